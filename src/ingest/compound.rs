@@ -1,0 +1,186 @@
+//! Tire compound files: master curves of storage modulus E' and loss factor
+//! tan δ versus temperature at a reference frequency, and the WLF constants
+//! that move between frequency and temperature (paper eqs. 30-31).
+
+use super::{IngestError, Result, read_toml, write_toml};
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct Compound {
+    pub id: String,
+    pub name: String,
+    /// Frequency at which the master curve below was measured (Hz).
+    pub reference_frequency_hz: f64,
+    pub wlf: Wlf,
+    pub master_curve: MasterCurve,
+}
+
+/// Williams-Landel-Ferry constants: `log10 a_T = -C1 (T - T_ref) / (C2 + T - T_ref)`.
+#[derive(Debug, Clone, Copy, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct Wlf {
+    /// C1 (dimensionless).
+    pub c1: f64,
+    /// C2 (K).
+    pub c2_k: f64,
+    /// Reference temperature T_ref (degC).
+    pub t_ref_c: f64,
+}
+
+/// Master curve sampled on a strictly increasing temperature grid.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct MasterCurve {
+    pub temperature_c: Vec<f64>,
+    pub storage_modulus_mpa: Vec<f64>,
+    pub loss_factor: Vec<f64>,
+}
+
+impl Wlf {
+    /// log10 of the shift factor a_T at temperature `t_c` (paper eq. 30).
+    pub fn log10_shift(&self, t_c: f64) -> f64 {
+        let dt = t_c - self.t_ref_c;
+        -self.c1 * dt / (self.c2_k + dt)
+    }
+
+    /// Temperature whose shift factor is `10^log10_at` (paper eq. 31, the
+    /// inverse of eq. 30): `T = T_ref - C2 x / (C1 + x)` with `x = log10 a_T`.
+    pub fn temperature_for_shift(&self, log10_at: f64) -> f64 {
+        self.t_ref_c - self.c2_k * log10_at / (self.c1 + log10_at)
+    }
+}
+
+impl Compound {
+    pub fn load(path: &Path) -> Result<Compound> {
+        let c: Compound = read_toml(path)?;
+        c.validate(path)?;
+        Ok(c)
+    }
+
+    pub fn write(&self, path: &Path) -> Result<()> {
+        write_toml(path, self)
+    }
+
+    pub fn validate(&self, path: &Path) -> Result<()> {
+        let bad = |rec: &str, what: String| IngestError::invalid(path, rec, what);
+        let m = &self.master_curve;
+        let n = m.temperature_c.len();
+        if n < 2 {
+            return Err(bad(
+                "master_curve",
+                format!("needs at least 2 temperatures, got {n}"),
+            ));
+        }
+        if m.storage_modulus_mpa.len() != n || m.loss_factor.len() != n {
+            return Err(bad(
+                "master_curve",
+                format!(
+                    "temperature_c has {n} values but storage_modulus_mpa has {} and loss_factor {}",
+                    m.storage_modulus_mpa.len(),
+                    m.loss_factor.len()
+                ),
+            ));
+        }
+        for i in 0..n {
+            let (t, e, d) = (
+                m.temperature_c[i],
+                m.storage_modulus_mpa[i],
+                m.loss_factor[i],
+            );
+            let rec = format!("master_curve point {i} (T = {t} degC)");
+            if !t.is_finite() || (i > 0 && t <= m.temperature_c[i - 1]) {
+                return Err(bad(&rec, "temperatures must be finite and strictly increasing".into()));
+            }
+            if !(e > 0.0 && e.is_finite()) {
+                return Err(bad(&rec, format!("storage modulus must be > 0 MPa, got {e}")));
+            }
+            if !(d > 0.0 && d.is_finite()) {
+                return Err(bad(&rec, format!("loss factor must be > 0, got {d}")));
+            }
+        }
+        if !(self.reference_frequency_hz > 0.0) {
+            return Err(bad(
+                "reference_frequency_hz",
+                format!("must be > 0, got {}", self.reference_frequency_hz),
+            ));
+        }
+        if !(self.wlf.c1 > 0.0 && self.wlf.c2_k > 0.0) {
+            return Err(bad(
+                "wlf",
+                format!("c1 and c2_k must be > 0, got {} and {}", self.wlf.c1, self.wlf.c2_k),
+            ));
+        }
+        Ok(())
+    }
+
+    /// E' (MPa) at temperature `t_c` on the reference-frequency master curve,
+    /// linear in log10 E' between grid points, clamped at the grid ends.
+    pub fn storage_modulus_mpa(&self, t_c: f64) -> f64 {
+        let m = &self.master_curve;
+        10f64.powf(interp(&m.temperature_c, &m.storage_modulus_mpa, t_c, f64::log10))
+    }
+
+    /// tan δ at temperature `t_c` on the reference-frequency master curve,
+    /// linear between grid points, clamped at the grid ends.
+    pub fn loss_factor(&self, t_c: f64) -> f64 {
+        let m = &self.master_curve;
+        interp(&m.temperature_c, &m.loss_factor, t_c, |v| v)
+    }
+}
+
+/// Piecewise-linear interpolation of `map(ys)` at `x`, clamped to the ends.
+fn interp(xs: &[f64], ys: &[f64], x: f64, map: impl Fn(f64) -> f64) -> f64 {
+    let n = xs.len();
+    if x <= xs[0] {
+        return map(ys[0]);
+    }
+    if x >= xs[n - 1] {
+        return map(ys[n - 1]);
+    }
+    let i = xs.partition_point(|&v| v <= x) - 1;
+    let w = (x - xs[i]) / (xs[i + 1] - xs[i]);
+    map(ys[i]) * (1.0 - w) + map(ys[i + 1]) * w
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn wlf_equations_30_and_31_are_inverse() {
+        let w = Wlf {
+            c1: 8.86,
+            c2_k: 101.6,
+            t_ref_c: 30.0,
+        };
+        // By hand: T - T_ref = 20 K -> log10 a_T = -8.86*20/121.6 = -1.457237 (3 d.p.)
+        assert!((w.log10_shift(50.0) + 8.86 * 20.0 / 121.6).abs() < 1e-12);
+        for t in [-20.0, 0.0, 30.0, 75.0, 140.0] {
+            assert!((w.temperature_for_shift(w.log10_shift(t)) - t).abs() < 1e-9);
+        }
+    }
+
+    #[test]
+    fn interpolation_is_log_linear_for_modulus() {
+        let c = Compound {
+            id: "x".into(),
+            name: "x".into(),
+            reference_frequency_hz: 10.0,
+            wlf: Wlf {
+                c1: 8.86,
+                c2_k: 101.6,
+                t_ref_c: 30.0,
+            },
+            master_curve: MasterCurve {
+                temperature_c: vec![0.0, 10.0],
+                storage_modulus_mpa: vec![100.0, 10.0],
+                loss_factor: vec![0.2, 0.4],
+            },
+        };
+        assert!((c.storage_modulus_mpa(5.0) - 10f64.powf(1.5)).abs() < 1e-9);
+        assert!((c.loss_factor(2.5) - 0.25).abs() < 1e-12);
+        assert_eq!(c.storage_modulus_mpa(-50.0), 100.0);
+    }
+}

@@ -1,0 +1,269 @@
+//! The season manifest (`season.toml`): events, tracks, cars, runs and the
+//! paths of every other file in the archive. Paths are relative to the
+//! manifest's folder.
+
+use super::{IngestError, Result, read_toml, write_toml};
+use crate::Wheel;
+use serde::{Deserialize, Serialize};
+use std::collections::HashSet;
+use std::path::{Path, PathBuf};
+
+/// The only format version this build reads and writes.
+pub const FORMAT_VERSION: u32 = 1;
+
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct Manifest {
+    pub format_version: u32,
+    pub name: String,
+    #[serde(default)]
+    pub description: String,
+    /// Wear-reading CSV files (`docs/formats.md`, "Wear readings").
+    pub wear_readings: Vec<String>,
+    /// Bulk road-profile Parquet file, if any.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub road_profiles: Option<String>,
+    pub compounds: Vec<CompoundRef>,
+    pub tracks: Vec<Track>,
+    pub events: Vec<Event>,
+    pub cars: Vec<Car>,
+    pub runs: Vec<Run>,
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct CompoundRef {
+    pub id: String,
+    /// Compound TOML file.
+    pub file: String,
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct Track {
+    pub id: String,
+    pub name: String,
+    pub length_m: f64,
+    /// Road profiles stored one per CSV file (in addition to any in the bulk file).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub profiles: Vec<ProfileRef>,
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct ProfileRef {
+    pub location: String,
+    pub file: String,
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct Event {
+    pub id: String,
+    pub track: String,
+    /// ISO 8601 date, `YYYY-MM-DD`.
+    pub date: String,
+    pub air_temp_c: f64,
+    pub track_temp_c: f64,
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct Car {
+    pub id: String,
+    pub name: String,
+    pub mass_kg: f64,
+    pub wheelbase_m: f64,
+    pub front_track_m: f64,
+    pub rear_track_m: f64,
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct Run {
+    pub id: String,
+    pub event: String,
+    pub car: String,
+    pub compound: String,
+    /// Planned run distance (m); the telemetry's distance channel is the measurement.
+    pub distance_m: f64,
+    /// MCAP telemetry file.
+    pub telemetry: String,
+    pub tire_sets: TireSets,
+}
+
+/// Tire set identifiers by wheel position.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct TireSets {
+    #[serde(rename = "FL")]
+    pub fl: String,
+    #[serde(rename = "FR")]
+    pub fr: String,
+    #[serde(rename = "RL")]
+    pub rl: String,
+    #[serde(rename = "RR")]
+    pub rr: String,
+}
+
+impl TireSets {
+    pub fn get(&self, wheel: Wheel) -> &str {
+        match wheel {
+            Wheel::FL => &self.fl,
+            Wheel::FR => &self.fr,
+            Wheel::RL => &self.rl,
+            Wheel::RR => &self.rr,
+        }
+    }
+}
+
+/// A manifest together with the folder its relative paths start from.
+#[derive(Debug, Clone)]
+pub struct Season {
+    pub root: PathBuf,
+    pub manifest_path: PathBuf,
+    pub manifest: Manifest,
+}
+
+impl Season {
+    /// Reads and validates `DIR/season.toml` (or a manifest path given directly).
+    pub fn open(path: &Path) -> Result<Season> {
+        let manifest_path = if path.is_dir() {
+            path.join("season.toml")
+        } else {
+            path.to_path_buf()
+        };
+        let manifest: Manifest = read_toml(&manifest_path)?;
+        manifest.validate(&manifest_path)?;
+        let root = manifest_path
+            .parent()
+            .map(Path::to_path_buf)
+            .unwrap_or_default();
+        Ok(Season {
+            root,
+            manifest_path,
+            manifest,
+        })
+    }
+
+    /// Resolves a path from the manifest against the archive folder.
+    pub fn path(&self, rel: &str) -> PathBuf {
+        self.root.join(rel)
+    }
+
+    pub fn event(&self, id: &str) -> Option<&Event> {
+        self.manifest.events.iter().find(|e| e.id == id)
+    }
+
+    pub fn track(&self, id: &str) -> Option<&Track> {
+        self.manifest.tracks.iter().find(|t| t.id == id)
+    }
+}
+
+impl Manifest {
+    /// Writes the manifest atomically.
+    pub fn write(&self, path: &Path) -> Result<()> {
+        write_toml(path, self)
+    }
+
+    /// Checks the version, unique ids, cross references and numeric ranges.
+    pub fn validate<'a>(&'a self, path: &Path) -> Result<()> {
+        let bad = |record: String, what: String| IngestError::invalid(path, record, what);
+        if self.format_version != FORMAT_VERSION {
+            return Err(bad(
+                "format_version".into(),
+                format!(
+                    "is {}, this build reads version {FORMAT_VERSION}",
+                    self.format_version
+                ),
+            ));
+        }
+        fn unique<'a>(kind: &str, ids: &[&'a str]) -> std::result::Result<HashSet<&'a str>, (String, String)> {
+            let mut seen = HashSet::new();
+            for (i, &id) in ids.iter().enumerate() {
+                if id.is_empty() {
+                    return Err((format!("{kind}[{i}]"), "empty id".into()));
+                }
+                if !seen.insert(id) {
+                    return Err((format!("{kind}[{i}] id={id}"), "duplicate id".into()));
+                }
+            }
+            Ok(seen)
+        }
+        let ids = |kind: &str, ids: Vec<&'_ str>| unique(kind, &ids).map(|_| ()).map_err(|(r, w)| bad(r, w));
+        ids("compounds", self.compounds.iter().map(|c| c.id.as_str()).collect())?;
+        ids("tracks", self.tracks.iter().map(|c| c.id.as_str()).collect())?;
+        ids("events", self.events.iter().map(|c| c.id.as_str()).collect())?;
+        ids("cars", self.cars.iter().map(|c| c.id.as_str()).collect())?;
+        ids("runs", self.runs.iter().map(|c| c.id.as_str()).collect())?;
+        let set = |v: Vec<&'a str>| -> HashSet<&'a str> { v.into_iter().collect() };
+        let compounds = set(self.compounds.iter().map(|c| c.id.as_str()).collect());
+        let tracks = set(self.tracks.iter().map(|c| c.id.as_str()).collect());
+        let events = set(self.events.iter().map(|c| c.id.as_str()).collect());
+        let cars = set(self.cars.iter().map(|c| c.id.as_str()).collect());
+
+        for (i, t) in self.tracks.iter().enumerate() {
+            if !(t.length_m > 0.0) {
+                return Err(bad(
+                    format!("tracks[{i}] id={}", t.id),
+                    format!("length_m must be > 0, got {}", t.length_m),
+                ));
+            }
+        }
+        for (i, e) in self.events.iter().enumerate() {
+            let rec = format!("events[{i}] id={}", e.id);
+            if !tracks.contains(e.track.as_str()) {
+                return Err(bad(rec, format!("unknown track '{}'", e.track)));
+            }
+            if !valid_date(&e.date) {
+                return Err(bad(rec, format!("date '{}' is not YYYY-MM-DD", e.date)));
+            }
+            for (name, v) in [("air_temp_c", e.air_temp_c), ("track_temp_c", e.track_temp_c)] {
+                if !(-40.0..=90.0).contains(&v) {
+                    return Err(bad(rec, format!("{name} = {v} is outside -40..90 degC")));
+                }
+            }
+        }
+        for (i, c) in self.cars.iter().enumerate() {
+            let rec = format!("cars[{i}] id={}", c.id);
+            for (name, v) in [
+                ("mass_kg", c.mass_kg),
+                ("wheelbase_m", c.wheelbase_m),
+                ("front_track_m", c.front_track_m),
+                ("rear_track_m", c.rear_track_m),
+            ] {
+                if !(v > 0.0 && v.is_finite()) {
+                    return Err(bad(rec, format!("{name} must be > 0, got {v}")));
+                }
+            }
+        }
+        for (i, r) in self.runs.iter().enumerate() {
+            let rec = format!("runs[{i}] id={}", r.id);
+            if !events.contains(r.event.as_str()) {
+                return Err(bad(rec, format!("unknown event '{}'", r.event)));
+            }
+            if !cars.contains(r.car.as_str()) {
+                return Err(bad(rec, format!("unknown car '{}'", r.car)));
+            }
+            if !compounds.contains(r.compound.as_str()) {
+                return Err(bad(rec, format!("unknown compound '{}'", r.compound)));
+            }
+            if !(r.distance_m > 0.0 && r.distance_m.is_finite()) {
+                return Err(bad(rec, format!("distance_m must be > 0, got {}", r.distance_m)));
+            }
+            if r.telemetry.is_empty() {
+                return Err(bad(rec, "telemetry path is empty".into()));
+            }
+        }
+        Ok(())
+    }
+}
+
+fn valid_date(s: &str) -> bool {
+    let b = s.as_bytes();
+    if b.len() != 10 || b[4] != b'-' || b[7] != b'-' {
+        return false;
+    }
+    let num = |r: std::ops::Range<usize>| s[r].parse::<u32>().ok();
+    matches!((num(0..4), num(5..7), num(8..10)), (Some(_), Some(m), Some(d)) if (1..=12).contains(&m) && (1..=31).contains(&d))
+}

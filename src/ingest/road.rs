@@ -1,0 +1,292 @@
+//! Road texture profiles: 1-D height profiles z(x), x and z in mm, sampled on
+//! an equally spaced grid. One profile per CSV file (`x_mm,z_mm`), or many in
+//! one long-format Parquet file (`track, location, x_mm, z_mm`).
+
+use super::{IngestError, Result};
+use arrow_array::{Array, Float64Array, RecordBatch, StringArray};
+use arrow_schema::{DataType, Field, Schema};
+use std::path::Path;
+use std::sync::Arc;
+
+/// Relative tolerance on the spacing of x: profiles must be equally spaced.
+const SPACING_RTOL: f64 = 1e-6;
+
+/// One measured profile.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Profile {
+    pub track: String,
+    pub location: String,
+    /// x of the first sample (mm).
+    pub x0_mm: f64,
+    /// Sample spacing Δx (mm).
+    pub dx_mm: f64,
+    /// Heights (mm).
+    pub z_mm: Vec<f64>,
+}
+
+impl Profile {
+    pub fn len_mm(&self) -> f64 {
+        self.dx_mm * self.z_mm.len() as f64
+    }
+
+    /// Builds a profile from sample columns, checking that x is equally spaced.
+    pub fn from_columns(
+        track: &str,
+        location: &str,
+        x: &[f64],
+        z: Vec<f64>,
+        path: &Path,
+    ) -> Result<Profile> {
+        let rec = format!("profile {track}/{location}");
+        if x.len() < 16 {
+            return Err(IngestError::invalid(
+                path,
+                rec,
+                format!("has {} samples, at least 16 are needed", x.len()),
+            ));
+        }
+        let dx = (x[x.len() - 1] - x[0]) / (x.len() - 1) as f64;
+        if !(dx > 0.0) {
+            return Err(IngestError::invalid(path, rec, "x_mm must increase"));
+        }
+        for i in 0..x.len() {
+            let expect = x[0] + dx * i as f64;
+            if !x[i].is_finite() || (x[i] - expect).abs() > SPACING_RTOL * dx * x.len() as f64 {
+                return Err(IngestError::invalid(
+                    path,
+                    format!("{rec} sample {i}"),
+                    format!(
+                        "x_mm = {} breaks the equal spacing of {dx} mm (expected {expect})",
+                        x[i]
+                    ),
+                ));
+            }
+            if !z[i].is_finite() {
+                return Err(IngestError::invalid(
+                    path,
+                    format!("{rec} sample {i}"),
+                    format!("z_mm = {} is not a finite number", z[i]),
+                ));
+            }
+        }
+        Ok(Profile {
+            track: track.into(),
+            location: location.into(),
+            x0_mm: x[0],
+            dx_mm: dx,
+            z_mm: z,
+        })
+    }
+}
+
+#[derive(serde::Deserialize, serde::Serialize)]
+struct CsvRow {
+    x_mm: f64,
+    z_mm: f64,
+}
+
+/// Reads one profile from a CSV file with header `x_mm,z_mm`.
+pub fn read_profile_csv(path: &Path, track: &str, location: &str) -> Result<Profile> {
+    let csv_err = |source| IngestError::Csv {
+        path: path.to_path_buf(),
+        source,
+    };
+    let mut rdr = csv::Reader::from_path(path).map_err(csv_err)?;
+    let (mut x, mut z) = (Vec::new(), Vec::new());
+    for row in rdr.deserialize::<CsvRow>() {
+        let row = row.map_err(csv_err)?;
+        x.push(row.x_mm);
+        z.push(row.z_mm);
+    }
+    Profile::from_columns(track, location, &x, z, path)
+}
+
+/// Writes one profile as CSV, atomically.
+pub fn write_profile_csv(path: &Path, p: &Profile) -> Result<()> {
+    crate::atomic::write_with(path, |w| {
+        let mut c = csv::Writer::from_writer(w);
+        for (i, &z) in p.z_mm.iter().enumerate() {
+            c.serialize(CsvRow {
+                x_mm: p.x0_mm + p.dx_mm * i as f64,
+                z_mm: z,
+            })?;
+        }
+        c.flush()
+    })
+    .map_err(|e| IngestError::io(path, e))
+}
+
+fn bulk_schema() -> Arc<Schema> {
+    Arc::new(Schema::new(vec![
+        Field::new("track", DataType::Utf8, false),
+        Field::new("location", DataType::Utf8, false),
+        Field::new("x_mm", DataType::Float64, false),
+        Field::new("z_mm", DataType::Float64, false),
+    ]))
+}
+
+/// Writes many profiles into one long-format Parquet file (one row per
+/// sample, zstd-compressed), atomically.
+pub fn write_profiles_parquet(path: &Path, profiles: &[Profile]) -> Result<()> {
+    let pq = |source| IngestError::Parquet {
+        path: path.to_path_buf(),
+        source,
+    };
+    let mut out = crate::atomic::AtomicFile::create(path).map_err(|e| IngestError::io(path, e))?;
+    let props = parquet::file::properties::WriterProperties::builder()
+        .set_compression(parquet::basic::Compression::ZSTD(Default::default()))
+        .build();
+    let schema = bulk_schema();
+    let mut w = parquet::arrow::ArrowWriter::try_new(out.file(), schema.clone(), Some(props))
+        .map_err(pq)?;
+    for p in profiles {
+        let n = p.z_mm.len();
+        let batch = RecordBatch::try_new(
+            schema.clone(),
+            vec![
+                Arc::new(StringArray::from(vec![p.track.as_str(); n])),
+                Arc::new(StringArray::from(vec![p.location.as_str(); n])),
+                Arc::new(Float64Array::from_iter_values(
+                    (0..n).map(|i| p.x0_mm + p.dx_mm * i as f64),
+                )),
+                Arc::new(Float64Array::from(p.z_mm.clone())),
+            ],
+        )
+        .map_err(|e| pq(e.into()))?;
+        w.write(&batch).map_err(pq)?;
+    }
+    w.close().map_err(pq)?;
+    out.commit().map_err(|e| IngestError::io(path, e))
+}
+
+/// Reads every profile of a long-format Parquet file. Rows of one profile
+/// must be contiguous and in increasing x.
+pub fn read_profiles_parquet(path: &Path) -> Result<Vec<Profile>> {
+    let pq = |source| IngestError::Parquet {
+        path: path.to_path_buf(),
+        source,
+    };
+    let file = std::fs::File::open(path).map_err(|e| IngestError::io(path, e))?;
+    let reader = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file)
+        .map_err(pq)?
+        .build()
+        .map_err(pq)?;
+    struct Acc {
+        key: (String, String),
+        x: Vec<f64>,
+        z: Vec<f64>,
+    }
+    let mut done: Vec<Profile> = Vec::new();
+    let mut cur: Option<Acc> = None;
+    let mut seen = std::collections::HashSet::new();
+    let finish = |acc: Acc, done: &mut Vec<Profile>| -> Result<()> {
+        done.push(Profile::from_columns(
+            &acc.key.0, &acc.key.1, &acc.x, acc.z, path,
+        )?);
+        Ok(())
+    };
+    for batch in reader {
+        let batch = batch.map_err(|e| pq(e.into()))?;
+        let col = |name: &str| {
+            batch.column_by_name(name).ok_or_else(|| {
+                IngestError::invalid(path, "schema", format!("missing column '{name}'"))
+            })
+        };
+        let (track, loc, x, z) = (col("track")?, col("location")?, col("x_mm")?, col("z_mm")?);
+        let strings = |a: &Arc<dyn Array>, name: &str| {
+            a.as_any()
+                .downcast_ref::<StringArray>()
+                .cloned()
+                .ok_or_else(|| IngestError::invalid(path, "schema", format!("column '{name}' must be UTF-8 strings")))
+        };
+        let floats = |a: &Arc<dyn Array>, name: &str| {
+            a.as_any()
+                .downcast_ref::<Float64Array>()
+                .cloned()
+                .ok_or_else(|| IngestError::invalid(path, "schema", format!("column '{name}' must be float64")))
+        };
+        let (track, loc, x, z) = (
+            strings(track, "track")?,
+            strings(loc, "location")?,
+            floats(x, "x_mm")?,
+            floats(z, "z_mm")?,
+        );
+        if track.null_count() + loc.null_count() + x.null_count() + z.null_count() > 0 {
+            return Err(IngestError::invalid(path, "columns", "null values are not allowed"));
+        }
+        for i in 0..batch.num_rows() {
+            let (t, l) = (track.value(i), loc.value(i));
+            let same = matches!(&cur, Some(a) if a.key.0 == t && a.key.1 == l);
+            if !same {
+                if let Some(acc) = cur.take() {
+                    finish(acc, &mut done)?;
+                }
+                if !seen.insert((t.to_string(), l.to_string())) {
+                    return Err(IngestError::invalid(
+                        path,
+                        format!("profile {t}/{l}"),
+                        "rows are not contiguous (the profile appears twice)",
+                    ));
+                }
+                cur = Some(Acc {
+                    key: (t.into(), l.into()),
+                    x: Vec::new(),
+                    z: Vec::new(),
+                });
+            }
+            let acc = cur.as_mut().expect("set above");
+            acc.x.push(x.value(i));
+            acc.z.push(z.value(i));
+        }
+    }
+    if let Some(acc) = cur.take() {
+        finish(acc, &mut done)?;
+    }
+    Ok(done)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn profile(track: &str, loc: &str, n: usize) -> Profile {
+        Profile {
+            track: track.into(),
+            location: loc.into(),
+            x0_mm: 0.0,
+            dx_mm: 0.01,
+            z_mm: (0..n).map(|i| (i as f64 * 0.3).sin()).collect(),
+        }
+    }
+
+    #[test]
+    fn csv_and_parquet_round_trip() {
+        let dir = tempfile::tempdir().unwrap();
+        let a = profile("monza", "L1", 64);
+        let b = profile("spa", "L2", 40);
+        write_profile_csv(&dir.path().join("a.csv"), &a).unwrap();
+        let back = read_profile_csv(&dir.path().join("a.csv"), "monza", "L1").unwrap();
+        assert_eq!(back.z_mm.len(), 64);
+        assert!((back.dx_mm - 0.01).abs() < 1e-12);
+        let pq = dir.path().join("p.parquet");
+        write_profiles_parquet(&pq, &[a.clone(), b.clone()]).unwrap();
+        let all = read_profiles_parquet(&pq).unwrap();
+        assert_eq!(all.len(), 2);
+        assert_eq!(all[1].track, "spa");
+        assert_eq!(all[0].z_mm, a.z_mm);
+    }
+
+    #[test]
+    fn unequal_spacing_is_named() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("bad.csv");
+        let mut text = String::from("x_mm,z_mm\n");
+        for i in 0..20 {
+            let x = if i == 7 { 0.075 } else { i as f64 * 0.01 };
+            text += &format!("{x},0.1\n");
+        }
+        std::fs::write(&path, text).unwrap();
+        let err = read_profile_csv(&path, "t", "L1").unwrap_err().to_string();
+        assert!(err.contains("bad.csv") && err.contains("sample 7"), "{err}");
+    }
+}

@@ -1,0 +1,374 @@
+//! Run telemetry in MCAP: one topic per wheel (`/tire/FL` ...) and one for
+//! the vehicle (`/vehicle`), protobuf-encoded with the schemas of
+//! `proto/tirewear.proto`. Two message forms: per-sample messages (Foxglove
+//! plots them) and packed blocks of equally spaced samples (fast).
+
+use super::{IngestError, Result};
+use crate::Wheel;
+use mcap::records::MessageHeader;
+use prost::Message as _;
+use std::collections::BTreeMap;
+use std::fs::File;
+use std::io::{BufReader, BufWriter};
+use std::path::{Path, PathBuf};
+
+/// Generated protobuf types (`tirewear.v1`).
+pub mod proto {
+    include!(concat!(env!("OUT_DIR"), "/tirewear.v1.rs"));
+}
+
+/// Binary `FileDescriptorSet` of `proto/tirewear.proto`, the data of every schema record.
+pub const FILE_DESCRIPTOR_SET: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/tirewear_fds.bin"));
+
+pub const TIRE_SAMPLE: &str = "tirewear.v1.TireSample";
+pub const TIRE_BLOCK: &str = "tirewear.v1.TireBlock";
+pub const VEHICLE_SAMPLE: &str = "tirewear.v1.VehicleSample";
+pub const VEHICLE_BLOCK: &str = "tirewear.v1.VehicleBlock";
+pub const VEHICLE_TOPIC: &str = "/vehicle";
+
+/// Largest MCAP record we accept (bytes): a corrupted length field becomes an
+/// error instead of a huge allocation.
+pub const RECORD_LENGTH_LIMIT: usize = 256 << 20;
+
+/// Which message form a file uses.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Encoding {
+    /// One message per sample per topic (`TireSample`, `VehicleSample`).
+    Sample,
+    /// Packed blocks of equally spaced samples (`TireBlock`, `VehicleBlock`).
+    Block,
+}
+
+/// Declares a columnar series type with one `Vec` per channel, and the code
+/// that appends a per-sample message or a packed block to it, from one list.
+macro_rules! series {
+    ($series:ident, $sample:ident, $block:ident, $elem:ident, [$($ch:ident: $t:ty),* $(,)?]) => {
+        /// Columnar channels of one topic, in file order; `time_ns` is the sample time.
+        #[derive(Debug, Clone, Default, PartialEq)]
+        pub struct $series {
+            pub time_ns: Vec<u64>,
+            $(pub $ch: Vec<$t>,)*
+        }
+
+        impl $series {
+            pub fn len(&self) -> usize {
+                self.time_ns.len()
+            }
+            pub fn is_empty(&self) -> bool {
+                self.time_ns.is_empty()
+            }
+            pub fn push_sample(&mut self, time_ns: u64, s: &proto::$sample) {
+                self.time_ns.push(time_ns);
+                $(self.$ch.push(s.$ch);)*
+            }
+            /// Appends a block, or says which channel's length disagrees.
+            pub fn push_block(&mut self, b: &proto::$block) -> std::result::Result<(), String> {
+                let n = b.$elem.len();
+                $(if b.$ch.len() != n {
+                    return Err(format!(
+                        "channel {} has {} samples, {} has {n}",
+                        stringify!($ch), b.$ch.len(), stringify!($elem)
+                    ));
+                })*
+                if n > 0 && b.sample_period_ns == 0 {
+                    return Err("sample_period_ns is 0".into());
+                }
+                self.time_ns.extend((0..n as u64).map(|i| b.start_time_ns + i * b.sample_period_ns));
+                $(self.$ch.extend_from_slice(&b.$ch);)*
+                Ok(())
+            }
+            /// Sample `i` as a per-sample message.
+            pub fn sample(&self, i: usize) -> proto::$sample {
+                proto::$sample { $($ch: self.$ch[i],)* }
+            }
+        }
+
+        impl proto::$block {
+            fn push(&mut self, s: &proto::$sample) {
+                $(self.$ch.push(s.$ch);)*
+            }
+        }
+    };
+}
+
+series!(WheelSeries, TireSample, TireBlock, vx_mps, [
+    vx_mps: f32, vy_mps: f32, omega_radps: f32, rolling_radius_m: f32,
+    fx_n: f32, fy_n: f32, fz_n: f32, t_surface_c: f32, t_inner_c: f32,
+    pressure_pa: f32, camber_deg: f32,
+]);
+series!(VehicleSeries, VehicleSample, VehicleBlock, speed_mps, [
+    speed_mps: f32, t_track_c: f32, t_air_c: f32, distance_m: f64,
+]);
+
+/// Identifies a run inside its telemetry file (an MCAP metadata record named
+/// `tirewear.run`; informative, readers rely on the manifest).
+#[derive(Debug, Clone, PartialEq)]
+pub struct RunInfo {
+    pub run: String,
+    pub event: String,
+    pub car: String,
+    pub sample_rate_hz: f64,
+}
+
+/// Streams one run's telemetry into an MCAP file (zstd chunks, summary,
+/// chunk and message indexes), written atomically.
+pub struct TelemetryWriter {
+    path: PathBuf,
+    out: Option<crate::atomic::AtomicFile>,
+    mcap: mcap::Writer<BufWriter<File>>,
+    encoding: Encoding,
+    period_ns: u64,
+    block_len: usize,
+    tire_channels: [u16; 4],
+    vehicle_channel: u16,
+    seq: u32,
+    pending: Option<Pending>,
+}
+
+/// Blocks under construction (block form only).
+struct Pending {
+    start_ns: u64,
+    n: usize,
+    tires: [proto::TireBlock; 4],
+    vehicle: proto::VehicleBlock,
+}
+
+impl TelemetryWriter {
+    /// Creates `path`. `block_len` is the number of samples per block (block form).
+    pub fn create(
+        path: &Path,
+        info: &RunInfo,
+        encoding: Encoding,
+        block_len: usize,
+    ) -> Result<Self> {
+        let io_err = |e| IngestError::io(path, e);
+        let mc = |source| IngestError::Mcap {
+            path: path.to_path_buf(),
+            source,
+        };
+        let mut out = crate::atomic::AtomicFile::create(path).map_err(io_err)?;
+        let handle = out.file().try_clone().map_err(io_err)?;
+        let opts = mcap::WriteOptions::new()
+            .compression(Some(mcap::Compression::Zstd))
+            .profile("")
+            .library(concat!("tirewear ", env!("CARGO_PKG_VERSION")))
+            .chunk_size(Some(1 << 20));
+        let mut mcap = opts.create(BufWriter::with_capacity(1 << 20, handle)).map_err(mc)?;
+        let (tire_schema, veh_schema) = match encoding {
+            Encoding::Sample => (TIRE_SAMPLE, VEHICLE_SAMPLE),
+            Encoding::Block => (TIRE_BLOCK, VEHICLE_BLOCK),
+        };
+        let ts = mcap.add_schema(tire_schema, "protobuf", FILE_DESCRIPTOR_SET).map_err(mc)?;
+        let vs = mcap.add_schema(veh_schema, "protobuf", FILE_DESCRIPTOR_SET).map_err(mc)?;
+        let mut tire_channels = [0u16; 4];
+        for w in Wheel::ALL {
+            let meta = BTreeMap::from([("wheel".to_string(), w.name().to_string())]);
+            tire_channels[w.index()] = mcap.add_channel(ts, w.topic(), "protobuf", &meta).map_err(mc)?;
+        }
+        let vehicle_channel = mcap
+            .add_channel(vs, VEHICLE_TOPIC, "protobuf", &BTreeMap::new())
+            .map_err(mc)?;
+        let metadata = BTreeMap::from([
+            ("run".to_string(), info.run.clone()),
+            ("event".to_string(), info.event.clone()),
+            ("car".to_string(), info.car.clone()),
+            ("sample_rate_hz".to_string(), info.sample_rate_hz.to_string()),
+            ("format_version".to_string(), super::manifest::FORMAT_VERSION.to_string()),
+        ]);
+        mcap.write_metadata(&mcap::records::Metadata {
+            name: "tirewear.run".into(),
+            metadata,
+        })
+        .map_err(mc)?;
+        Ok(Self {
+            path: path.to_path_buf(),
+            out: Some(out),
+            mcap,
+            encoding,
+            period_ns: (1e9 / info.sample_rate_hz).round() as u64,
+            block_len: block_len.max(1),
+            tire_channels,
+            vehicle_channel,
+            seq: 0,
+            pending: None,
+        })
+    }
+
+    fn mcap_err(&self, source: mcap::McapError) -> IngestError {
+        IngestError::Mcap {
+            path: self.path.clone(),
+            source,
+        }
+    }
+
+    fn write_msg(&mut self, channel_id: u16, time_ns: u64, data: &[u8]) -> Result<()> {
+        self.seq = self.seq.wrapping_add(1);
+        let header = MessageHeader {
+            channel_id,
+            sequence: self.seq,
+            log_time: time_ns,
+            publish_time: time_ns,
+        };
+        self.mcap
+            .write_to_known_channel(&header, data)
+            .map_err(|e| self.mcap_err(e))
+    }
+
+    /// Appends one time step. Steps must come in increasing time; a step that
+    /// does not follow the previous one by exactly one sample period (a
+    /// dropout) starts a new block.
+    pub fn push(
+        &mut self,
+        time_ns: u64,
+        tires: &[proto::TireSample; 4],
+        vehicle: &proto::VehicleSample,
+    ) -> Result<()> {
+        match self.encoding {
+            Encoding::Sample => {
+                let mut buf = Vec::with_capacity(64);
+                for w in Wheel::ALL {
+                    buf.clear();
+                    tires[w.index()].encode(&mut buf).expect("Vec grows");
+                    self.write_msg(self.tire_channels[w.index()], time_ns, &buf)?;
+                }
+                buf.clear();
+                vehicle.encode(&mut buf).expect("Vec grows");
+                self.write_msg(self.vehicle_channel, time_ns, &buf)
+            }
+            Encoding::Block => {
+                let contiguous = matches!(&self.pending,
+                    Some(p) if p.n < self.block_len && time_ns == p.start_ns + p.n as u64 * self.period_ns);
+                if !contiguous {
+                    self.flush_block()?;
+                    let mut p = Pending {
+                        start_ns: time_ns,
+                        n: 0,
+                        tires: Default::default(),
+                        vehicle: Default::default(),
+                    };
+                    for b in &mut p.tires {
+                        b.start_time_ns = time_ns;
+                        b.sample_period_ns = self.period_ns;
+                    }
+                    p.vehicle.start_time_ns = time_ns;
+                    p.vehicle.sample_period_ns = self.period_ns;
+                    self.pending = Some(p);
+                }
+                let p = self.pending.as_mut().expect("set above");
+                for (b, s) in p.tires.iter_mut().zip(tires) {
+                    b.push(s);
+                }
+                p.vehicle.push(vehicle);
+                p.n += 1;
+                Ok(())
+            }
+        }
+    }
+
+    fn flush_block(&mut self) -> Result<()> {
+        let Some(p) = self.pending.take() else {
+            return Ok(());
+        };
+        for w in Wheel::ALL {
+            let data = p.tires[w.index()].encode_to_vec();
+            self.write_msg(self.tire_channels[w.index()], p.start_ns, &data)?;
+        }
+        let data = p.vehicle.encode_to_vec();
+        self.write_msg(self.vehicle_channel, p.start_ns, &data)
+    }
+
+    /// Writes the summary and indexes and moves the file into place.
+    pub fn finish(mut self) -> Result<()> {
+        self.flush_block()?;
+        self.mcap.finish().map_err(|e| self.mcap_err(e))?;
+        let Self { path, out, mcap, .. } = self;
+        let io_err = |e| IngestError::io(&path, e);
+        mcap.into_inner().into_inner().map_err(|e| io_err(e.into_error()))?;
+        out.expect("set in create").commit().map_err(io_err)
+    }
+}
+
+/// All channels of one run, as read from its MCAP file.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct RunTelemetry {
+    /// Indexed by [`Wheel::index`].
+    pub wheels: [WheelSeries; 4],
+    pub vehicle: VehicleSeries,
+    /// Message form found in the file (`None` if it held no tirewear topic).
+    pub encoding: Option<Encoding>,
+    /// Messages on topics this reader does not know (ignored).
+    pub ignored_messages: u64,
+}
+
+/// Reads a telemetry MCAP file (either message form, chunked or not,
+/// compressed or not). Damage (truncation, a bad length, a message that does
+/// not decode) is an error naming the file and the message.
+pub fn read_telemetry(path: &Path) -> Result<RunTelemetry> {
+    let file = File::open(path).map_err(|e| IngestError::io(path, e))?;
+    let opts = mcap::sans_io::LinearReaderOptions::default()
+        .with_record_length_limit(RECORD_LENGTH_LIMIT);
+    let reader = mcap::io::MessageReader::new_with_options(BufReader::with_capacity(1 << 20, file), opts);
+    let mut run = RunTelemetry::default();
+    for msg in reader {
+        let msg = msg.map_err(|source| IngestError::Mcap {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        let topic = msg.channel.topic.as_str();
+        let wheel = Wheel::from_topic(topic);
+        if wheel.is_none() && topic != VEHICLE_TOPIC {
+            run.ignored_messages += 1;
+            continue;
+        }
+        let rec = || format!("topic {topic}, message sequence {} at log_time {} ns", msg.sequence, msg.log_time);
+        let schema = msg.channel.schema.as_ref().map(|s| s.name.as_str()).unwrap_or("");
+        if msg.channel.message_encoding != "protobuf" {
+            return Err(IngestError::invalid(
+                path,
+                rec(),
+                format!("message encoding is '{}', expected 'protobuf'", msg.channel.message_encoding),
+            ));
+        }
+        let encoding = match (wheel, schema) {
+            (Some(_), TIRE_SAMPLE) | (None, VEHICLE_SAMPLE) => Encoding::Sample,
+            (Some(_), TIRE_BLOCK) | (None, VEHICLE_BLOCK) => Encoding::Block,
+            _ => {
+                return Err(IngestError::invalid(
+                    path,
+                    rec(),
+                    format!("schema '{schema}' is not a tirewear.v1 schema for this topic"),
+                ));
+            }
+        };
+        match run.encoding {
+            None => run.encoding = Some(encoding),
+            Some(e) if e != encoding => {
+                return Err(IngestError::invalid(path, rec(), "file mixes per-sample and block messages"));
+            }
+            _ => {}
+        }
+        let data: &[u8] = &msg.data;
+        let undecodable = |e: prost::DecodeError| IngestError::invalid(path, rec(), format!("cannot decode {schema}: {e}"));
+        let bad_block = |what: String| IngestError::invalid(path, rec(), what);
+        match (wheel, encoding) {
+            (Some(w), Encoding::Sample) => {
+                let s = proto::TireSample::decode(data).map_err(undecodable)?;
+                run.wheels[w.index()].push_sample(msg.log_time, &s);
+            }
+            (Some(w), Encoding::Block) => {
+                let b = proto::TireBlock::decode(data).map_err(undecodable)?;
+                run.wheels[w.index()].push_block(&b).map_err(bad_block)?;
+            }
+            (None, Encoding::Sample) => {
+                let s = proto::VehicleSample::decode(data).map_err(undecodable)?;
+                run.vehicle.push_sample(msg.log_time, &s);
+            }
+            (None, Encoding::Block) => {
+                let b = proto::VehicleBlock::decode(data).map_err(undecodable)?;
+                run.vehicle.push_block(&b).map_err(bad_block)?;
+            }
+        }
+    }
+    Ok(run)
+}

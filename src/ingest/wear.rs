@@ -1,0 +1,103 @@
+//! Tread-depth readings (CSV): per run and wheel, the depth measured at
+//! several spots across the tread width (not equally spaced), several
+//! readings per spot, with the new-tire depth. One row per reading.
+
+use super::{IngestError, Result};
+use crate::Wheel;
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+
+/// One reading of one spot (a row of the CSV).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct WearReading {
+    pub run: String,
+    pub wheel: Wheel,
+    pub tire_set: String,
+    /// Spot number across the width, from the tire's inner (car-side) edge.
+    pub spot: u32,
+    /// Spot position from the inner tread edge (mm).
+    pub position_mm: f64,
+    /// Tread width (mm), the same for every row of a tire.
+    pub tread_width_mm: f64,
+    /// Reading number at this spot (1, 2, ...).
+    pub reading: u32,
+    /// Measured remaining tread depth (mm).
+    pub depth_mm: f64,
+    /// Tread depth of the new tire (mm).
+    pub new_depth_mm: f64,
+}
+
+/// Reads and checks a wear-reading CSV. Errors name the file and the line.
+pub fn read_wear_csv(path: &Path) -> Result<Vec<WearReading>> {
+    let csv_err = |source| IngestError::Csv {
+        path: path.to_path_buf(),
+        source,
+    };
+    let mut rdr = csv::Reader::from_path(path).map_err(csv_err)?;
+    let mut out = Vec::new();
+    for (i, row) in rdr.deserialize::<WearReading>().enumerate() {
+        let r = row.map_err(csv_err)?;
+        let rec = format!("line {} (run {}, wheel {}, spot {})", i + 2, r.run, r.wheel, r.spot);
+        let bad = |what: String| IngestError::invalid(path, rec.clone(), what);
+        if !(r.new_depth_mm > 0.0 && r.new_depth_mm.is_finite()) {
+            return Err(bad(format!("new_depth_mm must be > 0, got {}", r.new_depth_mm)));
+        }
+        if !r.depth_mm.is_finite() || r.depth_mm < 0.0 || r.depth_mm > 1.5 * r.new_depth_mm {
+            return Err(bad(format!(
+                "depth_mm = {} is outside 0..1.5 x new depth ({} mm)",
+                r.depth_mm, r.new_depth_mm
+            )));
+        }
+        if !(r.tread_width_mm > 0.0) || !(0.0..=r.tread_width_mm).contains(&r.position_mm) {
+            return Err(bad(format!(
+                "position_mm = {} is outside the tread width 0..{} mm",
+                r.position_mm, r.tread_width_mm
+            )));
+        }
+        out.push(r);
+    }
+    Ok(out)
+}
+
+/// Writes wear readings as CSV, atomically.
+pub fn write_wear_csv(path: &Path, rows: &[WearReading]) -> Result<()> {
+    crate::atomic::write_with(path, |w| {
+        let mut c = csv::Writer::from_writer(w);
+        for r in rows {
+            c.serialize(r)?;
+        }
+        c.flush()
+    })
+    .map_err(|e| IngestError::io(path, e))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn reads_hand_written_file_and_names_bad_line() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("wear.csv");
+        std::fs::write(
+            &p,
+            "run,wheel,tire_set,spot,position_mm,tread_width_mm,reading,depth_mm,new_depth_mm\n\
+             R1,FL,T1,1,15,300,1,3.1,4.0\n\
+             R1,FL,T1,1,15,300,2,3.2,4.0\n\
+             R1,FL,T1,2,80,300,1,7.5,4.0\n",
+        )
+        .unwrap();
+        let err = read_wear_csv(&p).unwrap_err().to_string();
+        assert!(err.contains("wear.csv") && err.contains("line 4") && err.contains("spot 2"), "{err}");
+        std::fs::write(
+            &p,
+            "run,wheel,tire_set,spot,position_mm,tread_width_mm,reading,depth_mm,new_depth_mm\n\
+             R1,RR,T1,1,15,300,1,3.1,4.0\n",
+        )
+        .unwrap();
+        let rows = read_wear_csv(&p).unwrap();
+        assert_eq!(rows[0].wheel, Wheel::RR);
+        assert_eq!(rows[0].depth_mm, 3.1);
+    }
+}

@@ -1,0 +1,12 @@
+//! tirewear: motorsport tire-wear analytics.
+//!
+//! Modules follow the data's path: [`ingest`] reads (and the simulator
+//! writes) the season archive formats, [`sim`] simulates whole seasons with
+//! known physics and planted effects. See `docs/` for formats and physics.
+
+pub mod atomic;
+pub mod ingest;
+pub mod sim;
+pub mod wheel;
+
+pub use wheel::{Axle, Wheel};

@@ -1,0 +1,92 @@
+//! Wheel positions and axles.
+
+use serde::{Deserialize, Serialize};
+use std::fmt;
+use std::str::FromStr;
+
+/// A wheel position on a four-wheeled car.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
+pub enum Wheel {
+    FL,
+    FR,
+    RL,
+    RR,
+}
+
+/// Front or rear axle.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+pub enum Axle {
+    Front,
+    Rear,
+}
+
+impl Wheel {
+    pub const ALL: [Wheel; 4] = [Wheel::FL, Wheel::FR, Wheel::RL, Wheel::RR];
+
+    pub fn index(self) -> usize {
+        self as usize
+    }
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Wheel::FL => "FL",
+            Wheel::FR => "FR",
+            Wheel::RL => "RL",
+            Wheel::RR => "RR",
+        }
+    }
+
+    /// MCAP topic carrying this wheel's channels.
+    pub fn topic(self) -> &'static str {
+        match self {
+            Wheel::FL => "/tire/FL",
+            Wheel::FR => "/tire/FR",
+            Wheel::RL => "/tire/RL",
+            Wheel::RR => "/tire/RR",
+        }
+    }
+
+    pub fn from_topic(topic: &str) -> Option<Wheel> {
+        Wheel::ALL.into_iter().find(|w| w.topic() == topic)
+    }
+
+    pub fn axle(self) -> Axle {
+        match self {
+            Wheel::FL | Wheel::FR => Axle::Front,
+            Wheel::RL | Wheel::RR => Axle::Rear,
+        }
+    }
+
+    /// +1 for left wheels, -1 for right (the sign of the wheel's y in ISO 8855 axes).
+    pub fn side_sign(self) -> f64 {
+        match self {
+            Wheel::FL | Wheel::RL => 1.0,
+            Wheel::FR | Wheel::RR => -1.0,
+        }
+    }
+}
+
+impl fmt::Display for Wheel {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl FromStr for Wheel {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        Wheel::ALL
+            .into_iter()
+            .find(|w| w.name().eq_ignore_ascii_case(s))
+            .ok_or_else(|| format!("unknown wheel position '{s}' (expected FL, FR, RL or RR)"))
+    }
+}
+
+impl fmt::Display for Axle {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            Axle::Front => "front",
+            Axle::Rear => "rear",
+        })
+    }
+}
