@@ -1,1 +1,488 @@
+//! Season simulator: whole seasons with known physics and planted effects,
+//! written as season archives (`docs/formats.md`), with the ground truth in
+//! `truth/` (`docs/simulator.md`). Deterministic for a seed.
 
+pub mod compound;
+pub mod effects;
+pub mod error;
+pub mod lap;
+pub mod preset;
+pub mod road;
+pub mod run;
+pub mod thermal;
+pub mod tire;
+pub mod track;
+pub mod vehicle;
+pub mod wear;
+
+pub use effects::{Effect, EffectKind};
+pub use error::SimError;
+pub use preset::{Plan, Preset};
+
+use crate::Wheel;
+use crate::ingest::manifest::{self, Manifest, ProfileRef, TireSets};
+use crate::ingest::road::{Profile, write_profile_csv, write_profiles_parquet};
+use crate::ingest::telemetry::{Encoding, RunInfo, TelemetryWriter};
+use crate::ingest::wear::write_wear_csv;
+use crate::ingest::{IngestError, write_toml};
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use rayon::prelude::*;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU64, Ordering};
+use wear::RoadTruth;
+
+/// What to simulate.
+#[derive(Debug, Clone)]
+pub struct SimOptions {
+    pub preset: Preset,
+    pub scale: f64,
+    pub seed: u64,
+    pub effects: Vec<Effect>,
+    pub encoding: Encoding,
+    pub rate_hz: Option<f64>,
+    pub out: PathBuf,
+    /// Show a progress bar.
+    pub progress: bool,
+}
+
+/// What was written.
+#[derive(Debug, Clone)]
+pub struct SimSummary {
+    pub out: PathBuf,
+    pub tracks: usize,
+    pub events: usize,
+    pub runs: usize,
+    pub observations: usize,
+    pub samples: u64,
+    pub bytes: u64,
+    pub saturated_fraction: f64,
+}
+
+const ROAD_MICRO_LAMBDA_MM: f64 = 0.5;
+
+/// Simulates a season into `opts.out`. The manifest is written last, so a
+/// folder with `season.toml` is a complete archive.
+pub fn simulate(opts: &SimOptions) -> Result<SimSummary, SimError> {
+    if !(opts.scale > 0.0 && opts.scale.is_finite()) {
+        return Err(SimError::Config(format!("--scale must be > 0, got {}", opts.scale)));
+    }
+    if let Some(r) = opts.rate_hz
+        && !(1.0..=1000.0).contains(&r)
+    {
+        return Err(SimError::Config(format!("--rate must be within 1..1000 Hz, got {r}")));
+    }
+    let mut kinds: Vec<_> = opts.effects.iter().map(|e| e.kind).collect();
+    kinds.sort();
+    kinds.dedup();
+    if kinds.len() != opts.effects.len() {
+        return Err(SimError::Config("each effect may be given once".into()));
+    }
+    let plan = Plan::new(opts.preset, opts.scale, opts.seed, opts.rate_hz);
+    let out = &opts.out;
+    let io = |p: &Path, e| SimError::Ingest(IngestError::io(p, e));
+    std::fs::create_dir_all(out).map_err(|e| io(out, e))?;
+    if out.join("season.toml").exists() {
+        std::fs::remove_file(out.join("season.toml")).map_err(|e| io(out, e))?;
+    }
+    tracing::info!(runs = plan.runs.len(), rate_hz = plan.rate_hz, "simulating season '{}'", plan.name);
+
+    // Compounds.
+    let mut compound_refs = Vec::new();
+    for c in &plan.compounds {
+        let rel = format!("compounds/{}.toml", c.id);
+        c.to_file().write(&out.join(&rel))?;
+        compound_refs.push(manifest::CompoundRef { id: c.id.clone(), file: rel });
+    }
+
+    // Road profiles: all but the last location of each track in the bulk file, the last one as CSV.
+    let (profiles, roads) = synthesise_roads(&plan, opts.seed);
+    let (bulk, single): (Vec<&Profile>, Vec<&Profile>) = profiles
+        .iter()
+        .partition(|p| p.location != format!("L{}", plan.locations_per_track));
+    write_profiles_parquet(&out.join("road/profiles.parquet"), &bulk.into_iter().cloned().collect::<Vec<_>>())?;
+    let mut tracks = Vec::new();
+    for def in &plan.tracks {
+        let mut refs = Vec::new();
+        for p in single.iter().filter(|p| p.track == def.id) {
+            let rel = format!("road/{}-{}.csv", p.track, p.location);
+            write_profile_csv(&out.join(&rel), p)?;
+            refs.push(ProfileRef { location: p.location.clone(), file: rel });
+        }
+        tracks.push(manifest::Track {
+            id: def.id.clone(),
+            name: def.name.clone(),
+            length_m: (def.shape(1.0).length_m()).round(),
+            profiles: refs,
+        });
+    }
+
+    // Runs, in parallel.
+    let shapes: Vec<_> = plan.tracks.iter().map(|t| t.shape(1.0)).collect();
+    let progress = progress_bar(opts.progress, plan.runs.len() as u64);
+    let samples = AtomicU64::new(0);
+    let results: Vec<Result<run::RunTruth, SimError>> = plan
+        .runs
+        .par_iter()
+        .map(|rp| {
+            let ev = &plan.events[rp.event];
+            let car = &plan.cars[rp.car];
+            let compound = &plan.compounds[rp.compound];
+            let track = &plan.tracks[ev.track];
+            let mu = compound.grip.mu(compound.grip.t_opt_c, tire::FZ_NOMINAL, track.grip) * rp.pace;
+            let lap = lap::solve(&shapes[ev.track], car, mu);
+            let ctx = run::RunContext {
+                car,
+                compound,
+                lap: &lap,
+                thermal: thermal::ThermalParams::default(),
+                road_grip: track.grip,
+                effects: &opts.effects,
+            };
+            let settings = run::RunSettings {
+                distance_m: rp.distance_m,
+                rate_hz: plan.rate_hz,
+                start_ns: rp.start_ns,
+                air_c: ev.air_c,
+                track_c: ev.track_c,
+                cold_pressure_pa: rp.cold_pressure_pa,
+                blanket_c: 70.0,
+            };
+            let info = RunInfo {
+                run: rp.id.clone(),
+                event: ev.id.clone(),
+                car: car.id.clone(),
+                sample_rate_hz: plan.rate_hz,
+            };
+            let path = out.join(telemetry_rel(&rp.id));
+            let mut writer = TelemetryWriter::create(&path, &info, opts.encoding, plan.rate_hz.round() as usize)?;
+            let mut rng = ChaCha8Rng::seed_from_u64(rp.seed);
+            let truth = run::simulate_run(&ctx, &settings, &mut rng, |t, tires, veh| writer.push(t, tires, veh))?;
+            writer.finish()?;
+            samples.fetch_add(truth.samples, Ordering::Relaxed);
+            progress.inc(1);
+            Ok(truth)
+        })
+        .collect();
+    progress.finish_and_clear();
+    let truths = results.into_iter().collect::<Result<Vec<_>, _>>()?;
+
+    // Wear: truth and readings.
+    let mut readings = Vec::new();
+    let mut truth_rows = Vec::new();
+    let mut saturated = 0u64;
+    let mut total_samples = 0u64;
+    for (rp, truth) in plan.runs.iter().zip(&truths) {
+        let ev = &plan.events[rp.event];
+        let car = &plan.cars[rp.car];
+        let compound = &plan.compounds[rp.compound];
+        let mut rng = ChaCha8Rng::seed_from_u64(rp.seed ^ 0x5745_4152);
+        saturated += truth.saturated_samples;
+        total_samples += truth.samples * 4;
+        for w in Wheel::ALL {
+            let wt = &truth.wheels[w.index()];
+            let tw = wear::tire_wear(compound, &roads[ev.track], w, wt, &opts.effects, &mut rng);
+            let set = tire_set_id(rp, w);
+            readings.extend(wear::spot_readings(&rp.id, w, &set, car.tread_width(w), &tw, &mut rng));
+            truth_rows.push(TruthRow::new(rp, ev, &plan.tracks[ev.track].id, compound, w, &set, wt, &tw));
+        }
+    }
+    write_wear_csv(&out.join("wear/readings.csv"), &readings)?;
+    write_truth(out, &plan, &roads, &truth_rows, truths.as_slice(), opts)?;
+
+    let manifest = Manifest {
+        format_version: manifest::FORMAT_VERSION,
+        name: plan.name.clone(),
+        description: format!(
+            "Simulated by tirewear {} (preset {:?}, seed {}, scale {}, effects [{}])",
+            env!("CARGO_PKG_VERSION"),
+            opts.preset,
+            opts.seed,
+            opts.scale,
+            opts.effects.iter().map(|e| e.to_string()).collect::<Vec<_>>().join("; ")
+        ),
+        wear_readings: vec!["wear/readings.csv".into()],
+        road_profiles: Some("road/profiles.parquet".into()),
+        compounds: compound_refs,
+        tracks,
+        events: plan
+            .events
+            .iter()
+            .map(|e| manifest::Event {
+                id: e.id.clone(),
+                track: plan.tracks[e.track].id.clone(),
+                date: e.date.clone(),
+                air_temp_c: e.air_c,
+                track_temp_c: e.track_c,
+            })
+            .collect(),
+        cars: plan
+            .cars
+            .iter()
+            .map(|c| manifest::Car {
+                id: c.id.clone(),
+                name: c.name.clone(),
+                mass_kg: c.mass_kg,
+                wheelbase_m: c.wheelbase_m,
+                front_track_m: c.front_track_m,
+                rear_track_m: c.rear_track_m,
+            })
+            .collect(),
+        runs: plan
+            .runs
+            .iter()
+            .map(|r| manifest::Run {
+                id: r.id.clone(),
+                event: plan.events[r.event].id.clone(),
+                car: plan.cars[r.car].id.clone(),
+                compound: plan.compounds[r.compound].id.clone(),
+                distance_m: r.distance_m,
+                telemetry: telemetry_rel(&r.id),
+                tire_sets: TireSets {
+                    fl: tire_set_id(r, Wheel::FL),
+                    fr: tire_set_id(r, Wheel::FR),
+                    rl: tire_set_id(r, Wheel::RL),
+                    rr: tire_set_id(r, Wheel::RR),
+                },
+            })
+            .collect(),
+    };
+    manifest.validate(&out.join("season.toml"))?;
+    manifest.write(&out.join("season.toml"))?;
+    Ok(SimSummary {
+        out: out.clone(),
+        tracks: plan.tracks.len(),
+        events: plan.events.len(),
+        runs: plan.runs.len(),
+        observations: plan.runs.len() * 4,
+        samples: samples.load(Ordering::Relaxed),
+        bytes: dir_size(out),
+        saturated_fraction: saturated as f64 / total_samples.max(1) as f64,
+    })
+}
+
+fn telemetry_rel(run: &str) -> String {
+    format!("telemetry/{run}.mcap")
+}
+
+fn tire_set_id(r: &preset::RunPlan, w: Wheel) -> String {
+    format!("{}-{}", r.id, w.name())
+}
+
+fn progress_bar(show: bool, n: u64) -> indicatif::ProgressBar {
+    if !show {
+        return indicatif::ProgressBar::hidden();
+    }
+    let pb = indicatif::ProgressBar::new(n);
+    pb.set_style(
+        indicatif::ProgressStyle::with_template("{spinner} simulating runs [{bar:40}] {pos}/{len} ({eta} left)")
+            .expect("valid template")
+            .progress_chars("=> "),
+    );
+    pb
+}
+
+fn dir_size(p: &Path) -> u64 {
+    std::fs::read_dir(p)
+        .map(|rd| {
+            rd.filter_map(Result::ok)
+                .map(|e| match e.metadata() {
+                    Ok(m) if m.is_dir() => dir_size(&e.path()),
+                    Ok(m) => m.len(),
+                    Err(_) => 0,
+                })
+                .sum()
+        })
+        .unwrap_or(0)
+}
+
+/// Synthesises every measurement location of every track, and the per-track
+/// road truth (means over locations) the wear law uses.
+fn synthesise_roads(plan: &Plan, seed: u64) -> (Vec<Profile>, Vec<RoadTruth>) {
+    let jobs: Vec<(usize, usize)> = (0..plan.tracks.len())
+        .flat_map(|t| (0..plan.locations_per_track).map(move |l| (t, l)))
+        .collect();
+    let profiles: Vec<Profile> = jobs
+        .par_iter()
+        .map(|&(t, l)| {
+            let def = &plan.tracks[t];
+            let mut rng = ChaCha8Rng::seed_from_u64(seed ^ (def.seed << 8) ^ l as u64);
+            let mut z = road::gaussian_profile(&def.road, plan.profile_samples, plan.profile_dx_mm, road::Amplitudes::Random, &mut rng);
+            road::shape_heights(&mut z, &def.road);
+            Profile {
+                track: def.id.clone(),
+                location: format!("L{}", l + 1),
+                x0_mm: 0.0,
+                dx_mm: plan.profile_dx_mm,
+                z_mm: z.iter().map(|v| (v * 1e5).round() / 1e5).collect(),
+            }
+        })
+        .collect();
+    let roads = plan
+        .tracks
+        .iter()
+        .map(|def| {
+            let mine: Vec<_> = profiles.iter().filter(|p| p.track == def.id).map(|p| road::moments(&p.z_mm)).collect();
+            let n = mine.len() as f64;
+            let mean = |f: fn(&(f64, f64, f64)) -> f64| mine.iter().map(f).sum::<f64>() / n;
+            let micro_share = road::variance_fraction_below(&def.road, plan.profile_samples, plan.profile_dx_mm, ROAD_MICRO_LAMBDA_MM);
+            RoadTruth {
+                rq_mm: mean(|m| m.0),
+                skewness: mean(|m| m.1),
+                kurtosis: mean(|m| m.2),
+                micro_rms_mm: def.road.rms_mm * micro_share.sqrt(),
+                hurst: def.road.hurst,
+                hidden_abrasiveness: def.hidden_abrasiveness,
+            }
+        })
+        .collect();
+    (profiles, roads)
+}
+
+/// One row of `truth/wear_truth.csv`.
+#[derive(Debug, serde::Serialize)]
+struct TruthRow {
+    run: String,
+    event: String,
+    track: String,
+    car: String,
+    compound: String,
+    wheel: Wheel,
+    tire_set: String,
+    friction_energy_j: f64,
+    friction_energy_x_j: f64,
+    friction_energy_y_j: f64,
+    weighted_energy_j: f64,
+    mean_surface_c: f64,
+    mean_inner_c: f64,
+    wear_base_pct: f64,
+    wear_irregular_pct: f64,
+    wear_graining_pct: f64,
+    wear_blistering_pct: f64,
+    wear_thermal_pct: f64,
+    wear_road_abrasion_pct: f64,
+    wear_total_pct: f64,
+}
+
+impl TruthRow {
+    #[allow(clippy::too_many_arguments)]
+    fn new(
+        rp: &preset::RunPlan,
+        ev: &preset::EventPlan,
+        track: &str,
+        compound: &compound::CompoundModel,
+        w: Wheel,
+        set: &str,
+        wt: &run::WheelTruth,
+        tw: &wear::TireWear,
+    ) -> Self {
+        TruthRow {
+            run: rp.id.clone(),
+            event: ev.id.clone(),
+            track: track.into(),
+            car: format!("car{}", rp.car + 1),
+            compound: compound.id.clone(),
+            wheel: w,
+            tire_set: set.into(),
+            friction_energy_j: wt.friction_energy_x_j + wt.friction_energy_y_j,
+            friction_energy_x_j: wt.friction_energy_x_j,
+            friction_energy_y_j: wt.friction_energy_y_j,
+            weighted_energy_j: wt.weighted_energy_j,
+            mean_surface_c: wt.mean_surface_c,
+            mean_inner_c: wt.mean_inner_c,
+            wear_base_pct: tw.base_pct,
+            wear_irregular_pct: tw.irregular_pct,
+            wear_graining_pct: tw.effect_pct[0],
+            wear_blistering_pct: tw.effect_pct[1],
+            wear_thermal_pct: tw.effect_pct[2],
+            wear_road_abrasion_pct: tw.effect_pct[3],
+            wear_total_pct: tw.total_pct(),
+        }
+    }
+}
+
+#[derive(serde::Serialize)]
+struct TruthSettings<'a> {
+    preset: String,
+    seed: u64,
+    scale: f64,
+    sample_rate_hz: f64,
+    encoding: Encoding,
+    effects: &'a [Effect],
+    tracks: Vec<TrackTruth<'a>>,
+    compounds: &'a [compound::CompoundModel],
+    thermal: thermal::ThermalParams,
+}
+
+#[derive(serde::Serialize)]
+struct TrackTruth<'a> {
+    id: &'a str,
+    grip: f64,
+    road_params: &'a track::RoadParams,
+    road: RoadTruth,
+}
+
+#[derive(serde::Serialize)]
+struct RunTruthRow<'a> {
+    run: &'a str,
+    pace: f64,
+    laps: u64,
+    duration_s: f64,
+    samples: u64,
+    dropped_samples: u64,
+    saturated_samples: u64,
+}
+
+fn write_truth(
+    out: &Path,
+    plan: &Plan,
+    roads: &[RoadTruth],
+    rows: &[TruthRow],
+    truths: &[run::RunTruth],
+    opts: &SimOptions,
+) -> Result<(), SimError> {
+    let settings = TruthSettings {
+        preset: format!("{:?}", opts.preset).to_lowercase(),
+        seed: opts.seed,
+        scale: opts.scale,
+        sample_rate_hz: plan.rate_hz,
+        encoding: opts.encoding,
+        effects: &opts.effects,
+        tracks: plan
+            .tracks
+            .iter()
+            .zip(roads)
+            .map(|(t, r)| TrackTruth { id: &t.id, grip: t.grip, road_params: &t.road, road: *r })
+            .collect(),
+        compounds: &plan.compounds,
+        thermal: thermal::ThermalParams::default(),
+    };
+    write_toml(&out.join("truth/settings.toml"), &settings)?;
+    write_csv(&out.join("truth/wear_truth.csv"), rows)?;
+    let run_rows: Vec<RunTruthRow> = plan
+        .runs
+        .iter()
+        .zip(truths)
+        .map(|(r, t)| RunTruthRow {
+            run: &r.id,
+            pace: r.pace,
+            laps: t.laps,
+            duration_s: t.duration_s,
+            samples: t.samples,
+            dropped_samples: t.dropped_samples,
+            saturated_samples: t.saturated_samples,
+        })
+        .collect();
+    write_csv(&out.join("truth/runs.csv"), &run_rows)
+}
+
+fn write_csv<T: serde::Serialize>(path: &Path, rows: &[T]) -> Result<(), SimError> {
+    crate::atomic::write_with(path, |w| {
+        let mut c = csv::Writer::from_writer(w);
+        for r in rows {
+            c.serialize(r)?;
+        }
+        c.flush()
+    })
+    .map_err(|e| SimError::Ingest(IngestError::io(path, e)))
+}

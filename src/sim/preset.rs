@@ -1,0 +1,231 @@
+//! Season presets: which tracks, events, cars and runs a season has.
+
+use super::compound::{CompoundModel, catalogue};
+use super::track::{RoadParams, TrackDef};
+use super::vehicle::CarParams;
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Preset {
+    /// 8 tracks, 10 events, 2 cars, 320 tire-runs at 20 Hz: under a minute.
+    Demo,
+    /// 12 tracks, 24 events × scale, 3 cars, 6 runs each at 200 Hz: tens of GB at scale 1.
+    Season,
+}
+
+#[derive(Debug, Clone)]
+pub struct EventPlan {
+    pub id: String,
+    pub track: usize,
+    pub date: String,
+    pub air_c: f64,
+    pub track_c: f64,
+}
+
+#[derive(Debug, Clone)]
+pub struct RunPlan {
+    pub id: String,
+    pub event: usize,
+    pub car: usize,
+    pub compound: usize,
+    pub distance_m: f64,
+    /// Share of the available grip the driver uses.
+    pub pace: f64,
+    pub cold_pressure_pa: [f64; 4],
+    pub seed: u64,
+    /// Start of the run (ns since the Unix epoch).
+    pub start_ns: u64,
+}
+
+/// Everything a season will contain, before any physics runs.
+#[derive(Debug, Clone)]
+pub struct Plan {
+    pub name: String,
+    pub tracks: Vec<TrackDef>,
+    pub compounds: Vec<CompoundModel>,
+    pub cars: Vec<CarParams>,
+    pub events: Vec<EventPlan>,
+    pub runs: Vec<RunPlan>,
+    pub rate_hz: f64,
+    pub profile_samples: usize,
+    pub profile_dx_mm: f64,
+    pub locations_per_track: usize,
+}
+
+/// The twelve tracks of the catalogue (the demo uses the first eight).
+pub fn track_catalogue() -> Vec<TrackDef> {
+    // (id, name, length m, corners, grip, hidden abrasiveness, H, rms mm, roll-off mm, skew, kurt)
+    let rows: [(&str, &str, f64, usize, f64, f64, f64, f64, f64, f64, f64); 12] = [
+        ("valle-rossa", "Valle Rossa", 5200.0, 11, 1.00, 1.02, 0.82, 0.45, 25.0, -0.07, 0.02),
+        ("nordkamm", "Nordkamm Ring", 4300.0, 14, 0.97, 0.97, 0.74, 0.62, 32.0, -0.20, 0.06),
+        ("baie-du-sud", "Baie du Sud", 5800.0, 12, 1.03, 1.04, 0.88, 0.30, 18.0, -0.01, 0.00),
+        ("sierra-azul", "Sierra Azul", 4700.0, 15, 0.99, 1.00, 0.70, 0.55, 28.0, -0.14, 0.10),
+        ("kiefernring", "Kiefernring", 3900.0, 10, 1.01, 0.98, 0.79, 0.38, 22.0, -0.04, 0.04),
+        ("porto-vento", "Porto Vento", 6300.0, 13, 0.96, 1.03, 0.68, 0.72, 36.0, -0.23, 0.08),
+        ("lakeside", "Lakeside Park", 4000.0, 9, 1.02, 1.01, 0.85, 0.34, 20.0, -0.10, 0.12),
+        ("desert-loop", "Desert Loop", 5500.0, 12, 0.98, 0.99, 0.76, 0.50, 30.0, -0.17, 0.03),
+        ("hafen", "Hafen Circuit", 4800.0, 16, 1.00, 1.00, 0.72, 0.42, 26.0, -0.11, 0.07),
+        ("monte-leone", "Monte Leone", 5900.0, 11, 0.99, 1.02, 0.80, 0.58, 34.0, -0.21, 0.02),
+        ("riverside", "Riverside", 4400.0, 12, 1.01, 0.98, 0.87, 0.28, 17.0, -0.03, 0.09),
+        ("highland", "Highland Raceway", 5100.0, 14, 0.97, 1.01, 0.66, 0.66, 38.0, -0.18, 0.11),
+    ];
+    rows.iter()
+        .enumerate()
+        .map(|(i, r)| TrackDef {
+            id: r.0.into(),
+            name: r.1.into(),
+            seed: 1000 + i as u64,
+            length_target_m: r.2,
+            corners: r.3,
+            grip: r.4,
+            hidden_abrasiveness: r.5,
+            road: RoadParams {
+                hurst: r.6,
+                rms_mm: r.7,
+                rolloff_mm: r.8,
+                cutoff_mm: 0.04,
+                skew_coef: r.9,
+                kurt_coef: r.10,
+            },
+        })
+        .collect()
+}
+
+/// Days since 1970-01-01 of a civil date (proleptic Gregorian).
+fn days_from_civil(y: i64, m: i64, d: i64) -> i64 {
+    let y = if m <= 2 { y - 1 } else { y };
+    let era = y.div_euclid(400);
+    let yoe = y - era * 400;
+    let mp = (m + 9) % 12;
+    let doy = (153 * mp + 2) / 5 + d - 1;
+    let doe = yoe * 365 + yoe / 4 - yoe / 100 + doy;
+    era * 146_097 + doe - 719_468
+}
+
+fn civil_from_days(z: i64) -> (i64, i64, i64) {
+    let z = z + 719_468;
+    let era = z.div_euclid(146_097);
+    let doe = z - era * 146_097;
+    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
+    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
+    let mp = (5 * doy + 2) / 153;
+    let d = doy - (153 * mp + 2) / 5 + 1;
+    let m = if mp < 10 { mp + 3 } else { mp - 9 };
+    (yoe + era * 400 + (m <= 2) as i64, m, d)
+}
+
+impl Plan {
+    /// Builds the plan of a preset. `scale` multiplies the number of events
+    /// (season preset); `rate_hz` overrides the preset's sample rate.
+    pub fn new(preset: Preset, scale: f64, seed: u64, rate_hz: Option<f64>) -> Plan {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x7469_7265_7765_6172);
+        let all_tracks = track_catalogue();
+        let (name, n_tracks, n_events, n_cars, runs_per_car, rate, dist) = match preset {
+            Preset::Demo => ("demo", 8, 10, 2, 4, 20.0, (30e3, 110e3)),
+            Preset::Season => {
+                let events = ((24.0 * scale).round() as usize).max(1);
+                ("season", 12, events, 3, 6, 200.0, (30e3, 250e3))
+            }
+        };
+        let tracks: Vec<TrackDef> = all_tracks.into_iter().take(n_tracks).collect();
+        let cars: Vec<CarParams> = (0..n_cars)
+            .map(|i| CarParams::single_seater(&format!("car{}", i + 1), &format!("Car #{}", i + 1), i as f64 - 0.5 * (n_cars - 1) as f64))
+            .collect();
+        let compounds = catalogue();
+        let season_start = days_from_civil(2026, 3, 1);
+        let events: Vec<EventPlan> = (0..n_events)
+            .map(|e| {
+                // Every track once, then again in a different order.
+                let track = if e < n_tracks { e } else { (e * 5 + 3) % n_tracks };
+                let day = season_start + (e as i64 * 240) / n_events as i64 + rng.random_range(0..3);
+                let (y, m, d) = civil_from_days(day);
+                let air_c: f64 = rng.random_range(12.0..36.0);
+                EventPlan {
+                    id: format!("E{:02}-{}", e + 1, tracks[track].id),
+                    track,
+                    date: format!("{y:04}-{m:02}-{d:02}"),
+                    air_c: (air_c * 10.0).round() / 10.0,
+                    track_c: ((air_c + rng.random_range(4.0..26.0)) * 10.0).round() / 10.0,
+                }
+            })
+            .collect();
+        let mut runs = Vec::new();
+        for (ei, ev) in events.iter().enumerate() {
+            let day = {
+                let p: Vec<i64> = ev.date.split('-').map(|s| s.parse().expect("we wrote it")).collect();
+                days_from_civil(p[0], p[1], p[2])
+            };
+            for car in 0..n_cars {
+                for r in 0..runs_per_car {
+                    let distance_m: f64 = rng.random_range(dist.0..dist.1);
+                    // The supplier nominates a compound per event by track temperature;
+                    // a fifth of the runs try a neighbouring one.
+                    let nominated: usize = if ev.track_c < 32.0 { 0 } else if ev.track_c < 44.0 { 1 } else { 2 };
+                    let compound = if rng.random_bool(0.8) {
+                        nominated
+                    } else if nominated == 0 || (nominated == 1 && rng.random_bool(0.5)) {
+                        nominated + 1
+                    } else {
+                        nominated - 1
+                    };
+                    let front: f64 = rng.random_range(70e3..85e3);
+                    let rear: f64 = rng.random_range(68e3..82e3);
+                    let jitter = |rng: &mut ChaCha8Rng| rng.random_range(-500.0..500.0);
+                    let hour = 9 + r as u64 * 2 + car as u64;
+                    runs.push(RunPlan {
+                        id: format!("{}-{}-R{}", ev.id, cars[car].id, r + 1),
+                        event: ei,
+                        car,
+                        compound,
+                        distance_m: distance_m.round(),
+                        pace: rng.random_range(0.82..0.94),
+                        cold_pressure_pa: [
+                            (front + jitter(&mut rng)).round(),
+                            (front + jitter(&mut rng)).round(),
+                            (rear + jitter(&mut rng)).round(),
+                            (rear + jitter(&mut rng)).round(),
+                        ],
+                        seed: rng.random(),
+                        start_ns: (day as u64 * 86_400 + hour * 3600) * 1_000_000_000,
+                    });
+                }
+            }
+        }
+        Plan {
+            name: name.into(),
+            tracks,
+            compounds,
+            cars,
+            events,
+            runs,
+            rate_hz: rate_hz.unwrap_or(rate),
+            profile_samples: 1 << 14,
+            profile_dx_mm: 0.01,
+            locations_per_track: 6,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn civil_dates_round_trip() {
+        assert_eq!(days_from_civil(1970, 1, 1), 0);
+        assert_eq!(days_from_civil(2026, 3, 1), 20_513);
+        for z in [0, 20_513, 20_600, -400, 30_000] {
+            let (y, m, d) = civil_from_days(z);
+            assert_eq!(days_from_civil(y, m, d), z);
+        }
+    }
+
+    #[test]
+    fn demo_has_enough_observations_from_separate_events() {
+        let p = Plan::new(Preset::Demo, 1.0, 7, None);
+        assert!(p.runs.len() * 4 >= 280);
+        assert_eq!(p.tracks.len(), 8);
+        assert!(p.events.len() >= 10);
+    }
+}

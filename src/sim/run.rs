@@ -1,0 +1,258 @@
+//! One run in the time domain: the car laps its quasi-steady-state profile
+//! (with small lap-to-lap pace changes), wheel forces and slips follow, tire
+//! temperatures evolve, and every sample goes to the telemetry writer with
+//! sensor noise and the occasional logger dropout. Noise-free integrals
+//! (friction energy, the wear law's weighted energy, each planted effect's
+//! weighted energy) are kept as ground truth.
+
+use super::compound::CompoundModel;
+use super::effects::{Effect, EffectKind};
+use super::lap::LapProfile;
+use super::thermal::{ThermalParams, TireTemps, hot_pressure_pa};
+use super::tire::slips;
+use super::vehicle::CarParams;
+use crate::Wheel;
+use crate::ingest::telemetry::proto::{TireSample, VehicleSample};
+use rand::Rng;
+use rand_distr::{Distribution, Normal, Poisson};
+
+/// Everything a run needs that is shared with other runs.
+pub struct RunContext<'a> {
+    pub car: &'a CarParams,
+    pub compound: &'a CompoundModel,
+    pub lap: &'a LapProfile,
+    pub thermal: ThermalParams,
+    /// Road grip factor of the track.
+    pub road_grip: f64,
+    pub effects: &'a [Effect],
+}
+
+/// The run's own settings.
+#[derive(Debug, Clone)]
+pub struct RunSettings {
+    pub distance_m: f64,
+    pub rate_hz: f64,
+    pub start_ns: u64,
+    pub air_c: f64,
+    pub track_c: f64,
+    /// Cold (set) gauge pressure per wheel (Pa) at 20 °C.
+    pub cold_pressure_pa: [f64; 4],
+    /// Tire temperature at the start (blankets, °C).
+    pub blanket_c: f64,
+}
+
+/// Noise-free integrals of one wheel over the run.
+#[derive(Debug, Clone, Default, PartialEq, serde::Serialize)]
+pub struct WheelTruth {
+    /// ∫ −F_x·v_sx dt (J).
+    pub friction_energy_x_j: f64,
+    /// ∫ −F_y·v_sy dt (J).
+    pub friction_energy_y_j: f64,
+    /// ∫ P·ψ(T_s) dt: friction energy weighted by the compound's temperature factor (J).
+    pub weighted_energy_j: f64,
+    /// Per planted effect (in `EffectKind::ALL` order): ∫ P_e·w dt (J).
+    pub effect_energy_j: [f64; 4],
+    pub mean_camber_deg: f64,
+    pub mean_pressure_pa: f64,
+    pub mean_surface_c: f64,
+    pub mean_inner_c: f64,
+}
+
+/// Run-level truth.
+#[derive(Debug, Clone, Default)]
+pub struct RunTruth {
+    pub wheels: [WheelTruth; 4],
+    pub samples: u64,
+    pub dropped_samples: u64,
+    pub saturated_samples: u64,
+    pub laps: u64,
+    pub duration_s: f64,
+}
+
+/// Standard deviations of the sensor noise.
+struct Noise {
+    vx: Normal<f64>,
+    vy: Normal<f64>,
+    omega: Normal<f64>,
+    force_n: Normal<f64>,
+    force_rel: Normal<f64>,
+    t_surface: Normal<f64>,
+    t_inner: Normal<f64>,
+    pressure: Normal<f64>,
+    camber: Normal<f64>,
+    speed: Normal<f64>,
+    t_track: Normal<f64>,
+    t_air: Normal<f64>,
+}
+
+impl Noise {
+    fn new() -> Self {
+        let n = |sd| Normal::new(0.0, sd).expect("positive sd");
+        Noise {
+            vx: n(0.02),
+            vy: n(0.01),
+            omega: n(0.03),
+            force_n: n(15.0),
+            force_rel: n(0.015),
+            t_surface: n(0.8),
+            t_inner: n(0.3),
+            pressure: n(300.0),
+            camber: n(0.05),
+            speed: n(0.05),
+            t_track: n(0.3),
+            t_air: n(0.1),
+        }
+    }
+}
+
+/// Lookup table of the wear law's temperature factor ψ(T) (−30..210 °C, 0.25 K).
+struct PsiTable(Vec<f64>);
+
+impl PsiTable {
+    const T0: f64 = -30.0;
+    const STEP: f64 = 0.25;
+    fn new(c: &CompoundModel) -> Self {
+        PsiTable((0..=960).map(|i| c.wear_temperature_factor(Self::T0 + Self::STEP * i as f64)).collect())
+    }
+    fn at(&self, t: f64) -> f64 {
+        let x = ((t - Self::T0) / Self::STEP).clamp(0.0, (self.0.len() - 2) as f64);
+        let i = x as usize;
+        let w = x - i as f64;
+        self.0[i] * (1.0 - w) + self.0[i + 1] * w
+    }
+}
+
+/// Simulates a run, passing each recorded sample to `sink(time_ns, tires, vehicle)`.
+pub fn simulate_run<E>(
+    ctx: &RunContext,
+    set: &RunSettings,
+    rng: &mut impl Rng,
+    mut sink: impl FnMut(u64, &[TireSample; 4], &VehicleSample) -> Result<(), E>,
+) -> Result<RunTruth, E> {
+    let car = ctx.car;
+    let lap = ctx.lap;
+    let dt = 1.0 / set.rate_hz;
+    let period_ns = (1e9 / set.rate_hz).round() as u64;
+    let lap_len = lap.ds_m * lap.v.len() as f64;
+    let psi = PsiTable::new(ctx.compound);
+    let noise = Noise::new();
+
+    // Logger dropouts: a Poisson number per hour, 0.1-1.5 s each.
+    let est_duration = set.distance_m / (lap_len / lap.lap_time_s);
+    let n_drop = Poisson::new(1.5 * est_duration / 3600.0 + 0.5)
+        .map(|p| p.sample(rng) as usize)
+        .unwrap_or(0);
+    let mut dropouts: Vec<(f64, f64)> = (0..n_drop)
+        .map(|_| {
+            let t0 = rng.random_range(5.0..est_duration.max(6.0));
+            (t0, t0 + rng.random_range(0.1..1.5))
+        })
+        .collect();
+    dropouts.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let weather_phase = rng.random_range(0.0..std::f64::consts::TAU);
+
+    let mut temps = [TireTemps {
+        surface_c: set.blanket_c,
+        inner_c: set.blanket_c,
+    }; 4];
+    let mut truth = RunTruth::default();
+    let (mut s_lap, mut distance, mut time) = (0.0f64, 0.0f64, 0.0f64);
+    let mut lap_pace: f64 = 1.0;
+    let mut tires = [TireSample::default(); 4];
+    while distance < set.distance_m {
+        // Interpolate the lap profile at s, scaled by this lap's pace.
+        let x = s_lap / lap.ds_m;
+        let i = (x as usize).min(lap.v.len() - 1);
+        let j = (i + 1) % lap.v.len();
+        let w = x - i as f64;
+        let lerp = |a: &[f64]| a[i] * (1.0 - w) + a[j] * w;
+        let v = lerp(&lap.v) * lap_pace.sqrt();
+        let ax = lerp(&lap.ax) * lap_pace;
+        let ay = lerp(&lap.ay) * lap_pace;
+        let kappa = lerp(&lap.curvature);
+        let yaw_rate = v * kappa;
+        let weather = (std::f64::consts::TAU * time / 3600.0 + weather_phase).sin();
+        let t_air = set.air_c + 1.0 * weather;
+        let t_track = set.track_c + 2.5 * weather;
+
+        let forces = car.wheel_forces(v, ax, ay);
+        for wheel in Wheel::ALL {
+            let k = wheel.index();
+            let f = forces[k];
+            let mu = ctx.compound.grip.mu(temps[k].surface_c, f.fz, ctx.road_grip);
+            let (sx, sy, saturated) = slips(f.fx, f.fy, f.fz, mu);
+            truth.saturated_samples += saturated as u64;
+            let y_w = wheel.side_sign() * 0.5 * car.track_width(wheel);
+            let vx = (v - yaw_rate * y_w).max(0.5);
+            let v_sx = sx * vx; // paper eq. 21
+            let v_sy = sy * vx; // paper eq. 22
+            let p_x = -f.fx * v_sx; // paper eq. 23, dissipated (≥ 0)
+            let p_y = -f.fy * v_sy; // paper eq. 24
+            let p = p_x + p_y; // paper eq. 25
+            let radius = car.rolling_radius(wheel) - f.fz / 600_000.0;
+            let omega = vx * (1.0 - sx) / radius;
+            let camber = car.camber_deg(wheel, ay);
+            let pressure = hot_pressure_pa(set.cold_pressure_pa[k], 20.0, temps[k].inner_c);
+
+            let wt = &mut truth.wheels[k];
+            wt.friction_energy_x_j += p_x * dt;
+            wt.friction_energy_y_j += p_y * dt;
+            wt.weighted_energy_j += p * psi.at(temps[k].surface_c) * dt;
+            for e in ctx.effects {
+                let idx = EffectKind::ALL.iter().position(|k| *k == e.kind).expect("listed");
+                let power = if e.kind == EffectKind::Graining { p_y } else { p };
+                wt.effect_energy_j[idx] += power * e.weight(temps[k].surface_c, temps[k].inner_c) * dt;
+            }
+            wt.mean_camber_deg += camber;
+            wt.mean_pressure_pa += pressure;
+            wt.mean_surface_c += temps[k].surface_c;
+            wt.mean_inner_c += temps[k].inner_c;
+
+            let rel = 1.0 + noise.force_rel.sample(rng);
+            tires[k] = TireSample {
+                vx_mps: (vx + noise.vx.sample(rng)) as f32,
+                vy_mps: (v_sy + noise.vy.sample(rng)) as f32,
+                omega_radps: (omega + noise.omega.sample(rng)) as f32,
+                rolling_radius_m: radius as f32,
+                fx_n: (f.fx * rel + noise.force_n.sample(rng)) as f32,
+                fy_n: (f.fy * rel + noise.force_n.sample(rng)) as f32,
+                fz_n: (f.fz * rel + noise.force_n.sample(rng)) as f32,
+                t_surface_c: (temps[k].surface_c + noise.t_surface.sample(rng)) as f32,
+                t_inner_c: (temps[k].inner_c + noise.t_inner.sample(rng)) as f32,
+                pressure_pa: (pressure + noise.pressure.sample(rng)) as f32,
+                camber_deg: (camber + noise.camber.sample(rng)) as f32,
+            };
+            temps[k] = ctx.thermal.step(temps[k], dt, p, f.fz, vx, t_air, t_track);
+        }
+        let vehicle = VehicleSample {
+            speed_mps: (v + noise.speed.sample(rng)) as f32,
+            t_track_c: (t_track + noise.t_track.sample(rng)) as f32,
+            t_air_c: (t_air + noise.t_air.sample(rng)) as f32,
+            distance_m: distance,
+        };
+        let dropped = dropouts.iter().any(|&(a, b)| time >= a && time < b);
+        if dropped {
+            truth.dropped_samples += 1;
+        } else {
+            sink(set.start_ns + truth.samples * period_ns, &tires, &vehicle)?;
+        }
+        truth.samples += 1;
+        s_lap += v * dt;
+        distance += v * dt;
+        time = truth.samples as f64 * dt;
+        if s_lap >= lap_len {
+            s_lap -= lap_len;
+            truth.laps += 1;
+            lap_pace = 1.0 + 0.006 * rng.sample::<f64, _>(rand_distr::StandardNormal);
+        }
+    }
+    let n = truth.samples.max(1) as f64;
+    for wt in &mut truth.wheels {
+        wt.mean_camber_deg /= n;
+        wt.mean_pressure_pa /= n;
+        wt.mean_surface_c /= n;
+        wt.mean_inner_c /= n;
+    }
+    truth.duration_s = time;
+    Ok(truth)
+}
