@@ -21,10 +21,12 @@ impl AtomicFile {
             _ => Path::new("."),
         };
         std::fs::create_dir_all(parent)?;
-        let tmp = tempfile::Builder::new()
-            .prefix(".tirewear-")
-            .suffix(".tmp")
-            .tempfile_in(parent)?;
+        let mut builder = tempfile::Builder::new();
+        builder.prefix(".tirewear-").suffix(".tmp");
+        // Temporary files are private (0600); the finished file gets ordinary permissions.
+        #[cfg(unix)]
+        builder.permissions(std::os::unix::fs::PermissionsExt::from_mode(0o644));
+        let tmp = builder.tempfile_in(parent)?;
         Ok(Self {
             tmp,
             dest: dest.to_path_buf(),

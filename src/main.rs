@@ -66,6 +66,9 @@ struct SimulateArgs {
     /// Telemetry sample rate in Hz (default: 20 for demo, 200 for season; at most 1000).
     #[arg(long)]
     rate: Option<f64>,
+    /// Ideal sensors: no measurement noise and no logger dropouts.
+    #[arg(long)]
+    no_noise: bool,
     /// Output folder (created; files in it are replaced).
     #[arg(long)]
     out: PathBuf,
@@ -115,6 +118,7 @@ fn main() -> Result<()> {
                 encoding: a.encoding,
                 rate_hz: a.rate,
                 out: a.out,
+                sensor_noise: !a.no_noise,
                 progress,
             };
             run_simulation(&opts)?;
@@ -128,6 +132,7 @@ fn main() -> Result<()> {
                 encoding: Encoding::Block,
                 rate_hz: None,
                 out,
+                sensor_noise: true,
                 progress,
             };
             let s = run_simulation(&opts)?;

@@ -42,6 +42,8 @@ pub struct SimOptions {
     pub encoding: Encoding,
     pub rate_hz: Option<f64>,
     pub out: PathBuf,
+    /// Sensor noise and logger dropouts (default on; off gives ideal sensors).
+    pub sensor_noise: bool,
     /// Show a progress bar.
     pub progress: bool,
 }
@@ -147,6 +149,7 @@ pub fn simulate(opts: &SimOptions) -> Result<SimSummary, SimError> {
                 track_c: ev.track_c,
                 cold_pressure_pa: rp.cold_pressure_pa,
                 blanket_c: 70.0,
+                sensor_noise: opts.sensor_noise,
             };
             let info = RunInfo {
                 run: rp.id.clone(),

@@ -8,6 +8,8 @@ use rand_chacha::ChaCha8Rng;
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum Preset {
+    /// 2 tracks, 2 events, 1 car, 2 short runs each: for tests and quick checks.
+    Tiny,
     /// 8 tracks, 10 events, 2 cars, 320 tire-runs at 20 Hz: under a minute.
     Demo,
     /// 12 tracks, 24 events × scale, 3 cars, 6 runs each at 200 Hz: tens of GB at scale 1.
@@ -122,6 +124,7 @@ impl Plan {
         let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x7469_7265_7765_6172);
         let all_tracks = track_catalogue();
         let (name, n_tracks, n_events, n_cars, runs_per_car, rate, dist) = match preset {
+            Preset::Tiny => ("tiny", 2, 2, 1, 2, 20.0, (6e3, 12e3)),
             Preset::Demo => ("demo", 8, 10, 2, 4, 20.0, (30e3, 110e3)),
             Preset::Season => {
                 let events = ((24.0 * scale).round() as usize).max(1);
@@ -200,9 +203,9 @@ impl Plan {
             events,
             runs,
             rate_hz: rate_hz.unwrap_or(rate),
-            profile_samples: 1 << 14,
+            profile_samples: if preset == Preset::Tiny { 1 << 12 } else { 1 << 14 },
             profile_dx_mm: 0.01,
-            locations_per_track: 6,
+            locations_per_track: if preset == Preset::Tiny { 2 } else { 6 },
         }
     }
 }

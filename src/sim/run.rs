@@ -39,6 +39,8 @@ pub struct RunSettings {
     pub cold_pressure_pa: [f64; 4],
     /// Tire temperature at the start (blankets, °C).
     pub blanket_c: f64,
+    /// Sensor noise and logger dropouts (off: ideal sensors, for exact tests).
+    pub sensor_noise: bool,
 }
 
 /// Noise-free integrals of one wheel over the run.
@@ -86,8 +88,9 @@ struct Noise {
 }
 
 impl Noise {
-    fn new() -> Self {
-        let n = |sd| Normal::new(0.0, sd).expect("positive sd");
+    fn new(on: bool) -> Self {
+        let scale = if on { 1.0 } else { 0.0 };
+        let n = |sd: f64| Normal::new(0.0, sd * scale).expect("non-negative sd");
         Noise {
             vx: n(0.02),
             vy: n(0.01),
@@ -135,13 +138,14 @@ pub fn simulate_run<E>(
     let period_ns = (1e9 / set.rate_hz).round() as u64;
     let lap_len = lap.ds_m * lap.v.len() as f64;
     let psi = PsiTable::new(ctx.compound);
-    let noise = Noise::new();
+    let noise = Noise::new(set.sensor_noise);
 
     // Logger dropouts: a Poisson number per hour, 0.1-1.5 s each.
     let est_duration = set.distance_m / (lap_len / lap.lap_time_s);
-    let n_drop = Poisson::new(1.5 * est_duration / 3600.0 + 0.5)
-        .map(|p| p.sample(rng) as usize)
-        .unwrap_or(0);
+    let n_drop = match set.sensor_noise {
+        true => Poisson::new(1.5 * est_duration / 3600.0 + 0.5).map(|p| p.sample(rng) as usize).unwrap_or(0),
+        false => 0,
+    };
     let mut dropouts: Vec<(f64, f64)> = (0..n_drop)
         .map(|_| {
             let t0 = rng.random_range(5.0..est_duration.max(6.0));

@@ -1,0 +1,79 @@
+"""Independent reader: Python `mcap` + `mcap-protobuf-support` decode telemetry
+files that tirewear wrote (schemas come from the files' own FileDescriptorSet
+records), and numpy computes per-channel statistics and the friction energy.
+
+Produces tests/golden/<fixture>.json for tests/oracle_mcap.rs.
+
+    python3 tests/oracles/read_our_mcap.py   # from the repository root
+
+The fixtures themselves were written by tirewear (see make_fixtures.sh).
+"""
+import json
+import pathlib
+
+import numpy as np
+from mcap.reader import make_reader
+from mcap_protobuf.decoder import DecoderFactory
+
+ROOT = pathlib.Path(__file__).resolve().parents[2]
+TIRE_FIELDS = ["vx_mps", "vy_mps", "omega_radps", "rolling_radius_m", "fx_n", "fy_n", "fz_n",
+               "t_surface_c", "t_inner_c", "pressure_pa", "camber_deg"]
+VEHICLE_FIELDS = ["speed_mps", "t_track_c", "t_air_c", "distance_m"]
+
+
+def read(path):
+    series = {}
+    with open(path, "rb") as f:
+        reader = make_reader(f, decoder_factories=[DecoderFactory()])
+        for schema, channel, message, msg in reader.iter_decoded_messages():
+            fields = TIRE_FIELDS if channel.topic.startswith("/tire/") else VEHICLE_FIELDS
+            s = series.setdefault(channel.topic, {"time_ns": [], **{k: [] for k in fields}})
+            if schema.name.endswith("Block"):
+                n = len(getattr(msg, fields[0]))
+                s["time_ns"].extend(msg.start_time_ns + i * msg.sample_period_ns for i in range(n))
+                for k in fields:
+                    vals = list(getattr(msg, k))
+                    assert len(vals) == n, (path, channel.topic, k)
+                    s[k].extend(vals)
+            else:
+                s["time_ns"].append(message.log_time)
+                for k in fields:
+                    s[k].append(getattr(msg, k))
+    return series
+
+
+def stats(series):
+    out = {}
+    for topic, s in sorted(series.items()):
+        t = np.array(s["time_ns"], dtype=np.int64)
+        entry = {"count": int(t.size), "first_time_ns": int(t[0]), "last_time_ns": int(t[-1])}
+        for k, v in s.items():
+            if k == "time_ns":
+                continue
+            a = np.array(v, dtype=np.float64)  # f32 values widened exactly
+            entry[k] = {"sum": float(a.sum()), "min": float(a.min()), "max": float(a.max()),
+                        "first": float(a[0]), "last": float(a[-1])}
+        if topic.startswith("/tire/"):
+            # Friction energy by paper eqs. 19-25 with the dissipation sign
+            # (ISO axes: friction opposes sliding): P = -(Fx (vx - Omega R) + Fy vy),
+            # integrated with the time step to the next sample (gaps excluded).
+            vsx = np.array(s["vx_mps"], float) - np.array(s["omega_radps"], float) * np.array(s["rolling_radius_m"], float)
+            p = -(np.array(s["fx_n"], float) * vsx + np.array(s["fy_n"], float) * np.array(s["vy_mps"], float))
+            dt = np.diff(t) / 1e9
+            period = np.median(dt)
+            ok = np.isclose(dt, period)
+            entry["friction_energy_j"] = float(np.sum(p[:-1][ok] * dt[ok]))
+        out[topic] = entry
+    return out
+
+
+def main():
+    for name in ["tiny-sample", "tiny-block"]:
+        path = ROOT / "tests" / "fixtures" / f"{name}.mcap"
+        golden = ROOT / "tests" / "golden" / f"{name}.json"
+        golden.write_text(json.dumps(stats(read(path)), indent=1, sort_keys=True) + "\n")
+        print("wrote", golden)
+
+
+if __name__ == "__main__":
+    main()
