@@ -78,13 +78,17 @@ fn parse_effects(specs: &[String]) -> Result<Vec<Effect>> {
     specs
         .iter()
         .filter(|s| s.as_str() != "none")
-        .map(|s| s.parse::<Effect>().map_err(|e| anyhow::anyhow!("--effect {s}: {e}")))
+        .map(|s| {
+            s.parse::<Effect>()
+                .map_err(|e| anyhow::anyhow!("--effect {s}: {e}"))
+        })
         .collect()
 }
 
 fn run_simulation(opts: &SimOptions) -> Result<sim::SimSummary> {
     let t0 = Instant::now();
-    let s = sim::simulate(opts).with_context(|| format!("simulating into {}", opts.out.display()))?;
+    let s =
+        sim::simulate(opts).with_context(|| format!("simulating into {}", opts.out.display()))?;
     println!(
         "wrote {}: {} tracks, {} events, {} runs, {} tire-run observations, {:.1} M telemetry samples, {:.1} MB in {:.1} s",
         s.out.display(),
@@ -97,7 +101,10 @@ fn run_simulation(opts: &SimOptions) -> Result<sim::SimSummary> {
         t0.elapsed().as_secs_f64()
     );
     if s.saturated_fraction > 0.0 {
-        tracing::debug!("{:.3} % of wheel samples past the tire's force peak", 100.0 * s.saturated_fraction);
+        tracing::debug!(
+            "{:.3} % of wheel samples past the tire's force peak",
+            100.0 * s.saturated_fraction
+        );
     }
     Ok(s)
 }
@@ -106,7 +113,10 @@ fn main() -> Result<()> {
     let cli = Cli::parse();
     let filter = tracing_subscriber::EnvFilter::try_from_default_env()
         .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(&cli.log));
-    tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr).init();
+    tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr)
+        .init();
     let progress = !cli.quiet && std::io::IsTerminal::is_terminal(&std::io::stderr());
     match cli.command {
         Command::Simulate(a) => {
@@ -138,12 +148,20 @@ fn main() -> Result<()> {
             let s = run_simulation(&opts)?;
             println!("\nThe demo season in {}:", s.out.display());
             println!("  season.toml             manifest: events, tracks, cars, runs, file paths");
-            println!("  telemetry/*.mcap        one MCAP per run: /tire/FL|FR|RL|RR and /vehicle (protobuf)");
-            println!("  road/profiles.parquet   road texture profiles (plus one CSV per track in road/)");
+            println!(
+                "  telemetry/*.mcap        one MCAP per run: /tire/FL|FR|RL|RR and /vehicle (protobuf)"
+            );
+            println!(
+                "  road/profiles.parquet   road texture profiles (plus one CSV per track in road/)"
+            );
             println!("  compounds/*.toml        E' and tan δ master curves with WLF constants");
             println!("  wear/readings.csv       tread depth per spot, several readings per spot");
-            println!("  truth/                  the simulator's ground truth (never read by the analysis)");
-            println!("\nNext steps of the pipeline (extract → fit → gap) arrive with their issues.");
+            println!(
+                "  truth/                  the simulator's ground truth (never read by the analysis)"
+            );
+            println!(
+                "\nNext steps of the pipeline (extract → fit → gap) arrive with their issues."
+            );
         }
     }
     Ok(())

@@ -8,11 +8,15 @@ use tirewear::Wheel;
 use tirewear::ingest::telemetry::{Encoding, RunTelemetry, read_telemetry};
 
 fn fixture(name: &str) -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures").join(name)
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/fixtures")
+        .join(name)
 }
 
 fn golden(name: &str) -> Value {
-    let p = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/golden").join(name);
+    let p = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/golden")
+        .join(name);
     serde_json::from_str(&std::fs::read_to_string(p).unwrap()).unwrap()
 }
 
@@ -23,11 +27,26 @@ fn check_channel(topic: &str, name: &str, v: &[f64], g: &Value) {
     // Values are f32 widened to f64 on both sides: extremes and ends are exact;
     // sums differ only by summation order (numpy is pairwise): 1e-9 relative.
     assert_eq!(v[0], g["first"].as_f64().unwrap(), "{topic} {name} first");
-    assert_eq!(*v.last().unwrap(), g["last"].as_f64().unwrap(), "{topic} {name} last");
-    assert_eq!(v.iter().cloned().fold(f64::INFINITY, f64::min), g["min"].as_f64().unwrap(), "{topic} {name} min");
-    assert_eq!(v.iter().cloned().fold(f64::NEG_INFINITY, f64::max), g["max"].as_f64().unwrap(), "{topic} {name} max");
+    assert_eq!(
+        *v.last().unwrap(),
+        g["last"].as_f64().unwrap(),
+        "{topic} {name} last"
+    );
+    assert_eq!(
+        v.iter().cloned().fold(f64::INFINITY, f64::min),
+        g["min"].as_f64().unwrap(),
+        "{topic} {name} min"
+    );
+    assert_eq!(
+        v.iter().cloned().fold(f64::NEG_INFINITY, f64::max),
+        g["max"].as_f64().unwrap(),
+        "{topic} {name} max"
+    );
     let gs = g["sum"].as_f64().unwrap();
-    assert!((sum - gs).abs() <= 1e-9 * gs.abs().max(1.0), "{topic} {name} sum {sum} vs {gs}");
+    assert!(
+        (sum - gs).abs() <= 1e-9 * gs.abs().max(1.0),
+        "{topic} {name} sum {sum} vs {gs}"
+    );
 }
 
 fn widen(v: &[f32]) -> Vec<f64> {
@@ -40,7 +59,10 @@ fn compare_with_golden(run: &RunTelemetry, g: &Value) {
         let gt = &g[w.topic()];
         assert_eq!(s.len() as u64, gt["count"].as_u64().unwrap(), "{w} count");
         assert_eq!(s.time_ns[0], gt["first_time_ns"].as_u64().unwrap());
-        assert_eq!(*s.time_ns.last().unwrap(), gt["last_time_ns"].as_u64().unwrap());
+        assert_eq!(
+            *s.time_ns.last().unwrap(),
+            gt["last_time_ns"].as_u64().unwrap()
+        );
         for (name, v) in [
             ("vx_mps", &s.vx_mps),
             ("vy_mps", &s.vy_mps),
@@ -70,7 +92,10 @@ fn compare_with_golden(run: &RunTelemetry, g: &Value) {
             e += p * dt as f64 / 1e9;
         }
         let ge = gt["friction_energy_j"].as_f64().unwrap();
-        assert!((e - ge).abs() <= 1e-9 * ge.abs(), "{w} friction energy {e} vs {ge}");
+        assert!(
+            (e - ge).abs() <= 1e-9 * ge.abs(),
+            "{w} friction energy {e} vs {ge}"
+        );
         assert!(e > 0.0);
     }
     let v = &run.vehicle;

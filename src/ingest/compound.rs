@@ -91,10 +91,16 @@ impl Compound {
             );
             let rec = format!("master_curve point {i} (T = {t} degC)");
             if !t.is_finite() || (i > 0 && t <= m.temperature_c[i - 1]) {
-                return Err(bad(&rec, "temperatures must be finite and strictly increasing".into()));
+                return Err(bad(
+                    &rec,
+                    "temperatures must be finite and strictly increasing".into(),
+                ));
             }
             if !(e > 0.0 && e.is_finite()) {
-                return Err(bad(&rec, format!("storage modulus must be > 0 MPa, got {e}")));
+                return Err(bad(
+                    &rec,
+                    format!("storage modulus must be > 0 MPa, got {e}"),
+                ));
             }
             if !(d > 0.0 && d.is_finite()) {
                 return Err(bad(&rec, format!("loss factor must be > 0, got {d}")));
@@ -109,7 +115,10 @@ impl Compound {
         if !(self.wlf.c1 > 0.0 && self.wlf.c2_k > 0.0) {
             return Err(bad(
                 "wlf",
-                format!("c1 and c2_k must be > 0, got {} and {}", self.wlf.c1, self.wlf.c2_k),
+                format!(
+                    "c1 and c2_k must be > 0, got {} and {}",
+                    self.wlf.c1, self.wlf.c2_k
+                ),
             ));
         }
         Ok(())
@@ -119,7 +128,12 @@ impl Compound {
     /// linear in log10 E' between grid points, clamped at the grid ends.
     pub fn storage_modulus_mpa(&self, t_c: f64) -> f64 {
         let m = &self.master_curve;
-        10f64.powf(interp(&m.temperature_c, &m.storage_modulus_mpa, t_c, f64::log10))
+        10f64.powf(interp(
+            &m.temperature_c,
+            &m.storage_modulus_mpa,
+            t_c,
+            f64::log10,
+        ))
     }
 
     /// tan δ at temperature `t_c` on the reference-frequency master curve,

@@ -178,7 +178,10 @@ impl Manifest {
                 ),
             ));
         }
-        fn unique<'a>(kind: &str, ids: &[&'a str]) -> std::result::Result<HashSet<&'a str>, (String, String)> {
+        fn unique<'a>(
+            kind: &str,
+            ids: &[&'a str],
+        ) -> std::result::Result<HashSet<&'a str>, (String, String)> {
             let mut seen = HashSet::new();
             for (i, &id) in ids.iter().enumerate() {
                 if id.is_empty() {
@@ -190,10 +193,21 @@ impl Manifest {
             }
             Ok(seen)
         }
-        let ids = |kind: &str, ids: Vec<&'_ str>| unique(kind, &ids).map(|_| ()).map_err(|(r, w)| bad(r, w));
-        ids("compounds", self.compounds.iter().map(|c| c.id.as_str()).collect())?;
-        ids("tracks", self.tracks.iter().map(|c| c.id.as_str()).collect())?;
-        ids("events", self.events.iter().map(|c| c.id.as_str()).collect())?;
+        let ids = |kind: &str, ids: Vec<&'_ str>| {
+            unique(kind, &ids).map(|_| ()).map_err(|(r, w)| bad(r, w))
+        };
+        ids(
+            "compounds",
+            self.compounds.iter().map(|c| c.id.as_str()).collect(),
+        )?;
+        ids(
+            "tracks",
+            self.tracks.iter().map(|c| c.id.as_str()).collect(),
+        )?;
+        ids(
+            "events",
+            self.events.iter().map(|c| c.id.as_str()).collect(),
+        )?;
         ids("cars", self.cars.iter().map(|c| c.id.as_str()).collect())?;
         ids("runs", self.runs.iter().map(|c| c.id.as_str()).collect())?;
         let set = |v: Vec<&'a str>| -> HashSet<&'a str> { v.into_iter().collect() };
@@ -218,7 +232,10 @@ impl Manifest {
             if !valid_date(&e.date) {
                 return Err(bad(rec, format!("date '{}' is not YYYY-MM-DD", e.date)));
             }
-            for (name, v) in [("air_temp_c", e.air_temp_c), ("track_temp_c", e.track_temp_c)] {
+            for (name, v) in [
+                ("air_temp_c", e.air_temp_c),
+                ("track_temp_c", e.track_temp_c),
+            ] {
                 if !(-40.0..=90.0).contains(&v) {
                     return Err(bad(rec, format!("{name} = {v} is outside -40..90 degC")));
                 }
@@ -249,7 +266,10 @@ impl Manifest {
                 return Err(bad(rec, format!("unknown compound '{}'", r.compound)));
             }
             if !(r.distance_m > 0.0 && r.distance_m.is_finite()) {
-                return Err(bad(rec, format!("distance_m must be > 0, got {}", r.distance_m)));
+                return Err(bad(
+                    rec,
+                    format!("distance_m must be > 0, got {}", r.distance_m),
+                ));
             }
             if r.telemetry.is_empty() {
                 return Err(bad(rec, "telemetry path is empty".into()));

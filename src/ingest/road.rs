@@ -193,26 +193,44 @@ pub fn read_profiles_parquet(path: &Path) -> Result<Vec<Profile>> {
             })
         };
         let (track, loc, x, z) = (col("track")?, col("location")?, col("x_mm")?, col("z_mm")?);
-        let strings = |a: &Arc<dyn Array>, name: &str| {
-            a.as_any()
-                .downcast_ref::<StringArray>()
-                .cloned()
-                .ok_or_else(|| IngestError::invalid(path, "schema", format!("column '{name}' must be UTF-8 strings")))
-        };
-        let floats = |a: &Arc<dyn Array>, name: &str| {
-            a.as_any()
-                .downcast_ref::<Float64Array>()
-                .cloned()
-                .ok_or_else(|| IngestError::invalid(path, "schema", format!("column '{name}' must be float64")))
+        // Accept what common writers produce (large or dictionary strings, float32) by casting.
+        let cast = |a: &Arc<dyn Array>, name: &str, to: &DataType| {
+            arrow_cast::cast(a, to).map_err(|e| {
+                IngestError::invalid(
+                    path,
+                    "schema",
+                    format!(
+                        "column '{name}' ({}) cannot be read as {to}: {e}",
+                        a.data_type()
+                    ),
+                )
+            })
         };
         let (track, loc, x, z) = (
-            strings(track, "track")?,
-            strings(loc, "location")?,
-            floats(x, "x_mm")?,
-            floats(z, "z_mm")?,
+            cast(track, "track", &DataType::Utf8)?,
+            cast(loc, "location", &DataType::Utf8)?,
+            cast(x, "x_mm", &DataType::Float64)?,
+            cast(z, "z_mm", &DataType::Float64)?,
         );
+        let strings = |a: &Arc<dyn Array>| {
+            a.as_any()
+                .downcast_ref::<StringArray>()
+                .expect("cast to Utf8")
+                .clone()
+        };
+        let floats = |a: &Arc<dyn Array>| {
+            a.as_any()
+                .downcast_ref::<Float64Array>()
+                .expect("cast to Float64")
+                .clone()
+        };
+        let (track, loc, x, z) = (strings(&track), strings(&loc), floats(&x), floats(&z));
         if track.null_count() + loc.null_count() + x.null_count() + z.null_count() > 0 {
-            return Err(IngestError::invalid(path, "columns", "null values are not allowed"));
+            return Err(IngestError::invalid(
+                path,
+                "columns",
+                "null values are not allowed",
+            ));
         }
         for i in 0..batch.num_rows() {
             let (t, l) = (track.value(i), loc.value(i));

@@ -18,7 +18,8 @@ pub mod proto {
 }
 
 /// Binary `FileDescriptorSet` of `proto/tirewear.proto`, the data of every schema record.
-pub const FILE_DESCRIPTOR_SET: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/tirewear_fds.bin"));
+pub const FILE_DESCRIPTOR_SET: &[u8] =
+    include_bytes!(concat!(env!("OUT_DIR"), "/tirewear_fds.bin"));
 
 pub const TIRE_SAMPLE: &str = "tirewear.v1.TireSample";
 pub const TIRE_BLOCK: &str = "tirewear.v1.TireBlock";
@@ -31,7 +32,9 @@ pub const VEHICLE_TOPIC: &str = "/vehicle";
 pub const RECORD_LENGTH_LIMIT: usize = 256 << 20;
 
 /// Which message form a file uses.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, serde::Serialize, serde::Deserialize)]
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, serde::Serialize, serde::Deserialize,
+)]
 #[serde(rename_all = "lowercase")]
 pub enum Encoding {
     /// One message per sample per topic (`TireSample`, `VehicleSample`).
@@ -154,17 +157,25 @@ impl TelemetryWriter {
             .profile("")
             .library(concat!("tirewear ", env!("CARGO_PKG_VERSION")))
             .chunk_size(Some(1 << 20));
-        let mut mcap = opts.create(BufWriter::with_capacity(1 << 20, handle)).map_err(mc)?;
+        let mut mcap = opts
+            .create(BufWriter::with_capacity(1 << 20, handle))
+            .map_err(mc)?;
         let (tire_schema, veh_schema) = match encoding {
             Encoding::Sample => (TIRE_SAMPLE, VEHICLE_SAMPLE),
             Encoding::Block => (TIRE_BLOCK, VEHICLE_BLOCK),
         };
-        let ts = mcap.add_schema(tire_schema, "protobuf", FILE_DESCRIPTOR_SET).map_err(mc)?;
-        let vs = mcap.add_schema(veh_schema, "protobuf", FILE_DESCRIPTOR_SET).map_err(mc)?;
+        let ts = mcap
+            .add_schema(tire_schema, "protobuf", FILE_DESCRIPTOR_SET)
+            .map_err(mc)?;
+        let vs = mcap
+            .add_schema(veh_schema, "protobuf", FILE_DESCRIPTOR_SET)
+            .map_err(mc)?;
         let mut tire_channels = [0u16; 4];
         for w in Wheel::ALL {
             let meta = BTreeMap::from([("wheel".to_string(), w.name().to_string())]);
-            tire_channels[w.index()] = mcap.add_channel(ts, w.topic(), "protobuf", &meta).map_err(mc)?;
+            tire_channels[w.index()] = mcap
+                .add_channel(ts, w.topic(), "protobuf", &meta)
+                .map_err(mc)?;
         }
         let vehicle_channel = mcap
             .add_channel(vs, VEHICLE_TOPIC, "protobuf", &BTreeMap::new())
@@ -173,8 +184,14 @@ impl TelemetryWriter {
             ("run".to_string(), info.run.clone()),
             ("event".to_string(), info.event.clone()),
             ("car".to_string(), info.car.clone()),
-            ("sample_rate_hz".to_string(), info.sample_rate_hz.to_string()),
-            ("format_version".to_string(), super::manifest::FORMAT_VERSION.to_string()),
+            (
+                "sample_rate_hz".to_string(),
+                info.sample_rate_hz.to_string(),
+            ),
+            (
+                "format_version".to_string(),
+                super::manifest::FORMAT_VERSION.to_string(),
+            ),
         ]);
         mcap.write_metadata(&mcap::records::Metadata {
             name: "tirewear.run".into(),
@@ -282,9 +299,13 @@ impl TelemetryWriter {
     pub fn finish(mut self) -> Result<()> {
         self.flush_block()?;
         self.mcap.finish().map_err(|e| self.mcap_err(e))?;
-        let Self { path, out, mcap, .. } = self;
+        let Self {
+            path, out, mcap, ..
+        } = self;
         let io_err = |e| IngestError::io(&path, e);
-        mcap.into_inner().into_inner().map_err(|e| io_err(e.into_error()))?;
+        mcap.into_inner()
+            .into_inner()
+            .map_err(|e| io_err(e.into_error()))?;
         out.expect("set in create").commit().map_err(io_err)
     }
 }
@@ -306,9 +327,10 @@ pub struct RunTelemetry {
 /// not decode) is an error naming the file and the message.
 pub fn read_telemetry(path: &Path) -> Result<RunTelemetry> {
     let file = File::open(path).map_err(|e| IngestError::io(path, e))?;
-    let opts = mcap::sans_io::LinearReaderOptions::default()
-        .with_record_length_limit(RECORD_LENGTH_LIMIT);
-    let reader = mcap::io::MessageReader::new_with_options(BufReader::with_capacity(1 << 20, file), opts);
+    let opts =
+        mcap::sans_io::LinearReaderOptions::default().with_record_length_limit(RECORD_LENGTH_LIMIT);
+    let reader =
+        mcap::io::MessageReader::new_with_options(BufReader::with_capacity(1 << 20, file), opts);
     let mut run = RunTelemetry::default();
     for msg in reader {
         let msg = msg.map_err(|source| IngestError::Mcap {
@@ -321,13 +343,26 @@ pub fn read_telemetry(path: &Path) -> Result<RunTelemetry> {
             run.ignored_messages += 1;
             continue;
         }
-        let rec = || format!("topic {topic}, message sequence {} at log_time {} ns", msg.sequence, msg.log_time);
-        let schema = msg.channel.schema.as_ref().map(|s| s.name.as_str()).unwrap_or("");
+        let rec = || {
+            format!(
+                "topic {topic}, message sequence {} at log_time {} ns",
+                msg.sequence, msg.log_time
+            )
+        };
+        let schema = msg
+            .channel
+            .schema
+            .as_ref()
+            .map(|s| s.name.as_str())
+            .unwrap_or("");
         if msg.channel.message_encoding != "protobuf" {
             return Err(IngestError::invalid(
                 path,
                 rec(),
-                format!("message encoding is '{}', expected 'protobuf'", msg.channel.message_encoding),
+                format!(
+                    "message encoding is '{}', expected 'protobuf'",
+                    msg.channel.message_encoding
+                ),
             ));
         }
         let encoding = match (wheel, schema) {
@@ -344,12 +379,18 @@ pub fn read_telemetry(path: &Path) -> Result<RunTelemetry> {
         match run.encoding {
             None => run.encoding = Some(encoding),
             Some(e) if e != encoding => {
-                return Err(IngestError::invalid(path, rec(), "file mixes per-sample and block messages"));
+                return Err(IngestError::invalid(
+                    path,
+                    rec(),
+                    "file mixes per-sample and block messages",
+                ));
             }
             _ => {}
         }
         let data: &[u8] = &msg.data;
-        let undecodable = |e: prost::DecodeError| IngestError::invalid(path, rec(), format!("cannot decode {schema}: {e}"));
+        let undecodable = |e: prost::DecodeError| {
+            IngestError::invalid(path, rec(), format!("cannot decode {schema}: {e}"))
+        };
         let bad_block = |what: String| IngestError::invalid(path, rec(), what);
         match (wheel, encoding) {
             (Some(w), Encoding::Sample) => {

@@ -38,10 +38,19 @@ pub fn read_wear_csv(path: &Path) -> Result<Vec<WearReading>> {
     let mut out = Vec::new();
     for (i, row) in rdr.deserialize::<WearReading>().enumerate() {
         let r = row.map_err(csv_err)?;
-        let rec = format!("line {} (run {}, wheel {}, spot {})", i + 2, r.run, r.wheel, r.spot);
+        let rec = format!(
+            "line {} (run {}, wheel {}, spot {})",
+            i + 2,
+            r.run,
+            r.wheel,
+            r.spot
+        );
         let bad = |what: String| IngestError::invalid(path, rec.clone(), what);
         if !(r.new_depth_mm > 0.0 && r.new_depth_mm.is_finite()) {
-            return Err(bad(format!("new_depth_mm must be > 0, got {}", r.new_depth_mm)));
+            return Err(bad(format!(
+                "new_depth_mm must be > 0, got {}",
+                r.new_depth_mm
+            )));
         }
         if !r.depth_mm.is_finite() || r.depth_mm < 0.0 || r.depth_mm > 1.5 * r.new_depth_mm {
             return Err(bad(format!(
@@ -89,7 +98,10 @@ mod tests {
         )
         .unwrap();
         let err = read_wear_csv(&p).unwrap_err().to_string();
-        assert!(err.contains("wear.csv") && err.contains("line 4") && err.contains("spot 2"), "{err}");
+        assert!(
+            err.contains("wear.csv") && err.contains("line 4") && err.contains("spot 2"),
+            "{err}"
+        );
         std::fs::write(
             &p,
             "run,wheel,tire_set,spot,position_mm,tread_width_mm,reading,depth_mm,new_depth_mm\n\

@@ -38,7 +38,8 @@ impl CompoundModel {
     pub fn viscoelastic(&self, t_c: f64, f_hz: f64) -> (f64, f64) {
         let x = f_hz.log10() + self.wlf.log10_shift(t_c) - self.x_transition();
         let s = 1.0 / (1.0 + (-x / (self.transition_decades / 4.0)).exp());
-        let log_e = self.e_rubbery_mpa.log10() + (self.e_glassy_mpa / self.e_rubbery_mpa).log10() * s;
+        let log_e =
+            self.e_rubbery_mpa.log10() + (self.e_glassy_mpa / self.e_rubbery_mpa).log10() * s;
         let [base, peak, width] = self.tan_delta;
         let td = base + (peak - base) * (-((x - 0.5) / width).powi(2)).exp();
         (10f64.powf(log_e), td)
@@ -84,28 +85,31 @@ fn round_sig(v: f64, digits: i32) -> f64 {
 
 /// The three compounds of the presets.
 pub fn catalogue() -> Vec<CompoundModel> {
-    let make = |id: &str, name: &str, tg: f64, e_r: f64, mu: f64, t_opt: f64, wear: f64, td_peak: f64| CompoundModel {
-        id: id.into(),
-        name: name.into(),
-        tg_c: tg,
-        wlf: Wlf {
-            c1: 8.86,
-            c2_k: 101.6,
-            t_ref_c: tg + 50.0,
-        },
-        reference_frequency_hz: 10.0,
-        e_glassy_mpa: 2500.0,
-        e_rubbery_mpa: e_r,
-        transition_decades: 10.0,
-        tan_delta: [0.10, td_peak, 5.0],
-        grip: GripParams {
-            mu_peak: mu,
-            t_opt_c: t_opt,
-            window_c: 45.0,
-        },
-        wear_mm_per_mj: wear,
-        wear_shift_exponent: 0.2,
-    };
+    let make =
+        |id: &str, name: &str, tg: f64, e_r: f64, mu: f64, t_opt: f64, wear: f64, td_peak: f64| {
+            CompoundModel {
+                id: id.into(),
+                name: name.into(),
+                tg_c: tg,
+                wlf: Wlf {
+                    c1: 8.86,
+                    c2_k: 101.6,
+                    t_ref_c: tg + 50.0,
+                },
+                reference_frequency_hz: 10.0,
+                e_glassy_mpa: 2500.0,
+                e_rubbery_mpa: e_r,
+                transition_decades: 10.0,
+                tan_delta: [0.10, td_peak, 5.0],
+                grip: GripParams {
+                    mu_peak: mu,
+                    t_opt_c: t_opt,
+                    window_c: 45.0,
+                },
+                wear_mm_per_mj: wear,
+                wear_shift_exponent: 0.2,
+            }
+        };
     vec![
         make("soft", "C-Soft", 0.0, 15.0, 1.92, 65.0, 0.135, 1.15),
         make("medium", "C-Medium", -8.0, 24.0, 1.84, 72.0, 0.12, 1.05),
@@ -125,7 +129,9 @@ mod tests {
             let file = c.to_file();
             for (t, f) in [(60.0, 1000.0), (80.0, 10_000.0), (40.0, 100.0)] {
                 let (e, _) = c.viscoelastic(t, f);
-                let t_star = c.wlf.temperature_for_shift(c.wlf.log10_shift(t) + (f / 10.0f64).log10());
+                let t_star = c
+                    .wlf
+                    .temperature_for_shift(c.wlf.log10_shift(t) + (f / 10.0f64).log10());
                 let (e_ref, _) = c.viscoelastic(t_star, 10.0);
                 assert!((e / e_ref - 1.0).abs() < 1e-9);
                 // and the tabulated curve interpolates it within 1 %

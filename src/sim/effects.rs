@@ -72,7 +72,9 @@ impl Effect {
     pub fn weight(&self, t_surface: f64, t_inner: f64) -> f64 {
         let logistic = |x: f64| 1.0 / (1.0 + (-x).exp());
         match self.kind {
-            EffectKind::Graining => logistic((self.threshold - 0.5 * (t_surface + t_inner)) / self.width),
+            EffectKind::Graining => {
+                logistic((self.threshold - 0.5 * (t_surface + t_inner)) / self.width)
+            }
             EffectKind::Blistering => logistic((t_inner - self.threshold) / self.width),
             EffectKind::Thermal => logistic((t_surface - self.threshold) / self.width),
             EffectKind::RoadAbrasion => 1.0,
@@ -93,24 +95,38 @@ impl FromStr for Effect {
         let mut parts = s.split(',');
         let head = parts.next().unwrap_or_default();
         let (name, mag) = match head.split_once('=') {
-            Some((n, m)) => (n, m.parse::<f64>().map_err(|_| format!("bad magnitude '{m}' in '{s}'"))?),
+            Some((n, m)) => (
+                n,
+                m.parse::<f64>()
+                    .map_err(|_| format!("bad magnitude '{m}' in '{s}'"))?,
+            ),
             None => (head, 0.5),
         };
         let kind = EffectKind::ALL
             .into_iter()
             .find(|k| k.name() == name)
-            .ok_or_else(|| format!("unknown effect '{name}' (graining, blistering, thermal, road-abrasion, none)"))?;
+            .ok_or_else(|| {
+                format!(
+                    "unknown effect '{name}' (graining, blistering, thermal, road-abrasion, none)"
+                )
+            })?;
         if !(mag >= 0.0 && mag.is_finite()) {
             return Err(format!("magnitude must be >= 0, got {mag}"));
         }
         let mut e = Effect::with_defaults(kind, mag);
         for kv in parts {
-            let (k, v) = kv.split_once('=').ok_or_else(|| format!("expected key=value, got '{kv}'"))?;
+            let (k, v) = kv
+                .split_once('=')
+                .ok_or_else(|| format!("expected key=value, got '{kv}'"))?;
             let v: f64 = v.parse().map_err(|_| format!("bad number '{v}' for {k}"))?;
             match k {
                 "threshold" => e.threshold = v,
                 "width" if v > 0.0 => e.width = v,
-                _ => return Err(format!("unknown or invalid setting '{kv}' (threshold, width > 0)")),
+                _ => {
+                    return Err(format!(
+                        "unknown or invalid setting '{kv}' (threshold, width > 0)"
+                    ));
+                }
             }
         }
         Ok(e)
@@ -119,7 +135,14 @@ impl FromStr for Effect {
 
 impl fmt::Display for Effect {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "{}={},threshold={},width={}", self.kind.name(), self.magnitude, self.threshold, self.width)
+        write!(
+            f,
+            "{}={},threshold={},width={}",
+            self.kind.name(),
+            self.magnitude,
+            self.threshold,
+            self.width
+        )
     }
 }
 

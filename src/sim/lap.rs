@@ -71,7 +71,11 @@ pub fn solve(track: &TrackShape, car: &CarParams, mu: f64) -> LapProfile {
     let n = track.curvature.len();
     let ds = track.ds_m;
     let v_top = 0.999 * (car.power_w / (0.5 * AIR_DENSITY * car.cd_a_m2)).cbrt();
-    let limit: Vec<f64> = track.curvature.iter().map(|&k| env.v_corner(k, v_top)).collect();
+    let limit: Vec<f64> = track
+        .curvature
+        .iter()
+        .map(|&k| env.v_corner(k, v_top))
+        .collect();
     // Start both passes at the slowest corner point: its speed is known.
     let start = (0..n)
         .min_by(|&a, &b| limit[a].total_cmp(&limit[b]))
@@ -125,7 +129,11 @@ mod tests {
         let lap = solve(&track, &car, mu);
         let m = car.mass_kg;
         let v = (mu * m * G / (m / r - mu * 0.5 * AIR_DENSITY * car.cl_a_m2)).sqrt();
-        assert!(lap.v.iter().all(|x| (x - v).abs() < 1e-9), "{} vs {v}", lap.v[0]);
+        assert!(
+            lap.v.iter().all(|x| (x - v).abs() < 1e-9),
+            "{} vs {v}",
+            lap.v[0]
+        );
         assert!(lap.ay.iter().all(|a| (a - v * v / r).abs() < 1e-6));
     }
 
@@ -134,13 +142,19 @@ mod tests {
         let car = CarParams::single_seater("c", "c", 0.0);
         let mut k = vec![0.0; 1500];
         k.extend(vec![1.0 / 20.0; 100]);
-        let track = TrackShape { ds_m: 1.0, curvature: k };
+        let track = TrackShape {
+            ds_m: 1.0,
+            curvature: k,
+        };
         let lap = solve(&track, &car, 1.7);
         let env = Envelope { car: &car, mu: 1.7 };
         for i in 0..lap.v.len() {
             // Never above the cornering limit, never braking harder than the tires allow.
             assert!(lap.v[i] <= env.v_corner(track.curvature[i], 1e9) + 1e-9);
-            assert!(-lap.ax[i] <= env.a_brake(lap.v[i], 0.0) * 1.05 + 0.5, "i={i}");
+            assert!(
+                -lap.ax[i] <= env.a_brake(lap.v[i], 0.0) * 1.05 + 0.5,
+                "i={i}"
+            );
         }
         let vmax = lap.v.iter().cloned().fold(0.0, f64::max);
         assert!(vmax > 60.0 && vmax < 100.0, "vmax {vmax}");

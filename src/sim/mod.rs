@@ -67,12 +67,17 @@ const ROAD_MICRO_LAMBDA_MM: f64 = 0.5;
 /// folder with `season.toml` is a complete archive.
 pub fn simulate(opts: &SimOptions) -> Result<SimSummary, SimError> {
     if !(opts.scale > 0.0 && opts.scale.is_finite()) {
-        return Err(SimError::Config(format!("--scale must be > 0, got {}", opts.scale)));
+        return Err(SimError::Config(format!(
+            "--scale must be > 0, got {}",
+            opts.scale
+        )));
     }
     if let Some(r) = opts.rate_hz
         && !(1.0..=1000.0).contains(&r)
     {
-        return Err(SimError::Config(format!("--rate must be within 1..1000 Hz, got {r}")));
+        return Err(SimError::Config(format!(
+            "--rate must be within 1..1000 Hz, got {r}"
+        )));
     }
     let mut kinds: Vec<_> = opts.effects.iter().map(|e| e.kind).collect();
     kinds.sort();
@@ -87,14 +92,22 @@ pub fn simulate(opts: &SimOptions) -> Result<SimSummary, SimError> {
     if out.join("season.toml").exists() {
         std::fs::remove_file(out.join("season.toml")).map_err(|e| io(out, e))?;
     }
-    tracing::info!(runs = plan.runs.len(), rate_hz = plan.rate_hz, "simulating season '{}'", plan.name);
+    tracing::info!(
+        runs = plan.runs.len(),
+        rate_hz = plan.rate_hz,
+        "simulating season '{}'",
+        plan.name
+    );
 
     // Compounds.
     let mut compound_refs = Vec::new();
     for c in &plan.compounds {
         let rel = format!("compounds/{}.toml", c.id);
         c.to_file().write(&out.join(&rel))?;
-        compound_refs.push(manifest::CompoundRef { id: c.id.clone(), file: rel });
+        compound_refs.push(manifest::CompoundRef {
+            id: c.id.clone(),
+            file: rel,
+        });
     }
 
     // Road profiles: all but the last location of each track in the bulk file, the last one as CSV.
@@ -102,14 +115,20 @@ pub fn simulate(opts: &SimOptions) -> Result<SimSummary, SimError> {
     let (bulk, single): (Vec<&Profile>, Vec<&Profile>) = profiles
         .iter()
         .partition(|p| p.location != format!("L{}", plan.locations_per_track));
-    write_profiles_parquet(&out.join("road/profiles.parquet"), &bulk.into_iter().cloned().collect::<Vec<_>>())?;
+    write_profiles_parquet(
+        &out.join("road/profiles.parquet"),
+        &bulk.into_iter().cloned().collect::<Vec<_>>(),
+    )?;
     let mut tracks = Vec::new();
     for def in &plan.tracks {
         let mut refs = Vec::new();
         for p in single.iter().filter(|p| p.track == def.id) {
             let rel = format!("road/{}-{}.csv", p.track, p.location);
             write_profile_csv(&out.join(&rel), p)?;
-            refs.push(ProfileRef { location: p.location.clone(), file: rel });
+            refs.push(ProfileRef {
+                location: p.location.clone(),
+                file: rel,
+            });
         }
         tracks.push(manifest::Track {
             id: def.id.clone(),
@@ -131,7 +150,10 @@ pub fn simulate(opts: &SimOptions) -> Result<SimSummary, SimError> {
             let car = &plan.cars[rp.car];
             let compound = &plan.compounds[rp.compound];
             let track = &plan.tracks[ev.track];
-            let mu = compound.grip.mu(compound.grip.t_opt_c, tire::FZ_NOMINAL, track.grip) * rp.pace;
+            let mu = compound
+                .grip
+                .mu(compound.grip.t_opt_c, tire::FZ_NOMINAL, track.grip)
+                * rp.pace;
             let lap = lap::solve(&shapes[ev.track], car, mu);
             let ctx = run::RunContext {
                 car,
@@ -158,9 +180,16 @@ pub fn simulate(opts: &SimOptions) -> Result<SimSummary, SimError> {
                 sample_rate_hz: plan.rate_hz,
             };
             let path = out.join(telemetry_rel(&rp.id));
-            let mut writer = TelemetryWriter::create(&path, &info, opts.encoding, plan.rate_hz.round() as usize)?;
+            let mut writer = TelemetryWriter::create(
+                &path,
+                &info,
+                opts.encoding,
+                plan.rate_hz.round() as usize,
+            )?;
             let mut rng = ChaCha8Rng::seed_from_u64(rp.seed);
-            let truth = run::simulate_run(&ctx, &settings, &mut rng, |t, tires, veh| writer.push(t, tires, veh))?;
+            let truth = run::simulate_run(&ctx, &settings, &mut rng, |t, tires, veh| {
+                writer.push(t, tires, veh)
+            })?;
             writer.finish()?;
             samples.fetch_add(truth.samples, Ordering::Relaxed);
             progress.inc(1);
@@ -186,8 +215,24 @@ pub fn simulate(opts: &SimOptions) -> Result<SimSummary, SimError> {
             let wt = &truth.wheels[w.index()];
             let tw = wear::tire_wear(compound, &roads[ev.track], w, wt, &opts.effects, &mut rng);
             let set = tire_set_id(rp, w);
-            readings.extend(wear::spot_readings(&rp.id, w, &set, car.tread_width(w), &tw, &mut rng));
-            truth_rows.push(TruthRow::new(rp, ev, &plan.tracks[ev.track].id, compound, w, &set, wt, &tw));
+            readings.extend(wear::spot_readings(
+                &rp.id,
+                w,
+                &set,
+                car.tread_width(w),
+                &tw,
+                &mut rng,
+            ));
+            truth_rows.push(TruthRow::new(
+                rp,
+                ev,
+                &plan.tracks[ev.track].id,
+                compound,
+                w,
+                &set,
+                wt,
+                &tw,
+            ));
         }
     }
     write_wear_csv(&out.join("wear/readings.csv"), &readings)?;
@@ -202,7 +247,11 @@ pub fn simulate(opts: &SimOptions) -> Result<SimSummary, SimError> {
             opts.preset,
             opts.seed,
             opts.scale,
-            opts.effects.iter().map(|e| e.to_string()).collect::<Vec<_>>().join("; ")
+            opts.effects
+                .iter()
+                .map(|e| e.to_string())
+                .collect::<Vec<_>>()
+                .join("; ")
         ),
         wear_readings: vec!["wear/readings.csv".into()],
         road_profiles: Some("road/profiles.parquet".into()),
@@ -278,9 +327,11 @@ fn progress_bar(show: bool, n: u64) -> indicatif::ProgressBar {
     }
     let pb = indicatif::ProgressBar::new(n);
     pb.set_style(
-        indicatif::ProgressStyle::with_template("{spinner} simulating runs [{bar:40}] {pos}/{len} ({eta} left)")
-            .expect("valid template")
-            .progress_chars("=> "),
+        indicatif::ProgressStyle::with_template(
+            "{spinner} simulating runs [{bar:40}] {pos}/{len} ({eta} left)",
+        )
+        .expect("valid template")
+        .progress_chars("=> "),
     );
     pb
 }
@@ -310,7 +361,13 @@ fn synthesise_roads(plan: &Plan, seed: u64) -> (Vec<Profile>, Vec<RoadTruth>) {
         .map(|&(t, l)| {
             let def = &plan.tracks[t];
             let mut rng = ChaCha8Rng::seed_from_u64(seed ^ (def.seed << 8) ^ l as u64);
-            let mut z = road::gaussian_profile(&def.road, plan.profile_samples, plan.profile_dx_mm, road::Amplitudes::Random, &mut rng);
+            let mut z = road::gaussian_profile(
+                &def.road,
+                plan.profile_samples,
+                plan.profile_dx_mm,
+                road::Amplitudes::Random,
+                &mut rng,
+            );
             road::shape_heights(&mut z, &def.road);
             Profile {
                 track: def.id.clone(),
@@ -325,10 +382,19 @@ fn synthesise_roads(plan: &Plan, seed: u64) -> (Vec<Profile>, Vec<RoadTruth>) {
         .tracks
         .iter()
         .map(|def| {
-            let mine: Vec<_> = profiles.iter().filter(|p| p.track == def.id).map(|p| road::moments(&p.z_mm)).collect();
+            let mine: Vec<_> = profiles
+                .iter()
+                .filter(|p| p.track == def.id)
+                .map(|p| road::moments(&p.z_mm))
+                .collect();
             let n = mine.len() as f64;
             let mean = |f: fn(&(f64, f64, f64)) -> f64| mine.iter().map(f).sum::<f64>() / n;
-            let micro_share = road::variance_fraction_below(&def.road, plan.profile_samples, plan.profile_dx_mm, ROAD_MICRO_LAMBDA_MM);
+            let micro_share = road::variance_fraction_below(
+                &def.road,
+                plan.profile_samples,
+                plan.profile_dx_mm,
+                ROAD_MICRO_LAMBDA_MM,
+            );
             RoadTruth {
                 rq_mm: mean(|m| m.0),
                 skewness: mean(|m| m.1),
@@ -455,7 +521,12 @@ fn write_truth(
             .tracks
             .iter()
             .zip(roads)
-            .map(|(t, r)| TrackTruth { id: &t.id, grip: t.grip, road_params: &t.road, road: *r })
+            .map(|(t, r)| TrackTruth {
+                id: &t.id,
+                grip: t.grip,
+                road_params: &t.road,
+                road: *r,
+            })
             .collect(),
         compounds: &plan.compounds,
         thermal: thermal::ThermalParams::default(),

@@ -59,18 +59,162 @@ pub struct Plan {
 pub fn track_catalogue() -> Vec<TrackDef> {
     // (id, name, length m, corners, grip, hidden abrasiveness, H, rms mm, roll-off mm, skew, kurt)
     let rows: [(&str, &str, f64, usize, f64, f64, f64, f64, f64, f64, f64); 12] = [
-        ("valle-rossa", "Valle Rossa", 5200.0, 11, 1.00, 1.02, 0.82, 0.45, 25.0, -0.07, 0.02),
-        ("nordkamm", "Nordkamm Ring", 4300.0, 14, 0.97, 0.97, 0.74, 0.62, 32.0, -0.20, 0.06),
-        ("baie-du-sud", "Baie du Sud", 5800.0, 12, 1.03, 1.04, 0.88, 0.30, 18.0, -0.01, 0.00),
-        ("sierra-azul", "Sierra Azul", 4700.0, 15, 0.99, 1.00, 0.70, 0.55, 28.0, -0.14, 0.10),
-        ("kiefernring", "Kiefernring", 3900.0, 10, 1.01, 0.98, 0.79, 0.38, 22.0, -0.04, 0.04),
-        ("porto-vento", "Porto Vento", 6300.0, 13, 0.96, 1.03, 0.68, 0.72, 36.0, -0.23, 0.08),
-        ("lakeside", "Lakeside Park", 4000.0, 9, 1.02, 1.01, 0.85, 0.34, 20.0, -0.10, 0.12),
-        ("desert-loop", "Desert Loop", 5500.0, 12, 0.98, 0.99, 0.76, 0.50, 30.0, -0.17, 0.03),
-        ("hafen", "Hafen Circuit", 4800.0, 16, 1.00, 1.00, 0.72, 0.42, 26.0, -0.11, 0.07),
-        ("monte-leone", "Monte Leone", 5900.0, 11, 0.99, 1.02, 0.80, 0.58, 34.0, -0.21, 0.02),
-        ("riverside", "Riverside", 4400.0, 12, 1.01, 0.98, 0.87, 0.28, 17.0, -0.03, 0.09),
-        ("highland", "Highland Raceway", 5100.0, 14, 0.97, 1.01, 0.66, 0.66, 38.0, -0.18, 0.11),
+        (
+            "valle-rossa",
+            "Valle Rossa",
+            5200.0,
+            11,
+            1.00,
+            1.02,
+            0.82,
+            0.45,
+            25.0,
+            -0.07,
+            0.02,
+        ),
+        (
+            "nordkamm",
+            "Nordkamm Ring",
+            4300.0,
+            14,
+            0.97,
+            0.97,
+            0.74,
+            0.62,
+            32.0,
+            -0.20,
+            0.06,
+        ),
+        (
+            "baie-du-sud",
+            "Baie du Sud",
+            5800.0,
+            12,
+            1.03,
+            1.04,
+            0.88,
+            0.30,
+            18.0,
+            -0.01,
+            0.00,
+        ),
+        (
+            "sierra-azul",
+            "Sierra Azul",
+            4700.0,
+            15,
+            0.99,
+            1.00,
+            0.70,
+            0.55,
+            28.0,
+            -0.14,
+            0.10,
+        ),
+        (
+            "kiefernring",
+            "Kiefernring",
+            3900.0,
+            10,
+            1.01,
+            0.98,
+            0.79,
+            0.38,
+            22.0,
+            -0.04,
+            0.04,
+        ),
+        (
+            "porto-vento",
+            "Porto Vento",
+            6300.0,
+            13,
+            0.96,
+            1.03,
+            0.68,
+            0.72,
+            36.0,
+            -0.23,
+            0.08,
+        ),
+        (
+            "lakeside",
+            "Lakeside Park",
+            4000.0,
+            9,
+            1.02,
+            1.01,
+            0.85,
+            0.34,
+            20.0,
+            -0.10,
+            0.12,
+        ),
+        (
+            "desert-loop",
+            "Desert Loop",
+            5500.0,
+            12,
+            0.98,
+            0.99,
+            0.76,
+            0.50,
+            30.0,
+            -0.17,
+            0.03,
+        ),
+        (
+            "hafen",
+            "Hafen Circuit",
+            4800.0,
+            16,
+            1.00,
+            1.00,
+            0.72,
+            0.42,
+            26.0,
+            -0.11,
+            0.07,
+        ),
+        (
+            "monte-leone",
+            "Monte Leone",
+            5900.0,
+            11,
+            0.99,
+            1.02,
+            0.80,
+            0.58,
+            34.0,
+            -0.21,
+            0.02,
+        ),
+        (
+            "riverside",
+            "Riverside",
+            4400.0,
+            12,
+            1.01,
+            0.98,
+            0.87,
+            0.28,
+            17.0,
+            -0.03,
+            0.09,
+        ),
+        (
+            "highland",
+            "Highland Raceway",
+            5100.0,
+            14,
+            0.97,
+            1.01,
+            0.66,
+            0.66,
+            38.0,
+            -0.18,
+            0.11,
+        ),
     ];
     rows.iter()
         .enumerate()
@@ -133,15 +277,26 @@ impl Plan {
         };
         let tracks: Vec<TrackDef> = all_tracks.into_iter().take(n_tracks).collect();
         let cars: Vec<CarParams> = (0..n_cars)
-            .map(|i| CarParams::single_seater(&format!("car{}", i + 1), &format!("Car #{}", i + 1), i as f64 - 0.5 * (n_cars - 1) as f64))
+            .map(|i| {
+                CarParams::single_seater(
+                    &format!("car{}", i + 1),
+                    &format!("Car #{}", i + 1),
+                    i as f64 - 0.5 * (n_cars - 1) as f64,
+                )
+            })
             .collect();
         let compounds = catalogue();
         let season_start = days_from_civil(2026, 3, 1);
         let events: Vec<EventPlan> = (0..n_events)
             .map(|e| {
                 // Every track once, then again in a different order.
-                let track = if e < n_tracks { e } else { (e * 5 + 3) % n_tracks };
-                let day = season_start + (e as i64 * 240) / n_events as i64 + rng.random_range(0..3);
+                let track = if e < n_tracks {
+                    e
+                } else {
+                    (e * 5 + 3) % n_tracks
+                };
+                let day =
+                    season_start + (e as i64 * 240) / n_events as i64 + rng.random_range(0..3);
                 let (y, m, d) = civil_from_days(day);
                 let air_c: f64 = rng.random_range(12.0..36.0);
                 EventPlan {
@@ -156,7 +311,11 @@ impl Plan {
         let mut runs = Vec::new();
         for (ei, ev) in events.iter().enumerate() {
             let day = {
-                let p: Vec<i64> = ev.date.split('-').map(|s| s.parse().expect("we wrote it")).collect();
+                let p: Vec<i64> = ev
+                    .date
+                    .split('-')
+                    .map(|s| s.parse().expect("we wrote it"))
+                    .collect();
                 days_from_civil(p[0], p[1], p[2])
             };
             for car in 0..n_cars {
@@ -164,7 +323,13 @@ impl Plan {
                     let distance_m: f64 = rng.random_range(dist.0..dist.1);
                     // The supplier nominates a compound per event by track temperature;
                     // a fifth of the runs try a neighbouring one.
-                    let nominated: usize = if ev.track_c < 32.0 { 0 } else if ev.track_c < 44.0 { 1 } else { 2 };
+                    let nominated: usize = if ev.track_c < 32.0 {
+                        0
+                    } else if ev.track_c < 44.0 {
+                        1
+                    } else {
+                        2
+                    };
                     let compound = if rng.random_bool(0.8) {
                         nominated
                     } else if nominated == 0 || (nominated == 1 && rng.random_bool(0.5)) {
@@ -203,7 +368,11 @@ impl Plan {
             events,
             runs,
             rate_hz: rate_hz.unwrap_or(rate),
-            profile_samples: if preset == Preset::Tiny { 1 << 12 } else { 1 << 14 },
+            profile_samples: if preset == Preset::Tiny {
+                1 << 12
+            } else {
+                1 << 14
+            },
             profile_dx_mm: 0.01,
             locations_per_track: if preset == Preset::Tiny { 2 } else { 6 },
         }

@@ -29,7 +29,13 @@ pub fn psd_shape(q: f64, p: &RoadParams) -> f64 {
 }
 
 /// Gaussian self-affine profile with `n` samples at spacing `dx_mm`, zero mean and rms `p.rms_mm`.
-pub fn gaussian_profile(p: &RoadParams, n: usize, dx_mm: f64, amps: Amplitudes, rng: &mut impl Rng) -> Vec<f64> {
+pub fn gaussian_profile(
+    p: &RoadParams,
+    n: usize,
+    dx_mm: f64,
+    amps: Amplitudes,
+    rng: &mut impl Rng,
+) -> Vec<f64> {
     let len = n as f64 * dx_mm;
     let mut planner = RealFftPlanner::<f64>::new();
     let c2r = planner.plan_fft_inverse(n);
@@ -130,7 +136,10 @@ mod tests {
         let mut out = r2c.make_output_vec();
         r2c.process(&mut input, &mut out).unwrap();
         let len = n as f64 * dx;
-        let (q_lo, q_hi) = (2.0 * 2.0 * std::f64::consts::PI / p.rolloff_mm, 0.5 * 2.0 * std::f64::consts::PI / p.cutoff_mm);
+        let (q_lo, q_hi) = (
+            2.0 * 2.0 * std::f64::consts::PI / p.rolloff_mm,
+            0.5 * 2.0 * std::f64::consts::PI / p.cutoff_mm,
+        );
         let pts: Vec<(f64, f64)> = out
             .iter()
             .enumerate()
@@ -183,5 +192,26 @@ mod tests {
         assert!((rq - 0.4).abs() < 1e-12);
         assert!(sk < -0.4, "skewness {sk}");
         assert!(ku > 3.3, "kurtosis {ku}");
+    }
+
+    #[test]
+    fn non_gaussian_catalogue_profiles_keep_rms_and_hurst() {
+        // Every catalogue track as the simulator writes it: rms exact, H from the
+        // PSD slope within ±0.06 (random amplitudes ±0.03 plus the height transform's
+        // harmonics, which flatten the spectrum slightly).
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(4);
+        for t in crate::sim::preset::track_catalogue() {
+            let mut z = gaussian_profile(&t.road, 1 << 16, 0.01, Amplitudes::Random, &mut rng);
+            shape_heights(&mut z, &t.road);
+            let (rq, _, _) = moments(&z);
+            assert!((rq - t.road.rms_mm).abs() < 1e-12);
+            let h = (-psd_slope(&z, 0.01, &t.road) - 1.0) / 2.0;
+            assert!(
+                (h - t.road.hurst).abs() < 0.06,
+                "{}: H {} -> {h}",
+                t.id,
+                t.road.hurst
+            );
+        }
     }
 }

@@ -115,7 +115,11 @@ impl PsiTable {
     const T0: f64 = -30.0;
     const STEP: f64 = 0.25;
     fn new(c: &CompoundModel) -> Self {
-        PsiTable((0..=960).map(|i| c.wear_temperature_factor(Self::T0 + Self::STEP * i as f64)).collect())
+        PsiTable(
+            (0..=960)
+                .map(|i| c.wear_temperature_factor(Self::T0 + Self::STEP * i as f64))
+                .collect(),
+        )
     }
     fn at(&self, t: f64) -> f64 {
         let x = ((t - Self::T0) / Self::STEP).clamp(0.0, (self.0.len() - 2) as f64);
@@ -143,7 +147,9 @@ pub fn simulate_run<E>(
     // Logger dropouts: a Poisson number per hour, 0.1-1.5 s each.
     let est_duration = set.distance_m / (lap_len / lap.lap_time_s);
     let n_drop = match set.sensor_noise {
-        true => Poisson::new(1.5 * est_duration / 3600.0 + 0.5).map(|p| p.sample(rng) as usize).unwrap_or(0),
+        true => Poisson::new(1.5 * est_duration / 3600.0 + 0.5)
+            .map(|p| p.sample(rng) as usize)
+            .unwrap_or(0),
         false => 0,
     };
     let mut dropouts: Vec<(f64, f64)> = (0..n_drop)
@@ -183,7 +189,10 @@ pub fn simulate_run<E>(
         for wheel in Wheel::ALL {
             let k = wheel.index();
             let f = forces[k];
-            let mu = ctx.compound.grip.mu(temps[k].surface_c, f.fz, ctx.road_grip);
+            let mu = ctx
+                .compound
+                .grip
+                .mu(temps[k].surface_c, f.fz, ctx.road_grip);
             let (sx, sy, saturated) = slips(f.fx, f.fy, f.fz, mu);
             truth.saturated_samples += saturated as u64;
             let y_w = wheel.side_sign() * 0.5 * car.track_width(wheel);
@@ -203,9 +212,17 @@ pub fn simulate_run<E>(
             wt.friction_energy_y_j += p_y * dt;
             wt.weighted_energy_j += p * psi.at(temps[k].surface_c) * dt;
             for e in ctx.effects {
-                let idx = EffectKind::ALL.iter().position(|k| *k == e.kind).expect("listed");
-                let power = if e.kind == EffectKind::Graining { p_y } else { p };
-                wt.effect_energy_j[idx] += power * e.weight(temps[k].surface_c, temps[k].inner_c) * dt;
+                let idx = EffectKind::ALL
+                    .iter()
+                    .position(|k| *k == e.kind)
+                    .expect("listed");
+                let power = if e.kind == EffectKind::Graining {
+                    p_y
+                } else {
+                    p
+                };
+                wt.effect_energy_j[idx] +=
+                    power * e.weight(temps[k].surface_c, temps[k].inner_c) * dt;
             }
             wt.mean_camber_deg += camber;
             wt.mean_pressure_pa += pressure;

@@ -80,8 +80,16 @@ impl TrackDef {
             })
             .collect();
         // Scale the left turns so the net turning is exactly 2π.
-        let left: f64 = corners.iter().filter(|c| c.angle > 0.0).map(|c| c.angle).sum();
-        let right: f64 = corners.iter().filter(|c| c.angle < 0.0).map(|c| -c.angle).sum();
+        let left: f64 = corners
+            .iter()
+            .filter(|c| c.angle > 0.0)
+            .map(|c| c.angle)
+            .sum();
+        let right: f64 = corners
+            .iter()
+            .filter(|c| c.angle < 0.0)
+            .map(|c| -c.angle)
+            .sum();
         let k = (2.0 * PI + right) / left.max(1e-9);
         for c in corners.iter_mut().filter(|c| c.angle > 0.0) {
             c.angle *= k;
@@ -95,7 +103,9 @@ impl TrackDef {
         }
         // Straights share the remaining length (at least 25 % of the lap), one is the main straight.
         let straight_total = (self.length_target_m - corner_len).max(0.25 * self.length_target_m);
-        let mut weights: Vec<f64> = (0..corners.len()).map(|_| rng.random_range(0.3..1.5)).collect();
+        let mut weights: Vec<f64> = (0..corners.len())
+            .map(|_| rng.random_range(0.3..1.5))
+            .collect();
         weights[0] = 4.0;
         let wsum: f64 = weights.iter().sum();
         let mut kappa = Vec::new();
@@ -141,7 +151,12 @@ mod tests {
         for t in track_catalogue() {
             let s = t.shape(1.0);
             assert!((s.total_turning() - 2.0 * PI).abs() < 1e-9, "{}", t.id);
-            assert!(s.length_m() > 2500.0 && s.length_m() < 9000.0, "{} {}", t.id, s.length_m());
+            assert!(
+                s.length_m() > 2500.0 && s.length_m() < 9000.0,
+                "{} {}",
+                t.id,
+                s.length_m()
+            );
             let r_min = 1.0 / s.curvature.iter().fold(0.0f64, |a, k| a.max(k.abs()));
             assert!(r_min > 10.0, "{} min radius {r_min}", t.id);
         }

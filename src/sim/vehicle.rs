@@ -177,7 +177,8 @@ impl CarParams {
     /// Dynamic camber (deg): static camber plus the roll-induced change; in a
     /// left turn the outer (right) wheels lose negative camber.
     pub fn camber_deg(&self, w: Wheel, ay: f64) -> f64 {
-        self.static_camber_deg[Self::axle(w)] - w.side_sign() * self.camber_per_roll * self.roll_deg(ay)
+        self.static_camber_deg[Self::axle(w)]
+            - w.side_sign() * self.camber_per_roll * self.roll_deg(ay)
     }
 }
 

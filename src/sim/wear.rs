@@ -59,11 +59,15 @@ impl TireWear {
     /// Wear (mm) at fraction `y` of the width from the inner edge.
     pub fn wear_mm_at(&self, y: f64) -> f64 {
         let to_mm = self.new_depth_mm / 100.0;
-        let base = (1.0 + self.camber_tilt * (1.0 - 2.0 * y) + self.pressure_crown * (1.0 - 12.0 * (y - 0.5).powi(2))).max(0.05);
+        let base = (1.0
+            + self.camber_tilt * (1.0 - 2.0 * y)
+            + self.pressure_crown * (1.0 - 12.0 * (y - 0.5).powi(2)))
+        .max(0.05);
         // Irregular front wear concentrates on the inner shoulder (mean 1 over the width).
         let irregular = (-y / 0.2).exp() / (0.2 * (1.0 - (-5.0f64).exp()));
         let effects: f64 = self.effect_pct.iter().sum();
-        (to_mm * (self.base_pct * base + self.irregular_pct * irregular + effects)).min(0.98 * self.new_depth_mm)
+        (to_mm * (self.base_pct * base + self.irregular_pct * irregular + effects))
+            .min(0.98 * self.new_depth_mm)
     }
 }
 
@@ -87,7 +91,10 @@ pub fn tire_wear(
     };
     let mut effect_pct = [0.0; 4];
     for e in effects {
-        let i = EffectKind::ALL.iter().position(|k| *k == e.kind).expect("listed");
+        let i = EffectKind::ALL
+            .iter()
+            .position(|k| *k == e.kind)
+            .expect("listed");
         effect_pct[i] = match e.kind {
             EffectKind::RoadAbrasion => e.magnitude * base_pct * e.road_weight(road.micro_rms_mm),
             EffectKind::Graining if wheel.axle() == crate::Axle::Rear => {
@@ -153,7 +160,10 @@ mod tests {
             new_depth_mm: 4.0,
         };
         let n = 100_000;
-        let mean: f64 = (0..n).map(|i| w.wear_mm_at((i as f64 + 0.5) / n as f64)).sum::<f64>() / n as f64;
+        let mean: f64 = (0..n)
+            .map(|i| w.wear_mm_at((i as f64 + 0.5) / n as f64))
+            .sum::<f64>()
+            / n as f64;
         assert!((100.0 * mean / 4.0 - w.total_pct()).abs() < 1e-6, "{mean}");
         // Negative camber (positive tilt) wears the inner edge more.
         assert!(w.wear_mm_at(0.05) > w.wear_mm_at(0.95));

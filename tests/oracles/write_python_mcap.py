@@ -6,10 +6,12 @@ checks every sample our reader returns.
     python3 tests/oracles/write_python_mcap.py   # from the repository root
 
 Writes tests/fixtures/python-sample.mcap (per-sample messages, a dropout
-between samples 20 and 25) and tests/fixtures/python-block.mcap (two blocks).
+between samples 20 and 25) and tests/fixtures/python-block.mcap (two blocks),
+and the telemetry and Parquet road file of datasets/handwritten/.
 """
 import importlib
 import pathlib
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -65,7 +67,22 @@ def main():
                 for name, v in vehicle_values(i).items():
                     getattr(vb, name).append(v)
             w.write_message(topic="/vehicle", message=vb, log_time=t, publish_time=t)
-    print("wrote tests/fixtures/python-sample.mcap and python-block.mcap")
+    # The hand-written example archive uses the per-sample file as its run's telemetry.
+    shutil.copyfile(ROOT / "tests" / "fixtures" / "python-sample.mcap",
+                    ROOT / "datasets" / "handwritten" / "telemetry" / "H1-car1-R1.mcap")
+    # ... and pyarrow for its bulk road file: two profiles, z = 0.1*sin + 0.05*location (mm).
+    import math
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+    rows = {"track": [], "location": [], "x_mm": [], "z_mm": []}
+    for loc in (1, 2):
+        for i in range(32):
+            rows["track"].append("paper-ring")
+            rows["location"].append(f"L{loc}")
+            rows["x_mm"].append(i * 0.25)
+            rows["z_mm"].append(0.1 * math.sin(0.5 * i) + 0.05 * loc)
+    pq.write_table(pa.table(rows), ROOT / "datasets" / "handwritten" / "road" / "profiles.parquet")
+    print("wrote tests/fixtures/python-*.mcap and datasets/handwritten/{telemetry,road}")
 
 
 if __name__ == "__main__":
