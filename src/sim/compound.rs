@@ -5,6 +5,9 @@
 use super::tire::GripParams;
 use crate::ingest::compound::{Compound, MasterCurve, Wlf};
 
+/// Surface temperature at which the wear law's temperature factor is 1 (°C).
+pub const WEAR_REFERENCE_C: f64 = 60.0;
+
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct CompoundModel {
     pub id: String,
@@ -21,8 +24,8 @@ pub struct CompoundModel {
     /// tan δ: base value, peak value and log-Gaussian width (decades).
     pub tan_delta: [f64; 3],
     pub grip: GripParams,
-    /// Base abrasion: tread depth lost per MJ of friction energy at the
-    /// reference temperature on a neutral road (mm/MJ).
+    /// Base abrasion: tread depth lost per MJ of friction energy at
+    /// [`WEAR_REFERENCE_C`] on a neutral road (mm/MJ).
     pub wear_mm_per_mj: f64,
     /// Exponent γ of the viscoelastic temperature factor `(a_T(T_opt)/a_T(T))^γ`.
     pub wear_shift_exponent: f64,
@@ -49,8 +52,10 @@ impl CompoundModel {
     /// through the compound's WLF shift (Grosch: abrasion follows the
     /// rubber's reduced viscoelastic state): each decade that heating moves
     /// the rubber toward its rubbery state multiplies abrasion by 10^γ.
+    /// It is 1 at [`WEAR_REFERENCE_C`] for every compound, so compounds differ
+    /// in abradability only through `wear_mm_per_mj`.
     pub fn wear_temperature_factor(&self, t_c: f64) -> f64 {
-        let decades = self.wlf.log10_shift(self.grip.t_opt_c) - self.wlf.log10_shift(t_c);
+        let decades = self.wlf.log10_shift(WEAR_REFERENCE_C) - self.wlf.log10_shift(t_c);
         10f64.powf(self.wear_shift_exponent * decades)
     }
 
@@ -107,13 +112,13 @@ pub fn catalogue() -> Vec<CompoundModel> {
                     window_c: 45.0,
                 },
                 wear_mm_per_mj: wear,
-                wear_shift_exponent: 0.2,
+                wear_shift_exponent: 0.17,
             }
         };
     vec![
-        make("soft", "C-Soft", 0.0, 15.0, 1.92, 65.0, 0.135, 1.15),
-        make("medium", "C-Medium", -8.0, 24.0, 1.84, 72.0, 0.12, 1.05),
-        make("hard", "C-Hard", -15.0, 34.0, 1.76, 80.0, 0.105, 0.95),
+        make("soft", "C-Soft", 0.0, 15.0, 1.92, 65.0, 0.12, 1.15),
+        make("medium", "C-Medium", -8.0, 24.0, 1.84, 72.0, 0.11, 1.05),
+        make("hard", "C-Hard", -15.0, 34.0, 1.76, 80.0, 0.10, 0.95),
     ]
 }
 

@@ -308,6 +308,7 @@ impl Plan {
                 }
             })
             .collect();
+        let nominations: Vec<usize> = events.iter().map(|_| rng.random_range(0..3)).collect();
         let mut runs = Vec::new();
         for (ei, ev) in events.iter().enumerate() {
             let day = {
@@ -320,16 +321,9 @@ impl Plan {
             };
             for car in 0..n_cars {
                 for r in 0..runs_per_car {
-                    let distance_m: f64 = rng.random_range(dist.0..dist.1);
-                    // The supplier nominates a compound per event by track temperature;
-                    // a fifth of the runs try a neighbouring one.
-                    let nominated: usize = if ev.track_c < 32.0 {
-                        0
-                    } else if ev.track_c < 44.0 {
-                        1
-                    } else {
-                        2
-                    };
+                    // The supplier nominates one compound per event; a fifth of the
+                    // runs try a neighbouring one.
+                    let nominated = nominations[ei];
                     let compound = if rng.random_bool(0.8) {
                         nominated
                     } else if nominated == 0 || (nominated == 1 && rng.random_bool(0.5)) {
@@ -337,6 +331,9 @@ impl Plan {
                     } else {
                         nominated - 1
                     };
+                    // Stint length by compound: softer compounds run shorter.
+                    let longest = dist.0 + (dist.1 - dist.0) * [0.5, 0.75, 1.0][compound];
+                    let distance_m: f64 = rng.random_range(dist.0..longest);
                     let front: f64 = rng.random_range(70e3..85e3);
                     let rear: f64 = rng.random_range(68e3..82e3);
                     let jitter = |rng: &mut ChaCha8Rng| rng.random_range(-500.0..500.0);
