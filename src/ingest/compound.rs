@@ -2,7 +2,7 @@
 //! tan δ versus temperature at a reference frequency, and the WLF constants
 //! that move between frequency and temperature (paper eqs. 30-31).
 
-use super::{IngestError, Result, read_toml, write_toml};
+use super::{IngestError, Result, positive, read_toml, write_toml};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
@@ -96,23 +96,23 @@ impl Compound {
                     "temperatures must be finite and strictly increasing".into(),
                 ));
             }
-            if !(e > 0.0 && e.is_finite()) {
+            if !positive(e) {
                 return Err(bad(
                     &rec,
                     format!("storage modulus must be > 0 MPa, got {e}"),
                 ));
             }
-            if !(d > 0.0 && d.is_finite()) {
+            if !positive(d) {
                 return Err(bad(&rec, format!("loss factor must be > 0, got {d}")));
             }
         }
-        if !(self.reference_frequency_hz > 0.0) {
+        if !positive(self.reference_frequency_hz) {
             return Err(bad(
                 "reference_frequency_hz",
                 format!("must be > 0, got {}", self.reference_frequency_hz),
             ));
         }
-        if !(self.wlf.c1 > 0.0 && self.wlf.c2_k > 0.0) {
+        if !(positive(self.wlf.c1) && positive(self.wlf.c2_k)) {
             return Err(bad(
                 "wlf",
                 format!(

@@ -2,7 +2,7 @@
 //! paths of every other file in the archive. Paths are relative to the
 //! manifest's folder.
 
-use super::{IngestError, Result, read_toml, write_toml};
+use super::{IngestError, Result, positive, read_toml, write_toml};
 use crate::Wheel;
 use serde::{Deserialize, Serialize};
 use std::collections::HashSet;
@@ -217,7 +217,7 @@ impl Manifest {
         let cars = set(self.cars.iter().map(|c| c.id.as_str()).collect());
 
         for (i, t) in self.tracks.iter().enumerate() {
-            if !(t.length_m > 0.0) {
+            if !positive(t.length_m) {
                 return Err(bad(
                     format!("tracks[{i}] id={}", t.id),
                     format!("length_m must be > 0, got {}", t.length_m),
@@ -249,7 +249,7 @@ impl Manifest {
                 ("front_track_m", c.front_track_m),
                 ("rear_track_m", c.rear_track_m),
             ] {
-                if !(v > 0.0 && v.is_finite()) {
+                if !positive(v) {
                     return Err(bad(rec, format!("{name} must be > 0, got {v}")));
                 }
             }
@@ -265,7 +265,7 @@ impl Manifest {
             if !compounds.contains(r.compound.as_str()) {
                 return Err(bad(rec, format!("unknown compound '{}'", r.compound)));
             }
-            if !(r.distance_m > 0.0 && r.distance_m.is_finite()) {
+            if !positive(r.distance_m) {
                 return Err(bad(
                     rec,
                     format!("distance_m must be > 0, got {}", r.distance_m),

@@ -12,6 +12,11 @@ pub use error::{IngestError, Result};
 
 use std::path::Path;
 
+/// True for a finite number above zero (false for NaN).
+pub(crate) fn positive(x: f64) -> bool {
+    x > 0.0 && x.is_finite()
+}
+
 /// Reads a TOML file into `T`, naming the file in any error.
 pub(crate) fn read_toml<T: serde::de::DeserializeOwned>(path: &Path) -> Result<T> {
     let text = std::fs::read_to_string(path).map_err(|e| IngestError::io(path, e))?;

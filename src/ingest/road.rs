@@ -2,7 +2,7 @@
 //! an equally spaced grid. One profile per CSV file (`x_mm,z_mm`), or many in
 //! one long-format Parquet file (`track, location, x_mm, z_mm`).
 
-use super::{IngestError, Result};
+use super::{IngestError, Result, positive};
 use arrow_array::{Array, Float64Array, RecordBatch, StringArray};
 use arrow_schema::{DataType, Field, Schema};
 use std::path::Path;
@@ -46,7 +46,7 @@ impl Profile {
             ));
         }
         let dx = (x[x.len() - 1] - x[0]) / (x.len() - 1) as f64;
-        if !(dx > 0.0) {
+        if !positive(dx) {
             return Err(IngestError::invalid(path, rec, "x_mm must increase"));
         }
         for i in 0..x.len() {

@@ -2,7 +2,7 @@
 //! several spots across the tread width (not equally spaced), several
 //! readings per spot, with the new-tire depth. One row per reading.
 
-use super::{IngestError, Result};
+use super::{IngestError, Result, positive};
 use crate::Wheel;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
@@ -46,7 +46,7 @@ pub fn read_wear_csv(path: &Path) -> Result<Vec<WearReading>> {
             r.spot
         );
         let bad = |what: String| IngestError::invalid(path, rec.clone(), what);
-        if !(r.new_depth_mm > 0.0 && r.new_depth_mm.is_finite()) {
+        if !positive(r.new_depth_mm) {
             return Err(bad(format!(
                 "new_depth_mm must be > 0, got {}",
                 r.new_depth_mm
@@ -58,7 +58,7 @@ pub fn read_wear_csv(path: &Path) -> Result<Vec<WearReading>> {
                 r.depth_mm, r.new_depth_mm
             )));
         }
-        if !(r.tread_width_mm > 0.0) || !(0.0..=r.tread_width_mm).contains(&r.position_mm) {
+        if !positive(r.tread_width_mm) || !(0.0..=r.tread_width_mm).contains(&r.position_mm) {
             return Err(bad(format!(
                 "position_mm = {} is outside the tread width 0..{} mm",
                 r.position_mm, r.tread_width_mm

@@ -58,6 +58,7 @@ pub struct Plan {
 /// The twelve tracks of the catalogue (the demo uses the first eight).
 pub fn track_catalogue() -> Vec<TrackDef> {
     // (id, name, length m, corners, grip, hidden abrasiveness, H, rms mm, roll-off mm, skew, kurt)
+    #[allow(clippy::type_complexity)] // a table: one tuple per track reads best
     let rows: [(&str, &str, f64, usize, f64, f64, f64, f64, f64, f64, f64); 12] = [
         (
             "valle-rossa",
@@ -319,7 +320,7 @@ impl Plan {
                     .collect();
                 days_from_civil(p[0], p[1], p[2])
             };
-            for car in 0..n_cars {
+            for (car, car_params) in cars.iter().enumerate() {
                 for r in 0..runs_per_car {
                     // The supplier nominates one compound per event; a fifth of the
                     // runs try a neighbouring one.
@@ -339,7 +340,7 @@ impl Plan {
                     let jitter = |rng: &mut ChaCha8Rng| rng.random_range(-500.0..500.0);
                     let hour = 9 + r as u64 * 2 + car as u64;
                     runs.push(RunPlan {
-                        id: format!("{}-{}-R{}", ev.id, cars[car].id, r + 1),
+                        id: format!("{}-{}-R{}", ev.id, car_params.id, r + 1),
                         event: ei,
                         car,
                         compound,

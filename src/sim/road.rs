@@ -55,7 +55,7 @@ pub fn gaussian_profile(
         *s = realfft::num_complex::Complex::from_polar(mag, phase);
     }
     spec[0] = Default::default();
-    if n % 2 == 0 {
+    if n.is_multiple_of(2) {
         spec[n / 2].im = 0.0; // Nyquist bin must be real
     }
     let mut z = c2r.make_output_vec();

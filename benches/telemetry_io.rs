@@ -1,0 +1,49 @@
+//! Telemetry I/O and simulation throughput on one simulated run.
+//!
+//! `cargo bench --bench telemetry_io`; with TIREWEAR_BENCH_SMALL=1 the run is
+//! short so CI can check the bench runs (`-- --test`). Throughput is reported
+//! per telemetry sample step (5 topics: four wheels and the vehicle).
+
+use criterion::{Criterion, Throughput, criterion_group, criterion_main};
+use tirewear::ingest::telemetry::{Encoding, read_telemetry};
+use tirewear::sim::{Preset, SimOptions, simulate};
+
+fn bench(c: &mut Criterion) {
+    let small = std::env::var_os("TIREWEAR_BENCH_SMALL").is_some();
+    let dir = tempfile::tempdir().unwrap();
+    for encoding in [Encoding::Block, Encoding::Sample] {
+        let out = dir.path().join(format!("{encoding:?}"));
+        let opts = SimOptions {
+            preset: Preset::Tiny,
+            scale: 1.0,
+            seed: 1,
+            effects: vec![],
+            encoding,
+            rate_hz: Some(if small { 20.0 } else { 200.0 }),
+            out: out.clone(),
+            sensor_noise: true,
+            progress: false,
+        };
+        let summary = simulate(&opts).unwrap();
+        let season = tirewear::ingest::manifest::Season::open(&out).unwrap();
+        let path = season.path(&season.manifest.runs[0].telemetry);
+        let steps = read_telemetry(&path).unwrap().vehicle.len() as u64;
+        let bytes = std::fs::metadata(&path).unwrap().len();
+
+        let mut g = c.benchmark_group(format!("read_telemetry/{encoding:?}"));
+        g.throughput(Throughput::Elements(steps));
+        g.bench_function("samples", |b| b.iter(|| read_telemetry(&path).unwrap()));
+        g.throughput(Throughput::Bytes(bytes));
+        g.bench_function("bytes", |b| b.iter(|| read_telemetry(&path).unwrap()));
+        g.finish();
+
+        let mut g = c.benchmark_group(format!("simulate_tiny_season/{encoding:?}"));
+        g.sample_size(10);
+        g.throughput(Throughput::Elements(summary.samples));
+        g.bench_function("samples", |b| b.iter(|| simulate(&opts).unwrap()));
+        g.finish();
+    }
+}
+
+criterion_group!(benches, bench);
+criterion_main!(benches);
