@@ -6,6 +6,7 @@
 
 pub mod atomic;
 pub mod ingest;
+pub mod kpi;
 pub mod sim;
 pub mod wheel;
 

@@ -32,7 +32,12 @@ enum Command {
     /// readings) with known physics and optionally planted effects; the
     /// ground truth goes to `OUT/truth/`.
     Simulate(SimulateArgs),
-    /// Try tirewear: simulate the demo season and say what was written.
+    /// Extract the KPI database from a season archive: one row per tire and
+    /// run with the paper's road (table 3), telemetry (table 4) and
+    /// viscoelastic (table 5) indices and the mean wear; side tables of road
+    /// spectra and friction-energy maps; a report of skipped runs.
+    Extract(ExtractArgs),
+    /// Try tirewear: simulate the demo season and extract its KPI database.
     Demo {
         /// Where to write the demo season.
         #[arg(long, default_value = "demo-season")]
@@ -40,6 +45,25 @@ enum Command {
         #[arg(long, default_value_t = 7)]
         seed: u64,
     },
+}
+
+#[derive(clap::Args)]
+struct ExtractArgs {
+    /// Season archive folder (with season.toml) or the manifest itself.
+    season: PathBuf,
+    /// KPI database to write (Parquet); side tables go next to it
+    /// (NAME.road.parquet, NAME.energy_maps.parquet, NAME.report.json).
+    #[arg(long, default_value = "kpis.parquet")]
+    out: PathBuf,
+    /// Also write the KPI database as CSV.
+    #[arg(long)]
+    csv: Option<PathBuf>,
+    /// Engine for the heavy reductions: cpu, gpu, or auto (GPU when usable, else CPU).
+    #[arg(long, value_enum, default_value = "auto")]
+    engine: tirewear::kpi::Engine,
+    /// Worker threads (default: all cores).
+    #[arg(long)]
+    jobs: Option<usize>,
 }
 
 #[derive(clap::Args)]
@@ -109,6 +133,42 @@ fn run_simulation(opts: &SimOptions) -> Result<sim::SimSummary> {
     Ok(s)
 }
 
+fn run_extract(opts: &tirewear::kpi::ExtractOptions) -> Result<tirewear::kpi::ExtractSummary> {
+    let s = tirewear::kpi::extract(opts)
+        .with_context(|| format!("extracting {}", opts.season.display()))?;
+    println!(
+        "wrote {}: {} rows from {} of {} runs in {:.1} s ({:?} engine)",
+        opts.out.display(),
+        s.rows,
+        s.runs - s.skipped.len(),
+        s.runs,
+        s.seconds,
+        s.engine
+    );
+    let threads = rayon::current_num_threads() as f64;
+    println!(
+        "telemetry: {:.2} M samples/s, {:.0} MB/s of MCAP ({:.0} MB/s per core); {:.0} % of run time decoding, {:.0} % reducing",
+        s.samples_per_second() / 1e6,
+        s.telemetry_bytes as f64 / 1e6 / s.seconds,
+        s.telemetry_bytes as f64 / 1e6 / s.seconds / threads,
+        100.0 * s.decode_seconds / (s.decode_seconds + s.reduce_seconds),
+        100.0 * s.reduce_seconds / (s.decode_seconds + s.reduce_seconds)
+    );
+    for k in &s.skipped {
+        println!("skipped run {}: {}", k.run, k.reason);
+    }
+    for w in s.warnings.iter().take(10) {
+        println!("warning: {w}");
+    }
+    if s.warnings.len() > 10 {
+        println!(
+            "... and {} more warnings (see the report)",
+            s.warnings.len() - 10
+        );
+    }
+    Ok(s)
+}
+
 fn main() -> Result<()> {
     let cli = Cli::parse();
     let filter = tracing_subscriber::EnvFilter::try_from_default_env()
@@ -133,6 +193,20 @@ fn main() -> Result<()> {
             };
             run_simulation(&opts)?;
         }
+        Command::Extract(a) => {
+            if let Some(j) = a.jobs {
+                rayon::ThreadPoolBuilder::new()
+                    .num_threads(j.max(1))
+                    .build_global()?;
+            }
+            run_extract(&tirewear::kpi::ExtractOptions {
+                season: a.season,
+                out: a.out,
+                csv: a.csv,
+                engine: a.engine,
+                progress,
+            })?;
+        }
         Command::Demo { out, seed } => {
             let opts = SimOptions {
                 preset: Preset::Demo,
@@ -141,7 +215,7 @@ fn main() -> Result<()> {
                 effects: Vec::new(),
                 encoding: Encoding::Block,
                 rate_hz: None,
-                out,
+                out: out.clone(),
                 sensor_noise: true,
                 progress,
             };
@@ -159,9 +233,15 @@ fn main() -> Result<()> {
             println!(
                 "  truth/                  the simulator's ground truth (never read by the analysis)"
             );
-            println!(
-                "\nNext steps of the pipeline (extract → fit → gap) arrive with their issues."
-            );
+            println!();
+            run_extract(&tirewear::kpi::ExtractOptions {
+                season: out.clone(),
+                out: out.join("kpis.parquet"),
+                csv: Some(out.join("kpis.csv")),
+                engine: tirewear::kpi::Engine::Auto,
+                progress,
+            })?;
+            println!("\nNext steps of the pipeline (fit → gap) arrive with their issues.");
         }
     }
     Ok(())

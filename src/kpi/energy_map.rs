@@ -1,0 +1,103 @@
+//! Friction-energy maps: the friction energy of one tire and run binned over
+//! (surface temperature × inner-liner temperature) and over (sliding speed ×
+//! surface temperature), on fixed bin edges, so that threshold effects can be
+//! tested later without re-reading telemetry. Values outside the edges go
+//! to the first or last bin.
+
+/// Surface-temperature bins: 20..140 °C, 5 K wide.
+pub const T_SURFACE_BINS: Bins = Bins {
+    lo: 20.0,
+    width: 5.0,
+    n: 24,
+};
+/// Inner-liner temperature bins: 40..160 °C, 5 K wide.
+pub const T_INNER_BINS: Bins = Bins {
+    lo: 40.0,
+    width: 5.0,
+    n: 24,
+};
+/// Sliding-speed bins: 0..10 m/s, 0.5 m/s wide.
+pub const SLIDING_SPEED_BINS: Bins = Bins {
+    lo: 0.0,
+    width: 0.5,
+    n: 20,
+};
+
+/// Equal-width bins `[lo + i·width, lo + (i+1)·width)`, clamped at both ends.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Bins {
+    pub lo: f64,
+    pub width: f64,
+    pub n: usize,
+}
+
+impl Bins {
+    pub fn index(&self, x: f64) -> usize {
+        let i = ((x - self.lo) / self.width).floor();
+        if i.is_nan() || i < 0.0 {
+            0
+        } else {
+            (i as usize).min(self.n - 1)
+        }
+    }
+    pub fn lower_edge(&self, i: usize) -> f64 {
+        self.lo + self.width * i as f64
+    }
+}
+
+/// Both maps of one tire and run (J per bin, row-major).
+#[derive(Debug, Clone, PartialEq)]
+pub struct EnergyMaps {
+    /// [T_surface bin][T_inner bin].
+    pub surface_inner: Vec<f64>,
+    /// [sliding-speed bin][T_surface bin].
+    pub speed_surface: Vec<f64>,
+}
+
+impl Default for EnergyMaps {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl EnergyMaps {
+    pub fn new() -> Self {
+        EnergyMaps {
+            surface_inner: vec![0.0; T_SURFACE_BINS.n * T_INNER_BINS.n],
+            speed_surface: vec![0.0; SLIDING_SPEED_BINS.n * T_SURFACE_BINS.n],
+        }
+    }
+
+    pub fn add(&mut self, t_surface: f64, t_inner: f64, sliding_speed: f64, energy_j: f64) {
+        let s = T_SURFACE_BINS.index(t_surface);
+        self.surface_inner[s * T_INNER_BINS.n + T_INNER_BINS.index(t_inner)] += energy_j;
+        self.speed_surface[SLIDING_SPEED_BINS.index(sliding_speed) * T_SURFACE_BINS.n + s] +=
+            energy_j;
+    }
+
+    pub fn total(&self) -> f64 {
+        self.surface_inner.iter().sum()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn bins_clamp_and_split_by_hand() {
+        assert_eq!(T_SURFACE_BINS.index(19.0), 0);
+        assert_eq!(T_SURFACE_BINS.index(24.999), 0);
+        assert_eq!(T_SURFACE_BINS.index(25.0), 1);
+        assert_eq!(T_SURFACE_BINS.index(500.0), 23);
+        assert_eq!(T_SURFACE_BINS.index(f64::NAN), 0);
+        let mut m = EnergyMaps::new();
+        m.add(72.0, 101.0, 1.2, 10.0);
+        m.add(72.0, 131.0, 6.0, 5.0);
+        assert_eq!(m.surface_inner[10 * 24 + 12], 10.0);
+        assert_eq!(m.surface_inner[10 * 24 + 18], 5.0);
+        assert_eq!(m.speed_surface[2 * 24 + 10], 10.0);
+        assert_eq!(m.speed_surface[12 * 24 + 10], 5.0);
+        assert_eq!(m.total(), 15.0);
+    }
+}

@@ -1,0 +1,484 @@
+//! `tirewear extract`: a season archive in, the KPI database out.
+//!
+//! Outputs (all written atomically), for `--out kpis.parquet`:
+//! - `kpis.parquet` (and `--csv`): one row per tire and run;
+//! - `kpis.road.parquet`: per track and location, the PSD and HDC curves;
+//! - `kpis.energy_maps.parquet`: per tire and run, the non-empty bins of both energy maps;
+//! - `kpis.report.json`: what was skipped and why, cleaning counts, timings.
+
+use super::energy_map::{EnergyMaps, SLIDING_SPEED_BINS, T_INNER_BINS, T_SURFACE_BINS};
+use super::road::{RoadCurves, RoadIndices, mean_indices, profile_indices};
+use super::table::{KpiRow, write_batch, write_csv, write_parquet};
+use super::telemetry::{CleaningReport, vehicle_indices, wheel_indices};
+use super::viscoelastic::viscoelastic_indices;
+use super::wear::mean_wear;
+use crate::Wheel;
+use crate::ingest::IngestError;
+use crate::ingest::compound::Compound;
+use crate::ingest::manifest::{Run, Season};
+use crate::ingest::road::{Profile, read_profile_csv, read_profiles_parquet};
+use crate::ingest::telemetry::read_telemetry;
+use crate::ingest::wear::read_wear_csv;
+use arrow_array::{Float64Array, RecordBatch, StringArray, UInt32Array};
+use arrow_schema::{DataType, Field, Schema};
+use rayon::prelude::*;
+use std::collections::{BTreeMap, HashMap};
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::time::Instant;
+
+/// Which engine reduces the telemetry and roughness.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Engine {
+    Cpu,
+    Gpu,
+    /// The GPU when one is usable, else the CPU (with a message saying so).
+    Auto,
+}
+
+#[derive(Debug, Clone)]
+pub struct ExtractOptions {
+    pub season: PathBuf,
+    pub out: PathBuf,
+    pub csv: Option<PathBuf>,
+    pub engine: Engine,
+    pub progress: bool,
+}
+
+/// A run that produced no rows, and why.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct Skipped {
+    pub run: String,
+    pub file: String,
+    pub reason: String,
+}
+
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct ExtractSummary {
+    pub engine: Engine,
+    pub rows: usize,
+    pub runs: usize,
+    pub skipped: Vec<Skipped>,
+    /// Problems that left rows in place but a KPI missing (NaN), e.g. no wear readings.
+    pub warnings: Vec<String>,
+    pub telemetry_samples: u64,
+    pub telemetry_bytes: u64,
+    pub seconds: f64,
+    /// Seconds summed over runs (all threads): decoding MCAP vs reducing samples.
+    pub decode_seconds: f64,
+    pub reduce_seconds: f64,
+    pub cleaning: BTreeMap<String, CleaningReport>,
+}
+
+impl ExtractSummary {
+    pub fn samples_per_second(&self) -> f64 {
+        self.telemetry_samples as f64 / self.seconds
+    }
+}
+
+fn side_path(out: &Path, suffix: &str) -> PathBuf {
+    let stem = out.file_stem().and_then(|s| s.to_str()).unwrap_or("kpis");
+    out.with_file_name(format!("{stem}.{suffix}"))
+}
+
+/// Road indices of every track (mean over locations) and the curves of every profile.
+fn road_kpis(
+    season: &Season,
+    warnings: &mut Vec<String>,
+) -> Result<(HashMap<String, RoadIndices>, Vec<(Profile, RoadCurves)>), IngestError> {
+    let mut profiles: Vec<Profile> = Vec::new();
+    if let Some(bulk) = &season.manifest.road_profiles {
+        profiles.extend(read_profiles_parquet(&season.path(bulk))?);
+    }
+    for t in &season.manifest.tracks {
+        for p in &t.profiles {
+            profiles.push(read_profile_csv(&season.path(&p.file), &t.id, &p.location)?);
+        }
+    }
+    let results: Vec<(Profile, RoadIndices, RoadCurves)> = profiles
+        .into_par_iter()
+        .map(|p| {
+            let (i, c) = profile_indices(&p);
+            (p, i, c)
+        })
+        .collect();
+    let mut by_track: HashMap<String, Vec<RoadIndices>> = HashMap::new();
+    for (p, i, _) in &results {
+        by_track.entry(p.track.clone()).or_default().push(*i);
+    }
+    let mut means = HashMap::new();
+    for t in &season.manifest.tracks {
+        match by_track.get(&t.id) {
+            Some(v) => {
+                means.insert(t.id.clone(), mean_indices(v));
+            }
+            None => warnings.push(format!(
+                "track {}: no road profiles, its road KPIs are NaN",
+                t.id
+            )),
+        }
+    }
+    Ok((means, results.into_iter().map(|(p, _, c)| (p, c)).collect()))
+}
+
+struct RunOutput {
+    rows: Vec<KpiRow>,
+    maps: Vec<(Wheel, EnergyMaps)>,
+    cleaning: Vec<(String, CleaningReport)>,
+    samples: u64,
+    bytes: u64,
+    decode_s: f64,
+    reduce_s: f64,
+}
+
+#[allow(clippy::too_many_arguments)]
+fn run_rows(
+    season: &Season,
+    run: &Run,
+    compounds: &HashMap<String, Compound>,
+    roads: &HashMap<String, RoadIndices>,
+    wear: &BTreeMap<(String, Wheel), f64>,
+) -> Result<RunOutput, String> {
+    let path = season.path(&run.telemetry);
+    let t0 = Instant::now();
+    let tel = read_telemetry(&path).map_err(|e| e.to_string())?;
+    let decode_s = t0.elapsed().as_secs_f64();
+    let t1 = Instant::now();
+    let event = season.event(&run.event).expect("validated manifest");
+    let vehicle = vehicle_indices(&tel.vehicle).map_err(|e| format!("{}: {e}", path.display()))?;
+    let compound = &compounds[&run.compound];
+    let road = roads.get(&event.track).copied().unwrap_or(RoadIndices {
+        macro_wavelength_mm: f64::NAN,
+        micro_wavelength_mm: f64::NAN,
+        hurst: f64::NAN,
+        hurst_hdc: f64::NAN,
+        ra_macro_mm: f64::NAN,
+        ra_micro_mm: f64::NAN,
+        peakyness_mm: f64::NAN,
+        skewness: f64::NAN,
+        kurtosis: f64::NAN,
+        rq_mm: f64::NAN,
+        ra_mm: f64::NAN,
+    });
+    let mut out = RunOutput {
+        rows: vec![],
+        maps: vec![],
+        cleaning: vec![],
+        samples: 0,
+        bytes: 0,
+        decode_s,
+        reduce_s: 0.0,
+    };
+    out.bytes = std::fs::metadata(&path).map(|m| m.len()).unwrap_or(0);
+    for w in Wheel::ALL {
+        let series = &tel.wheels[w.index()];
+        if series.is_empty() {
+            return Err(format!(
+                "{}: topic {} is missing or empty",
+                path.display(),
+                w.topic()
+            ));
+        }
+        out.samples += series.len() as u64;
+        let (k, maps, rep) = wheel_indices(series)
+            .map_err(|e| format!("{}: topic {}: {e}", path.display(), w.topic()))?;
+        let sliding_speed = k.sliding_distance_m / k.duration_s;
+        let ve = viscoelastic_indices(
+            compound,
+            sliding_speed,
+            road.macro_wavelength_mm,
+            k.t_surface_avg_c,
+        );
+        let row = KpiRow {
+            event: run.event.clone(),
+            track: event.track.clone(),
+            car: run.car.clone(),
+            run: run.id.clone(),
+            wheel: w.name().into(),
+            axle: w.axle().to_string(),
+            compound: run.compound.clone(),
+            tire_set: run.tire_sets.get(w).into(),
+            t_surface_avg_c: k.t_surface_avg_c,
+            t_surface_std_c: k.t_surface_std_c,
+            t_inner_avg_c: k.t_inner_avg_c,
+            t_inner_std_c: k.t_inner_std_c,
+            t_track_avg_c: vehicle.t_track_avg_c,
+            t_air_avg_c: vehicle.t_air_avg_c,
+            fx_avg_n: k.fx_avg_n,
+            fx_std_n: k.fx_std_n,
+            fy_avg_n: k.fy_avg_n,
+            fy_std_n: k.fy_std_n,
+            fz_avg_n: k.fz_avg_n,
+            fz_std_n: k.fz_std_n,
+            vsx_avg_mps: k.vsx_avg_mps,
+            vsx_std_mps: k.vsx_std_mps,
+            vsy_avg_mps: k.vsy_avg_mps,
+            vsy_std_mps: k.vsy_std_mps,
+            friction_energy_x_j: k.friction_energy_x_j,
+            friction_energy_y_j: k.friction_energy_y_j,
+            friction_energy_j: k.friction_energy_j,
+            sliding_distance_m: k.sliding_distance_m,
+            camber_avg_deg: k.camber_avg_deg,
+            pressure_avg_pa: k.pressure_avg_pa,
+            contact_patch_mm2: k.contact_patch_mm2,
+            distance_m: vehicle.distance_m,
+            macro_wavelength_mm: road.macro_wavelength_mm,
+            micro_wavelength_mm: road.micro_wavelength_mm,
+            hurst: road.hurst,
+            hurst_hdc: road.hurst_hdc,
+            ra_macro_mm: road.ra_macro_mm,
+            ra_micro_mm: road.ra_micro_mm,
+            peakyness_mm: road.peakyness_mm,
+            skewness: road.skewness,
+            kurtosis: road.kurtosis,
+            rq_mm: road.rq_mm,
+            ra_mm: road.ra_mm,
+            solicitation_frequency_hz: ve.solicitation_frequency_hz,
+            shifted_temperature_c: ve.shifted_temperature_c,
+            storage_modulus_mpa: ve.storage_modulus_mpa,
+            loss_factor: ve.loss_factor,
+            wear_mean_pct: wear.get(&(run.id.clone(), w)).copied().unwrap_or(f64::NAN),
+            telemetry_duration_s: k.duration_s,
+            dropout_time_s: rep.dropout_time_s,
+            invalid_samples: (rep.samples - rep.kept) as f64,
+        };
+        out.rows.push(row);
+        out.maps.push((w, maps));
+        out.cleaning.push((format!("{}/{}", run.id, w), rep));
+    }
+    out.reduce_s = t1.elapsed().as_secs_f64();
+    Ok(out)
+}
+
+/// Extracts the KPI database of a season. One damaged run fails only itself.
+pub fn extract(opts: &ExtractOptions) -> Result<ExtractSummary, IngestError> {
+    let start = Instant::now();
+    let engine = match opts.engine {
+        Engine::Cpu => Engine::Cpu,
+        Engine::Auto => {
+            tracing::info!(
+                "engine auto: the GPU engine is not available in this build; using the CPU engine"
+            );
+            Engine::Cpu
+        }
+        Engine::Gpu => {
+            return Err(IngestError::invalid(
+                &opts.season,
+                "--engine gpu",
+                "the GPU engine is not available in this build (use --engine cpu or auto)",
+            ));
+        }
+    };
+    let season = Season::open(&opts.season)?;
+    let m = &season.manifest;
+    let mut warnings = Vec::new();
+    let mut compounds = HashMap::new();
+    for c in &m.compounds {
+        compounds.insert(c.id.clone(), Compound::load(&season.path(&c.file))?);
+    }
+    let (roads, curves) = road_kpis(&season, &mut warnings)?;
+    let mut readings = Vec::new();
+    for f in &m.wear_readings {
+        readings.extend(read_wear_csv(&season.path(f))?);
+    }
+    let wear = mean_wear(&readings);
+
+    let pb = if opts.progress {
+        let pb = indicatif::ProgressBar::new(m.runs.len() as u64);
+        pb.set_style(
+            indicatif::ProgressStyle::with_template(
+                "{spinner} extracting runs [{bar:40}] {pos}/{len} ({eta} left)",
+            )
+            .expect("valid template")
+            .progress_chars("=> "),
+        );
+        pb
+    } else {
+        indicatif::ProgressBar::hidden()
+    };
+    let results: Vec<(&Run, Result<RunOutput, String>)> = m
+        .runs
+        .par_iter()
+        .map(|run| {
+            let r = run_rows(&season, run, &compounds, &roads, &wear);
+            pb.inc(1);
+            (run, r)
+        })
+        .collect();
+    pb.finish_and_clear();
+
+    let mut rows = Vec::new();
+    let mut maps = Vec::new();
+    let mut skipped = Vec::new();
+    let mut cleaning = BTreeMap::new();
+    let (mut samples, mut bytes, mut decode_s, mut reduce_s) = (0, 0, 0.0, 0.0);
+    for (run, r) in results {
+        match r {
+            Ok(o) => {
+                for row in &o.rows {
+                    if row.wear_mean_pct.is_nan() {
+                        warnings.push(format!(
+                            "run {} wheel {}: no wear readings, wear_mean_pct is NaN",
+                            row.run, row.wheel
+                        ));
+                    }
+                }
+                maps.extend(o.maps.into_iter().map(|(w, mp)| (run.id.clone(), w, mp)));
+                rows.extend(o.rows);
+                cleaning.extend(o.cleaning);
+                samples += o.samples;
+                bytes += o.bytes;
+                decode_s += o.decode_s;
+                reduce_s += o.reduce_s;
+            }
+            Err(reason) => {
+                tracing::warn!("run {} skipped: {reason}", run.id);
+                skipped.push(Skipped {
+                    run: run.id.clone(),
+                    file: run.telemetry.clone(),
+                    reason,
+                });
+            }
+        }
+    }
+    write_parquet(&opts.out, &rows)?;
+    if let Some(csv) = &opts.csv {
+        write_csv(csv, &rows)?;
+    }
+    write_road_curves(&side_path(&opts.out, "road.parquet"), &curves)?;
+    write_energy_maps(&side_path(&opts.out, "energy_maps.parquet"), &maps)?;
+    let summary = ExtractSummary {
+        engine,
+        rows: rows.len(),
+        runs: m.runs.len(),
+        skipped,
+        warnings,
+        telemetry_samples: samples,
+        telemetry_bytes: bytes,
+        seconds: start.elapsed().as_secs_f64(),
+        decode_seconds: decode_s,
+        reduce_seconds: reduce_s,
+        cleaning,
+    };
+    let report = side_path(&opts.out, "report.json");
+    let text = serde_json::to_string_pretty(&summary)
+        .map_err(|e| IngestError::invalid(&report, "report", e.to_string()))?;
+    crate::atomic::write_bytes(&report, text.as_bytes())
+        .map_err(|e| IngestError::io(&report, e))?;
+    Ok(summary)
+}
+
+/// Side table of road curves: track, location, curve ("psd" or "hdc"), x, y.
+fn write_road_curves(path: &Path, curves: &[(Profile, RoadCurves)]) -> Result<(), IngestError> {
+    let (mut t, mut l, mut k, mut x, mut y) = (vec![], vec![], vec![], vec![], vec![]);
+    for (p, c) in curves {
+        for (kind, xs, ys) in [
+            ("psd", &c.psd_q, &c.psd_c),
+            ("hdc", &c.hdc_lag_mm, &c.hdc_c),
+        ] {
+            for (a, b) in xs.iter().zip(ys.iter()) {
+                t.push(p.track.clone());
+                l.push(p.location.clone());
+                k.push(kind);
+                x.push(*a);
+                y.push(*b);
+            }
+        }
+    }
+    let schema = Arc::new(Schema::new(vec![
+        Field::new("track", DataType::Utf8, false),
+        Field::new("location", DataType::Utf8, false),
+        Field::new("curve", DataType::Utf8, false),
+        Field::new("x", DataType::Float64, false),
+        Field::new("y", DataType::Float64, false),
+    ]));
+    let batch = RecordBatch::try_new(
+        schema,
+        vec![
+            Arc::new(StringArray::from(t)),
+            Arc::new(StringArray::from(l)),
+            Arc::new(StringArray::from(k)),
+            Arc::new(Float64Array::from(x)),
+            Arc::new(Float64Array::from(y)),
+        ],
+    )
+    .map_err(|e| IngestError::Parquet {
+        path: path.to_path_buf(),
+        source: e.into(),
+    })?;
+    write_batch(path, &batch)
+}
+
+/// Side table of energy maps: run, wheel, map, i, j, x_lo, y_lo, energy_j (non-empty bins).
+fn write_energy_maps(path: &Path, maps: &[(String, Wheel, EnergyMaps)]) -> Result<(), IngestError> {
+    let mut cols: (
+        Vec<String>,
+        Vec<&str>,
+        Vec<&str>,
+        Vec<u32>,
+        Vec<u32>,
+        Vec<f64>,
+        Vec<f64>,
+        Vec<f64>,
+    ) = Default::default();
+    for (run, w, m) in maps {
+        for (name, data, xb, yb) in [
+            (
+                "surface_inner",
+                &m.surface_inner,
+                T_SURFACE_BINS,
+                T_INNER_BINS,
+            ),
+            (
+                "speed_surface",
+                &m.speed_surface,
+                SLIDING_SPEED_BINS,
+                T_SURFACE_BINS,
+            ),
+        ] {
+            for (idx, &e) in data.iter().enumerate() {
+                if e == 0.0 {
+                    continue;
+                }
+                let (i, j) = (idx / yb.n, idx % yb.n);
+                cols.0.push(run.clone());
+                cols.1.push(w.name());
+                cols.2.push(name);
+                cols.3.push(i as u32);
+                cols.4.push(j as u32);
+                cols.5.push(xb.lower_edge(i));
+                cols.6.push(yb.lower_edge(j));
+                cols.7.push(e);
+            }
+        }
+    }
+    let schema = Arc::new(Schema::new(vec![
+        Field::new("run", DataType::Utf8, false),
+        Field::new("wheel", DataType::Utf8, false),
+        Field::new("map", DataType::Utf8, false),
+        Field::new("i", DataType::UInt32, false),
+        Field::new("j", DataType::UInt32, false),
+        Field::new("x_lo", DataType::Float64, false),
+        Field::new("y_lo", DataType::Float64, false),
+        Field::new("energy_j", DataType::Float64, false),
+    ]));
+    let batch = RecordBatch::try_new(
+        schema,
+        vec![
+            Arc::new(StringArray::from(cols.0)),
+            Arc::new(StringArray::from(cols.1)),
+            Arc::new(StringArray::from(cols.2)),
+            Arc::new(UInt32Array::from(cols.3)),
+            Arc::new(UInt32Array::from(cols.4)),
+            Arc::new(Float64Array::from(cols.5)),
+            Arc::new(Float64Array::from(cols.6)),
+            Arc::new(Float64Array::from(cols.7)),
+        ],
+    )
+    .map_err(|e| IngestError::Parquet {
+        path: path.to_path_buf(),
+        source: e.into(),
+    })?;
+    write_batch(path, &batch)
+}

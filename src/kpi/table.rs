@@ -1,0 +1,184 @@
+//! The KPI database: one row per tire and run. Every column is declared once
+//! here (name, type, meaning) and drives the row struct, the Parquet schema
+//! and the CSV header. Units and formulas: docs/kpis.md.
+
+use crate::ingest::IngestError;
+use arrow_array::{ArrayRef, Float64Array, RecordBatch, StringArray};
+use arrow_schema::{DataType, Field, Schema};
+use std::path::Path;
+use std::sync::Arc;
+
+macro_rules! kpi_table {
+    (text: [$($t:ident),* $(,)?], numbers: [$($n:ident),* $(,)?]) => {
+        /// One row of the KPI database (see docs/kpis.md for every column).
+        #[derive(Debug, Clone, Default, PartialEq, serde::Serialize)]
+        pub struct KpiRow {
+            $(pub $t: String,)*
+            $(pub $n: f64,)*
+        }
+
+        impl KpiRow {
+            pub const TEXT_COLUMNS: &'static [&'static str] = &[$(stringify!($t)),*];
+            pub const NUMBER_COLUMNS: &'static [&'static str] = &[$(stringify!($n)),*];
+
+            /// Numeric columns by name.
+            pub fn number(&self, name: &str) -> Option<f64> {
+                match name {
+                    $(stringify!($n) => Some(self.$n),)*
+                    _ => None,
+                }
+            }
+
+            /// Sets a numeric column by name; false if there is no such column.
+            pub fn set_number(&mut self, name: &str, v: f64) -> bool {
+                match name {
+                    $(stringify!($n) => { self.$n = v; true })*
+                    _ => false,
+                }
+            }
+
+            /// Sets a text column by name; false if there is no such column.
+            pub fn set_text(&mut self, name: &str, v: &str) -> bool {
+                match name {
+                    $(stringify!($t) => { self.$t = v.to_string(); true })*
+                    _ => false,
+                }
+            }
+
+            fn arrays(rows: &[KpiRow]) -> Vec<ArrayRef> {
+                let mut v: Vec<ArrayRef> = Vec::new();
+                $(v.push(Arc::new(StringArray::from_iter_values(rows.iter().map(|r| r.$t.as_str()))));)*
+                $(v.push(Arc::new(Float64Array::from_iter_values(rows.iter().map(|r| r.$n))));)*
+                v
+            }
+        }
+    };
+}
+
+kpi_table!(
+    text: [event, track, car, run, wheel, axle, compound, tire_set],
+    numbers: [
+        // Table 4: telemetry
+        t_surface_avg_c, t_surface_std_c, t_inner_avg_c, t_inner_std_c, t_track_avg_c, t_air_avg_c,
+        fx_avg_n, fx_std_n, fy_avg_n, fy_std_n, fz_avg_n, fz_std_n,
+        vsx_avg_mps, vsx_std_mps, vsy_avg_mps, vsy_std_mps,
+        friction_energy_x_j, friction_energy_y_j, friction_energy_j, sliding_distance_m,
+        camber_avg_deg, pressure_avg_pa, contact_patch_mm2, distance_m,
+        // Table 3: road (track means)
+        macro_wavelength_mm, micro_wavelength_mm, hurst, hurst_hdc, ra_macro_mm, ra_micro_mm,
+        peakyness_mm, skewness, kurtosis, rq_mm, ra_mm,
+        // Table 5: viscoelastic
+        solicitation_frequency_hz, shifted_temperature_c, storage_modulus_mpa, loss_factor,
+        // Target
+        wear_mean_pct,
+        // Data quality
+        telemetry_duration_s, dropout_time_s, invalid_samples,
+    ]
+);
+
+pub fn schema() -> Arc<Schema> {
+    let mut fields: Vec<Field> = KpiRow::TEXT_COLUMNS
+        .iter()
+        .map(|n| Field::new(*n, DataType::Utf8, false))
+        .collect();
+    fields.extend(
+        KpiRow::NUMBER_COLUMNS
+            .iter()
+            .map(|n| Field::new(*n, DataType::Float64, false)),
+    );
+    Arc::new(Schema::new(fields))
+}
+
+fn parquet_err(path: &Path, e: impl Into<parquet::errors::ParquetError>) -> IngestError {
+    IngestError::Parquet {
+        path: path.to_path_buf(),
+        source: e.into(),
+    }
+}
+
+/// Writes a record batch to a zstd Parquet file, atomically.
+pub fn write_batch(path: &Path, batch: &RecordBatch) -> Result<(), IngestError> {
+    let mut out = crate::atomic::AtomicFile::create(path).map_err(|e| IngestError::io(path, e))?;
+    let props = parquet::file::properties::WriterProperties::builder()
+        .set_compression(parquet::basic::Compression::ZSTD(Default::default()))
+        .build();
+    let mut w = parquet::arrow::ArrowWriter::try_new(out.file(), batch.schema(), Some(props))
+        .map_err(|e| parquet_err(path, e))?;
+    w.write(batch).map_err(|e| parquet_err(path, e))?;
+    w.close().map_err(|e| parquet_err(path, e))?;
+    out.commit().map_err(|e| IngestError::io(path, e))
+}
+
+/// Writes the KPI rows as Parquet.
+pub fn write_parquet(path: &Path, rows: &[KpiRow]) -> Result<(), IngestError> {
+    let batch =
+        RecordBatch::try_new(schema(), KpiRow::arrays(rows)).map_err(|e| parquet_err(path, e))?;
+    write_batch(path, &batch)
+}
+
+/// Writes the KPI rows as CSV (same columns).
+pub fn write_csv(path: &Path, rows: &[KpiRow]) -> Result<(), IngestError> {
+    crate::atomic::write_with(path, |w| {
+        let mut c = csv::Writer::from_writer(w);
+        for r in rows {
+            c.serialize(r)?;
+        }
+        c.flush()
+    })
+    .map_err(|e| IngestError::io(path, e))
+}
+
+/// Reads a KPI Parquet file back (for `fit`, `gap` and tests).
+pub fn read_parquet(path: &Path) -> Result<Vec<KpiRow>, IngestError> {
+    let file = std::fs::File::open(path).map_err(|e| IngestError::io(path, e))?;
+    let reader = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file)
+        .map_err(|e| parquet_err(path, e))?
+        .build()
+        .map_err(|e| parquet_err(path, e))?;
+    let mut rows = Vec::new();
+    for batch in reader {
+        let batch = batch.map_err(|e| parquet_err(path, e))?;
+        let text = |name: &str| -> Result<StringArray, IngestError> {
+            let col = batch.column_by_name(name).ok_or_else(|| {
+                IngestError::invalid(path, "schema", format!("missing column '{name}'"))
+            })?;
+            let cast = arrow_cast::cast(col, &DataType::Utf8).map_err(|e| parquet_err(path, e))?;
+            Ok(cast
+                .as_any()
+                .downcast_ref::<StringArray>()
+                .expect("cast")
+                .clone())
+        };
+        let num = |name: &str| -> Result<Float64Array, IngestError> {
+            let col = batch.column_by_name(name).ok_or_else(|| {
+                IngestError::invalid(path, "schema", format!("missing column '{name}'"))
+            })?;
+            let cast =
+                arrow_cast::cast(col, &DataType::Float64).map_err(|e| parquet_err(path, e))?;
+            Ok(cast
+                .as_any()
+                .downcast_ref::<Float64Array>()
+                .expect("cast")
+                .clone())
+        };
+        let texts = KpiRow::TEXT_COLUMNS
+            .iter()
+            .map(|n| text(n))
+            .collect::<Result<Vec<_>, _>>()?;
+        let nums = KpiRow::NUMBER_COLUMNS
+            .iter()
+            .map(|n| num(n))
+            .collect::<Result<Vec<_>, _>>()?;
+        for i in 0..batch.num_rows() {
+            let mut r = KpiRow::default();
+            for (n, a) in KpiRow::TEXT_COLUMNS.iter().zip(&texts) {
+                r.set_text(n, a.value(i));
+            }
+            for (n, a) in KpiRow::NUMBER_COLUMNS.iter().zip(&nums) {
+                r.set_number(n, a.value(i));
+            }
+            rows.push(r);
+        }
+    }
+    Ok(rows)
+}

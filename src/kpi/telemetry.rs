@@ -1,0 +1,363 @@
+//! Telemetry indices (paper table 4) of one wheel over one run, and the
+//! friction-energy maps, from the decoded channels. Cleaning rule (also in
+//! docs/kpis.md):
+//!
+//! - a sample whose time does not increase is dropped ("time backwards");
+//! - a sample with a non-finite or out-of-range channel is dropped
+//!   (counted per channel);
+//! - every kept sample stands for the time to the next kept sample, so
+//!   rate changes are handled; a gap longer than [`MAX_BRIDGED_GAP_S`]
+//!   (a dropout) contributes only one nominal period, and its missing time
+//!   is reported, not integrated;
+//! - a run is rejected if a wheel topic is missing, fewer than 80 % of its
+//!   samples are valid, or it lasts less than 10 s.
+
+use super::energy_map::EnergyMaps;
+use crate::ingest::telemetry::{VehicleSeries, WheelSeries};
+
+/// Gaps up to this long are bridged (the last power holds); longer ones are dropouts.
+pub const MAX_BRIDGED_GAP_S: f64 = 0.5;
+/// Least share of valid samples for a run to be accepted.
+pub const MIN_VALID_SHARE: f64 = 0.8;
+pub const MIN_DURATION_S: f64 = 10.0;
+/// Contact-patch model: mean contact pressure = inflation pressure + carcass share (Pa).
+pub const CARCASS_PRESSURE_PA: f64 = 40_000.0;
+
+/// Plausible ranges of the wheel channels (in the order of `WheelSeries`).
+pub const WHEEL_RANGES: [(&str, f64, f64); 11] = [
+    ("vx_mps", -5.0, 150.0),
+    ("vy_mps", -50.0, 50.0),
+    ("omega_radps", -10.0, 1000.0),
+    ("rolling_radius_m", 0.1, 1.0),
+    ("fx_n", -50e3, 50e3),
+    ("fy_n", -50e3, 50e3),
+    ("fz_n", 0.0, 50e3),
+    ("t_surface_c", -30.0, 250.0),
+    ("t_inner_c", -30.0, 250.0),
+    ("pressure_pa", 0.0, 600e3),
+    ("camber_deg", -15.0, 15.0),
+];
+
+/// Why samples were dropped, and what was lost.
+#[derive(Debug, Clone, Default, PartialEq, serde::Serialize)]
+pub struct CleaningReport {
+    pub samples: u64,
+    pub kept: u64,
+    pub time_backwards: u64,
+    /// Dropped samples per channel (order of [`WHEEL_RANGES`]).
+    pub invalid_per_channel: [u64; 11],
+    pub bridged_gaps: u64,
+    pub dropouts: u64,
+    pub dropout_time_s: f64,
+    /// Distinct sample periods seen (a rate change gives more than one).
+    pub sample_periods: u32,
+}
+
+/// Table 4 indices of one wheel and run.
+#[derive(Debug, Clone, Default, PartialEq, serde::Serialize)]
+pub struct WheelIndices {
+    pub t_surface_avg_c: f64,
+    pub t_surface_std_c: f64,
+    pub t_inner_avg_c: f64,
+    pub t_inner_std_c: f64,
+    pub fx_avg_n: f64,
+    pub fx_std_n: f64,
+    pub fy_avg_n: f64,
+    pub fy_std_n: f64,
+    pub fz_avg_n: f64,
+    pub fz_std_n: f64,
+    /// Mean of |v_sx| (m/s): a sliding speed.
+    pub vsx_avg_mps: f64,
+    pub vsx_std_mps: f64,
+    /// Mean of |v_sy| (m/s).
+    pub vsy_avg_mps: f64,
+    pub vsy_std_mps: f64,
+    /// ∫ −F_x v_sx dt (J): the paper's FP_x as an energy.
+    pub friction_energy_x_j: f64,
+    pub friction_energy_y_j: f64,
+    pub friction_energy_j: f64,
+    /// ∫ |v_s| dt (m).
+    pub sliding_distance_m: f64,
+    pub camber_avg_deg: f64,
+    pub pressure_avg_pa: f64,
+    /// Mean of F_z / (p + p_carcass) (mm²).
+    pub contact_patch_mm2: f64,
+    /// Integrated time (s), dropouts excluded.
+    pub duration_s: f64,
+}
+
+/// Vehicle indices of one run.
+#[derive(Debug, Clone, Default, PartialEq, serde::Serialize)]
+pub struct VehicleIndices {
+    pub t_track_avg_c: f64,
+    pub t_air_avg_c: f64,
+    /// Dist_TOT: last minus first of the distance channel (m).
+    pub distance_m: f64,
+}
+
+/// Running sums with Welford updates for mean and variance (f64).
+#[derive(Default, Clone, Copy)]
+struct Moments {
+    n: f64,
+    mean: f64,
+    m2: f64,
+}
+
+impl Moments {
+    fn push(&mut self, x: f64) {
+        self.n += 1.0;
+        let d = x - self.mean;
+        self.mean += d / self.n;
+        self.m2 += d * (x - self.mean);
+    }
+    /// Population standard deviation (1/N).
+    fn std(&self) -> f64 {
+        (self.m2 / self.n.max(1.0)).sqrt()
+    }
+}
+
+/// Indices of kept samples and, for each, the time (s) it stands for.
+fn clean(s: &WheelSeries, report: &mut CleaningReport) -> Vec<(usize, f64)> {
+    report.samples = s.len() as u64;
+    let channels: [&[f32]; 11] = [
+        &s.vx_mps,
+        &s.vy_mps,
+        &s.omega_radps,
+        &s.rolling_radius_m,
+        &s.fx_n,
+        &s.fy_n,
+        &s.fz_n,
+        &s.t_surface_c,
+        &s.t_inner_c,
+        &s.pressure_pa,
+        &s.camber_deg,
+    ];
+    let mut kept: Vec<usize> = Vec::with_capacity(s.len());
+    let mut last_t: Option<u64> = None;
+    'samples: for i in 0..s.len() {
+        if let Some(t) = last_t
+            && s.time_ns[i] <= t
+        {
+            report.time_backwards += 1;
+            continue;
+        }
+        for (c, (_, lo, hi)) in WHEEL_RANGES.iter().enumerate() {
+            let v = channels[c][i] as f64;
+            if !(v.is_finite() && v >= *lo && v <= *hi) {
+                report.invalid_per_channel[c] += 1;
+                continue 'samples;
+            }
+        }
+        last_t = Some(s.time_ns[i]);
+        kept.push(i);
+    }
+    report.kept = kept.len() as u64;
+    // Nominal period: the median step between kept samples.
+    let mut steps: Vec<u64> = kept
+        .windows(2)
+        .map(|w| s.time_ns[w[1]] - s.time_ns[w[0]])
+        .collect();
+    steps.sort_unstable();
+    let period_ns = steps.get(steps.len() / 2).copied().unwrap_or(0);
+    let mut periods: Vec<u64> = steps
+        .iter()
+        .copied()
+        .filter(|&d| d as f64 <= MAX_BRIDGED_GAP_S * 1e9)
+        .collect();
+    periods.dedup_by(|a, b| (*a as f64 - *b as f64).abs() <= 0.01 * *b as f64);
+    report.sample_periods = periods.len() as u32;
+    let period_s = period_ns as f64 / 1e9;
+    let mut out = Vec::with_capacity(kept.len());
+    for (k, &i) in kept.iter().enumerate() {
+        let dt = match kept.get(k + 1) {
+            Some(&j) => (s.time_ns[j] - s.time_ns[i]) as f64 / 1e9,
+            None => period_s,
+        };
+        let dt = if dt > MAX_BRIDGED_GAP_S {
+            report.dropouts += 1;
+            report.dropout_time_s += dt - period_s;
+            period_s
+        } else {
+            if dt > 1.5 * period_s {
+                report.bridged_gaps += 1;
+            }
+            dt
+        };
+        out.push((i, dt));
+    }
+    out
+}
+
+/// Reduces one wheel: table-4 indices and energy maps, or why the wheel is rejected.
+pub fn wheel_indices(
+    s: &WheelSeries,
+) -> Result<(WheelIndices, EnergyMaps, CleaningReport), String> {
+    let mut report = CleaningReport::default();
+    if s.is_empty() {
+        return Err("no samples".into());
+    }
+    let kept = clean(s, &mut report);
+    if (report.kept as f64) < MIN_VALID_SHARE * report.samples as f64 {
+        let worst = WHEEL_RANGES
+            .iter()
+            .zip(report.invalid_per_channel)
+            .max_by_key(|(_, n)| *n)
+            .map(|((name, _, _), n)| format!("{name}: {n} invalid"))
+            .unwrap_or_default();
+        return Err(format!(
+            "only {} of {} samples valid ({} time-backwards; worst channel {worst})",
+            report.kept, report.samples, report.time_backwards
+        ));
+    }
+    let mut m = [Moments::default(); 9];
+    let mut out = WheelIndices::default();
+    let mut maps = EnergyMaps::new();
+    let (mut camber, mut pressure, mut patch) = (0.0, 0.0, 0.0);
+    for &(i, dt) in &kept {
+        let vx = s.vx_mps[i] as f64;
+        let v_sx = vx - s.omega_radps[i] as f64 * s.rolling_radius_m[i] as f64; // eq. 21
+        let v_sy = s.vy_mps[i] as f64; // eq. 22: s_y·v_x = v_y
+        let (fx, fy, fz) = (s.fx_n[i] as f64, s.fy_n[i] as f64, s.fz_n[i] as f64);
+        let p_x = -fx * v_sx; // eq. 23, dissipation sign
+        let p_y = -fy * v_sy; // eq. 24
+        let ts = s.t_surface_c[i] as f64;
+        let ti = s.t_inner_c[i] as f64;
+        let v_s = v_sx.hypot(v_sy);
+        for (k, x) in [ts, ti, fx, fy, fz, v_sx.abs(), v_sy.abs()]
+            .into_iter()
+            .enumerate()
+        {
+            m[k].push(x);
+        }
+        out.friction_energy_x_j += p_x * dt;
+        out.friction_energy_y_j += p_y * dt;
+        out.sliding_distance_m += v_s * dt;
+        out.duration_s += dt;
+        camber += s.camber_deg[i] as f64;
+        let p = s.pressure_pa[i] as f64;
+        pressure += p;
+        patch += fz / (p + CARCASS_PRESSURE_PA) * 1e6;
+        maps.add(ts, ti, v_s, (p_x + p_y) * dt);
+    }
+    let n = kept.len() as f64;
+    if out.duration_s < MIN_DURATION_S {
+        return Err(format!("only {:.1} s of valid telemetry", out.duration_s));
+    }
+    out.friction_energy_j = out.friction_energy_x_j + out.friction_energy_y_j; // eq. 25
+    (out.t_surface_avg_c, out.t_surface_std_c) = (m[0].mean, m[0].std());
+    (out.t_inner_avg_c, out.t_inner_std_c) = (m[1].mean, m[1].std());
+    (out.fx_avg_n, out.fx_std_n) = (m[2].mean, m[2].std());
+    (out.fy_avg_n, out.fy_std_n) = (m[3].mean, m[3].std());
+    (out.fz_avg_n, out.fz_std_n) = (m[4].mean, m[4].std());
+    (out.vsx_avg_mps, out.vsx_std_mps) = (m[5].mean, m[5].std());
+    (out.vsy_avg_mps, out.vsy_std_mps) = (m[6].mean, m[6].std());
+    out.camber_avg_deg = camber / n;
+    out.pressure_avg_pa = pressure / n;
+    out.contact_patch_mm2 = patch / n;
+    Ok((out, maps, report))
+}
+
+/// Vehicle indices; samples with a non-finite or out-of-range value are skipped.
+pub fn vehicle_indices(v: &VehicleSeries) -> Result<VehicleIndices, String> {
+    let ok = |x: f32, lo: f32, hi: f32| x.is_finite() && x >= lo && x <= hi;
+    let (mut track, mut air) = (Moments::default(), Moments::default());
+    let mut dist: Vec<f64> = Vec::new();
+    for i in 0..v.len() {
+        if ok(v.t_track_c[i], -30.0, 120.0) && ok(v.t_air_c[i], -40.0, 70.0) {
+            track.push(v.t_track_c[i] as f64);
+            air.push(v.t_air_c[i] as f64);
+        }
+        if v.distance_m[i].is_finite() && v.distance_m[i] >= 0.0 {
+            dist.push(v.distance_m[i]);
+        }
+    }
+    if track.n == 0.0 || dist.len() < 2 {
+        return Err("no valid /vehicle samples (track/air temperature, distance)".into());
+    }
+    Ok(VehicleIndices {
+        t_track_avg_c: track.mean,
+        t_air_avg_c: air.mean,
+        distance_m: dist[dist.len() - 1] - dist[0],
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Constant slip: every quantity by hand.
+    fn constant_series(n: usize, period_ns: u64) -> WheelSeries {
+        let mut s = WheelSeries::default();
+        for i in 0..n {
+            s.time_ns.push(1_000_000_000 + i as u64 * period_ns);
+            s.vx_mps.push(50.0);
+            s.vy_mps.push(-1.0);
+            s.omega_radps.push(148.5); // ΩR = 49.005 -> v_sx = 0.995 m/s (braking)
+            s.rolling_radius_m.push(0.33);
+            s.fx_n.push(-2000.0);
+            s.fy_n.push(3000.0);
+            s.fz_n.push(4000.0);
+            s.t_surface_c.push(70.0);
+            s.t_inner_c.push(100.0);
+            s.pressure_pa.push(160_000.0);
+            s.camber_deg.push(-3.0);
+        }
+        s
+    }
+
+    #[test]
+    fn constant_slip_energy_by_hand() {
+        // 100 Hz for 60 s: P_x = 2000·0.995 = 1990 W, P_y = 3000·1 = 3000 W.
+        let s = constant_series(6000, 10_000_000);
+        let (k, maps, rep) = wheel_indices(&s).unwrap();
+        let vsx = 50.0 - 148.5f32 as f64 * 0.33f32 as f64;
+        assert!((k.duration_s - 60.0).abs() < 1e-9);
+        assert!((k.friction_energy_x_j - 2000.0 * vsx * 60.0).abs() < 1e-6);
+        assert!((k.friction_energy_y_j - 3000.0 * 60.0).abs() < 1e-6);
+        assert!((k.sliding_distance_m - vsx.hypot(1.0) * 60.0).abs() < 1e-6);
+        // Contact patch: 4000 N / (160 kPa + 40 kPa) = 0.02 m² = 20000 mm².
+        assert!((k.contact_patch_mm2 - 20_000.0).abs() < 1e-6);
+        assert_eq!(k.t_surface_std_c, 0.0);
+        assert!((maps.total() - k.friction_energy_j).abs() < 1e-6);
+        assert_eq!((rep.dropouts, rep.sample_periods), (0, 1));
+    }
+
+    #[test]
+    fn cleaning_rule_drops_bad_samples_and_gaps() {
+        let mut s = constant_series(2000, 10_000_000);
+        s.fz_n[10] = f32::NAN;
+        s.t_surface_c[11] = 900.0;
+        s.time_ns[12] = s.time_ns[5]; // time going backwards
+        // A 2 s dropout: remove samples 500..700.
+        for v in [
+            &mut s.vx_mps,
+            &mut s.vy_mps,
+            &mut s.omega_radps,
+            &mut s.rolling_radius_m,
+            &mut s.fx_n,
+            &mut s.fy_n,
+            &mut s.fz_n,
+            &mut s.t_surface_c,
+            &mut s.t_inner_c,
+            &mut s.pressure_pa,
+            &mut s.camber_deg,
+        ] {
+            v.drain(500..700);
+        }
+        s.time_ns.drain(500..700);
+        let (k, _, rep) = wheel_indices(&s).unwrap();
+        assert_eq!(rep.invalid_per_channel[6], 1);
+        assert_eq!(rep.invalid_per_channel[7], 1);
+        assert_eq!(rep.time_backwards, 1);
+        assert_eq!(rep.dropouts, 1);
+        assert!((rep.dropout_time_s - 2.0).abs() < 1e-9);
+        // 1800 kept-or-dropped samples span 20 s minus the 2 s dropout; the three bad
+        // samples are bridged by their neighbours.
+        assert!((k.duration_s - 18.0).abs() < 1e-9, "{}", k.duration_s);
+        // Mostly invalid: rejected with a reason naming the channel.
+        let mut bad = constant_series(100, 10_000_000);
+        bad.pressure_pa.iter_mut().take(50).for_each(|p| *p = -1.0);
+        let err = wheel_indices(&bad).unwrap_err();
+        assert!(err.contains("pressure_pa"), "{err}");
+    }
+}
