@@ -63,7 +63,37 @@ def stats(series):
             period = np.median(dt)
             ok = np.isclose(dt, period)
             entry["friction_energy_j"] = float(np.sum(p[:-1][ok] * dt[ok]))
+            entry["table4"] = table4(s)
         out[topic] = entry
+    return out
+
+
+def table4(s):
+    """Table-4 KPIs of one wheel under docs/kpis.md's cleaning rule: each sample
+    stands for the time to the next one; a gap over 0.5 s (a dropout) counts
+    one nominal period (the median step). Standard deviations are 1/N."""
+    t = np.array(s["time_ns"], dtype=np.int64)
+    assert np.all(np.diff(t) > 0), "fixture has no out-of-order samples"
+    steps = np.diff(t) / 1e9
+    period = np.median(steps)
+    dt = np.append(steps, period)
+    dt = np.where(dt > 0.5, period, dt)
+    a = {k: np.array(v, dtype=np.float64) for k, v in s.items() if k != "time_ns"}
+    vsx = a["vx_mps"] - a["omega_radps"] * a["rolling_radius_m"]
+    vsy = a["vy_mps"]
+    px, py = -a["fx_n"] * vsx, -a["fy_n"] * vsy
+    out = {}
+    for name, v in [("t_surface", a["t_surface_c"]), ("t_inner", a["t_inner_c"]), ("fx", a["fx_n"]),
+                    ("fy", a["fy_n"]), ("fz", a["fz_n"]), ("vsx", np.abs(vsx)), ("vsy", np.abs(vsy))]:
+        out[name + "_avg"] = float(v.mean())
+        out[name + "_std"] = float(v.std(ddof=0))
+    out["friction_energy_x_j"] = float(np.sum(px * dt))
+    out["friction_energy_y_j"] = float(np.sum(py * dt))
+    out["sliding_distance_m"] = float(np.sum(np.hypot(vsx, vsy) * dt))
+    out["duration_s"] = float(dt.sum())
+    out["camber_avg_deg"] = float(a["camber_deg"].mean())
+    out["pressure_avg_pa"] = float(a["pressure_pa"].mean())
+    out["contact_patch_mm2"] = float(np.mean(a["fz_n"] / (a["pressure_pa"] + 40000.0) * 1e6))
     return out
 
 
