@@ -1,11 +1,13 @@
-//! Telemetry I/O and simulation throughput on one simulated run.
+//! Telemetry I/O and simulation throughput on one simulated run: the
+//! parallel chunk reader against the linear reader, in sample steps/s and
+//! MB/s of MCAP.
 //!
 //! `cargo bench --bench telemetry_io`; with TIREWEAR_BENCH_SMALL=1 the run is
 //! short so CI can check the bench runs (`-- --test`). Throughput is reported
 //! per telemetry sample step (5 topics: four wheels and the vehicle).
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
-use tirewear::ingest::telemetry::{Encoding, read_telemetry};
+use tirewear::ingest::telemetry::{Encoding, read_telemetry, read_telemetry_linear};
 use tirewear::sim::{Preset, SimOptions, simulate};
 
 fn bench(c: &mut Criterion) {
@@ -32,9 +34,16 @@ fn bench(c: &mut Criterion) {
 
         let mut g = c.benchmark_group(format!("read_telemetry/{encoding:?}"));
         g.throughput(Throughput::Elements(steps));
-        g.bench_function("samples", |b| b.iter(|| read_telemetry(&path).unwrap()));
+        g.bench_function("parallel_chunks", |b| {
+            b.iter(|| read_telemetry(&path).unwrap())
+        });
+        g.bench_function("linear", |b| {
+            b.iter(|| read_telemetry_linear(&path).unwrap())
+        });
         g.throughput(Throughput::Bytes(bytes));
-        g.bench_function("bytes", |b| b.iter(|| read_telemetry(&path).unwrap()));
+        g.bench_function("parallel_chunks_bytes", |b| {
+            b.iter(|| read_telemetry(&path).unwrap())
+        });
         g.finish();
 
         let mut g = c.benchmark_group(format!("simulate_tiny_season/{encoding:?}"));

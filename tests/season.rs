@@ -6,7 +6,7 @@ use tirewear::Wheel;
 use tirewear::ingest::compound::Compound;
 use tirewear::ingest::manifest::Season;
 use tirewear::ingest::road::{read_profile_csv, read_profiles_parquet};
-use tirewear::ingest::telemetry::{Encoding, read_telemetry};
+use tirewear::ingest::telemetry::{Encoding, read_telemetry, read_telemetry_linear};
 use tirewear::ingest::wear::read_wear_csv;
 use tirewear::sim::{Effect, Preset, SimOptions, simulate};
 
@@ -134,6 +134,15 @@ fn same_seed_same_season_and_both_encodings_carry_the_same_samples() {
         assert_eq!(tb.encoding, Some(Encoding::Sample));
         assert_eq!(ta.wheels, tb.wheels);
         assert_eq!(ta.vehicle, tb.vehicle);
+        // The parallel chunk reader and the linear reader return the same data.
+        assert_eq!(
+            read_telemetry_linear(&a.path().join(&r.telemetry)).unwrap(),
+            ta
+        );
+        assert_eq!(
+            read_telemetry_linear(&b.path().join(&r.telemetry)).unwrap(),
+            tb
+        );
     }
 }
 
@@ -224,7 +233,10 @@ fn damaged_telemetry_is_an_error_naming_the_file() {
     // Truncated in the middle of the data section.
     let cut = dir.path().join("cut.mcap");
     std::fs::write(&cut, &bytes[..bytes.len() / 2]).unwrap();
-    let err = read_telemetry(&cut).unwrap_err().to_string();
+    let err = read_telemetry(&cut)
+        .err()
+        .expect("truncated file must fail")
+        .to_string();
     assert!(err.contains("cut.mcap"), "{err}");
     // A record length field overwritten with a huge value: an error, not an abort.
     let mut bad = bytes.clone();
@@ -232,7 +244,10 @@ fn damaged_telemetry_is_an_error_naming_the_file() {
     bad[pos..pos + 8].copy_from_slice(&u64::MAX.to_le_bytes());
     let badp = dir.path().join("bad-length.mcap");
     std::fs::write(&badp, &bad).unwrap();
-    let err = read_telemetry(&badp).unwrap_err().to_string();
+    let err = read_telemetry(&badp)
+        .err()
+        .expect("corrupt header must fail")
+        .to_string();
     assert!(err.contains("bad-length.mcap"), "{err}");
     // Flipped bytes inside compressed chunks: every outcome is an error or a clean read, never a panic.
     for k in 1..20 {

@@ -81,6 +81,12 @@ macro_rules! series {
                 $(self.$ch.extend_from_slice(&b.$ch);)*
                 Ok(())
             }
+            /// Appends another series (the next part of the same topic).
+            pub fn append(&mut self, mut other: Self) {
+                self.time_ns.append(&mut other.time_ns);
+                $(self.$ch.append(&mut other.$ch);)*
+            }
+
             /// Sample `i` as a per-sample message.
             pub fn sample(&self, i: usize) -> proto::$sample {
                 proto::$sample { $($ch: self.$ch[i],)* }
@@ -323,9 +329,255 @@ pub struct RunTelemetry {
 }
 
 /// Reads a telemetry MCAP file (either message form, chunked or not,
-/// compressed or not). Damage (truncation, a bad length, a message that does
-/// not decode) is an error naming the file and the message.
+/// compressed or not). Files with a summary and chunk indexes are decoded
+/// chunk by chunk in parallel (rayon) from a memory map; others are read
+/// linearly. Damage (truncation, a bad length, a message that does not
+/// decode) is an error naming the file and the message.
 pub fn read_telemetry(path: &Path) -> Result<RunTelemetry> {
+    match read_indexed(path)? {
+        Some(run) => Ok(run),
+        None => read_telemetry_linear(path),
+    }
+}
+
+/// Decodes one message into `run`.
+fn decode_into(
+    run: &mut RunTelemetry,
+    path: &Path,
+    channel: &mcap::Channel,
+    sequence: u32,
+    log_time: u64,
+    data: &[u8],
+) -> Result<()> {
+    let topic = channel.topic.as_str();
+    let wheel = Wheel::from_topic(topic);
+    if wheel.is_none() && topic != VEHICLE_TOPIC {
+        run.ignored_messages += 1;
+        return Ok(());
+    }
+    let rec = || format!("topic {topic}, message sequence {sequence} at log_time {log_time} ns");
+    let schema = channel
+        .schema
+        .as_ref()
+        .map(|s| s.name.as_str())
+        .unwrap_or("");
+    if channel.message_encoding != "protobuf" {
+        return Err(IngestError::invalid(
+            path,
+            rec(),
+            format!(
+                "message encoding is '{}', expected 'protobuf'",
+                channel.message_encoding
+            ),
+        ));
+    }
+    let encoding = match (wheel, schema) {
+        (Some(_), TIRE_SAMPLE) | (None, VEHICLE_SAMPLE) => Encoding::Sample,
+        (Some(_), TIRE_BLOCK) | (None, VEHICLE_BLOCK) => Encoding::Block,
+        _ => {
+            return Err(IngestError::invalid(
+                path,
+                rec(),
+                format!("schema '{schema}' is not a tirewear.v1 schema for this topic"),
+            ));
+        }
+    };
+    match run.encoding {
+        None => run.encoding = Some(encoding),
+        Some(e) if e != encoding => {
+            return Err(IngestError::invalid(
+                path,
+                rec(),
+                "file mixes per-sample and block messages",
+            ));
+        }
+        _ => {}
+    }
+    let undecodable = |e: prost::DecodeError| {
+        IngestError::invalid(path, rec(), format!("cannot decode {schema}: {e}"))
+    };
+    let bad_block = |what: String| IngestError::invalid(path, rec(), what);
+    match (wheel, encoding) {
+        (Some(w), Encoding::Sample) => {
+            let s = proto::TireSample::decode(data).map_err(undecodable)?;
+            run.wheels[w.index()].push_sample(log_time, &s);
+        }
+        (Some(w), Encoding::Block) => {
+            let b = proto::TireBlock::decode(data).map_err(undecodable)?;
+            run.wheels[w.index()].push_block(&b).map_err(bad_block)?;
+        }
+        (None, Encoding::Sample) => {
+            let s = proto::VehicleSample::decode(data).map_err(undecodable)?;
+            run.vehicle.push_sample(log_time, &s);
+        }
+        (None, Encoding::Block) => {
+            let b = proto::VehicleBlock::decode(data).map_err(undecodable)?;
+            run.vehicle.push_block(&b).map_err(bad_block)?;
+        }
+    }
+    Ok(())
+}
+
+/// The summary section, read with the file size and the record-length limit,
+/// so a damaged summary is an error rather than an abort.
+fn read_summary(path: &Path, bytes: &[u8]) -> Result<Option<mcap::Summary>> {
+    let mc = |source| IngestError::Mcap {
+        path: path.to_path_buf(),
+        source,
+    };
+    let opts = mcap::sans_io::SummaryReaderOptions::default()
+        .with_file_size(bytes.len() as u64)
+        .with_record_length_limit(RECORD_LENGTH_LIMIT);
+    let mut reader = mcap::sans_io::SummaryReader::new_with_options(opts);
+    let mut pos: usize = 0;
+    while let Some(event) = reader.next_event() {
+        match event.map_err(mc)? {
+            mcap::sans_io::SummaryReadEvent::ReadRequest(n) => {
+                let end = (pos + n).min(bytes.len());
+                let buf = reader.insert(end - pos);
+                buf.copy_from_slice(&bytes[pos..end]);
+                reader.notify_read(end - pos);
+                pos = end;
+            }
+            mcap::sans_io::SummaryReadEvent::SeekRequest(to) => {
+                let target = match to {
+                    std::io::SeekFrom::Start(o) => o as i128,
+                    std::io::SeekFrom::End(o) => bytes.len() as i128 + o as i128,
+                    std::io::SeekFrom::Current(o) => pos as i128 + o as i128,
+                };
+                if target < 0 || target > bytes.len() as i128 {
+                    return Err(IngestError::invalid(
+                        path,
+                        "summary",
+                        format!("seek to {target} outside the file"),
+                    ));
+                }
+                pos = target as usize;
+                reader.notify_seeked(pos as u64);
+            }
+        }
+    }
+    Ok(reader.finish())
+}
+
+/// The start magic and the header record must be intact: the indexed path
+/// would otherwise never look at them.
+fn check_header(path: &Path, bytes: &[u8]) -> Result<()> {
+    const MAGIC: &[u8] = b"\x89MCAP0\r\n";
+    let bad = |what: &str| Err(IngestError::invalid(path, "header", what.to_string()));
+    if bytes.len() < 17 || &bytes[..8] != MAGIC {
+        return bad("not an MCAP file (bad start magic or too short)");
+    }
+    if bytes[8] != 0x01 {
+        return bad("the first record is not a header record");
+    }
+    let len = u64::from_le_bytes(bytes[9..17].try_into().expect("8 bytes"));
+    if len > RECORD_LENGTH_LIMIT as u64 || 17 + len > bytes.len() as u64 {
+        return bad(&format!("header record length {len} is corrupt"));
+    }
+    Ok(())
+}
+
+/// Parallel path: every chunk through its own indexed reader over the memory map.
+/// `None` when the file has no usable summary or chunk index (read it linearly).
+fn read_indexed(path: &Path) -> Result<Option<RunTelemetry>> {
+    use rayon::prelude::*;
+    let file = File::open(path).map_err(|e| IngestError::io(path, e))?;
+    // SAFETY: the map is read-only and the file is not modified while we read it;
+    // a concurrent writer could only make us read wrong bytes, which decode as errors.
+    let map = unsafe { memmap2::Mmap::map(&file) }.map_err(|e| IngestError::io(path, e))?;
+    let bytes: &[u8] = &map;
+    check_header(path, bytes)?;
+    let Some(summary) = read_summary(path, bytes).ok().flatten() else {
+        return Ok(None);
+    };
+    if summary.chunk_indexes.is_empty() {
+        return Ok(None);
+    }
+    let mut chunks = summary.chunk_indexes.clone();
+    chunks.sort_by_key(|c| c.chunk_start_offset);
+    let parts: Vec<Result<RunTelemetry>> = chunks
+        .par_iter()
+        .map(|ci| {
+            let mc = |source| IngestError::Mcap {
+                path: path.to_path_buf(),
+                source,
+            };
+            let mut one = summary.clone();
+            one.chunk_indexes = vec![ci.clone()];
+            let opts = mcap::sans_io::IndexedReaderOptions::new()
+                .with_record_length_limit(RECORD_LENGTH_LIMIT);
+            let mut reader =
+                mcap::sans_io::IndexedReader::new_with_options(&one, opts).map_err(mc)?;
+            let mut part = RunTelemetry::default();
+            while let Some(event) = reader.next_event() {
+                match event.map_err(mc)? {
+                    mcap::sans_io::IndexedReadEvent::ReadChunkRequest { offset, length } => {
+                        let end = (offset as usize)
+                            .checked_add(length)
+                            .filter(|&e| e <= bytes.len());
+                        let Some(end) = end else {
+                            return Err(IngestError::invalid(
+                                path,
+                                format!("chunk at offset {offset}"),
+                                format!(
+                                    "{length} bytes run past the end of the file ({} bytes)",
+                                    bytes.len()
+                                ),
+                            ));
+                        };
+                        reader
+                            .insert_chunk_record_data(offset, &bytes[offset as usize..end])
+                            .map_err(mc)?;
+                    }
+                    mcap::sans_io::IndexedReadEvent::Message { header, data } => {
+                        let channel = one.channels.get(&header.channel_id).ok_or_else(|| {
+                            IngestError::invalid(
+                                path,
+                                format!("message sequence {}", header.sequence),
+                                format!("unknown channel {}", header.channel_id),
+                            )
+                        })?;
+                        decode_into(
+                            &mut part,
+                            path,
+                            channel,
+                            header.sequence,
+                            header.log_time,
+                            data,
+                        )?;
+                    }
+                }
+            }
+            Ok(part)
+        })
+        .collect();
+    let mut run = RunTelemetry::default();
+    for part in parts {
+        let part = part?;
+        match (run.encoding, part.encoding) {
+            (Some(a), Some(b)) if a != b => {
+                return Err(IngestError::invalid(
+                    path,
+                    "chunks",
+                    "file mixes per-sample and block messages",
+                ));
+            }
+            (None, e) => run.encoding = e,
+            _ => {}
+        }
+        run.ignored_messages += part.ignored_messages;
+        for (w, p) in run.wheels.iter_mut().zip(part.wheels) {
+            w.append(p);
+        }
+        run.vehicle.append(part.vehicle);
+    }
+    Ok(Some(run))
+}
+
+/// Linear path: every record in file order, one thread (unchunked files,
+/// files without a summary). Public so tests and benches can compare paths.
+pub fn read_telemetry_linear(path: &Path) -> Result<RunTelemetry> {
     let file = File::open(path).map_err(|e| IngestError::io(path, e))?;
     let opts =
         mcap::sans_io::LinearReaderOptions::default().with_record_length_limit(RECORD_LENGTH_LIMIT);
@@ -337,79 +589,14 @@ pub fn read_telemetry(path: &Path) -> Result<RunTelemetry> {
             path: path.to_path_buf(),
             source,
         })?;
-        let topic = msg.channel.topic.as_str();
-        let wheel = Wheel::from_topic(topic);
-        if wheel.is_none() && topic != VEHICLE_TOPIC {
-            run.ignored_messages += 1;
-            continue;
-        }
-        let rec = || {
-            format!(
-                "topic {topic}, message sequence {} at log_time {} ns",
-                msg.sequence, msg.log_time
-            )
-        };
-        let schema = msg
-            .channel
-            .schema
-            .as_ref()
-            .map(|s| s.name.as_str())
-            .unwrap_or("");
-        if msg.channel.message_encoding != "protobuf" {
-            return Err(IngestError::invalid(
-                path,
-                rec(),
-                format!(
-                    "message encoding is '{}', expected 'protobuf'",
-                    msg.channel.message_encoding
-                ),
-            ));
-        }
-        let encoding = match (wheel, schema) {
-            (Some(_), TIRE_SAMPLE) | (None, VEHICLE_SAMPLE) => Encoding::Sample,
-            (Some(_), TIRE_BLOCK) | (None, VEHICLE_BLOCK) => Encoding::Block,
-            _ => {
-                return Err(IngestError::invalid(
-                    path,
-                    rec(),
-                    format!("schema '{schema}' is not a tirewear.v1 schema for this topic"),
-                ));
-            }
-        };
-        match run.encoding {
-            None => run.encoding = Some(encoding),
-            Some(e) if e != encoding => {
-                return Err(IngestError::invalid(
-                    path,
-                    rec(),
-                    "file mixes per-sample and block messages",
-                ));
-            }
-            _ => {}
-        }
-        let data: &[u8] = &msg.data;
-        let undecodable = |e: prost::DecodeError| {
-            IngestError::invalid(path, rec(), format!("cannot decode {schema}: {e}"))
-        };
-        let bad_block = |what: String| IngestError::invalid(path, rec(), what);
-        match (wheel, encoding) {
-            (Some(w), Encoding::Sample) => {
-                let s = proto::TireSample::decode(data).map_err(undecodable)?;
-                run.wheels[w.index()].push_sample(msg.log_time, &s);
-            }
-            (Some(w), Encoding::Block) => {
-                let b = proto::TireBlock::decode(data).map_err(undecodable)?;
-                run.wheels[w.index()].push_block(&b).map_err(bad_block)?;
-            }
-            (None, Encoding::Sample) => {
-                let s = proto::VehicleSample::decode(data).map_err(undecodable)?;
-                run.vehicle.push_sample(msg.log_time, &s);
-            }
-            (None, Encoding::Block) => {
-                let b = proto::VehicleBlock::decode(data).map_err(undecodable)?;
-                run.vehicle.push_block(&b).map_err(bad_block)?;
-            }
-        }
+        decode_into(
+            &mut run,
+            path,
+            &msg.channel,
+            msg.sequence,
+            msg.log_time,
+            &msg.data,
+        )?;
     }
     Ok(run)
 }
