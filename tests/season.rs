@@ -233,10 +233,10 @@ fn damaged_telemetry_is_an_error_naming_the_file() {
     // Truncated in the middle of the data section.
     let cut = dir.path().join("cut.mcap");
     std::fs::write(&cut, &bytes[..bytes.len() / 2]).unwrap();
-    let err = read_telemetry(&cut)
-        .err()
-        .expect("truncated file must fail")
-        .to_string();
+    let Err(err) = read_telemetry(&cut) else {
+        panic!("a truncated file must fail")
+    };
+    let err = err.to_string();
     assert!(err.contains("cut.mcap"), "{err}");
     // A record length field overwritten with a huge value: an error, not an abort.
     let mut bad = bytes.clone();
@@ -244,10 +244,10 @@ fn damaged_telemetry_is_an_error_naming_the_file() {
     bad[pos..pos + 8].copy_from_slice(&u64::MAX.to_le_bytes());
     let badp = dir.path().join("bad-length.mcap");
     std::fs::write(&badp, &bad).unwrap();
-    let err = read_telemetry(&badp)
-        .err()
-        .expect("corrupt header must fail")
-        .to_string();
+    let Err(err) = read_telemetry(&badp) else {
+        panic!("a corrupt header must fail")
+    };
+    let err = err.to_string();
     assert!(err.contains("bad-length.mcap"), "{err}");
     // Flipped bytes inside compressed chunks: every outcome is an error or a clean read, never a panic.
     for k in 1..20 {

@@ -82,11 +82,14 @@ fn side_path(out: &Path, suffix: &str) -> PathBuf {
     out.with_file_name(format!("{stem}.{suffix}"))
 }
 
+/// Mean road indices by track id.
+type TrackRoads = HashMap<String, RoadIndices>;
+
 /// Road indices of every track (mean over locations) and the curves of every profile.
 fn road_kpis(
     season: &Season,
     warnings: &mut Vec<String>,
-) -> Result<(HashMap<String, RoadIndices>, Vec<(Profile, RoadCurves)>), IngestError> {
+) -> Result<(TrackRoads, Vec<(Profile, RoadCurves)>), IngestError> {
     let mut profiles: Vec<Profile> = Vec::new();
     if let Some(bulk) = &season.manifest.road_profiles {
         profiles.extend(read_profiles_parquet(&season.path(bulk))?);
@@ -410,18 +413,22 @@ fn write_road_curves(path: &Path, curves: &[(Profile, RoadCurves)]) -> Result<()
     write_batch(path, &batch)
 }
 
+/// Columns of the energy-map side table.
+#[derive(Default)]
+struct MapRows {
+    run: Vec<String>,
+    wheel: Vec<&'static str>,
+    map: Vec<&'static str>,
+    i: Vec<u32>,
+    j: Vec<u32>,
+    x_lo: Vec<f64>,
+    y_lo: Vec<f64>,
+    energy_j: Vec<f64>,
+}
+
 /// Side table of energy maps: run, wheel, map, i, j, x_lo, y_lo, energy_j (non-empty bins).
 fn write_energy_maps(path: &Path, maps: &[(String, Wheel, EnergyMaps)]) -> Result<(), IngestError> {
-    let mut cols: (
-        Vec<String>,
-        Vec<&str>,
-        Vec<&str>,
-        Vec<u32>,
-        Vec<u32>,
-        Vec<f64>,
-        Vec<f64>,
-        Vec<f64>,
-    ) = Default::default();
+    let mut c = MapRows::default();
     for (run, w, m) in maps {
         for (name, data, xb, yb) in [
             (
@@ -442,14 +449,14 @@ fn write_energy_maps(path: &Path, maps: &[(String, Wheel, EnergyMaps)]) -> Resul
                     continue;
                 }
                 let (i, j) = (idx / yb.n, idx % yb.n);
-                cols.0.push(run.clone());
-                cols.1.push(w.name());
-                cols.2.push(name);
-                cols.3.push(i as u32);
-                cols.4.push(j as u32);
-                cols.5.push(xb.lower_edge(i));
-                cols.6.push(yb.lower_edge(j));
-                cols.7.push(e);
+                c.run.push(run.clone());
+                c.wheel.push(w.name());
+                c.map.push(name);
+                c.i.push(i as u32);
+                c.j.push(j as u32);
+                c.x_lo.push(xb.lower_edge(i));
+                c.y_lo.push(yb.lower_edge(j));
+                c.energy_j.push(e);
             }
         }
     }
@@ -466,14 +473,14 @@ fn write_energy_maps(path: &Path, maps: &[(String, Wheel, EnergyMaps)]) -> Resul
     let batch = RecordBatch::try_new(
         schema,
         vec![
-            Arc::new(StringArray::from(cols.0)),
-            Arc::new(StringArray::from(cols.1)),
-            Arc::new(StringArray::from(cols.2)),
-            Arc::new(UInt32Array::from(cols.3)),
-            Arc::new(UInt32Array::from(cols.4)),
-            Arc::new(Float64Array::from(cols.5)),
-            Arc::new(Float64Array::from(cols.6)),
-            Arc::new(Float64Array::from(cols.7)),
+            Arc::new(StringArray::from(c.run)),
+            Arc::new(StringArray::from(c.wheel)),
+            Arc::new(StringArray::from(c.map)),
+            Arc::new(UInt32Array::from(c.i)),
+            Arc::new(UInt32Array::from(c.j)),
+            Arc::new(Float64Array::from(c.x_lo)),
+            Arc::new(Float64Array::from(c.y_lo)),
+            Arc::new(Float64Array::from(c.energy_j)),
         ],
     )
     .map_err(|e| IngestError::Parquet {

@@ -46,10 +46,10 @@ macro_rules! kpi_table {
             }
 
             fn arrays(rows: &[KpiRow]) -> Vec<ArrayRef> {
-                let mut v: Vec<ArrayRef> = Vec::new();
-                $(v.push(Arc::new(StringArray::from_iter_values(rows.iter().map(|r| r.$t.as_str()))));)*
-                $(v.push(Arc::new(Float64Array::from_iter_values(rows.iter().map(|r| r.$n))));)*
-                v
+                vec![
+                    $(Arc::new(StringArray::from_iter_values(rows.iter().map(|r| r.$t.as_str()))) as ArrayRef,)*
+                    $(Arc::new(Float64Array::from_iter_values(rows.iter().map(|r| r.$n))) as ArrayRef,)*
+                ]
             }
         }
     };

@@ -134,6 +134,7 @@ fn clean(s: &WheelSeries, report: &mut CleaningReport) -> Vec<(usize, f64)> {
     ];
     let mut kept: Vec<usize> = Vec::with_capacity(s.len());
     let mut last_t: Option<u64> = None;
+    #[allow(clippy::needless_range_loop)] // i indexes the time and all eleven channel columns
     'samples: for i in 0..s.len() {
         if let Some(t) = last_t
             && s.time_ns[i] <= t
