@@ -60,6 +60,17 @@ pub fn write_with(
     out.commit()
 }
 
+/// Writes serialisable rows as CSV (header from the field names), atomically.
+pub fn write_csv<T: serde::Serialize>(dest: &Path, rows: &[T]) -> io::Result<()> {
+    write_with(dest, |w| {
+        let mut c = csv::Writer::from_writer(w);
+        for r in rows {
+            c.serialize(r)?;
+        }
+        c.flush()
+    })
+}
+
 /// Writes bytes to `dest` atomically.
 pub fn write_bytes(dest: &Path, bytes: &[u8]) -> io::Result<()> {
     write_with(dest, |w| w.write_all(bytes))

@@ -71,14 +71,7 @@ pub fn read_wear_csv(path: &Path) -> Result<Vec<WearReading>> {
 
 /// Writes wear readings as CSV, atomically.
 pub fn write_wear_csv(path: &Path, rows: &[WearReading]) -> Result<()> {
-    crate::atomic::write_with(path, |w| {
-        let mut c = csv::Writer::from_writer(w);
-        for r in rows {
-            c.serialize(r)?;
-        }
-        c.flush()
-    })
-    .map_err(|e| IngestError::io(path, e))
+    crate::atomic::write_csv(path, rows).map_err(|e| IngestError::io(path, e))
 }
 
 #[cfg(test)]

@@ -118,14 +118,7 @@ pub fn write_parquet(path: &Path, rows: &[KpiRow]) -> Result<(), IngestError> {
 
 /// Writes the KPI rows as CSV (same columns).
 pub fn write_csv(path: &Path, rows: &[KpiRow]) -> Result<(), IngestError> {
-    crate::atomic::write_with(path, |w| {
-        let mut c = csv::Writer::from_writer(w);
-        for r in rows {
-            c.serialize(r)?;
-        }
-        c.flush()
-    })
-    .map_err(|e| IngestError::io(path, e))
+    crate::atomic::write_csv(path, rows).map_err(|e| IngestError::io(path, e))
 }
 
 /// Reads a KPI Parquet file back (for `fit`, `gap` and tests).

@@ -551,12 +551,5 @@ fn write_truth(
 }
 
 fn write_csv<T: serde::Serialize>(path: &Path, rows: &[T]) -> Result<(), SimError> {
-    crate::atomic::write_with(path, |w| {
-        let mut c = csv::Writer::from_writer(w);
-        for r in rows {
-            c.serialize(r)?;
-        }
-        c.flush()
-    })
-    .map_err(|e| SimError::Ingest(IngestError::io(path, e)))
+    crate::atomic::write_csv(path, rows).map_err(|e| SimError::Ingest(IngestError::io(path, e)))
 }
