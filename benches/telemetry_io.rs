@@ -54,5 +54,39 @@ fn bench(c: &mut Criterion) {
     }
 }
 
-criterion_group!(benches, bench);
+/// KPI extraction of a whole season (the demo at its 20 Hz, or the tiny one when small):
+/// telemetry sample steps per second, all cores.
+fn bench_extract(c: &mut Criterion) {
+    let small = std::env::var_os("TIREWEAR_BENCH_SMALL").is_some();
+    let dir = tempfile::tempdir().unwrap();
+    let season = dir.path().join("season");
+    let s = simulate(&SimOptions {
+        preset: if small { Preset::Tiny } else { Preset::Demo },
+        scale: 1.0,
+        seed: 7,
+        effects: vec![],
+        encoding: Encoding::Block,
+        rate_hz: None,
+        out: season.clone(),
+        sensor_noise: true,
+        progress: false,
+    })
+    .unwrap();
+    let opts = tirewear::kpi::ExtractOptions {
+        season: season.clone(),
+        out: dir.path().join("kpis.parquet"),
+        csv: None,
+        engine: tirewear::kpi::Engine::Cpu,
+        progress: false,
+    };
+    let mut g = c.benchmark_group("extract_season");
+    g.sample_size(10);
+    g.throughput(Throughput::Elements(s.samples));
+    g.bench_function(if small { "tiny" } else { "demo" }, |b| {
+        b.iter(|| tirewear::kpi::extract(&opts).unwrap())
+    });
+    g.finish();
+}
+
+criterion_group!(benches, bench, bench_extract);
 criterion_main!(benches);
