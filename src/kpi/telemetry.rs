@@ -9,8 +9,10 @@
 //!   rate changes are handled; a gap longer than [`MAX_BRIDGED_GAP_S`]
 //!   (a dropout) contributes only one nominal period, and its missing time
 //!   is reported, not integrated;
-//! - a run is rejected if a wheel topic is missing, fewer than 80 % of its
-//!   samples are valid, or it lasts less than 10 s.
+//! - a run is rejected if a wheel topic is missing, a channel is missing
+//!   (every sample exactly 0.0: proto3 cannot tell an absent field from a
+//!   zero, and no real channel is exactly zero throughout a run), fewer than
+//!   80 % of its samples are valid, or it lasts less than 10 s.
 
 use super::energy_map::EnergyMaps;
 use crate::ingest::telemetry::{VehicleSeries, WheelSeries};
@@ -117,21 +119,12 @@ impl Moments {
 }
 
 /// Indices of kept samples and, for each, the time (s) it stands for.
-fn clean(s: &WheelSeries, report: &mut CleaningReport) -> Vec<(usize, f64)> {
+fn clean(
+    s: &WheelSeries,
+    channels: &[&[f32]; 11],
+    report: &mut CleaningReport,
+) -> Vec<(usize, f64)> {
     report.samples = s.len() as u64;
-    let channels: [&[f32]; 11] = [
-        &s.vx_mps,
-        &s.vy_mps,
-        &s.omega_radps,
-        &s.rolling_radius_m,
-        &s.fx_n,
-        &s.fy_n,
-        &s.fz_n,
-        &s.t_surface_c,
-        &s.t_inner_c,
-        &s.pressure_pa,
-        &s.camber_deg,
-    ];
     let mut kept: Vec<usize> = Vec::with_capacity(s.len());
     let mut last_t: Option<u64> = None;
     #[allow(clippy::needless_range_loop)] // i indexes the time and all eleven channel columns
@@ -197,7 +190,25 @@ pub fn wheel_indices(
     if s.is_empty() {
         return Err("no samples".into());
     }
-    let kept = clean(s, &mut report);
+    let channels: [&[f32]; 11] = [
+        &s.vx_mps,
+        &s.vy_mps,
+        &s.omega_radps,
+        &s.rolling_radius_m,
+        &s.fx_n,
+        &s.fy_n,
+        &s.fz_n,
+        &s.t_surface_c,
+        &s.t_inner_c,
+        &s.pressure_pa,
+        &s.camber_deg,
+    ];
+    for ((name, _, _), c) in WHEEL_RANGES.iter().zip(channels) {
+        if c.iter().all(|&v| v == 0.0) {
+            return Err(format!("channel {name} is missing (every sample is 0)"));
+        }
+    }
+    let kept = clean(s, &channels, &mut report);
     if (report.kept as f64) < MIN_VALID_SHARE * report.samples as f64 {
         let worst = WHEEL_RANGES
             .iter()
@@ -324,6 +335,41 @@ mod tests {
     }
 
     #[test]
+    fn sample_rate_change_is_integrated_exactly() {
+        // 10 s at 100 Hz, then 10 s at 50 Hz: 20 s, two periods, constant power 4990 W.
+        let mut s = constant_series(1000, 10_000_000);
+        let t_end = *s.time_ns.last().unwrap();
+        let tail = constant_series(500, 20_000_000);
+        s.time_ns.extend(
+            tail.time_ns
+                .iter()
+                .map(|t| t - 1_000_000_000 + t_end + 10_000_000),
+        );
+        for (a, b) in [
+            (&mut s.vx_mps, &tail.vx_mps),
+            (&mut s.vy_mps, &tail.vy_mps),
+            (&mut s.omega_radps, &tail.omega_radps),
+            (&mut s.rolling_radius_m, &tail.rolling_radius_m),
+            (&mut s.fx_n, &tail.fx_n),
+            (&mut s.fy_n, &tail.fy_n),
+            (&mut s.fz_n, &tail.fz_n),
+            (&mut s.t_surface_c, &tail.t_surface_c),
+            (&mut s.t_inner_c, &tail.t_inner_c),
+            (&mut s.pressure_pa, &tail.pressure_pa),
+            (&mut s.camber_deg, &tail.camber_deg),
+        ] {
+            a.extend_from_slice(b);
+        }
+        let (k, _, rep) = wheel_indices(&s).unwrap();
+        assert_eq!(rep.sample_periods, 2);
+        // The last sample stands for one median period (10 ms): 10 + 10 − 0.02 + 0.01 s.
+        assert!((k.duration_s - 19.99).abs() < 1e-9, "{}", k.duration_s);
+        let vsx = 50.0 - 148.5f32 as f64 * 0.33f32 as f64;
+        let p = 2000.0 * vsx + 3000.0;
+        assert!((k.friction_energy_j - p * k.duration_s).abs() < 1e-6);
+    }
+
+    #[test]
     fn cleaning_rule_drops_bad_samples_and_gaps() {
         let mut s = constant_series(2000, 10_000_000);
         s.fz_n[10] = f32::NAN;
@@ -355,6 +401,11 @@ mod tests {
         // 1800 kept-or-dropped samples span 20 s minus the 2 s dropout; the three bad
         // samples are bridged by their neighbours.
         assert!((k.duration_s - 18.0).abs() < 1e-9, "{}", k.duration_s);
+        // A channel absent from every message decodes as 0.0: rejected as missing.
+        let mut missing = constant_series(100, 10_000_000);
+        missing.camber_deg.iter_mut().for_each(|v| *v = 0.0);
+        let err = wheel_indices(&missing).unwrap_err();
+        assert!(err.contains("camber_deg is missing"), "{err}");
         // Mostly invalid: rejected with a reason naming the channel.
         let mut bad = constant_series(100, 10_000_000);
         bad.pressure_pa.iter_mut().take(50).for_each(|p| *p = -1.0);
