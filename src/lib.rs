@@ -7,6 +7,7 @@
 pub mod atomic;
 pub mod ingest;
 pub mod kpi;
+pub mod model;
 pub mod sim;
 pub mod wheel;
 

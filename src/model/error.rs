@@ -1,0 +1,19 @@
+//! Errors of model fitting and evaluation.
+
+#[derive(Debug, thiserror::Error, PartialEq)]
+pub enum ModelError {
+    #[error("{what}: need more observations than {needed}, got {got}")]
+    TooFewObservations {
+        what: String,
+        needed: usize,
+        got: usize,
+    },
+    #[error("{0}: lengths differ")]
+    LengthMismatch(String),
+    #[error("{0}: the design matrix is singular (collinear or constant inputs)")]
+    Singular(String),
+    #[error("{0}: total sum of squares is zero (constant target)")]
+    ConstantTarget(String),
+    #[error("{0}")]
+    Invalid(String),
+}

@@ -1,0 +1,164 @@
+//! OLS against statsmodels and PCA against scikit-learn on a committed table
+//! (tests/oracles/models_oracle.py). Tolerances: relative 1e-8 on
+//! coefficients, standard errors and R² (QR versus statsmodels' pinv: both
+//! f64, the design is well conditioned after nothing but an intercept);
+//! p-values absolute 1e-10 (they are down to ~1e-200, where only the
+//! magnitude matters); loadings up to sign.
+
+use serde_json::Value;
+use std::path::PathBuf;
+use tirewear::model::ols::OlsFit;
+use tirewear::model::pca::PcaFit;
+
+#[derive(serde::Deserialize)]
+struct Row {
+    axle: String,
+    skewness: f64,
+    kurtosis: f64,
+    t_surface_avg_c: f64,
+    friction_energy_j: f64,
+    contact_patch_mm2: f64,
+    loss_factor: f64,
+    fz_avg_n: f64,
+    pressure_avg_pa: f64,
+    sliding_distance_m: f64,
+    t_inner_avg_c: f64,
+    hurst: f64,
+    wear_mean_pct: f64,
+}
+
+fn table() -> Vec<Row> {
+    let p = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/model_table.csv");
+    csv::Reader::from_path(p)
+        .unwrap()
+        .deserialize()
+        .map(Result::unwrap)
+        .collect()
+}
+
+fn golden() -> Value {
+    let p = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/golden/models.json");
+    serde_json::from_str(&std::fs::read_to_string(p).unwrap()).unwrap()
+}
+
+fn floats(v: &Value) -> Vec<f64> {
+    v.as_array()
+        .unwrap()
+        .iter()
+        .map(|x| x.as_f64().unwrap())
+        .collect()
+}
+
+fn close(what: &str, got: f64, want: f64, rtol: f64) {
+    assert!(
+        (got - want).abs() <= rtol * want.abs() + 1e-12,
+        "{what}: {got} vs {want}"
+    );
+}
+
+#[test]
+fn ols_matches_statsmodels() {
+    let g = &golden()["ols"];
+    let rear: Vec<Row> = table().into_iter().filter(|r| r.axle == "rear").collect();
+    let rows: Vec<Vec<f64>> = rear
+        .iter()
+        .map(|r| {
+            vec![
+                r.skewness,
+                r.kurtosis,
+                r.t_surface_avg_c,
+                r.friction_energy_j,
+                r.contact_patch_mm2,
+                r.loss_factor,
+            ]
+        })
+        .collect();
+    let y: Vec<f64> = rear.iter().map(|r| r.wear_mean_pct).collect();
+    let names: Vec<String> = g["inputs"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_str().unwrap().to_string())
+        .collect();
+    let f = OlsFit::fit(&rows, &y, &names).unwrap();
+    assert_eq!(f.train.n as u64, g["n"].as_u64().unwrap());
+    for (name, got, want) in [
+        ("coef", &f.coef, floats(&g["coef"])),
+        ("std_err", &f.std_err, floats(&g["std_err"])),
+        ("t", &f.t_values, floats(&g["t_values"])),
+    ] {
+        for (j, (a, b)) in got.iter().zip(&want).enumerate() {
+            close(&format!("{name}[{j}]"), *a, *b, 1e-8);
+        }
+    }
+    for (j, (a, b)) in f.p_values.iter().zip(floats(&g["p_values"])).enumerate() {
+        assert!((a - b).abs() < 1e-10, "p[{j}]: {a} vs {b}");
+    }
+    close("R²", f.train.r2, g["r2"].as_f64().unwrap(), 1e-10);
+    close(
+        "adjusted R²",
+        f.train.r2_adj,
+        g["r2_adj"].as_f64().unwrap(),
+        1e-10,
+    );
+    close("σ²", f.sigma2, g["sigma2"].as_f64().unwrap(), 1e-8);
+}
+
+#[test]
+fn pca_matches_scikit_learn() {
+    let g = &golden()["pca"];
+    let rows: Vec<Vec<f64>> = table()
+        .iter()
+        .map(|r| {
+            vec![
+                r.fz_avg_n,
+                r.pressure_avg_pa,
+                r.sliding_distance_m,
+                r.t_inner_avg_c,
+                r.t_surface_avg_c,
+                r.friction_energy_j,
+                r.hurst,
+                r.skewness,
+            ]
+        })
+        .collect();
+    let names: Vec<String> = g["inputs"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_str().unwrap().to_string())
+        .collect();
+    let p = PcaFit::fit(&rows, &names, 0.99).unwrap();
+    for (i, (a, b)) in p
+        .proportions
+        .iter()
+        .zip(floats(&g["proportions"]))
+        .enumerate()
+    {
+        close(&format!("proportion[{i}]"), *a, b, 1e-9);
+    }
+    for (i, comp) in g["loadings"].as_array().unwrap().iter().enumerate() {
+        let want = floats(comp);
+        // Eigenvectors are defined up to sign.
+        let sign = if p.loadings[i]
+            .iter()
+            .zip(&want)
+            .map(|(a, b)| a * b)
+            .sum::<f64>()
+            < 0.0
+        {
+            -1.0
+        } else {
+            1.0
+        };
+        for (j, (a, b)) in p.loadings[i].iter().zip(&want).enumerate() {
+            assert!(
+                (sign * a - b).abs() < 1e-8,
+                "loading[{i}][{j}]: {} vs {b}",
+                sign * a
+            );
+        }
+    }
+    let cum: f64 = p.proportions[..p.kept].iter().sum();
+    assert!(cum >= 0.99 && (p.kept == 1 || p.proportions[..p.kept - 1].iter().sum::<f64>() < 0.99));
+}

@@ -1,0 +1,46 @@
+"""Model oracles: statsmodels OLS (coefficients, standard errors, p-values,
+R², adjusted R²) and scikit-learn PCA (proportions, loadings) on a committed
+table, tests/fixtures/model_table.csv (rear-axle and front rows of the demo
+season's KPI database, written by `tirewear demo`).
+
+    python3 tests/oracles/models_oracle.py   # from the repository root
+
+Writes tests/golden/models.json for tests/oracle_models.rs.
+"""
+import json
+import pathlib
+
+import pandas as pd
+import statsmodels.api as sm
+from sklearn.decomposition import PCA
+from sklearn.preprocessing import StandardScaler
+
+ROOT = pathlib.Path(__file__).resolve().parents[2]
+OLS_INPUTS = ["skewness", "kurtosis", "t_surface_avg_c", "friction_energy_j", "contact_patch_mm2", "loss_factor"]
+PCA_INPUTS = ["fz_avg_n", "pressure_avg_pa", "sliding_distance_m", "t_inner_avg_c", "t_surface_avg_c",
+              "friction_energy_j", "hurst", "skewness"]
+
+
+def main():
+    t = pd.read_csv(ROOT / "tests" / "fixtures" / "model_table.csv")
+    rear = t[t["axle"] == "rear"]
+    fit = sm.OLS(rear["wear_mean_pct"], sm.add_constant(rear[OLS_INPUTS])).fit()
+    pca = PCA().fit(StandardScaler().fit_transform(t[PCA_INPUTS]))
+    out = {
+        "ols": {
+            "inputs": OLS_INPUTS, "n": int(fit.nobs),
+            "coef": list(fit.params), "std_err": list(fit.bse), "t_values": list(fit.tvalues),
+            "p_values": list(fit.pvalues), "r2": fit.rsquared, "r2_adj": fit.rsquared_adj,
+            "sigma2": fit.scale,
+        },
+        "pca": {
+            "inputs": PCA_INPUTS, "proportions": list(pca.explained_variance_ratio_),
+            "loadings": [list(c) for c in pca.components_],
+        },
+    }
+    (ROOT / "tests" / "golden" / "models.json").write_text(json.dumps(out, indent=1) + "\n")
+    print("wrote tests/golden/models.json")
+
+
+if __name__ == "__main__":
+    main()
