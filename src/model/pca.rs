@@ -41,7 +41,7 @@ impl PcaFit {
                     .sqrt()
             })
             .collect();
-        if let Some(j) = stds.iter().position(|s| !(*s > 0.0)) {
+        if let Some(j) = stds.iter().position(|s| !(s.is_finite() && *s > 0.0)) {
             return Err(ModelError::Invalid(format!(
                 "PCA: input '{}' is constant",
                 inputs[j]
