@@ -7,6 +7,7 @@
 
 use serde_json::Value;
 use std::path::PathBuf;
+use tirewear::model::lm::{LeastSquares, LmSettings, levenberg_marquardt};
 use tirewear::model::ols::OlsFit;
 use tirewear::model::pca::PcaFit;
 
@@ -161,4 +162,48 @@ fn pca_matches_scikit_learn() {
     }
     let cum: f64 = p.proportions[..p.kept].iter().sum();
     assert!(cum >= 0.99 && (p.kept == 1 || p.proportions[..p.kept - 1].iter().sum::<f64>() < 0.99));
+}
+
+/// y = a·exp(−b·t) + c fitted to the oracle's data.
+struct ExpDecay {
+    t: Vec<f64>,
+    y: Vec<f64>,
+}
+
+impl LeastSquares for ExpDecay {
+    fn n_residuals(&self) -> usize {
+        self.t.len()
+    }
+    fn n_params(&self) -> usize {
+        3
+    }
+    fn residuals(&self, p: &[f64], r: &mut [f64]) {
+        for i in 0..self.t.len() {
+            r[i] = p[0] * (-p[1] * self.t[i]).exp() + p[2] - self.y[i];
+        }
+    }
+    fn jacobian(&self, p: &[f64], j: &mut faer::Mat<f64>) {
+        for i in 0..self.t.len() {
+            let e = (-p[1] * self.t[i]).exp();
+            j[(i, 0)] = e;
+            j[(i, 1)] = -p[0] * self.t[i] * e;
+            j[(i, 2)] = 1.0;
+        }
+    }
+}
+
+#[test]
+fn levenberg_marquardt_matches_scipy() {
+    let p = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/golden/lm.json");
+    let g: Value = serde_json::from_str(&std::fs::read_to_string(p).unwrap()).unwrap();
+    let problem = ExpDecay {
+        t: floats(&g["t"]),
+        y: floats(&g["y"]),
+    };
+    let res = levenberg_marquardt(&problem, &floats(&g["x0"]), &LmSettings::default()).unwrap();
+    // Same minimum as MINPACK's LM (scipy): parameters to 1e-6 relative, cost (½·SSE) to 1e-9.
+    for (a, b) in res.params.iter().zip(floats(&g["solution"])) {
+        close("LM parameter", *a, b, 1e-6);
+    }
+    close("LM cost", 0.5 * res.sse, g["cost"].as_f64().unwrap(), 1e-9);
 }

@@ -1,8 +1,10 @@
 //! Wear models (paper sections 2 and 4), fitted on the CPU with faer.
 //! So far: the performance indicators, ordinary least squares with
-//! inference, and principal component analysis.
+//! inference, principal component analysis and the Levenberg–Marquardt
+//! solver (the network, the physical method and `tirewear fit` follow).
 
 pub mod error;
+pub mod lm;
 pub mod metrics;
 pub mod ols;
 pub mod pca;

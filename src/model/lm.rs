@@ -1,0 +1,154 @@
+//! Levenberg–Marquardt for nonlinear least squares, as used to train the
+//! feed-forward network (paper table 6): solve (JᵀJ + μI) δ = −Jᵀr with a
+//! Cholesky factorisation (faer); accept the step and lower μ when the sum
+//! of squares falls, otherwise raise μ and try again.
+
+use super::ModelError;
+use faer::linalg::solvers::Solve;
+use faer::{Mat, Side};
+
+/// A least-squares problem: residuals r(p) and their Jacobian ∂r/∂p.
+pub trait LeastSquares {
+    fn n_residuals(&self) -> usize;
+    fn n_params(&self) -> usize;
+    fn residuals(&self, p: &[f64], r: &mut [f64]);
+    /// Fills `jac` (n_residuals × n_params).
+    fn jacobian(&self, p: &[f64], jac: &mut Mat<f64>);
+}
+
+/// Settings (MATLAB trainlm's defaults for μ).
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct LmSettings {
+    pub max_iterations: usize,
+    pub mu: f64,
+    pub mu_decrease: f64,
+    pub mu_increase: f64,
+    pub mu_max: f64,
+    /// Stop when the relative decrease of the sum of squares is below this.
+    pub tolerance: f64,
+}
+
+impl Default for LmSettings {
+    fn default() -> Self {
+        LmSettings {
+            max_iterations: 100,
+            mu: 1e-3,
+            mu_decrease: 0.1,
+            mu_increase: 10.0,
+            mu_max: 1e10,
+            tolerance: 1e-12,
+        }
+    }
+}
+
+#[derive(Debug, Clone, PartialEq)]
+pub struct LmResult {
+    pub params: Vec<f64>,
+    /// Sum of squared residuals at `params`.
+    pub sse: f64,
+    pub iterations: usize,
+    /// Sum of squares after each accepted iteration.
+    pub history: Vec<f64>,
+}
+
+fn sse(r: &[f64]) -> f64 {
+    r.iter().map(|v| v * v).sum()
+}
+
+/// Minimises Σ r(p)² from `p0`.
+pub fn levenberg_marquardt(
+    problem: &impl LeastSquares,
+    p0: &[f64],
+    s: &LmSettings,
+) -> Result<LmResult, ModelError> {
+    let (n, m) = (problem.n_residuals(), problem.n_params());
+    if p0.len() != m {
+        return Err(ModelError::LengthMismatch(
+            "Levenberg-Marquardt start point".into(),
+        ));
+    }
+    let mut p = p0.to_vec();
+    let mut r = vec![0.0; n];
+    let mut trial_r = vec![0.0; n];
+    let mut jac = Mat::<f64>::zeros(n, m);
+    problem.residuals(&p, &mut r);
+    let mut cost = sse(&r);
+    let mut mu = s.mu;
+    let mut history = vec![cost];
+    let mut iterations = 0;
+    while iterations < s.max_iterations {
+        iterations += 1;
+        problem.jacobian(&p, &mut jac);
+        let jtj = jac.transpose() * &jac;
+        let jtr = jac.transpose() * Mat::from_fn(n, 1, |i, _| r[i]);
+        let mut improved = false;
+        while mu <= s.mu_max {
+            let a = Mat::from_fn(m, m, |i, j| jtj[(i, j)] + if i == j { mu } else { 0.0 });
+            let Ok(llt) = a.llt(Side::Lower) else {
+                mu *= s.mu_increase;
+                continue;
+            };
+            let delta = llt.solve(&jtr);
+            let trial: Vec<f64> = (0..m).map(|i| p[i] - delta[(i, 0)]).collect();
+            problem.residuals(&trial, &mut trial_r);
+            let trial_cost = sse(&trial_r);
+            if trial_cost.is_finite() && trial_cost < cost {
+                let rel = (cost - trial_cost) / cost.max(f64::MIN_POSITIVE);
+                p = trial;
+                std::mem::swap(&mut r, &mut trial_r);
+                cost = trial_cost;
+                mu *= s.mu_decrease;
+                history.push(cost);
+                improved = rel > s.tolerance;
+                break;
+            }
+            mu *= s.mu_increase;
+        }
+        if !improved {
+            break;
+        }
+    }
+    Ok(LmResult {
+        params: p,
+        sse: cost,
+        iterations,
+        history,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Rosenbrock as least squares: r = (10(p1 − p0²), 1 − p0); minimum at (1, 1).
+    struct Rosenbrock;
+    impl LeastSquares for Rosenbrock {
+        fn n_residuals(&self) -> usize {
+            2
+        }
+        fn n_params(&self) -> usize {
+            2
+        }
+        fn residuals(&self, p: &[f64], r: &mut [f64]) {
+            r[0] = 10.0 * (p[1] - p[0] * p[0]);
+            r[1] = 1.0 - p[0];
+        }
+        fn jacobian(&self, p: &[f64], j: &mut Mat<f64>) {
+            j[(0, 0)] = -20.0 * p[0];
+            j[(0, 1)] = 10.0;
+            j[(1, 0)] = -1.0;
+            j[(1, 1)] = 0.0;
+        }
+    }
+
+    #[test]
+    fn finds_the_rosenbrock_minimum() {
+        let res = levenberg_marquardt(&Rosenbrock, &[-1.2, 1.0], &LmSettings::default()).unwrap();
+        assert!(
+            (res.params[0] - 1.0).abs() < 1e-8 && (res.params[1] - 1.0).abs() < 1e-8,
+            "{:?}",
+            res.params
+        );
+        assert!(res.history.windows(2).all(|w| w[1] < w[0]));
+    }
+}
