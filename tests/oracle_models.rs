@@ -178,8 +178,8 @@ impl LeastSquares for ExpDecay {
         3
     }
     fn residuals(&self, p: &[f64], r: &mut [f64]) {
-        for i in 0..self.t.len() {
-            r[i] = p[0] * (-p[1] * self.t[i]).exp() + p[2] - self.y[i];
+        for ((r, t), y) in r.iter_mut().zip(&self.t).zip(&self.y) {
+            *r = p[0] * (-p[1] * t).exp() + p[2] - y;
         }
     }
     fn jacobian(&self, p: &[f64], j: &mut faer::Mat<f64>) {
