@@ -55,62 +55,99 @@ fn sse(r: &[f64]) -> f64 {
     r.iter().map(|v| v * v).sum()
 }
 
+/// One solver in progress: call [`LmSolver::step`] once per epoch (so a
+/// caller can stop early on validation error), or [`levenberg_marquardt`].
+pub struct LmSolver {
+    pub params: Vec<f64>,
+    /// Sum of squared residuals at `params`.
+    pub sse: f64,
+    pub mu: f64,
+    settings: LmSettings,
+    r: Vec<f64>,
+    trial_r: Vec<f64>,
+    jac: Mat<f64>,
+}
+
+impl LmSolver {
+    pub fn new(
+        problem: &impl LeastSquares,
+        p0: &[f64],
+        settings: LmSettings,
+    ) -> Result<Self, ModelError> {
+        let (n, m) = (problem.n_residuals(), problem.n_params());
+        if p0.len() != m {
+            return Err(ModelError::LengthMismatch(
+                "Levenberg-Marquardt start point".into(),
+            ));
+        }
+        let mut r = vec![0.0; n];
+        problem.residuals(p0, &mut r);
+        Ok(LmSolver {
+            params: p0.to_vec(),
+            sse: sse(&r),
+            mu: settings.mu,
+            settings,
+            r,
+            trial_r: vec![0.0; n],
+            jac: Mat::zeros(n, m),
+        })
+    }
+
+    /// One iteration. Returns false when no step improves the sum of squares
+    /// by more than the tolerance (μ has reached its maximum or the fit converged).
+    pub fn step(&mut self, problem: &impl LeastSquares) -> bool {
+        let (n, m) = (self.r.len(), self.params.len());
+        problem.jacobian(&self.params, &mut self.jac);
+        let jtj = self.jac.transpose() * &self.jac;
+        let jtr = self.jac.transpose() * Mat::from_fn(n, 1, |i, _| self.r[i]);
+        while self.mu <= self.settings.mu_max {
+            let a = Mat::from_fn(m, m, |i, j| {
+                jtj[(i, j)] + if i == j { self.mu } else { 0.0 }
+            });
+            let Ok(llt) = a.llt(Side::Lower) else {
+                self.mu *= self.settings.mu_increase;
+                continue;
+            };
+            let delta = llt.solve(&jtr);
+            let trial: Vec<f64> = (0..m).map(|i| self.params[i] - delta[(i, 0)]).collect();
+            problem.residuals(&trial, &mut self.trial_r);
+            let trial_sse = sse(&self.trial_r);
+            if trial_sse.is_finite() && trial_sse < self.sse {
+                let rel = (self.sse - trial_sse) / self.sse.max(f64::MIN_POSITIVE);
+                self.params = trial;
+                std::mem::swap(&mut self.r, &mut self.trial_r);
+                self.sse = trial_sse;
+                self.mu *= self.settings.mu_decrease;
+                return rel > self.settings.tolerance;
+            }
+            self.mu *= self.settings.mu_increase;
+        }
+        false
+    }
+}
+
 /// Minimises Σ r(p)² from `p0`.
 pub fn levenberg_marquardt(
     problem: &impl LeastSquares,
     p0: &[f64],
     s: &LmSettings,
 ) -> Result<LmResult, ModelError> {
-    let (n, m) = (problem.n_residuals(), problem.n_params());
-    if p0.len() != m {
-        return Err(ModelError::LengthMismatch(
-            "Levenberg-Marquardt start point".into(),
-        ));
-    }
-    let mut p = p0.to_vec();
-    let mut r = vec![0.0; n];
-    let mut trial_r = vec![0.0; n];
-    let mut jac = Mat::<f64>::zeros(n, m);
-    problem.residuals(&p, &mut r);
-    let mut cost = sse(&r);
-    let mut mu = s.mu;
-    let mut history = vec![cost];
+    let mut solver = LmSolver::new(problem, p0, *s)?;
+    let mut history = vec![solver.sse];
     let mut iterations = 0;
     while iterations < s.max_iterations {
         iterations += 1;
-        problem.jacobian(&p, &mut jac);
-        let jtj = jac.transpose() * &jac;
-        let jtr = jac.transpose() * Mat::from_fn(n, 1, |i, _| r[i]);
-        let mut improved = false;
-        while mu <= s.mu_max {
-            let a = Mat::from_fn(m, m, |i, j| jtj[(i, j)] + if i == j { mu } else { 0.0 });
-            let Ok(llt) = a.llt(Side::Lower) else {
-                mu *= s.mu_increase;
-                continue;
-            };
-            let delta = llt.solve(&jtr);
-            let trial: Vec<f64> = (0..m).map(|i| p[i] - delta[(i, 0)]).collect();
-            problem.residuals(&trial, &mut trial_r);
-            let trial_cost = sse(&trial_r);
-            if trial_cost.is_finite() && trial_cost < cost {
-                let rel = (cost - trial_cost) / cost.max(f64::MIN_POSITIVE);
-                p = trial;
-                std::mem::swap(&mut r, &mut trial_r);
-                cost = trial_cost;
-                mu *= s.mu_decrease;
-                history.push(cost);
-                improved = rel > s.tolerance;
-                break;
-            }
-            mu *= s.mu_increase;
+        let improved = solver.step(problem);
+        if history.last() != Some(&solver.sse) {
+            history.push(solver.sse);
         }
         if !improved {
             break;
         }
     }
     Ok(LmResult {
-        params: p,
-        sse: cost,
+        params: solver.params,
+        sse: solver.sse,
         iterations,
         history,
     })

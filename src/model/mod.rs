@@ -1,9 +1,11 @@
 //! Wear models (paper sections 2 and 4), fitted on the CPU with faer.
 //! So far: the performance indicators, ordinary least squares with
-//! inference, principal component analysis and the Levenberg–Marquardt
-//! solver (the network, the physical method and `tirewear fit` follow).
+//! inference, principal component analysis, the Levenberg–Marquardt solver
+//! and the feed-forward network it trains (the physical method, the data
+//! split and `tirewear fit` follow).
 
 pub mod error;
+pub mod ffnn;
 pub mod lm;
 pub mod metrics;
 pub mod ols;
