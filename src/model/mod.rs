@@ -4,6 +4,7 @@
 //! and the feed-forward network it trains (the physical method, the data
 //! split and `tirewear fit` follow).
 
+pub mod data;
 pub mod error;
 pub mod ffnn;
 pub mod lm;
