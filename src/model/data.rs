@@ -47,7 +47,7 @@ pub fn split_by_events(
     };
     let (mut tr, mut te) = (Vec::new(), Vec::new());
     for (i, r) in rows.iter().enumerate() {
-        if test.iter().any(|e| *e == r.event) {
+        if test.contains(&r.event) {
             te.push(i)
         } else {
             tr.push(i)
