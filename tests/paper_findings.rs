@@ -8,6 +8,7 @@ use std::collections::HashMap;
 use tirewear::Axle;
 use tirewear::ingest::telemetry::Encoding;
 use tirewear::ingest::wear::read_wear_csv;
+use tirewear::model::data::correlation as corr;
 use tirewear::sim::{Preset, SimOptions, simulate};
 
 #[derive(serde::Deserialize)]
@@ -18,15 +19,6 @@ struct Truth {
     friction_energy_j: f64,
     mean_surface_c: f64,
     wear_irregular_pct: f64,
-}
-
-fn corr(a: &[f64], b: &[f64]) -> f64 {
-    let n = a.len() as f64;
-    let (ma, mb) = (a.iter().sum::<f64>() / n, b.iter().sum::<f64>() / n);
-    let cov: f64 = a.iter().zip(b).map(|(x, y)| (x - ma) * (y - mb)).sum();
-    let va: f64 = a.iter().map(|x| (x - ma).powi(2)).sum();
-    let vb: f64 = b.iter().map(|y| (y - mb).powi(2)).sum();
-    cov / (va * vb).sqrt()
 }
 
 /// Least-squares line y = a + b x: (a, b, R²).
