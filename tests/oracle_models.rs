@@ -50,6 +50,14 @@ fn floats(v: &Value) -> Vec<f64> {
         .collect()
 }
 
+fn strings(v: &Value) -> Vec<String> {
+    v.as_array()
+        .unwrap()
+        .iter()
+        .map(|x| x.as_str().unwrap().to_string())
+        .collect()
+}
+
 fn close(what: &str, got: f64, want: f64, rtol: f64) {
     assert!(
         (got - want).abs() <= rtol * want.abs() + 1e-12,
@@ -75,12 +83,7 @@ fn ols_matches_statsmodels() {
         })
         .collect();
     let y: Vec<f64> = rear.iter().map(|r| r.wear_mean_pct).collect();
-    let names: Vec<String> = g["inputs"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|v| v.as_str().unwrap().to_string())
-        .collect();
+    let names = strings(&g["inputs"]);
     let f = OlsFit::fit(&rows, &y, &names).unwrap();
     assert_eq!(f.train.n as u64, g["n"].as_u64().unwrap());
     for (name, got, want) in [
@@ -123,12 +126,7 @@ fn pca_matches_scikit_learn() {
             ]
         })
         .collect();
-    let names: Vec<String> = g["inputs"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|v| v.as_str().unwrap().to_string())
-        .collect();
+    let names = strings(&g["inputs"]);
     let p = PcaFit::fit(&rows, &names, 0.99).unwrap();
     for (i, (a, b)) in p
         .proportions
