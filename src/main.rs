@@ -5,6 +5,8 @@ use clap::{Parser, Subcommand};
 use std::path::PathBuf;
 use std::time::Instant;
 use tirewear::ingest::telemetry::Encoding;
+use tirewear::model::fit::{self, FitSettings, Method};
+use tirewear::model::saved::SavedModel;
 use tirewear::sim::{self, Effect, Preset, SimOptions};
 
 /// Motorsport tire-wear analytics: season archives in, wear models and
@@ -37,7 +39,25 @@ enum Command {
     /// viscoelastic (table 5) indices and the mean wear; side tables of road
     /// spectra and friction-energy maps; a report of skipped runs.
     Extract(ExtractArgs),
-    /// Try tirewear: simulate the demo season and extract its KPI database.
+    /// Fit wear models on a KPI database: the feed-forward network (LM),
+    /// PCA + regression and the physical correlations + regression per axle,
+    /// trained on some events and tested on others. Prints the paper's
+    /// performance tables and writes each model as JSON (OUT/METHOD.json).
+    Fit(FitArgs),
+    /// Apply a saved model to a KPI database; refuses a table whose columns
+    /// or units differ from the model's, naming them.
+    Predict {
+        /// Model written by `tirewear fit` (e.g. models/physical.json).
+        model: PathBuf,
+        /// KPI database (Parquet, as written by `tirewear extract`).
+        kpis: PathBuf,
+        /// Predictions to write (CSV: event, track, car, run, wheel, axle,
+        /// compound, measured and predicted mean wear in %).
+        #[arg(long, default_value = "predictions.csv")]
+        out: PathBuf,
+    },
+    /// Try tirewear: simulate the demo season, extract its KPI database and
+    /// fit the three wear models.
     Demo {
         /// Where to write the demo season.
         #[arg(long, default_value = "demo-season")]
@@ -64,6 +84,33 @@ struct ExtractArgs {
     /// Worker threads (default: all cores).
     #[arg(long)]
     jobs: Option<usize>,
+}
+
+#[derive(clap::Args)]
+struct FitArgs {
+    /// KPI database (Parquet, as written by `tirewear extract`).
+    kpis: PathBuf,
+    /// Method(s) to fit.
+    #[arg(long, value_enum, default_value = "all")]
+    method: MethodArg,
+    /// Testing events (comma-separated event ids), never seen in training.
+    /// Default: every third event in event-id order.
+    #[arg(long, value_delimiter = ',')]
+    test_events: Option<Vec<String>>,
+    /// Folder for the fitted models (METHOD.json) and the summary (fit.json).
+    #[arg(long, default_value = "models")]
+    out: PathBuf,
+    /// Seed of the network's initial weights and its training/validation split.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+}
+
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum MethodArg {
+    Ffnn,
+    Pca,
+    Physical,
+    All,
 }
 
 #[derive(clap::Args)]
@@ -169,6 +216,124 @@ fn run_extract(opts: &tirewear::kpi::ExtractOptions) -> Result<tirewear::kpi::Ex
     Ok(s)
 }
 
+fn run_fit(
+    kpis: &std::path::Path,
+    methods: &[Method],
+    settings: &FitSettings,
+    out: &std::path::Path,
+) -> Result<Vec<SavedModel>> {
+    let t0 = Instant::now();
+    let rows = tirewear::kpi::table::read_parquet(kpis)?;
+    let split = fit::split(&rows, settings.test_events.as_deref())
+        .with_context(|| format!("splitting {}", kpis.display()))?;
+    println!(
+        "{}: {} rows; training on {} events ({} rows), testing on {} events ({} rows): {}",
+        kpis.display(),
+        rows.len(),
+        split.train_events.len(),
+        split.train.len(),
+        split.test_events.len(),
+        split.test.len(),
+        split.test_events.join(", ")
+    );
+    let mut models = Vec::new();
+    for &m in methods {
+        let t = Instant::now();
+        let (model, notes) = fit::fit_method(m, &split, settings)
+            .with_context(|| format!("fitting the {m:?} model on {}", kpis.display()))?;
+        for n in notes.iter().take(5) {
+            println!("left out: {n}");
+        }
+        if notes.len() > 5 {
+            println!("... and {} more rows left out", notes.len() - 5);
+        }
+        println!(
+            "\n{}  ({:.1} s)",
+            fit::render_table(&model),
+            t.elapsed().as_secs_f64()
+        );
+        models.push(model);
+    }
+    let paths = tirewear::model::saved::save_all(&models, out)
+        .with_context(|| format!("writing models to {}", out.display()))?;
+    if models.len() > 1 {
+        println!("{}", fit::render_comparison(&models));
+    }
+    for p in paths {
+        println!("wrote {}", p.display());
+    }
+    println!("fitted in {:.1} s", t0.elapsed().as_secs_f64());
+    Ok(models)
+}
+
+fn run_predict(
+    model: &std::path::Path,
+    kpis: &std::path::Path,
+    out: &std::path::Path,
+) -> Result<()> {
+    let m = SavedModel::load(model)?;
+    let units = tirewear::kpi::table::read_units(kpis)?;
+    m.check_columns(&units)
+        .with_context(|| format!("{} against {}", kpis.display(), model.display()))?;
+    if units.iter().all(|(_, u)| u.is_none()) {
+        tracing::warn!(
+            "{} states no units; assuming those of docs/kpis.md",
+            kpis.display()
+        );
+    }
+    let rows = tirewear::kpi::table::read_parquet(kpis)?;
+    #[derive(serde::Serialize)]
+    struct Prediction<'a> {
+        event: &'a str,
+        track: &'a str,
+        car: &'a str,
+        run: &'a str,
+        wheel: &'a str,
+        axle: &'a str,
+        compound: &'a str,
+        measured_wear_pct: f64,
+        predicted_wear_pct: f64,
+    }
+    let mut out_rows = Vec::with_capacity(rows.len());
+    for r in &rows {
+        let p = m
+            .predict_row(r)
+            .with_context(|| format!("{}", kpis.display()))?;
+        out_rows.push(Prediction {
+            event: &r.event,
+            track: &r.track,
+            car: &r.car,
+            run: &r.run,
+            wheel: &r.wheel,
+            axle: &r.axle,
+            compound: &r.compound,
+            measured_wear_pct: r.wear_mean_pct,
+            predicted_wear_pct: p,
+        });
+    }
+    tirewear::atomic::write_csv(out, &out_rows)
+        .with_context(|| format!("writing {}", out.display()))?;
+    let observed: Vec<f64> = out_rows.iter().map(|p| p.measured_wear_pct).collect();
+    let predicted: Vec<f64> = out_rows.iter().map(|p| p.predicted_wear_pct).collect();
+    match tirewear::model::metrics::metrics(&observed, &predicted, m.features.len()) {
+        Ok(x) => println!(
+            "wrote {}: {} predictions ({} model); against the measured wear R² {:.4}, RMSE {:.4} %",
+            out.display(),
+            x.n,
+            m.method(),
+            x.r2,
+            x.rmse
+        ),
+        Err(_) => println!(
+            "wrote {}: {} predictions ({} model)",
+            out.display(),
+            out_rows.len(),
+            m.method()
+        ),
+    }
+    Ok(())
+}
+
 fn main() -> Result<()> {
     let cli = Cli::parse();
     let filter = tracing_subscriber::EnvFilter::try_from_default_env()
@@ -207,6 +372,24 @@ fn main() -> Result<()> {
                 progress,
             })?;
         }
+        Command::Fit(a) => {
+            let methods = match a.method {
+                MethodArg::Ffnn => vec![Method::Ffnn],
+                MethodArg::Pca => vec![Method::Pca],
+                MethodArg::Physical => vec![Method::Physical],
+                MethodArg::All => Method::ALL.to_vec(),
+            };
+            let settings = FitSettings {
+                test_events: a.test_events,
+                network: tirewear::model::network::NetworkSettings {
+                    seed: a.seed,
+                    ..Default::default()
+                },
+                ..Default::default()
+            };
+            run_fit(&a.kpis, &methods, &settings, &a.out)?;
+        }
+        Command::Predict { model, kpis, out } => run_predict(&model, &kpis, &out)?,
         Command::Demo { out, seed } => {
             let opts = SimOptions {
                 preset: Preset::Demo,
@@ -241,7 +424,13 @@ fn main() -> Result<()> {
                 engine: tirewear::kpi::Engine::Auto,
                 progress,
             })?;
-            println!("\nNext steps of the pipeline (fit → gap) arrive with their issues.");
+            println!();
+            run_fit(
+                &out.join("kpis.parquet"),
+                &Method::ALL,
+                &FitSettings::default(),
+                &out.join("models"),
+            )?;
         }
     }
     Ok(())

@@ -81,12 +81,56 @@ pub fn schema() -> Arc<Schema> {
         .iter()
         .map(|n| Field::new(*n, DataType::Utf8, false))
         .collect();
-    fields.extend(
-        KpiRow::NUMBER_COLUMNS
-            .iter()
-            .map(|n| Field::new(*n, DataType::Float64, false)),
-    );
+    fields.extend(KpiRow::NUMBER_COLUMNS.iter().map(|n| {
+        Field::new(*n, DataType::Float64, false).with_metadata(std::collections::HashMap::from([(
+            "unit".to_string(),
+            unit(n).to_string(),
+        )]))
+    }));
     Arc::new(Schema::new(fields))
+}
+
+/// The unit of a numeric column, from its name's suffix (the naming rule of
+/// docs/kpis.md); "1" for dimensionless indices. Written into the Parquet
+/// schema as field metadata `unit`, and checked by `tirewear predict`.
+pub fn unit(column: &str) -> &'static str {
+    const SUFFIXES: [(&str, &str); 13] = [
+        ("_mm2", "mm^2"),
+        ("_mm", "mm"),
+        ("_mps", "m/s"),
+        ("_m", "m"),
+        ("_c", "degC"),
+        ("_n", "N"),
+        ("_j", "J"),
+        ("_deg", "deg"),
+        ("_pa", "Pa"),
+        ("_hz", "Hz"),
+        ("_mpa", "MPa"),
+        ("_pct", "%"),
+        ("_s", "s"),
+    ];
+    // Longest suffix first, so `_mpa` is not read as `_pa`.
+    let mut best: Option<(&str, &str)> = None;
+    for (suffix, u) in SUFFIXES {
+        if column.ends_with(suffix) && best.is_none_or(|(b, _)| suffix.len() > b.len()) {
+            best = Some((suffix, u));
+        }
+    }
+    best.map_or("1", |(_, u)| u)
+}
+
+/// Column names of a KPI Parquet file with their `unit` metadata (None when
+/// the file does not state one, e.g. a table written by another tool).
+pub fn read_units(path: &Path) -> Result<Vec<(String, Option<String>)>, IngestError> {
+    let file = std::fs::File::open(path).map_err(|e| IngestError::io(path, e))?;
+    let builder = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file)
+        .map_err(|e| parquet_err(path, e))?;
+    Ok(builder
+        .schema()
+        .fields()
+        .iter()
+        .map(|f| (f.name().clone(), f.metadata().get("unit").cloned()))
+        .collect())
 }
 
 fn parquet_err(path: &Path, e: impl Into<parquet::errors::ParquetError>) -> IngestError {
@@ -174,4 +218,26 @@ pub fn read_parquet(path: &Path) -> Result<Vec<KpiRow>, IngestError> {
         }
     }
     Ok(rows)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn units_follow_the_suffix_rule() {
+        assert_eq!(unit("storage_modulus_mpa"), "MPa");
+        assert_eq!(unit("pressure_avg_pa"), "Pa");
+        assert_eq!(unit("contact_patch_mm2"), "mm^2");
+        assert_eq!(unit("ra_mm"), "mm");
+        assert_eq!(unit("vsx_avg_mps"), "m/s");
+        assert_eq!(unit("distance_m"), "m");
+        assert_eq!(unit("t_surface_avg_c"), "degC");
+        assert_eq!(unit("friction_energy_j"), "J");
+        assert_eq!(unit("wear_mean_pct"), "%");
+        assert_eq!(unit("skewness"), "1");
+        assert_eq!(unit("invalid_samples"), "1");
+        assert!(schema().fields().iter().all(|f| f.data_type() == &DataType::Utf8
+            || f.metadata()["unit"] == unit(f.name())));
+    }
 }

@@ -1,16 +1,19 @@
 //! Wear models (paper sections 2 and 4), fitted on the CPU with faer.
-//! So far: the performance indicators, ordinary least squares with
-//! inference, principal component analysis, the Levenberg–Marquardt solver
-//! and the feed-forward network it trains (the physical method, the data
-//! split and `tirewear fit` follow).
+//! Building blocks (indicators, OLS, PCA, Levenberg–Marquardt, the network),
+//! the three methods (network, PCA + regression, physical per axle), the
+//! event split, saved models and `tirewear fit`. Definitions: docs/models.md.
 
 pub mod data;
 pub mod error;
 pub mod ffnn;
+pub mod fit;
 pub mod lm;
 pub mod metrics;
+pub mod network;
 pub mod ols;
 pub mod pca;
+pub mod physical;
+pub mod saved;
 
 pub use error::ModelError;
 

@@ -1,0 +1,381 @@
+//! `tirewear fit`: the three methods on one split of the KPI database,
+//! each returned as a saved model with its performance table.
+
+use super::ModelError;
+use super::data::{TARGET, candidate_inputs, select_inputs, split_by_events};
+use super::metrics::metrics;
+use super::network::{NetworkSettings, fit_network};
+use super::ols::OlsFit;
+use super::pca::PcaFit;
+use super::physical::{PHYSICAL_INPUTS, analyse_axle};
+use super::saved::{Feature, Indicators, MODEL_FORMAT, MODEL_VERSION, ModelBody, SavedModel};
+use crate::kpi::KpiRow;
+use std::fmt::Write;
+
+/// A wear-model method.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Method {
+    /// Feed-forward network trained by Levenberg–Marquardt (paper 4.1).
+    Ffnn,
+    /// PCA + multiple linear regression (paper 4.2).
+    Pca,
+    /// Physical correlations + regression per axle (paper 4.3).
+    Physical,
+}
+
+impl Method {
+    pub const ALL: [Method; 3] = [Method::Ffnn, Method::Pca, Method::Physical];
+}
+
+/// Settings of a fit.
+#[derive(Debug, Clone, Default)]
+pub struct FitSettings {
+    /// Testing events; None = every third event (docs/models.md).
+    pub test_events: Option<Vec<String>>,
+    pub network: NetworkSettings,
+    /// PCA variance threshold; 0 = the paper's 0.99.
+    pub pca_threshold: f64,
+}
+
+/// Rows usable by a model: finite target and inputs. Returns the kept rows and
+/// a note for each dropped one.
+fn usable<'a>(rows: &[&'a KpiRow], inputs: &[String]) -> (Vec<&'a KpiRow>, Vec<String>) {
+    let (mut ok, mut dropped) = (Vec::new(), Vec::new());
+    for r in rows {
+        let bad: Vec<&str> = std::iter::once(TARGET)
+            .chain(inputs.iter().map(String::as_str))
+            .filter(|c| !r.number(c).is_some_and(f64::is_finite))
+            .collect();
+        if bad.is_empty() {
+            ok.push(*r)
+        } else {
+            dropped.push(format!(
+                "run {} wheel {}: not finite: {}",
+                r.run,
+                r.wheel,
+                bad.join(", ")
+            ))
+        }
+    }
+    (ok, dropped)
+}
+
+fn matrix(rows: &[&KpiRow], inputs: &[String]) -> Vec<Vec<f64>> {
+    rows.iter()
+        .map(|r| {
+            inputs
+                .iter()
+                .map(|c| r.number(c).expect("KPI column"))
+                .collect()
+        })
+        .collect()
+}
+
+fn target(rows: &[&KpiRow]) -> Vec<f64> {
+    rows.iter().map(|r| r.wear_mean_pct).collect()
+}
+
+/// The split, shared by all methods.
+pub struct Split<'a> {
+    pub train: Vec<&'a KpiRow>,
+    pub test: Vec<&'a KpiRow>,
+    pub test_events: Vec<String>,
+    pub train_events: Vec<String>,
+}
+
+pub fn split<'a>(
+    rows: &'a [KpiRow],
+    test_events: Option<&[String]>,
+) -> Result<Split<'a>, ModelError> {
+    if let Some(list) = test_events {
+        let unknown: Vec<&String> = list
+            .iter()
+            .filter(|e| !rows.iter().any(|r| &r.event == *e))
+            .collect();
+        if !unknown.is_empty() {
+            return Err(ModelError::Invalid(format!(
+                "testing events not in the table: {}",
+                unknown
+                    .iter()
+                    .map(|s| s.as_str())
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            )));
+        }
+    }
+    let (tr, te, test_events) = split_by_events(rows, test_events);
+    let mut train_events: Vec<String> = tr.iter().map(|&i| rows[i].event.clone()).collect();
+    train_events.sort();
+    train_events.dedup();
+    Ok(Split {
+        train: tr.iter().map(|&i| &rows[i]).collect(),
+        test: te.iter().map(|&i| &rows[i]).collect(),
+        test_events,
+        train_events,
+    })
+}
+
+/// Training and (when there are testing rows) testing indicators of a predictor.
+fn indicators(
+    prefix: &str,
+    train: &[&KpiRow],
+    test: &[&KpiRow],
+    k: usize,
+    predict: impl Fn(&KpiRow) -> f64,
+) -> Result<Vec<Indicators>, ModelError> {
+    let mut out = Vec::new();
+    for (label, rows) in [("Training", train), ("Testing", test)] {
+        if rows.is_empty() {
+            continue;
+        }
+        let p: Vec<f64> = rows.iter().map(|r| predict(r)).collect();
+        out.push(Indicators {
+            label: format!("{prefix}{label}"),
+            metrics: metrics(&target(rows), &p, k)?,
+        });
+    }
+    Ok(out)
+}
+
+/// Fits one method on the split.
+pub fn fit_method(
+    method: Method,
+    s: &Split,
+    settings: &FitSettings,
+) -> Result<(SavedModel, Vec<String>), ModelError> {
+    let candidates: Vec<String> = candidate_inputs().iter().map(|c| c.to_string()).collect();
+    let (train, mut notes) = usable(&s.train, &candidates);
+    let (test, dropped) = usable(&s.test, &candidates);
+    notes.extend(dropped);
+    if train.is_empty() {
+        return Err(ModelError::Invalid("no usable training rows".into()));
+    }
+    let columns = |rows: &[&KpiRow]| -> Vec<(&str, Vec<f64>)> {
+        candidate_inputs()
+            .into_iter()
+            .map(|c| {
+                (
+                    c,
+                    rows.iter().map(|r| r.number(c).expect("column")).collect(),
+                )
+            })
+            .collect()
+    };
+    let y = target(&train);
+    let (features, body, table) = match method {
+        Method::Ffnn => {
+            let ns = &settings.network;
+            let inputs = select_inputs(
+                &columns(&train),
+                Some((&y, ns.min_target_corr)),
+                ns.max_mutual_corr,
+            );
+            let network = fit_network(&matrix(&train, &inputs), &y, ns)?;
+            let net = network.net.clone();
+            let predict = |r: &KpiRow| {
+                net.predict_one(
+                    &inputs
+                        .iter()
+                        .map(|c| r.number(c).expect("column"))
+                        .collect::<Vec<_>>(),
+                )
+            };
+            let table = indicators("", &train, &test, inputs.len(), predict)?;
+            (
+                inputs,
+                ModelBody::Ffnn {
+                    settings: ns.clone(),
+                    network,
+                },
+                table,
+            )
+        }
+        Method::Pca => {
+            let all = columns(&train);
+            let inputs = select_inputs(&all, None, settings.network.max_mutual_corr);
+            let dropped_correlated = all
+                .iter()
+                .map(|c| c.0.to_string())
+                .filter(|c| !inputs.contains(c))
+                .collect();
+            let threshold = if settings.pca_threshold > 0.0 {
+                settings.pca_threshold
+            } else {
+                0.99
+            };
+            let pca = PcaFit::fit(&matrix(&train, &inputs), &inputs, threshold)?;
+            let scores = pca.transform(&matrix(&train, &inputs));
+            let names: Vec<String> = (1..=pca.kept).map(|i| format!("PC{i}")).collect();
+            let regression = OlsFit::fit(&scores, &y, &names)?;
+            let predict = |r: &KpiRow| {
+                let x: Vec<f64> = inputs
+                    .iter()
+                    .map(|c| r.number(c).expect("column"))
+                    .collect();
+                regression.predict_one(&pca.transform(&[x])[0])
+            };
+            let table = indicators("", &train, &test, pca.kept, predict)?;
+            (
+                inputs,
+                ModelBody::Pca {
+                    dropped_correlated,
+                    pca,
+                    regression,
+                },
+                table,
+            )
+        }
+        Method::Physical => {
+            fn axle<'r>(rows: &[&'r KpiRow], a: &str) -> Vec<&'r KpiRow> {
+                rows.iter().filter(|r| r.axle == a).copied().collect()
+            }
+            let front = analyse_axle("front", &axle(&train, "front"))?;
+            let rear = analyse_axle("rear", &axle(&train, "rear"))?;
+            let mut table = Vec::new();
+            for (name, a) in [("Front—", &front), ("Rear—", &rear)] {
+                let predict = |r: &KpiRow| a.regression.predict_one(&super::physical::inputs_of(r));
+                table.extend(indicators(
+                    name,
+                    &axle(&train, &a.axle),
+                    &axle(&test, &a.axle),
+                    PHYSICAL_INPUTS.len(),
+                    predict,
+                )?);
+            }
+            let inputs = PHYSICAL_INPUTS.iter().map(|c| c.to_string()).collect();
+            (inputs, ModelBody::Physical { front, rear }, table)
+        }
+    };
+    let model = SavedModel {
+        format: MODEL_FORMAT.into(),
+        version: MODEL_VERSION,
+        tirewear_version: env!("CARGO_PKG_VERSION").into(),
+        target: Feature::of(TARGET),
+        features: features.iter().map(|f| Feature::of(f)).collect(),
+        training_events: s.train_events.clone(),
+        testing_events: s.test_events.clone(),
+        indicators: table,
+        model: body,
+    };
+    Ok((model, notes))
+}
+
+fn method_title(m: &SavedModel) -> &'static str {
+    match m.model {
+        ModelBody::Ffnn { .. } => "Feed-forward neural network (Levenberg–Marquardt)",
+        ModelBody::Pca { .. } => "PCA + multiple linear regression",
+        ModelBody::Physical { .. } => "Physical correlations + regression",
+    }
+}
+
+/// The performance table of a model, like the paper's tables 8, 9 and 11.
+pub fn render_table(m: &SavedModel) -> String {
+    let mut s = String::new();
+    let _ = writeln!(s, "{} — inputs: {}", method_title(m), m.features.len());
+    let _ = writeln!(
+        s,
+        "  {:<20} {:>5} {:>8} {:>8} {:>9} {:>9}",
+        "", "n", "R²", "R²adj", "RMSE %", "MAE %"
+    );
+    for i in &m.indicators {
+        let x = &i.metrics;
+        let _ = writeln!(
+            s,
+            "  {:<20} {:>5} {:>8.4} {:>8.4} {:>9.4} {:>9.4}",
+            i.label, x.n, x.r2, x.r2_adj, x.rmse, x.mae
+        );
+    }
+    match &m.model {
+        ModelBody::Ffnn { network, .. } => {
+            let _ = writeln!(
+                s,
+                "  architecture {}–{}–{}–1 (second layer chosen among {} widths; retrained pair kept: {}); best epoch {}",
+                network.net.inputs,
+                network.net.hidden1,
+                network.net.hidden2,
+                network.trials.len(),
+                network.retrained_kept,
+                network.net.best_epoch
+            );
+            let _ = writeln!(
+                s,
+                "  inputs: {}",
+                m.features
+                    .iter()
+                    .map(|f| f.name.as_str())
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            );
+        }
+        ModelBody::Pca {
+            pca,
+            dropped_correlated,
+            ..
+        } => {
+            let cum: f64 = pca.proportions[..pca.kept].iter().sum();
+            let _ = writeln!(
+                s,
+                "  {} inputs after dropping {} correlated; {} components explain {:.2} % of the variance",
+                pca.inputs.len(),
+                dropped_correlated.len(),
+                pca.kept,
+                100.0 * cum
+            );
+        }
+        ModelBody::Physical { front, rear } => {
+            for a in [front, rear] {
+                let _ = writeln!(
+                    s,
+                    "  {}: {} tracks; corr(slope, T_surf) = {:+.2}; corr(residual, skewness) = {:+.2}",
+                    a.axle,
+                    a.lines.len(),
+                    a.slope_vs_t_surface,
+                    a.residual_vs_skewness
+                );
+                let r = &a.regression;
+                for (j, name) in std::iter::once("intercept")
+                    .chain(r.inputs.iter().map(String::as_str))
+                    .enumerate()
+                {
+                    let _ = writeln!(
+                        s,
+                        "    {:<20} {:>+12.4e} ± {:>10.3e}  p = {:.3}",
+                        name, r.coef[j], r.std_err[j], r.p_values[j]
+                    );
+                }
+            }
+        }
+    }
+    s
+}
+
+/// A comparison of the methods' testing indicators (one line per model and axle).
+pub fn render_comparison(models: &[SavedModel]) -> String {
+    let mut s = String::from("Comparison on the testing events\n");
+    let _ = writeln!(
+        s,
+        "  {:<42} {:>5} {:>8} {:>8} {:>9}",
+        "model", "n", "R²", "R²adj", "RMSE %"
+    );
+    for m in models {
+        for i in m.indicators.iter().filter(|i| i.label.ends_with("Testing")) {
+            let label = format!(
+                "{} {}",
+                m.method(),
+                i.label.trim_end_matches("Testing").trim_end_matches('—')
+            );
+            let x = &i.metrics;
+            let _ = writeln!(
+                s,
+                "  {:<42} {:>5} {:>8.4} {:>8.4} {:>9.4}",
+                label.trim(),
+                x.n,
+                x.r2,
+                x.r2_adj,
+                x.rmse
+            );
+        }
+    }
+    s
+}

@@ -1,0 +1,189 @@
+//! Fitted models as versioned JSON files (`tirewear fit` writes them,
+//! `tirewear predict` and `tirewear gap --baseline` read them): the feature
+//! names and units, the normalisation, the coefficients or weights, the
+//! settings and the indicators. Format: docs/models.md.
+
+use super::ModelError;
+use super::metrics::Metrics;
+use super::network::{NetworkFit, NetworkSettings};
+use super::ols::OlsFit;
+use super::pca::PcaFit;
+use super::physical::{AxleAnalysis, inputs_of};
+use crate::kpi::{KpiRow, table::unit};
+use std::path::Path;
+
+pub const MODEL_FORMAT: &str = "tirewear-model";
+pub const MODEL_VERSION: u32 = 1;
+
+/// A column with its unit.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Feature {
+    pub name: String,
+    pub unit: String,
+}
+
+impl Feature {
+    pub fn of(name: &str) -> Feature {
+        Feature {
+            name: name.to_string(),
+            unit: unit(name).to_string(),
+        }
+    }
+}
+
+/// One line of a performance table (paper tables 8, 9, 11).
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Indicators {
+    /// e.g. "Training", "Testing", "Rear—Testing".
+    pub label: String,
+    pub metrics: Metrics,
+}
+
+/// What was fitted, by method.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(tag = "method", rename_all = "lowercase")]
+pub enum ModelBody {
+    Ffnn {
+        settings: NetworkSettings,
+        network: NetworkFit,
+    },
+    Pca {
+        /// Candidates dropped as correlated with an input kept (target not looked at).
+        dropped_correlated: Vec<String>,
+        pca: PcaFit,
+        /// OLS on the kept component scores PC1..PCk.
+        regression: OlsFit,
+    },
+    Physical {
+        front: AxleAnalysis,
+        rear: AxleAnalysis,
+    },
+}
+
+/// A fitted model as saved.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct SavedModel {
+    pub format: String,
+    pub version: u32,
+    pub tirewear_version: String,
+    pub target: Feature,
+    /// Input columns, in the order the model reads them.
+    pub features: Vec<Feature>,
+    pub training_events: Vec<String>,
+    pub testing_events: Vec<String>,
+    pub indicators: Vec<Indicators>,
+    pub model: ModelBody,
+}
+
+impl SavedModel {
+    pub fn method(&self) -> &'static str {
+        match self.model {
+            ModelBody::Ffnn { .. } => "ffnn",
+            ModelBody::Pca { .. } => "pca",
+            ModelBody::Physical { .. } => "physical",
+        }
+    }
+
+    /// Predicted mean wear (%) of one row; the physical model picks the
+    /// regression of the row's axle.
+    pub fn predict_row(&self, r: &KpiRow) -> Result<f64, ModelError> {
+        let x: Vec<f64> = self
+            .features
+            .iter()
+            .map(|f| {
+                r.number(&f.name)
+                    .ok_or_else(|| ModelError::Invalid(format!("no KPI column '{}'", f.name)))
+            })
+            .collect::<Result<_, _>>()?;
+        Ok(match &self.model {
+            ModelBody::Ffnn { network, .. } => network.net.predict_one(&x),
+            ModelBody::Pca {
+                pca, regression, ..
+            } => regression.predict_one(&pca.transform(&[x])[0]),
+            ModelBody::Physical { front, rear } => match r.axle.as_str() {
+                "front" => front.regression.predict_one(&inputs_of(r)),
+                "rear" => rear.regression.predict_one(&inputs_of(r)),
+                other => {
+                    return Err(ModelError::Invalid(format!(
+                        "run {} wheel {}: axle '{other}' is neither front nor rear",
+                        r.run, r.wheel
+                    )));
+                }
+            },
+        })
+    }
+
+    pub fn to_json(&self) -> String {
+        serde_json::to_string_pretty(self).expect("model serialises")
+    }
+
+    /// Writes the model atomically.
+    pub fn save(&self, path: &Path) -> std::io::Result<()> {
+        crate::atomic::write_bytes(path, self.to_json().as_bytes())
+    }
+
+    /// Reads a model file, refusing other formats and newer versions.
+    pub fn load(path: &Path) -> Result<SavedModel, ModelError> {
+        let text = std::fs::read_to_string(path)
+            .map_err(|e| ModelError::Invalid(format!("{}: {e}", path.display())))?;
+        let head: serde_json::Value = serde_json::from_str(&text)
+            .map_err(|e| ModelError::Invalid(format!("{}: not JSON: {e}", path.display())))?;
+        if head["format"] != MODEL_FORMAT {
+            return Err(ModelError::Invalid(format!(
+                "{}: not a tirewear model (field \"format\" is {}, expected \"{MODEL_FORMAT}\")",
+                path.display(),
+                head["format"]
+            )));
+        }
+        match head["version"].as_u64() {
+            Some(v) if v as u32 == MODEL_VERSION => {}
+            v => {
+                return Err(ModelError::Invalid(format!(
+                    "{}: model format version {v:?}, this tirewear reads version {MODEL_VERSION}",
+                    path.display()
+                )));
+            }
+        }
+        serde_json::from_str(&text)
+            .map_err(|e| ModelError::Invalid(format!("{}: {e}", path.display())))
+    }
+
+    /// Checks a KPI table's columns and units against the model's features;
+    /// every mismatch is named. `units`: column name → unit stated by the
+    /// table (None when the table states none: the documented unit is assumed).
+    pub fn check_columns(&self, units: &[(String, Option<String>)]) -> Result<(), ModelError> {
+        let mut problems = Vec::new();
+        for f in self.features.iter().chain([&self.target]) {
+            match units.iter().find(|(n, _)| *n == f.name) {
+                None if f.name == self.target.name => {}
+                None => problems.push(format!("column '{}' is missing", f.name)),
+                Some((_, Some(u))) if *u != f.unit => problems.push(format!(
+                    "column '{}' is in {u}, the model was fitted in {}",
+                    f.name, f.unit
+                )),
+                Some(_) => {}
+            }
+        }
+        if problems.is_empty() {
+            Ok(())
+        } else {
+            Err(ModelError::Invalid(format!(
+                "the table does not match the {} model: {}",
+                self.method(),
+                problems.join("; ")
+            )))
+        }
+    }
+}
+
+/// Writes a file atomically (re-exported for the CLI).
+pub fn save_all(models: &[SavedModel], dir: &Path) -> std::io::Result<Vec<std::path::PathBuf>> {
+    std::fs::create_dir_all(dir)?;
+    models
+        .iter()
+        .map(|m| {
+            let p = dir.join(format!("{}.json", m.method()));
+            m.save(&p).map(|_| p)
+        })
+        .collect()
+}

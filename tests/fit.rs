@@ -1,0 +1,174 @@
+//! `tirewear fit` end to end on the demo season: the three methods fit on
+//! whole training events and are tested on others; the physical method's
+//! rear-axle testing R² beats PCA's (the paper's ranking, table 11 vs 9);
+//! saved models reload and predict the same numbers; `predict` refuses a
+//! table with a missing column or a different unit, naming it.
+
+use std::collections::HashMap;
+use std::sync::Arc;
+use tirewear::ingest::telemetry::Encoding;
+use tirewear::kpi::table::{read_parquet, read_units, write_batch};
+use tirewear::kpi::{Engine, ExtractOptions, KpiRow, extract};
+use tirewear::model::fit::{FitSettings, Method, fit_method, split};
+use tirewear::model::network::NetworkSettings;
+use tirewear::model::saved::{ModelBody, SavedModel};
+use tirewear::sim::{Preset, SimOptions, simulate};
+
+fn demo_kpis(dir: &std::path::Path) -> Vec<KpiRow> {
+    simulate(&SimOptions {
+        preset: Preset::Demo,
+        scale: 1.0,
+        seed: 7,
+        effects: vec![],
+        encoding: Encoding::Block,
+        rate_hz: Some(5.0),
+        out: dir.to_path_buf(),
+        sensor_noise: true,
+        progress: false,
+    })
+    .unwrap();
+    extract(&ExtractOptions {
+        season: dir.to_path_buf(),
+        out: dir.join("kpis.parquet"),
+        csv: None,
+        engine: Engine::Cpu,
+        progress: false,
+    })
+    .unwrap();
+    read_parquet(&dir.join("kpis.parquet")).unwrap()
+}
+
+fn testing_r2(m: &SavedModel, label: &str) -> f64 {
+    m.indicators
+        .iter()
+        .find(|i| i.label == label)
+        .unwrap_or_else(|| panic!("{} has no '{label}' line", m.method()))
+        .metrics
+        .r2
+}
+
+#[test]
+fn demo_fit_ranks_like_the_paper_and_models_round_trip() {
+    let dir = tempfile::tempdir().unwrap();
+    let rows = demo_kpis(dir.path());
+    let s = split(&rows, None).unwrap();
+    // Whole events: no event on both sides.
+    assert!(s.train_events.iter().all(|e| !s.test_events.contains(e)));
+    assert!(!s.test.is_empty() && s.train.len() > 2 * s.test.len() - 10);
+    let settings = FitSettings {
+        // Two widths keep the debug-build test quick; the CLI loops over 1..=inputs+4.
+        network: NetworkSettings {
+            hidden2_candidates: vec![4, 8],
+            ..Default::default()
+        },
+        ..Default::default()
+    };
+    let models: HashMap<&str, SavedModel> = Method::ALL
+        .iter()
+        .map(|&m| {
+            let (model, notes) = fit_method(m, &s, &settings).unwrap();
+            assert!(notes.is_empty(), "demo rows are complete: {notes:?}");
+            (model.method(), model)
+        })
+        .collect();
+    let (phys_rear, pca) = (
+        testing_r2(&models["physical"], "Rear—Testing"),
+        testing_r2(&models["pca"], "Testing"),
+    );
+    assert!(
+        phys_rear > pca,
+        "physical rear testing R² {phys_rear:.4} vs PCA testing R² {pca:.4}"
+    );
+    // The physical method's preliminary analysis (paper figures 13 and 14).
+    let ModelBody::Physical { front, rear } = &models["physical"].model else {
+        panic!("physical body")
+    };
+    assert!(rear.slope_vs_t_surface > 0.0 && front.slope_vs_t_surface > 0.0);
+    assert!(rear.lines.iter().all(|l| (0.0..=1.0).contains(&l.r2)));
+    assert_eq!(rear.regression.inputs.len(), 6);
+
+    // Save, reload, predict: identical numbers.
+    let out = dir.path().join("models");
+    let paths =
+        tirewear::model::saved::save_all(&models.values().cloned().collect::<Vec<_>>(), &out)
+            .unwrap();
+    assert_eq!(paths.len(), 3);
+    for m in models.values() {
+        let back = SavedModel::load(&out.join(format!("{}.json", m.method()))).unwrap();
+        assert_eq!(&back, m);
+        for r in rows.iter().take(20) {
+            assert_eq!(back.predict_row(r).unwrap(), m.predict_row(r).unwrap());
+        }
+    }
+    // The indicators recomputed from the reloaded model's predictions on the testing events.
+    let phys = SavedModel::load(&out.join("physical.json")).unwrap();
+    let rear_test: Vec<&KpiRow> = s
+        .test
+        .iter()
+        .copied()
+        .filter(|r| r.axle == "rear")
+        .collect();
+    let y: Vec<f64> = rear_test.iter().map(|r| r.wear_mean_pct).collect();
+    let p: Vec<f64> = rear_test
+        .iter()
+        .map(|r| phys.predict_row(r).unwrap())
+        .collect();
+    let m = tirewear::model::metrics::metrics(&y, &p, 6).unwrap();
+    assert!((m.r2 - phys_rear).abs() < 1e-12);
+
+    // The KPI table carries units; a changed unit or a missing column is refused by name.
+    let units = read_units(&dir.path().join("kpis.parquet")).unwrap();
+    phys.check_columns(&units).unwrap();
+    let mut changed = units.clone();
+    for (n, u) in &mut changed {
+        if n == "contact_patch_mm2" {
+            *u = Some("cm^2".into());
+        }
+    }
+    let e = phys.check_columns(&changed).unwrap_err().to_string();
+    assert!(
+        e.contains("contact_patch_mm2") && e.contains("cm^2") && e.contains("mm^2"),
+        "{e}"
+    );
+    let missing: Vec<_> = units.into_iter().filter(|(n, _)| n != "skewness").collect();
+    let e = phys.check_columns(&missing).unwrap_err().to_string();
+    assert!(e.contains("'skewness' is missing"), "{e}");
+
+    // A Parquet file whose schema states another unit is caught from the file itself.
+    let batch = {
+        let file = std::fs::File::open(dir.path().join("kpis.parquet")).unwrap();
+        let mut r = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file)
+            .unwrap()
+            .build()
+            .unwrap();
+        r.next().unwrap().unwrap()
+    };
+    let fields: Vec<arrow_schema::Field> = batch
+        .schema()
+        .fields()
+        .iter()
+        .map(|f| {
+            let f = f.as_ref().clone();
+            if f.name() == "t_surface_avg_c" {
+                f.with_metadata(HashMap::from([("unit".into(), "K".into())]))
+            } else {
+                f
+            }
+        })
+        .collect();
+    let kelvin = dir.path().join("kelvin.parquet");
+    let batch = arrow_array::RecordBatch::try_new(
+        Arc::new(arrow_schema::Schema::new(fields)),
+        batch.columns().to_vec(),
+    )
+    .unwrap();
+    write_batch(&kelvin, &batch).unwrap();
+    let e = phys
+        .check_columns(&read_units(&kelvin).unwrap())
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("t_surface_avg_c") && e.contains("is in K"),
+        "{e}"
+    );
+}
