@@ -5,6 +5,8 @@
 //! known physics and planted effects. See `docs/` for formats and physics.
 
 pub mod atomic;
+pub mod engine;
+pub mod gpu;
 pub mod ingest;
 pub mod kpi;
 pub mod model;

@@ -9,10 +9,12 @@
 use super::energy_map::{EnergyMaps, SLIDING_SPEED_BINS, T_INNER_BINS, T_SURFACE_BINS};
 use super::road::{RoadCurves, RoadIndices, mean_indices, profile_indices};
 use super::table::{KpiRow, write_batch, write_csv, write_parquet};
-use super::telemetry::{CleaningReport, vehicle_indices, wheel_indices};
+use super::telemetry::{CleaningReport, finish_wheel, prepare_wheel, vehicle_indices};
+use super::telemetry_reduce::{ReduceBatch, merge};
 use super::viscoelastic::viscoelastic_indices;
 use super::wear::mean_wear;
 use crate::Wheel;
+use crate::engine::{CpuEngine, GpuEngine, ReduceEngine};
 use crate::ingest::IngestError;
 use crate::ingest::compound::Compound;
 use crate::ingest::manifest::{Run, Season};
@@ -57,6 +59,10 @@ pub struct Skipped {
 #[derive(Debug, Clone, serde::Serialize)]
 pub struct ExtractSummary {
     pub engine: Engine,
+    /// The device that ran the reductions.
+    pub device: String,
+    /// GPU upload / compute / readback time, summed over runs (GPU engine only).
+    pub gpu_timings: Option<crate::gpu::GpuTimings>,
     pub rows: usize,
     pub runs: usize,
     pub skipped: Vec<Skipped>,
@@ -142,6 +148,7 @@ fn run_rows(
     compounds: &HashMap<String, Compound>,
     roads: &HashMap<String, RoadIndices>,
     wear: &BTreeMap<(String, Wheel), f64>,
+    engine: &dyn ReduceEngine,
 ) -> Result<RunOutput, String> {
     let path = season.path(&run.telemetry);
     let t0 = Instant::now();
@@ -174,6 +181,9 @@ fn run_rows(
         reduce_s: 0.0,
     };
     out.bytes = std::fs::metadata(&path).map(|m| m.len()).unwrap_or(0);
+    // Clean every wheel, then reduce the run's four wheels in one batch.
+    let mut batch = ReduceBatch::default();
+    let mut prepared = Vec::with_capacity(4);
     for w in Wheel::ALL {
         let series = &tel.wheels[w.index()];
         if series.is_empty() {
@@ -184,7 +194,18 @@ fn run_rows(
             ));
         }
         out.samples += series.len() as u64;
-        let (k, maps, rep) = wheel_indices(series)
+        let p = prepare_wheel(series)
+            .map_err(|e| format!("{}: topic {}: {e}", path.display(), w.topic()))?;
+        batch.push_wheel(&p.samples);
+        prepared.push(p);
+    }
+    let partials = engine
+        .telemetry_reduce(&batch)
+        .map_err(|e| format!("{}: {} engine: {e}", path.display(), engine.name()))?;
+    let sums = merge(&batch, &partials);
+    for (i, (w, p)) in Wheel::ALL.into_iter().zip(prepared).enumerate() {
+        let (maps, rep) = (p.maps, p.report);
+        let k = finish_wheel(&sums[i], &batch.refs[i])
             .map_err(|e| format!("{}: topic {}: {e}", path.display(), w.topic()))?;
         let sliding_speed = k.sliding_distance_m / k.duration_s;
         let ve = viscoelastic_indices(
@@ -254,24 +275,46 @@ fn run_rows(
     Ok(out)
 }
 
+/// The engine to use: `gpu` needs an adapter; `auto` takes a hardware GPU
+/// and otherwise the CPU engine (a software adapter such as lavapipe is
+/// slower than the CPU engine it emulates), saying why.
+pub fn open_engine(choice: Engine) -> Result<(Engine, Option<GpuEngine>), crate::gpu::GpuError> {
+    match choice {
+        Engine::Cpu => Ok((Engine::Cpu, None)),
+        Engine::Gpu => Ok((Engine::Gpu, Some(GpuEngine::new()?))),
+        Engine::Auto => match GpuEngine::new() {
+            Ok(g) if g.ctx.adapter.device_type != wgpu::DeviceType::Cpu => {
+                Ok((Engine::Gpu, Some(g)))
+            }
+            Ok(g) => {
+                tracing::info!(
+                    "engine auto: the only GPU adapter is a software one ({}); using the CPU engine (--engine gpu forces it)",
+                    g.ctx.adapter.name
+                );
+                Ok((Engine::Cpu, None))
+            }
+            Err(e) => {
+                tracing::info!("engine auto: {e}; using the CPU engine");
+                Ok((Engine::Cpu, None))
+            }
+        },
+    }
+}
+
 /// Extracts the KPI database of a season. One damaged run fails only itself.
 pub fn extract(opts: &ExtractOptions) -> Result<ExtractSummary, IngestError> {
     let start = Instant::now();
-    let engine = match opts.engine {
-        Engine::Cpu => Engine::Cpu,
-        Engine::Auto => {
-            tracing::info!(
-                "engine auto: the GPU engine is not available in this build; using the CPU engine"
-            );
-            Engine::Cpu
-        }
-        Engine::Gpu => {
-            return Err(IngestError::invalid(
-                &opts.season,
-                "--engine gpu",
-                "the GPU engine is not available in this build (use --engine cpu or auto)",
-            ));
-        }
+    let (engine, reducer) = open_engine(opts.engine).map_err(|e| {
+        IngestError::invalid(
+            &opts.season,
+            "--engine gpu",
+            format!("{e} (use --engine cpu or auto)"),
+        )
+    })?;
+    let reducer_gpu = reducer.as_ref();
+    let reducer: &dyn ReduceEngine = match reducer_gpu {
+        Some(g) => g,
+        None => &CpuEngine,
     };
     let season = Season::open(&opts.season)?;
     let m = &season.manifest;
@@ -304,7 +347,7 @@ pub fn extract(opts: &ExtractOptions) -> Result<ExtractSummary, IngestError> {
         .runs
         .par_iter()
         .map(|run| {
-            let r = run_rows(&season, run, &compounds, &roads, &wear);
+            let r = run_rows(&season, run, &compounds, &roads, &wear, reducer);
             pb.inc(1);
             (run, r)
         })
@@ -353,6 +396,8 @@ pub fn extract(opts: &ExtractOptions) -> Result<ExtractSummary, IngestError> {
     write_energy_maps(&side_path(&opts.out, "energy_maps.parquet"), &maps)?;
     let summary = ExtractSummary {
         engine,
+        device: reducer.device(),
+        gpu_timings: reducer_gpu.map(GpuEngine::timings),
         rows: rows.len(),
         runs: m.runs.len(),
         skipped,

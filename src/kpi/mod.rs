@@ -7,6 +7,7 @@ pub mod extract;
 pub mod road;
 pub mod table;
 pub mod telemetry;
+pub mod telemetry_reduce;
 pub mod viscoelastic;
 pub mod wear;
 

@@ -15,6 +15,9 @@
 //!   80 % of its samples are valid, or it lasts less than 10 s.
 
 use super::energy_map::EnergyMaps;
+use super::telemetry_reduce::{
+    ReduceBatch, ReduceRef, ReduceSample, SUMS, Sum, merge, moments, telemetry_reduce,
+};
 use crate::ingest::telemetry::{VehicleSeries, WheelSeries};
 
 /// Gaps up to this long are bridged (the last power holds); longer ones are dropouts.
@@ -97,24 +100,17 @@ pub struct VehicleIndices {
     pub distance_m: f64,
 }
 
-/// Running sums with Welford updates for mean and variance (f64).
+/// Running mean (Welford update, f64).
 #[derive(Default, Clone, Copy)]
 struct Moments {
     n: f64,
     mean: f64,
-    m2: f64,
 }
 
 impl Moments {
     fn push(&mut self, x: f64) {
         self.n += 1.0;
-        let d = x - self.mean;
-        self.mean += d / self.n;
-        self.m2 += d * (x - self.mean);
-    }
-    /// Population standard deviation (1/N).
-    fn std(&self) -> f64 {
-        (self.m2 / self.n.max(1.0)).sqrt()
+        self.mean += (x - self.mean) / self.n;
     }
 }
 
@@ -182,10 +178,16 @@ fn clean(
     out
 }
 
-/// Reduces one wheel: table-4 indices and energy maps, or why the wheel is rejected.
-pub fn wheel_indices(
-    s: &WheelSeries,
-) -> Result<(WheelIndices, EnergyMaps, CleaningReport), String> {
+/// A wheel cleaned and ready for the reduction: its kept samples as the
+/// engines take them, its energy maps (binned on the CPU) and the cleaning report.
+pub struct PreparedWheel {
+    pub samples: Vec<ReduceSample>,
+    pub maps: EnergyMaps,
+    pub report: CleaningReport,
+}
+
+/// Cleans one wheel (the rule above) and bins its friction energy.
+pub fn prepare_wheel(s: &WheelSeries) -> Result<PreparedWheel, String> {
     let mut report = CleaningReport::default();
     if s.is_empty() {
         return Err("no samples".into());
@@ -221,52 +223,90 @@ pub fn wheel_indices(
             report.kept, report.samples, report.time_backwards
         ));
     }
-    let mut m = [Moments::default(); 9];
-    let mut out = WheelIndices::default();
     let mut maps = EnergyMaps::new();
-    let (mut camber, mut pressure, mut patch) = (0.0, 0.0, 0.0);
+    let mut samples = Vec::with_capacity(kept.len());
     for &(i, dt) in &kept {
-        let vx = s.vx_mps[i] as f64;
-        let v_sx = vx - s.omega_radps[i] as f64 * s.rolling_radius_m[i] as f64; // eq. 21
-        let v_sy = s.vy_mps[i] as f64; // eq. 22: s_y·v_x = v_y
-        let (fx, fy, fz) = (s.fx_n[i] as f64, s.fy_n[i] as f64, s.fz_n[i] as f64);
-        let p_x = -fx * v_sx; // eq. 23, dissipation sign
-        let p_y = -fy * v_sy; // eq. 24
-        let ts = s.t_surface_c[i] as f64;
-        let ti = s.t_inner_c[i] as f64;
-        let v_s = v_sx.hypot(v_sy);
-        for (k, x) in [ts, ti, fx, fy, fz, v_sx.abs(), v_sy.abs()]
-            .into_iter()
-            .enumerate()
-        {
-            m[k].push(x);
-        }
-        out.friction_energy_x_j += p_x * dt;
-        out.friction_energy_y_j += p_y * dt;
-        out.sliding_distance_m += v_s * dt;
-        out.duration_s += dt;
-        camber += s.camber_deg[i] as f64;
-        let p = s.pressure_pa[i] as f64;
-        pressure += p;
-        patch += fz / (p + CARCASS_PRESSURE_PA) * 1e6;
-        maps.add(ts, ti, v_s, (p_x + p_y) * dt);
+        let (dt_hi, dt_lo) = ReduceSample::split_dt(dt);
+        let p = ReduceSample {
+            vx: s.vx_mps[i],
+            vy: s.vy_mps[i],
+            omega: s.omega_radps[i],
+            radius: s.rolling_radius_m[i],
+            fx: s.fx_n[i],
+            fy: s.fy_n[i],
+            fz: s.fz_n[i],
+            t_surface: s.t_surface_c[i],
+            t_inner: s.t_inner_c[i],
+            pressure: s.pressure_pa[i],
+            camber: s.camber_deg[i],
+            dt: dt_hi,
+            dt_lo,
+        };
+        // The same per-sample terms as the reduction (eqs. 21–24), for the maps.
+        let v_sx = p.vx as f64 - p.omega as f64 * p.radius as f64;
+        let v_sy = p.vy as f64;
+        let power = -(p.fx as f64) * v_sx - p.fy as f64 * v_sy;
+        maps.add(
+            p.t_surface as f64,
+            p.t_inner as f64,
+            v_sx.hypot(v_sy),
+            power * dt,
+        );
+        samples.push(p);
     }
-    let n = kept.len() as f64;
-    if out.duration_s < MIN_DURATION_S {
-        return Err(format!("only {:.1} s of valid telemetry", out.duration_s));
+    Ok(PreparedWheel {
+        samples,
+        maps,
+        report,
+    })
+}
+
+/// Table 4 indices from a wheel's merged sums.
+pub fn finish_wheel(sums: &[f64; SUMS], r: &ReduceRef) -> Result<WheelIndices, String> {
+    let duration_s = sums[Sum::DURATION];
+    if duration_s < MIN_DURATION_S {
+        return Err(format!("only {duration_s:.1} s of valid telemetry"));
     }
-    out.friction_energy_j = out.friction_energy_x_j + out.friction_energy_y_j; // eq. 25
-    (out.t_surface_avg_c, out.t_surface_std_c) = (m[0].mean, m[0].std());
-    (out.t_inner_avg_c, out.t_inner_std_c) = (m[1].mean, m[1].std());
-    (out.fx_avg_n, out.fx_std_n) = (m[2].mean, m[2].std());
-    (out.fy_avg_n, out.fy_std_n) = (m[3].mean, m[3].std());
-    (out.fz_avg_n, out.fz_std_n) = (m[4].mean, m[4].std());
-    (out.vsx_avg_mps, out.vsx_std_mps) = (m[5].mean, m[5].std());
-    (out.vsy_avg_mps, out.vsy_std_mps) = (m[6].mean, m[6].std());
-    out.camber_avg_deg = camber / n;
-    out.pressure_avg_pa = pressure / n;
-    out.contact_patch_mm2 = patch / n;
-    Ok((out, maps, report))
+    let m = moments(sums, r);
+    let n = sums[Sum::COUNT];
+    let (energy_x, energy_y) = (sums[Sum::ENERGY_X], sums[Sum::ENERGY_Y]);
+    Ok(WheelIndices {
+        t_surface_avg_c: m[0].0,
+        t_surface_std_c: m[0].1,
+        t_inner_avg_c: m[1].0,
+        t_inner_std_c: m[1].1,
+        fx_avg_n: m[2].0,
+        fx_std_n: m[2].1,
+        fy_avg_n: m[3].0,
+        fy_std_n: m[3].1,
+        fz_avg_n: m[4].0,
+        fz_std_n: m[4].1,
+        vsx_avg_mps: m[5].0,
+        vsx_std_mps: m[5].1,
+        vsy_avg_mps: m[6].0,
+        vsy_std_mps: m[6].1,
+        friction_energy_x_j: energy_x,
+        friction_energy_y_j: energy_y,
+        friction_energy_j: energy_x + energy_y, // eq. 25
+        sliding_distance_m: sums[Sum::SLIDING_DISTANCE],
+        camber_avg_deg: sums[Sum::CAMBER] / n,
+        pressure_avg_pa: sums[Sum::PRESSURE] / n,
+        contact_patch_mm2: sums[Sum::CONTACT_PATCH] / n,
+        duration_s,
+    })
+}
+
+/// Reduces one wheel on the CPU: table-4 indices and energy maps, or why the
+/// wheel is rejected (the engines reduce whole runs: `crate::engine`).
+pub fn wheel_indices(
+    s: &WheelSeries,
+) -> Result<(WheelIndices, EnergyMaps, CleaningReport), String> {
+    let p = prepare_wheel(s)?;
+    let mut batch = ReduceBatch::default();
+    batch.push_wheel(&p.samples);
+    let sums = merge(&batch, &telemetry_reduce(&batch));
+    let k = finish_wheel(&sums[0], &batch.refs[0])?;
+    Ok((k, p.maps, p.report))
 }
 
 /// Vehicle indices; samples with a non-finite or out-of-range value are skipped.

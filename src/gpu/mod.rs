@@ -1,0 +1,131 @@
+//! The GPU engine's device side: a context built once (instance, adapter,
+//! device, queue, every kernel's pipeline and reusable buffers), and one host
+//! module per kernel in `shaders/`.
+
+mod error;
+pub mod telemetry_reduce;
+
+pub use error::GpuError;
+
+use std::time::Duration;
+
+/// Device, queue and pipelines, created once and shared by every run.
+pub struct GpuContext {
+    pub device: wgpu::Device,
+    pub queue: wgpu::Queue,
+    pub adapter: wgpu::AdapterInfo,
+    pub limits: wgpu::Limits,
+    pub(crate) telemetry_reduce: telemetry_reduce::TelemetryReduceKernel,
+}
+
+/// Where a kernel's GPU time went.
+#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize)]
+pub struct GpuTimings {
+    pub upload: Duration,
+    pub compute: Duration,
+    pub readback: Duration,
+}
+
+impl GpuTimings {
+    pub fn total(&self) -> Duration {
+        self.upload + self.compute + self.readback
+    }
+    pub fn add(&mut self, o: &GpuTimings) {
+        self.upload += o.upload;
+        self.compute += o.compute;
+        self.readback += o.readback;
+    }
+}
+
+impl GpuContext {
+    /// Opens the first adapter wgpu offers (a real GPU before a software
+    /// one; `WGPU_BACKEND` and `WGPU_ADAPTER_NAME` select), with its own limits.
+    pub fn new() -> Result<GpuContext, GpuError> {
+        pollster::block_on(Self::new_async())
+    }
+
+    async fn new_async() -> Result<GpuContext, GpuError> {
+        let instance =
+            wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
+        let adapter = match wgpu::util::initialize_adapter_from_env(&instance, None).await {
+            Ok(a) => a,
+            Err(_) => instance
+                .request_adapter(&wgpu::RequestAdapterOptions {
+                    power_preference: wgpu::PowerPreference::HighPerformance,
+                    force_fallback_adapter: false,
+                    compatible_surface: None,
+                    apply_limit_buckets: false,
+                })
+                .await
+                .map_err(|e| GpuError::NoAdapter(e.to_string()))?,
+        };
+        let info = adapter.get_info();
+        let limits = adapter.limits();
+        let (device, queue) = adapter
+            .request_device(&wgpu::DeviceDescriptor {
+                label: Some("tirewear"),
+                required_features: wgpu::Features::empty(),
+                required_limits: limits.clone(),
+                experimental_features: wgpu::ExperimentalFeatures::default(),
+                memory_hints: wgpu::MemoryHints::Performance,
+                trace: wgpu::Trace::Off,
+            })
+            .await
+            .map_err(|source| GpuError::Device {
+                adapter: info.name.clone(),
+                source,
+            })?;
+        let telemetry_reduce = telemetry_reduce::TelemetryReduceKernel::new(&device)?;
+        tracing::info!(
+            "GPU: {} ({:?}, {:?} backend, driver {})",
+            info.name,
+            info.device_type,
+            info.backend,
+            info.driver_info
+        );
+        Ok(GpuContext {
+            device,
+            queue,
+            adapter: info,
+            limits,
+            telemetry_reduce,
+        })
+    }
+
+    /// Blocks until the queue is idle.
+    pub(crate) fn wait(&self) -> Result<(), GpuError> {
+        self.device
+            .poll(wgpu::PollType::wait_indefinitely())
+            .map(|_| ())
+            .map_err(|e| GpuError::Poll(e.to_string()))
+    }
+
+    /// Reads a MAP_READ buffer's first `bytes` back.
+    pub(crate) fn read_back(&self, buffer: &wgpu::Buffer, bytes: u64) -> Result<Vec<u8>, GpuError> {
+        let slice = buffer.slice(..bytes);
+        let (tx, rx) = std::sync::mpsc::channel();
+        slice.map_async(wgpu::MapMode::Read, move |r| {
+            let _ = tx.send(r);
+        });
+        self.wait()?;
+        rx.recv()
+            .map_err(|e| GpuError::Map(e.to_string()))?
+            .map_err(|e| GpuError::Map(e.to_string()))?;
+        let out = slice
+            .get_mapped_range()
+            .map_err(|e| GpuError::Map(e.to_string()))?
+            .to_vec();
+        buffer.unmap();
+        Ok(out)
+    }
+
+    /// Workgroup grid for `n` workgroups: x up to the per-dimension limit, then y.
+    pub(crate) fn grid(&self, n: u32) -> (u32, u32) {
+        let max = self.limits.max_compute_workgroups_per_dimension.max(1);
+        if n <= max {
+            (n, 1)
+        } else {
+            (max, n.div_ceil(max))
+        }
+    }
+}

@@ -1,0 +1,222 @@
+//! Host side of `shaders/telemetry_reduce.wgsl`: pipeline built once,
+//! buffers grown on demand and reused, batches cut at chunk boundaries so no
+//! binding exceeds the device's limit, grids over 65 535 workgroups in 2-D.
+
+use super::{GpuContext, GpuError, GpuTimings};
+use crate::kpi::telemetry_reduce::{ReduceBatch, ReduceChunk, ReduceSample, SUMS};
+use std::sync::Mutex;
+use std::time::Instant;
+use wgpu::util::DeviceExt;
+
+struct Scratch {
+    samples: wgpu::Buffer,
+    chunks: wgpu::Buffer,
+    partials: wgpu::Buffer,
+    readback: wgpu::Buffer,
+}
+
+pub(crate) struct TelemetryReduceKernel {
+    pipeline: wgpu::ComputePipeline,
+    layout: wgpu::BindGroupLayout,
+    scratch: Mutex<Option<(u64, u64, Scratch)>>,
+}
+
+fn storage(
+    device: &wgpu::Device,
+    label: &str,
+    size: u64,
+    usage: wgpu::BufferUsages,
+) -> wgpu::Buffer {
+    device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some(label),
+        size: size.max(16),
+        usage,
+        mapped_at_creation: false,
+    })
+}
+
+impl TelemetryReduceKernel {
+    pub(crate) fn new(device: &wgpu::Device) -> Result<Self, GpuError> {
+        let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let module =
+            device.create_shader_module(wgpu::include_wgsl!("../../shaders/telemetry_reduce.wgsl"));
+        let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some("telemetry_reduce"),
+            layout: None,
+            module: &module,
+            entry_point: Some("main"),
+            compilation_options: Default::default(),
+            cache: None,
+        });
+        if let Some(e) = pollster::block_on(scope.pop()) {
+            return Err(GpuError::Validation {
+                kernel: "telemetry_reduce",
+                message: e.to_string(),
+            });
+        }
+        let layout = pipeline.get_bind_group_layout(0);
+        Ok(TelemetryReduceKernel {
+            pipeline,
+            layout,
+            scratch: Mutex::new(None),
+        })
+    }
+}
+
+impl GpuContext {
+    /// Largest number of samples one dispatch may bind.
+    fn max_samples_per_dispatch(&self) -> usize {
+        let limit = self
+            .limits
+            .max_storage_buffer_binding_size
+            .min(self.limits.max_buffer_size);
+        (limit as usize / size_of::<ReduceSample>()).max(crate::kpi::telemetry_reduce::CHUNK)
+    }
+
+    /// Every chunk's partial sums (f32 on the device, returned as f64) and the time split.
+    pub fn telemetry_reduce(
+        &self,
+        batch: &ReduceBatch,
+    ) -> Result<(Vec<[f64; SUMS]>, GpuTimings), GpuError> {
+        let mut out = Vec::with_capacity(batch.chunks.len());
+        let mut timings = GpuTimings::default();
+        let refs = self
+            .device
+            .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some("telemetry_reduce refs"),
+                contents: bytemuck::cast_slice(&batch.refs),
+                usage: wgpu::BufferUsages::STORAGE,
+            });
+        // Cut the batch at chunk boundaries so the sample binding stays in limits.
+        let max = self.max_samples_per_dispatch();
+        let mut first = 0;
+        while first < batch.chunks.len() {
+            let start = batch.chunks[first].start as usize;
+            let mut last = first;
+            while last < batch.chunks.len() {
+                let c = &batch.chunks[last];
+                if c.start as usize + c.count as usize - start > max {
+                    break;
+                }
+                last += 1;
+            }
+            let end = batch.chunks[last - 1].start as usize + batch.chunks[last - 1].count as usize;
+            let chunks: Vec<ReduceChunk> = batch.chunks[first..last]
+                .iter()
+                .map(|c| ReduceChunk {
+                    start: c.start - start as u32,
+                    ..*c
+                })
+                .collect();
+            let (p, t) = self.reduce_dispatch(&batch.samples[start..end], &chunks, &refs)?;
+            out.extend(p);
+            timings.add(&t);
+            first = last;
+        }
+        Ok((out, timings))
+    }
+
+    fn reduce_dispatch(
+        &self,
+        samples: &[ReduceSample],
+        chunks: &[ReduceChunk],
+        refs: &wgpu::Buffer,
+    ) -> Result<(Vec<[f64; SUMS]>, GpuTimings), GpuError> {
+        let k = &self.telemetry_reduce;
+        let sample_bytes = size_of_val(samples) as u64;
+        let chunk_bytes = size_of_val(chunks) as u64;
+        let partial_bytes = (chunks.len() * SUMS * 4) as u64;
+        let mut guard = k.scratch.lock().expect("scratch lock");
+        let fits = matches!(&*guard, Some((s, c, _)) if *s >= sample_bytes && *c >= chunk_bytes);
+        if !fits {
+            let (s, c) = (
+                sample_bytes.next_power_of_two(),
+                chunk_bytes.next_power_of_two(),
+            );
+            let p = c / size_of::<ReduceChunk>() as u64 * SUMS as u64 * 4;
+            use wgpu::BufferUsages as U;
+            *guard = Some((
+                s,
+                c,
+                Scratch {
+                    samples: storage(&self.device, "samples", s, U::STORAGE | U::COPY_DST),
+                    chunks: storage(&self.device, "chunks", c, U::STORAGE | U::COPY_DST),
+                    partials: storage(&self.device, "partials", p, U::STORAGE | U::COPY_SRC),
+                    readback: storage(&self.device, "readback", p, U::MAP_READ | U::COPY_DST),
+                },
+            ));
+        }
+        let sc = &guard.as_ref().expect("scratch").2;
+        let mut t = GpuTimings::default();
+        let t0 = Instant::now();
+        self.queue
+            .write_buffer(&sc.samples, 0, bytemuck::cast_slice(samples));
+        self.queue
+            .write_buffer(&sc.chunks, 0, bytemuck::cast_slice(chunks));
+        self.queue.submit([]);
+        self.wait()?;
+        t.upload = t0.elapsed();
+
+        fn bind(b: &wgpu::Buffer, size: u64) -> wgpu::BindingResource<'_> {
+            wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                buffer: b,
+                offset: 0,
+                size: wgpu::BufferSize::new(size.max(4)),
+            })
+        }
+        let group = self.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("telemetry_reduce"),
+            layout: &k.layout,
+            entries: &[
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: bind(&sc.samples, sample_bytes),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: bind(&sc.chunks, chunk_bytes),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 2,
+                    resource: refs.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 3,
+                    resource: bind(&sc.partials, partial_bytes),
+                },
+            ],
+        });
+        let t0 = Instant::now();
+        let scope = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let mut enc = self.device.create_command_encoder(&Default::default());
+        {
+            let mut pass = enc.begin_compute_pass(&Default::default());
+            pass.set_pipeline(&k.pipeline);
+            pass.set_bind_group(0, &group, &[]);
+            let (x, y) = self.grid(chunks.len() as u32);
+            pass.dispatch_workgroups(x, y, 1);
+        }
+        self.queue.submit([enc.finish()]);
+        self.wait()?;
+        if let Some(e) = pollster::block_on(scope.pop()) {
+            return Err(GpuError::Validation {
+                kernel: "telemetry_reduce",
+                message: e.to_string(),
+            });
+        }
+        t.compute = t0.elapsed();
+
+        let t0 = Instant::now();
+        let mut enc = self.device.create_command_encoder(&Default::default());
+        enc.copy_buffer_to_buffer(&sc.partials, 0, &sc.readback, 0, partial_bytes);
+        self.queue.submit([enc.finish()]);
+        let bytes = self.read_back(&sc.readback, partial_bytes)?;
+        let f: &[f32] = bytemuck::cast_slice(&bytes);
+        let out = f
+            .chunks_exact(SUMS)
+            .map(|c| std::array::from_fn(|m| c[m] as f64))
+            .collect();
+        t.readback = t0.elapsed();
+        Ok((out, t))
+    }
+}
