@@ -3,7 +3,8 @@
 //! (wgpu). Tests are written once against the trait and run for both.
 
 use crate::gpu::{GpuContext, GpuError, GpuTimings};
-use crate::kpi::telemetry_reduce::{ReduceBatch, SUMS, telemetry_reduce};
+use crate::kpi::telemetry::finish_wheel;
+use crate::kpi::telemetry_reduce::{ReduceBatch, SUMS, merge, telemetry_reduce};
 use std::sync::Mutex;
 
 /// A reduction engine.
@@ -84,4 +85,86 @@ pub fn gpu_for_tests(test: &str) -> Option<GpuEngine> {
             None
         }
     }
+}
+
+/// Tolerance of the GPU telemetry reduction against the CPU's f64: relative
+/// 1e-5 of each index, and for a mean of |mean| + standard deviation (a mean
+/// near zero, such as Fy's, is judged against its spread). Why: f32 rounds at
+/// 6e-8; a chunk's sum sees at most 8 sequential and 7 tree additions
+/// (≈ 1e-6 of Σ|terms|), chunks are merged in f64, and the per-sample slip
+/// v_x − ω·r loses a few ulps of v_x. Measured on the demo season: ≤ 1e-7,
+/// except Fy's mean (1e-5 of its value, 1e-8 of its spread).
+pub const TELEMETRY_TOLERANCE: f64 = 1e-5;
+
+/// Largest scaled difference between two engines on one batch, per index.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct Comparison {
+    /// (index name, largest scaled difference over the batch's wheels).
+    pub errors: Vec<(String, f64)>,
+    pub tolerance: f64,
+}
+
+impl Comparison {
+    pub fn worst(&self) -> (&str, f64) {
+        self.errors
+            .iter()
+            .max_by(|a, b| a.1.total_cmp(&b.1))
+            .map_or(("", 0.0), |(n, e)| (n.as_str(), *e))
+    }
+    pub fn passes(&self) -> bool {
+        self.worst().1 <= self.tolerance
+    }
+}
+
+/// Runs the telemetry reduction on both engines and compares the finished
+/// table-4 indices of every wheel (the one helper every parity test uses).
+pub fn compare_telemetry(
+    reference: &dyn ReduceEngine,
+    other: &dyn ReduceEngine,
+    batch: &ReduceBatch,
+) -> Result<Comparison, GpuError> {
+    let finish = |e: &dyn ReduceEngine| -> Result<Vec<serde_json::Value>, GpuError> {
+        let sums = merge(batch, &e.telemetry_reduce(batch)?);
+        Ok(sums
+            .iter()
+            .zip(&batch.refs)
+            .map(|(s, r)| {
+                finish_wheel(s, r).map_or(serde_json::Value::Null, |k| {
+                    serde_json::to_value(k).expect("indices")
+                })
+            })
+            .collect())
+    };
+    let (a, b) = (finish(reference)?, finish(other)?);
+    let mut errors: Vec<(String, f64)> = Vec::new();
+    for (x, y) in a.iter().zip(&b) {
+        let (Some(x), Some(y)) = (x.as_object(), y.as_object()) else {
+            continue;
+        };
+        for (name, v) in x {
+            let (v, w) = (
+                v.as_f64().unwrap_or(f64::NAN),
+                y[name].as_f64().unwrap_or(f64::NAN),
+            );
+            let spread = x
+                .get(&name.replace("_avg_", "_std_"))
+                .filter(|_| name.contains("_avg_"))
+                .and_then(|s| s.as_f64())
+                .unwrap_or(0.0);
+            let scale = v.abs() + spread;
+            let e = if scale > 0.0 {
+                (v - w).abs() / scale
+            } else {
+                (v - w).abs()
+            };
+            match errors.iter_mut().find(|(n, _)| n == name) {
+                Some(slot) => slot.1 = slot.1.max(e),
+                None => errors.push((name.clone(), e)),
+            }
+        }
+    }
+    Ok(Comparison {
+        errors,
+        tolerance: TELEMETRY_TOLERANCE,
+    })
 }

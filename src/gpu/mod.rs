@@ -16,6 +16,9 @@ pub struct GpuContext {
     pub adapter: wgpu::AdapterInfo,
     pub limits: wgpu::Limits,
     pub(crate) telemetry_reduce: telemetry_reduce::TelemetryReduceKernel,
+    /// Test overrides: samples per dispatch and workgroups per grid dimension.
+    dispatch_samples: Option<usize>,
+    grid_dim: Option<u32>,
 }
 
 /// Where a kernel's GPU time went.
@@ -89,6 +92,8 @@ impl GpuContext {
             adapter: info,
             limits,
             telemetry_reduce,
+            dispatch_samples: None,
+            grid_dim: None,
         })
     }
 
@@ -119,9 +124,23 @@ impl GpuContext {
         Ok(out)
     }
 
+    /// Lowers the batch-splitting and grid limits below the device's, so tests
+    /// reach the multi-dispatch and 2-D grid paths with small inputs.
+    pub fn set_test_limits(&mut self, dispatch_samples: usize, workgroups_per_dimension: u32) {
+        self.dispatch_samples = Some(dispatch_samples);
+        self.grid_dim = Some(workgroups_per_dimension);
+    }
+
+    pub(crate) fn dispatch_samples_override(&self) -> Option<usize> {
+        self.dispatch_samples
+    }
+
     /// Workgroup grid for `n` workgroups: x up to the per-dimension limit, then y.
     pub(crate) fn grid(&self, n: u32) -> (u32, u32) {
-        let max = self.limits.max_compute_workgroups_per_dimension.max(1);
+        let max = self
+            .grid_dim
+            .unwrap_or(self.limits.max_compute_workgroups_per_dimension)
+            .max(1);
         if n <= max {
             (n, 1)
         } else {

@@ -3,7 +3,7 @@
 //! binding exceeds the device's limit, grids over 65 535 workgroups in 2-D.
 
 use super::{GpuContext, GpuError, GpuTimings};
-use crate::kpi::telemetry_reduce::{ReduceBatch, ReduceChunk, ReduceSample, SUMS};
+use crate::kpi::telemetry_reduce::{CHUNK, ReduceBatch, ReduceChunk, ReduceSample, SUMS};
 use std::sync::Mutex;
 use std::time::Instant;
 use wgpu::util::DeviceExt;
@@ -70,7 +70,9 @@ impl GpuContext {
             .limits
             .max_storage_buffer_binding_size
             .min(self.limits.max_buffer_size);
-        (limit as usize / size_of::<ReduceSample>()).max(crate::kpi::telemetry_reduce::CHUNK)
+        let device = (limit as usize / size_of::<ReduceSample>()).max(CHUNK);
+        self.dispatch_samples_override()
+            .map_or(device, |o| o.clamp(CHUNK, device))
     }
 
     /// Every chunk's partial sums (f32 on the device, returned as f64) and the time split.

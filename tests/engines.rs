@@ -1,0 +1,204 @@
+//! The reduction engines, tested once against the `ReduceEngine` trait and
+//! run for the CPU engine and (when this machine has an adapter; always in
+//! CI, on Mesa's lavapipe) the GPU engine:
+//! - a constant-slip run by hand;
+//! - a full-length run (1 h at 1 kHz, 3.6 M samples) against the CPU's f64
+//!   result within the stated tolerance;
+//! - the multi-dispatch and 2-D grid paths, reached by lowering the limits;
+//! - `extract --engine gpu` on the demo season equals `--engine cpu`.
+
+use tirewear::engine::{
+    CpuEngine, ReduceEngine, TELEMETRY_TOLERANCE, compare_telemetry, gpu_for_tests,
+};
+use tirewear::kpi::table::read_parquet;
+use tirewear::kpi::telemetry::finish_wheel;
+use tirewear::kpi::telemetry_reduce::{ReduceBatch, ReduceSample, merge};
+use tirewear::kpi::{Engine, ExtractOptions, KpiRow, extract};
+
+/// Every engine this machine has, with the tolerance its results are held to
+/// against exact values: the CPU works in f64, the GPU in f32.
+fn engines(test: &str) -> Vec<(Box<dyn ReduceEngine>, f64)> {
+    let mut v: Vec<(Box<dyn ReduceEngine>, f64)> = vec![(Box::new(CpuEngine), 1e-9)];
+    if let Some(g) = gpu_for_tests(test) {
+        v.push((Box::new(g), TELEMETRY_TOLERANCE));
+    }
+    v
+}
+
+fn sample(dt: f64) -> ReduceSample {
+    let (dt, dt_lo) = ReduceSample::split_dt(dt);
+    ReduceSample {
+        dt,
+        dt_lo,
+        ..Default::default()
+    }
+}
+
+#[test]
+fn constant_slip_by_hand_on_every_engine() {
+    // v_sx = 50.5 − 100·0.5 = 0.5 m/s, v_sy = 1 m/s, Fx = −2000 N, Fy = −3000 N:
+    // P_x = 1000 W, P_y = 3000 W over 60 000 samples of 1 ms = 60 s.
+    let s = ReduceSample {
+        vx: 50.5,
+        vy: 1.0,
+        omega: 100.0,
+        radius: 0.5,
+        fx: -2000.0,
+        fy: -3000.0,
+        fz: 4000.0,
+        t_surface: 85.0,
+        t_inner: 110.0,
+        pressure: 160_000.0,
+        camber: -2.5,
+        ..sample(0.001)
+    };
+    let mut batch = ReduceBatch::default();
+    batch.push_wheel(&vec![s; 60_000]);
+    for (e, tol) in engines("constant_slip_by_hand_on_every_engine") {
+        let sums = merge(&batch, &e.telemetry_reduce(&batch).unwrap());
+        let k = finish_wheel(&sums[0], &batch.refs[0]).unwrap();
+        let close = |got: f64, want: f64, what: &str| {
+            assert!(
+                (got - want).abs() <= tol * want.abs().max(1.0),
+                "{} engine, {what}: {got} vs {want} (tolerance {tol:e})",
+                e.name()
+            );
+        };
+        close(k.duration_s, 60.0, "duration");
+        close(k.friction_energy_x_j, 60_000.0, "energy x");
+        close(k.friction_energy_y_j, 180_000.0, "energy y");
+        close(
+            k.sliding_distance_m,
+            1.25f64.sqrt() * 60.0,
+            "sliding distance",
+        );
+        close(k.contact_patch_mm2, 20_000.0, "contact patch");
+        close(k.t_surface_avg_c, 85.0, "surface temperature");
+        close(k.camber_avg_deg, -2.5, "camber");
+        assert_eq!(k.t_surface_std_c, 0.0, "{}", e.name());
+    }
+}
+
+/// A deterministic full-length run: 1 h at 1 kHz of smooth signals with
+/// sliding, load and temperature swings.
+fn full_length_run() -> Vec<ReduceSample> {
+    (0..3_600_000)
+        .map(|i| {
+            let t = i as f64 * 1e-3;
+            let vx = 45.0 + 20.0 * (0.05 * t).sin();
+            let slip = 0.03 * (1.3 * t).sin();
+            let radius = 0.33 + 0.002 * (0.7 * t).cos();
+            ReduceSample {
+                vx: vx as f32,
+                vy: (0.8 * (0.9 * t).sin()) as f32,
+                omega: (vx * (1.0 - slip) / radius) as f32,
+                radius: radius as f32,
+                fx: (3000.0 * (1.3 * t).sin()) as f32,
+                fy: (-4000.0 * (0.9 * t).sin()) as f32,
+                fz: (4000.0 + 1000.0 * (0.3 * t).sin()) as f32,
+                t_surface: (80.0 + 10.0 * (0.01 * t).sin()) as f32,
+                t_inner: (110.0 + 5.0 * (0.004 * t).sin()) as f32,
+                pressure: (160_000.0 + 5000.0 * (0.002 * t).sin()) as f32,
+                camber: (-2.0 + 0.5 * (0.3 * t).sin()) as f32,
+                ..sample(1e-3)
+            }
+        })
+        .collect()
+}
+
+#[test]
+fn full_length_run_matches_the_f64_reference() {
+    let mut batch = ReduceBatch::default();
+    batch.push_wheel(&full_length_run());
+    batch.push_wheel(&full_length_run()[..20_000]);
+    for (e, _) in engines("full_length_run_matches_the_f64_reference") {
+        let c = compare_telemetry(&CpuEngine, e.as_ref(), &batch).unwrap();
+        let (worst, err) = c.worst();
+        eprintln!(
+            "{} engine ({}): largest scaled difference {err:.2e} in {worst}",
+            e.name(),
+            e.device()
+        );
+        assert!(c.passes(), "{}: {:?}", e.name(), c.errors);
+        assert_eq!(c.errors.len(), 22, "every index compared");
+    }
+}
+
+#[test]
+fn gpu_splits_batches_and_spreads_grids_in_2d() {
+    let Some(mut g) = gpu_for_tests("gpu_splits_batches_and_spreads_grids_in_2d") else {
+        return;
+    };
+    // 3 wheels, 38 chunks; at most 5 chunks per dispatch and 3 workgroups per grid row.
+    let run = full_length_run();
+    let mut batch = ReduceBatch::default();
+    batch.push_wheel(&run[..15_000]);
+    batch.push_wheel(&run[100_000..111_000]);
+    batch.push_wheel(&run[200_000..212_000]);
+    assert_eq!(batch.chunks.len(), 15 + 11 + 12);
+    g.ctx.set_test_limits(5 * 1024, 3);
+    let c = compare_telemetry(&CpuEngine, &g as &dyn ReduceEngine, &batch).unwrap();
+    assert!(c.passes(), "{:?}", c.errors);
+}
+
+#[test]
+fn extract_on_gpu_equals_extract_on_cpu() {
+    if gpu_for_tests("extract_on_gpu_equals_extract_on_cpu").is_none() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    tirewear::sim::simulate(&tirewear::sim::SimOptions {
+        preset: tirewear::sim::Preset::Demo,
+        scale: 1.0,
+        seed: 7,
+        effects: vec![],
+        encoding: tirewear::ingest::telemetry::Encoding::Block,
+        rate_hz: Some(5.0),
+        out: dir.path().to_path_buf(),
+        sensor_noise: true,
+        progress: false,
+    })
+    .unwrap();
+    let tables: Vec<Vec<KpiRow>> = [Engine::Cpu, Engine::Gpu]
+        .into_iter()
+        .map(|engine| {
+            let out = dir.path().join(format!("{engine:?}.parquet"));
+            let s = extract(&ExtractOptions {
+                season: dir.path().to_path_buf(),
+                out: out.clone(),
+                csv: None,
+                engine,
+                progress: false,
+            })
+            .unwrap();
+            assert_eq!(s.engine, engine);
+            read_parquet(&out).unwrap()
+        })
+        .collect();
+    let (cpu, gpu) = (&tables[0], &tables[1]);
+    assert_eq!(cpu.len(), gpu.len());
+    assert!(cpu.len() >= 280);
+    let mut worst = (String::new(), 0.0f64);
+    for (c, g) in cpu.iter().zip(gpu) {
+        assert_eq!((&c.run, &c.wheel), (&g.run, &g.wheel));
+        for name in KpiRow::NUMBER_COLUMNS {
+            let (x, y) = (c.number(name).unwrap(), g.number(name).unwrap());
+            if x.is_nan() {
+                assert!(y.is_nan(), "{name}");
+                continue;
+            }
+            let spread = c
+                .number(&name.replace("_avg_", "_std_"))
+                .filter(|_| name.contains("_avg_"));
+            let e = (x - y).abs() / (x.abs() + spread.unwrap_or(0.0)).max(1e-12);
+            if e > worst.1 {
+                worst = (format!("{name} ({} {})", c.run, c.wheel), e);
+            }
+        }
+    }
+    eprintln!(
+        "GPU vs CPU on the demo season: largest scaled difference {:.2e} in {}",
+        worst.1, worst.0
+    );
+    assert!(worst.1 <= TELEMETRY_TOLERANCE, "{worst:?}");
+}
