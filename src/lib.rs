@@ -5,6 +5,7 @@
 //! known physics and planted effects. See `docs/` for formats and physics.
 
 pub mod atomic;
+pub mod bench;
 pub mod engine;
 pub mod gpu;
 pub mod ingest;

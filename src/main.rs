@@ -56,6 +56,24 @@ enum Command {
         #[arg(long, default_value = "predictions.csv")]
         out: PathBuf,
     },
+    /// Measure the engines: each kernel on the CPU (1 thread, all threads) and
+    /// the GPU (upload, compute, readback), against a plain memory pass over
+    /// the same buffer. Prints a table and saves it as JSON; run it on two
+    /// machines to compare them.
+    Bench {
+        /// Engines to measure: cpu, gpu, or all.
+        #[arg(long, value_enum, default_value = "all")]
+        engine: BenchEngine,
+        /// Small sizes (a quick check that everything runs).
+        #[arg(long)]
+        small: bool,
+        /// Repeats per measurement (the best is kept).
+        #[arg(long, default_value_t = 3)]
+        repeats: usize,
+        /// Where to save the results.
+        #[arg(long, default_value = "bench.json")]
+        out: PathBuf,
+    },
     /// Try tirewear: simulate the demo season, extract its KPI database and
     /// fit the three wear models.
     Demo {
@@ -103,6 +121,13 @@ struct FitArgs {
     /// Seed of the network's initial weights and its training/validation split.
     #[arg(long, default_value_t = 1)]
     seed: u64,
+}
+
+#[derive(Clone, Copy, PartialEq, clap::ValueEnum)]
+enum BenchEngine {
+    Cpu,
+    Gpu,
+    All,
 }
 
 #[derive(Clone, Copy, clap::ValueEnum)]
@@ -390,6 +415,25 @@ fn main() -> Result<()> {
             run_fit(&a.kpis, &methods, &settings, &a.out)?;
         }
         Command::Predict { model, kpis, out } => run_predict(&model, &kpis, &out)?,
+        Command::Bench {
+            engine,
+            small,
+            repeats,
+            out,
+        } => {
+            let r = tirewear::bench::run_bench(&tirewear::bench::BenchOptions {
+                small,
+                gpu: engine != BenchEngine::Cpu,
+                repeats,
+            });
+            print!("{}", tirewear::bench::render(&r));
+            if engine == BenchEngine::Gpu && r.gpu.is_none() {
+                anyhow::bail!("--engine gpu: no GPU adapter could be opened (see the note above)");
+            }
+            tirewear::atomic::write_bytes(&out, serde_json::to_string_pretty(&r)?.as_bytes())
+                .with_context(|| format!("writing {}", out.display()))?;
+            println!("wrote {}", out.display());
+        }
         Command::Demo { out, seed } => {
             let opts = SimOptions {
                 preset: Preset::Demo,

@@ -1,0 +1,47 @@
+//! Each GPU kernel against its CPU twin: the CPU engine on 1 thread and on
+//! all threads, the GPU engine (when an adapter opens), and a plain memory
+//! pass over the same buffer, over a size grid in samples per wheel.
+//!
+//! `cargo bench --bench kernels`; with TIREWEAR_BENCH_SMALL=1 the grid is one
+//! small size so CI can check the bench runs (`-- --test`).
+
+use criterion::{Criterion, Throughput, criterion_group, criterion_main};
+use tirewear::bench::{memory_pass, one_thread, telemetry_batch};
+use tirewear::engine::{CpuEngine, GpuEngine, ReduceEngine};
+
+fn bench(c: &mut Criterion) {
+    let small = std::env::var_os("TIREWEAR_BENCH_SMALL").is_some();
+    let sizes: &[usize] = if small {
+        &[1 << 12]
+    } else {
+        &[1 << 14, 1 << 18, 1 << 21]
+    };
+    let gpu = match GpuEngine::new() {
+        Ok(g) => Some(g),
+        Err(e) => {
+            eprintln!("kernels bench: GPU engine skipped: {e}");
+            None
+        }
+    };
+    for &n in sizes {
+        let batch = telemetry_batch(n);
+        let bytes: &[u8] = bytemuck::cast_slice(&batch.samples);
+        let mut g = c.benchmark_group(format!("telemetry_reduce/4x{n}"));
+        g.throughput(Throughput::Elements(batch.samples.len() as u64));
+        g.sample_size(10);
+        g.bench_function("memory_pass", |b| b.iter(|| memory_pass(bytes)));
+        g.bench_function("cpu_1_thread", |b| {
+            b.iter(|| one_thread(|| CpuEngine.telemetry_reduce(&batch).unwrap()))
+        });
+        g.bench_function("cpu_all_threads", |b| {
+            b.iter(|| CpuEngine.telemetry_reduce(&batch).unwrap())
+        });
+        if let Some(gpu) = &gpu {
+            g.bench_function("gpu", |b| b.iter(|| gpu.telemetry_reduce(&batch).unwrap()));
+        }
+        g.finish();
+    }
+}
+
+criterion_group!(benches, bench);
+criterion_main!(benches);

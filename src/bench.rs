@@ -1,0 +1,351 @@
+//! `tirewear bench`: the figures a user compares machines with, measured in
+//! one run: each kernel on the CPU engine (1 thread and all threads) and the
+//! GPU engine (upload, compute, readback apart), against a plain memory pass
+//! over the same buffer (the bandwidth reference). Best of a few repeats.
+
+use crate::engine::{CpuEngine, GpuEngine, ReduceEngine};
+use crate::ingest::road::Profile;
+use crate::kpi::energy_map::EnergyMaps;
+use crate::kpi::road::profile_indices;
+use crate::kpi::telemetry_reduce::{ReduceBatch, ReduceSample};
+use rayon::prelude::*;
+use std::fmt::Write;
+use std::time::{Duration, Instant};
+
+/// Settings of a bench run.
+#[derive(Debug, Clone)]
+pub struct BenchOptions {
+    /// Small sizes (for CI's check that the bench runs).
+    pub small: bool,
+    /// Run the GPU engine (skipped with a message when there is no adapter).
+    pub gpu: bool,
+    pub repeats: usize,
+}
+
+/// One measured line.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct BenchLine {
+    pub kernel: String,
+    pub size: String,
+    pub engine: String,
+    pub seconds: f64,
+    /// Items per second (samples or profiles).
+    pub items_per_s: f64,
+    pub unit: String,
+    /// Bytes of input per second.
+    pub gb_per_s: f64,
+    /// Time of the memory pass over the same bytes divided by this time.
+    pub vs_memory_pass: f64,
+    /// GPU only: upload / compute / readback seconds.
+    pub gpu_split_s: Option<[f64; 3]>,
+}
+
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct BenchReport {
+    pub cpu: String,
+    pub gpu: Option<String>,
+    pub threads: usize,
+    pub lines: Vec<BenchLine>,
+    pub notes: Vec<String>,
+}
+
+fn best<T>(repeats: usize, mut f: impl FnMut() -> T) -> (Duration, T) {
+    let mut out = None;
+    let mut best = Duration::MAX;
+    for _ in 0..repeats.max(1) {
+        let t = Instant::now();
+        let r = f();
+        best = best.min(t.elapsed());
+        out = Some(r);
+    }
+    (best, out.expect("one repeat"))
+}
+
+/// A plain pass over the bytes (sum of u32 words, all threads): the bandwidth reference.
+pub fn memory_pass(bytes: &[u8]) -> u64 {
+    let words: &[u32] = bytemuck::cast_slice(&bytes[..bytes.len() / 4 * 4]);
+    words
+        .par_chunks(1 << 16)
+        .map(|c| c.iter().map(|&w| w as u64).sum::<u64>())
+        .sum()
+}
+
+/// Four wheels of `samples` each, smooth signals (benchmarks only).
+pub fn telemetry_batch(samples: usize) -> ReduceBatch {
+    let mut b = ReduceBatch::default();
+    for w in 0..4 {
+        let wheel: Vec<ReduceSample> = (0..samples)
+            .map(|i| {
+                let t = i as f32 * 1e-3 + w as f32;
+                let (dt, dt_lo) = ReduceSample::split_dt(1e-3);
+                ReduceSample {
+                    vx: 45.0 + 20.0 * (0.05 * t).sin(),
+                    vy: 0.8 * (0.9 * t).sin(),
+                    omega: 130.0 + 60.0 * (0.05 * t).sin(),
+                    radius: 0.33,
+                    fx: 3000.0 * (1.3 * t).sin(),
+                    fy: -4000.0 * (0.9 * t).sin(),
+                    fz: 4000.0 + 1000.0 * (0.3 * t).sin(),
+                    t_surface: 80.0 + 10.0 * (0.01 * t).sin(),
+                    t_inner: 110.0,
+                    pressure: 160_000.0,
+                    camber: -2.0,
+                    dt,
+                    dt_lo,
+                }
+            })
+            .collect();
+        b.push_wheel(&wheel);
+    }
+    b
+}
+
+pub fn one_thread<T: Send>(f: impl FnOnce() -> T + Send) -> T {
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .expect("1-thread pool")
+        .install(f)
+}
+
+/// Runs the benchmarks.
+pub fn run_bench(o: &BenchOptions) -> BenchReport {
+    let threads = rayon::current_num_threads();
+    let mut report = BenchReport {
+        cpu: CpuEngine.device(),
+        gpu: None,
+        threads,
+        lines: Vec::new(),
+        notes: Vec::new(),
+    };
+    let gpu = if o.gpu {
+        match GpuEngine::new() {
+            Ok(g) => {
+                report.gpu = Some(g.device());
+                Some(g)
+            }
+            Err(e) => {
+                report.notes.push(format!("GPU engine skipped: {e}"));
+                None
+            }
+        }
+    } else {
+        None
+    };
+
+    // Telemetry reduction: 4 wheels × 1 h at 1 kHz (small: 4 × 2 min).
+    let per_wheel = if o.small { 120_000 } else { 3_600_000 };
+    let batch = telemetry_batch(per_wheel);
+    let bytes: &[u8] = bytemuck::cast_slice(&batch.samples);
+    let n = batch.samples.len() as f64;
+    let (mem, _) = best(o.repeats, || memory_pass(bytes));
+    let size = format!(
+        "4 × {per_wheel} samples ({:.0} MB)",
+        bytes.len() as f64 / 1e6
+    );
+    let mut line = |engine: &str,
+                    d: Duration,
+                    split: Option<[f64; 3]>,
+                    items: f64,
+                    unit: &str,
+                    nbytes: f64,
+                    kernel: &str,
+                    size: &str,
+                    mem: Duration| {
+        report.lines.push(BenchLine {
+            kernel: kernel.into(),
+            size: size.into(),
+            engine: engine.into(),
+            seconds: d.as_secs_f64(),
+            items_per_s: items / d.as_secs_f64(),
+            unit: unit.into(),
+            gb_per_s: nbytes / d.as_secs_f64() / 1e9,
+            vs_memory_pass: mem.as_secs_f64() / d.as_secs_f64(),
+            gpu_split_s: split,
+        })
+    };
+    let nb = bytes.len() as f64;
+    line(
+        "memory pass",
+        mem,
+        None,
+        n,
+        "samples/s",
+        nb,
+        "telemetry_reduce",
+        &size,
+        mem,
+    );
+    let (d, _) = best(o.repeats, || {
+        one_thread(|| CpuEngine.telemetry_reduce(&batch))
+    });
+    line(
+        "cpu, 1 thread",
+        d,
+        None,
+        n,
+        "samples/s",
+        nb,
+        "telemetry_reduce",
+        &size,
+        mem,
+    );
+    let (d, _) = best(o.repeats, || CpuEngine.telemetry_reduce(&batch));
+    line(
+        &format!("cpu, {threads} threads"),
+        d,
+        None,
+        n,
+        "samples/s",
+        nb,
+        "telemetry_reduce",
+        &size,
+        mem,
+    );
+    if let Some(g) = &gpu {
+        let _ = g.ctx.telemetry_reduce(&batch); // warm-up: buffers allocated once
+        let mut split = None;
+        let (d, _) = best(o.repeats, || {
+            if let Ok((_, t)) = g.ctx.telemetry_reduce(&batch) {
+                split = Some([
+                    t.upload.as_secs_f64(),
+                    t.compute.as_secs_f64(),
+                    t.readback.as_secs_f64(),
+                ]);
+            }
+        });
+        line(
+            "gpu",
+            d,
+            split,
+            n,
+            "samples/s",
+            nb,
+            "telemetry_reduce",
+            &size,
+            mem,
+        );
+    }
+
+    // Energy maps (CPU binning; the GPU kernel is still to come).
+    let samples = &batch.samples;
+    let (d, _) = best(o.repeats, || {
+        samples
+            .par_chunks(1 << 16)
+            .map(|c| {
+                let mut m = EnergyMaps::new();
+                for p in c {
+                    let v_sx = p.vx as f64 - p.omega as f64 * p.radius as f64;
+                    let power = -(p.fx as f64) * v_sx - p.fy as f64 * p.vy as f64;
+                    m.add(
+                        p.t_surface as f64,
+                        p.t_inner as f64,
+                        v_sx.hypot(p.vy as f64),
+                        power * 1e-3,
+                    );
+                }
+                m.total()
+            })
+            .sum::<f64>()
+    });
+    line(
+        &format!("cpu, {threads} threads"),
+        d,
+        None,
+        n,
+        "samples/s",
+        nb,
+        "energy_map",
+        &size,
+        mem,
+    );
+
+    // Roughness: one profile's moments, Gaussian split, Welch PSD and HDC.
+    for log2 in [14u32, 18] {
+        let len = 1usize << log2;
+        let count = if o.small {
+            2
+        } else if log2 == 14 {
+            64
+        } else {
+            4
+        };
+        let profiles: Vec<Profile> = (0..count)
+            .map(|k| Profile {
+                track: "bench".into(),
+                location: format!("L{k}"),
+                x0_mm: 0.0,
+                dx_mm: 0.01,
+                z_mm: (0..len)
+                    .map(|i| {
+                        let x = i as f64 * 0.01;
+                        (x * 0.7 + k as f64).sin()
+                            + 0.3 * (x * 13.0).sin()
+                            + 0.05 * (x * 171.0).cos()
+                    })
+                    .collect(),
+            })
+            .collect();
+        let pbytes = (count * len * 8) as f64;
+        let all: Vec<u8> = profiles
+            .iter()
+            .flat_map(|p| bytemuck::cast_slice::<f64, u8>(&p.z_mm).to_vec())
+            .collect();
+        let (pmem, _) = best(o.repeats, || memory_pass(&all));
+        let size = format!("{count} × 2^{log2} samples");
+        let (d, _) = best(o.repeats, || {
+            profiles
+                .par_iter()
+                .map(|p| profile_indices(p).0.rq_mm)
+                .sum::<f64>()
+        });
+        line(
+            &format!("cpu, {threads} threads"),
+            d,
+            None,
+            count as f64,
+            "profiles/s",
+            pbytes,
+            "roughness",
+            &size,
+            pmem,
+        );
+    }
+    if gpu.is_some() {
+        report.notes.push("energy_map and roughness run on the CPU engine only so far (GPU kernels: issue 4, open)".into());
+    }
+    report
+}
+
+/// The report as a table.
+pub fn render(r: &BenchReport) -> String {
+    let mut s = String::new();
+    let _ = writeln!(s, "CPU: {} threads", r.threads);
+    let _ = writeln!(s, "GPU: {}", r.gpu.as_deref().unwrap_or("none"));
+    let _ = writeln!(
+        s,
+        "{:<17} {:<28} {:<14} {:>10} {:>14} {:>9} {:>8}  gpu upload/compute/readback",
+        "kernel", "size", "engine", "time ms", "rate", "GB/s", "vs mem"
+    );
+    for l in &r.lines {
+        let split = l.gpu_split_s.map_or(String::new(), |[u, c, b]| {
+            format!("{:.1} / {:.1} / {:.1} ms", u * 1e3, c * 1e3, b * 1e3)
+        });
+        let _ = writeln!(
+            s,
+            "{:<17} {:<28} {:<14} {:>10.2} {:>10.3e} {:>3} {:>9.2} {:>8.2}  {split}",
+            l.kernel,
+            l.size,
+            l.engine,
+            l.seconds * 1e3,
+            l.items_per_s,
+            if l.unit == "samples/s" { "S/s" } else { "P/s" },
+            l.gb_per_s,
+            l.vs_memory_pass
+        );
+    }
+    for n in &r.notes {
+        let _ = writeln!(s, "note: {n}");
+    }
+    s
+}
