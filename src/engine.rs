@@ -3,6 +3,7 @@
 //! (wgpu). Tests are written once against the trait and run for both.
 
 use crate::gpu::{GpuContext, GpuError, GpuTimings};
+use crate::kpi::energy_map_kernel::{energy_map, merge_maps};
 use crate::kpi::telemetry::finish_wheel;
 use crate::kpi::telemetry_reduce::{ReduceBatch, SUMS, merge, telemetry_reduce};
 use std::sync::Mutex;
@@ -16,6 +17,9 @@ pub trait ReduceEngine: Send + Sync {
     /// Every chunk's partial sums of the telemetry reduction
     /// (`shaders/telemetry_reduce.wgsl`); merge with `telemetry_reduce::merge`.
     fn telemetry_reduce(&self, batch: &ReduceBatch) -> Result<Vec<[f64; SUMS]>, GpuError>;
+    /// Every chunk's partial energy map (`shaders/energy_map.wgsl`); merge
+    /// with `energy_map_kernel::merge_maps`.
+    fn energy_map(&self, batch: &ReduceBatch) -> Result<Vec<Vec<f64>>, GpuError>;
 }
 
 /// The CPU engine: the shaders' Rust twins in f64, parallel over chunks.
@@ -30,6 +34,9 @@ impl ReduceEngine for CpuEngine {
     }
     fn telemetry_reduce(&self, batch: &ReduceBatch) -> Result<Vec<[f64; SUMS]>, GpuError> {
         Ok(telemetry_reduce(batch))
+    }
+    fn energy_map(&self, batch: &ReduceBatch) -> Result<Vec<Vec<f64>>, GpuError> {
+        Ok(energy_map(batch))
     }
 }
 
@@ -66,6 +73,11 @@ impl ReduceEngine for GpuEngine {
     }
     fn telemetry_reduce(&self, batch: &ReduceBatch) -> Result<Vec<[f64; SUMS]>, GpuError> {
         let (p, t) = self.ctx.telemetry_reduce(batch)?;
+        self.timings.lock().expect("timings lock").add(&t);
+        Ok(p)
+    }
+    fn energy_map(&self, batch: &ReduceBatch) -> Result<Vec<Vec<f64>>, GpuError> {
+        let (p, t) = self.ctx.energy_map(batch)?;
         self.timings.lock().expect("timings lock").add(&t);
         Ok(p)
     }
@@ -167,4 +179,37 @@ pub fn compare_telemetry(
         errors,
         tolerance: TELEMETRY_TOLERANCE,
     })
+}
+
+/// Tolerance of the GPU energy maps against the CPU's, per wheel: the summed
+/// |difference| over all bins at most 1e-4 of the summed |energy|. Why: bin
+/// sums are f32 over ≤ 1024 samples in sample order (≈ 1e-6), and a sample
+/// whose sliding speed or temperature lies within f32 rounding (~1e-6) of a
+/// bin edge may fall in the neighbouring bin on one side only; such samples
+/// are rare, each moves one sample's energy.
+pub const ENERGY_MAP_TOLERANCE: f64 = 1e-4;
+
+/// Largest per-wheel L1 difference of the maps, relative to the wheel's summed |energy|.
+pub fn compare_energy_maps(
+    reference: &dyn ReduceEngine,
+    other: &dyn ReduceEngine,
+    batch: &ReduceBatch,
+) -> Result<f64, GpuError> {
+    let a = merge_maps(batch, &reference.energy_map(batch)?);
+    let b = merge_maps(batch, &other.energy_map(batch)?);
+    let mut worst = 0.0f64;
+    for (x, y) in a.iter().zip(&b) {
+        let bins = |m: &crate::kpi::energy_map::EnergyMaps| -> Vec<f64> {
+            m.surface_inner
+                .iter()
+                .chain(&m.speed_surface)
+                .copied()
+                .collect()
+        };
+        let (x, y) = (bins(x), bins(y));
+        let scale: f64 = x.iter().map(|v| v.abs()).sum();
+        let diff: f64 = x.iter().zip(&y).map(|(u, v)| (u - v).abs()).sum();
+        worst = worst.max(if scale > 0.0 { diff / scale } else { diff });
+    }
+    Ok(worst)
 }

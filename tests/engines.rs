@@ -1,15 +1,17 @@
 //! The reduction engines, tested once against the `ReduceEngine` trait and
 //! run for the CPU engine and (when this machine has an adapter; always in
 //! CI, on Mesa's lavapipe) the GPU engine:
-//! - a constant-slip run by hand;
+//! - a constant-slip run and two-bin energy maps by hand;
 //! - a full-length run (1 h at 1 kHz, 3.6 M samples) against the CPU's f64
-//!   result within the stated tolerance;
+//!   result within the stated tolerances (indices and energy maps);
 //! - the multi-dispatch and 2-D grid paths, reached by lowering the limits;
 //! - `extract --engine gpu` on the demo season equals `--engine cpu`.
 
 use tirewear::engine::{
-    CpuEngine, ReduceEngine, TELEMETRY_TOLERANCE, compare_telemetry, gpu_for_tests,
+    CpuEngine, ENERGY_MAP_TOLERANCE, ReduceEngine, TELEMETRY_TOLERANCE, compare_energy_maps,
+    compare_telemetry, gpu_for_tests,
 };
+use tirewear::kpi::energy_map_kernel::merge_maps;
 use tirewear::kpi::table::read_parquet;
 use tirewear::kpi::telemetry::finish_wheel;
 use tirewear::kpi::telemetry_reduce::{ReduceBatch, ReduceSample, merge};
@@ -121,6 +123,51 @@ fn full_length_run_matches_the_f64_reference() {
         );
         assert!(c.passes(), "{}: {:?}", e.name(), c.errors);
         assert_eq!(c.errors.len(), 22, "every index compared");
+        let m = compare_energy_maps(&CpuEngine, e.as_ref(), &batch).unwrap();
+        eprintln!(
+            "{} engine: energy maps differ by {m:.2e} of the energy",
+            e.name()
+        );
+        assert!(m <= ENERGY_MAP_TOLERANCE, "{}: {m}", e.name());
+    }
+}
+
+#[test]
+fn energy_maps_by_hand_on_every_engine() {
+    // 1500 samples at T_s 82 °C, T_i 101 °C, v_s 0.5 m/s, P = 1000 W and
+    // 700 at T_s 19 (first bin), T_i 170 (last), v_s 12 m/s (last), P = 300 W; 10 ms each.
+    let a = ReduceSample {
+        vx: 50.5,
+        omega: 100.0,
+        radius: 0.5,
+        fx: -2000.0,
+        t_surface: 82.0,
+        t_inner: 101.0,
+        ..sample(0.01)
+    };
+    let b = ReduceSample {
+        vx: 0.0,
+        omega: 0.0,
+        fx: 0.0,
+        vy: 12.0,
+        fy: -25.0,
+        t_surface: 19.0,
+        t_inner: 170.0,
+        ..a
+    };
+    let mut wheel = vec![a; 1500];
+    wheel.extend(vec![b; 700]);
+    let mut batch = ReduceBatch::default();
+    batch.push_wheel(&wheel);
+    let (ea, eb) = (1000.0 * 0.01 * 1500.0, 300.0 * 0.01 * 700.0);
+    for (e, tol) in engines("energy_maps_by_hand_on_every_engine") {
+        let m = &merge_maps(&batch, &e.energy_map(&batch).unwrap())[0];
+        let close = |got: f64, want: f64| (got - want).abs() <= tol * want;
+        assert!(close(m.surface_inner[12 * 24 + 12], ea), "{}", e.name());
+        assert!(close(m.speed_surface[24 + 12], ea), "{}", e.name());
+        assert!(close(m.surface_inner[23], eb), "{}", e.name());
+        assert!(close(m.speed_surface[19 * 24], eb), "{}", e.name());
+        assert!(close(m.total(), ea + eb), "{}", e.name());
     }
 }
 
@@ -139,6 +186,8 @@ fn gpu_splits_batches_and_spreads_grids_in_2d() {
     g.ctx.set_test_limits(5 * 1024, 3);
     let c = compare_telemetry(&CpuEngine, &g as &dyn ReduceEngine, &batch).unwrap();
     assert!(c.passes(), "{:?}", c.errors);
+    let m = compare_energy_maps(&CpuEngine, &g as &dyn ReduceEngine, &batch).unwrap();
+    assert!(m <= ENERGY_MAP_TOLERANCE, "{m}");
 }
 
 #[test]

@@ -2,8 +2,8 @@
 //! device, queue, every kernel's pipeline and reusable buffers), and one host
 //! module per kernel in `shaders/`.
 
+mod chunk_kernel;
 mod error;
-pub mod telemetry_reduce;
 
 pub use error::GpuError;
 
@@ -15,7 +15,8 @@ pub struct GpuContext {
     pub queue: wgpu::Queue,
     pub adapter: wgpu::AdapterInfo,
     pub limits: wgpu::Limits,
-    pub(crate) telemetry_reduce: telemetry_reduce::TelemetryReduceKernel,
+    telemetry_reduce: chunk_kernel::ChunkKernel,
+    energy_map: chunk_kernel::ChunkKernel,
     /// Test overrides: samples per dispatch and workgroups per grid dimension.
     dispatch_samples: Option<usize>,
     grid_dim: Option<u32>,
@@ -78,7 +79,20 @@ impl GpuContext {
                 adapter: info.name.clone(),
                 source,
             })?;
-        let telemetry_reduce = telemetry_reduce::TelemetryReduceKernel::new(&device)?;
+        let telemetry_reduce = chunk_kernel::ChunkKernel::new(
+            &device,
+            "telemetry_reduce",
+            wgpu::include_wgsl!("../../shaders/telemetry_reduce.wgsl"),
+            crate::kpi::telemetry_reduce::SUMS,
+            true,
+        )?;
+        let energy_map = chunk_kernel::ChunkKernel::new(
+            &device,
+            "energy_map",
+            wgpu::include_wgsl!("../../shaders/energy_map.wgsl"),
+            crate::kpi::energy_map_kernel::BINS,
+            false,
+        )?;
         tracing::info!(
             "GPU: {} ({:?}, {:?} backend, driver {})",
             info.name,
@@ -92,6 +106,7 @@ impl GpuContext {
             adapter: info,
             limits,
             telemetry_reduce,
+            energy_map,
             dispatch_samples: None,
             grid_dim: None,
         })

@@ -7,6 +7,7 @@
 //! - `kpis.report.json`: what was skipped and why, cleaning counts, timings.
 
 use super::energy_map::{EnergyMaps, SLIDING_SPEED_BINS, T_INNER_BINS, T_SURFACE_BINS};
+use super::energy_map_kernel::merge_maps;
 use super::road::{RoadCurves, RoadIndices, mean_indices, profile_indices};
 use super::table::{KpiRow, write_batch, write_csv, write_parquet};
 use super::telemetry::{CleaningReport, finish_wheel, prepare_wheel, vehicle_indices};
@@ -203,8 +204,12 @@ fn run_rows(
         .telemetry_reduce(&batch)
         .map_err(|e| format!("{}: {} engine: {e}", path.display(), engine.name()))?;
     let sums = merge(&batch, &partials);
-    for (i, (w, p)) in Wheel::ALL.into_iter().zip(prepared).enumerate() {
-        let (maps, rep) = (p.maps, p.report);
+    let maps = engine
+        .energy_map(&batch)
+        .map_err(|e| format!("{}: {} engine: {e}", path.display(), engine.name()))?;
+    let maps = merge_maps(&batch, &maps);
+    for (i, ((w, p), maps)) in Wheel::ALL.into_iter().zip(prepared).zip(maps).enumerate() {
+        let rep = p.report;
         let k = finish_wheel(&sums[i], &batch.refs[i])
             .map_err(|e| format!("{}: topic {}: {e}", path.display(), w.topic()))?;
         let sliding_speed = k.sliding_distance_m / k.duration_s;

@@ -3,6 +3,7 @@
 //! plus the mean wear. Formulas and units: docs/kpis.md.
 
 pub mod energy_map;
+pub mod energy_map_kernel;
 pub mod extract;
 pub mod road;
 pub mod table;

@@ -15,6 +15,7 @@
 //!   80 % of its samples are valid, or it lasts less than 10 s.
 
 use super::energy_map::EnergyMaps;
+use super::energy_map_kernel::{energy_map, merge_maps};
 use super::telemetry_reduce::{
     ReduceBatch, ReduceRef, ReduceSample, SUMS, Sum, merge, moments, telemetry_reduce,
 };
@@ -178,15 +179,14 @@ fn clean(
     out
 }
 
-/// A wheel cleaned and ready for the reduction: its kept samples as the
-/// engines take them, its energy maps (binned on the CPU) and the cleaning report.
+/// A wheel cleaned and ready for the engines: its kept samples as the
+/// kernels take them, and the cleaning report.
 pub struct PreparedWheel {
     pub samples: Vec<ReduceSample>,
-    pub maps: EnergyMaps,
     pub report: CleaningReport,
 }
 
-/// Cleans one wheel (the rule above) and bins its friction energy.
+/// Cleans one wheel (the rule above).
 pub fn prepare_wheel(s: &WheelSeries) -> Result<PreparedWheel, String> {
     let mut report = CleaningReport::default();
     if s.is_empty() {
@@ -223,11 +223,10 @@ pub fn prepare_wheel(s: &WheelSeries) -> Result<PreparedWheel, String> {
             report.kept, report.samples, report.time_backwards
         ));
     }
-    let mut maps = EnergyMaps::new();
     let mut samples = Vec::with_capacity(kept.len());
     for &(i, dt) in &kept {
         let (dt_hi, dt_lo) = ReduceSample::split_dt(dt);
-        let p = ReduceSample {
+        samples.push(ReduceSample {
             vx: s.vx_mps[i],
             vy: s.vy_mps[i],
             omega: s.omega_radps[i],
@@ -241,24 +240,9 @@ pub fn prepare_wheel(s: &WheelSeries) -> Result<PreparedWheel, String> {
             camber: s.camber_deg[i],
             dt: dt_hi,
             dt_lo,
-        };
-        // The same per-sample terms as the reduction (eqs. 21–24), for the maps.
-        let v_sx = p.vx as f64 - p.omega as f64 * p.radius as f64;
-        let v_sy = p.vy as f64;
-        let power = -(p.fx as f64) * v_sx - p.fy as f64 * v_sy;
-        maps.add(
-            p.t_surface as f64,
-            p.t_inner as f64,
-            v_sx.hypot(v_sy),
-            power * dt,
-        );
-        samples.push(p);
+        });
     }
-    Ok(PreparedWheel {
-        samples,
-        maps,
-        report,
-    })
+    Ok(PreparedWheel { samples, report })
 }
 
 /// Table 4 indices from a wheel's merged sums.
@@ -306,7 +290,8 @@ pub fn wheel_indices(
     batch.push_wheel(&p.samples);
     let sums = merge(&batch, &telemetry_reduce(&batch));
     let k = finish_wheel(&sums[0], &batch.refs[0])?;
-    Ok((k, p.maps, p.report))
+    let maps = merge_maps(&batch, &energy_map(&batch)).remove(0);
+    Ok((k, maps, p.report))
 }
 
 /// Vehicle indices; samples with a non-finite or out-of-range value are skipped.

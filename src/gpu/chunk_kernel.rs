@@ -1,8 +1,11 @@
-//! Host side of `shaders/telemetry_reduce.wgsl`: pipeline built once,
+//! Host side of the chunk kernels (`shaders/telemetry_reduce.wgsl`,
+//! `shaders/energy_map.wgsl`): one workgroup per chunk of one wheel, one
+//! partial result of fixed length per chunk. Pipelines are built once,
 //! buffers grown on demand and reused, batches cut at chunk boundaries so no
 //! binding exceeds the device's limit, grids over 65 535 workgroups in 2-D.
 
 use super::{GpuContext, GpuError, GpuTimings};
+use crate::kpi::energy_map_kernel::BINS;
 use crate::kpi::telemetry_reduce::{CHUNK, ReduceBatch, ReduceChunk, ReduceSample, SUMS};
 use std::sync::Mutex;
 use std::time::Instant;
@@ -15,7 +18,12 @@ struct Scratch {
     readback: wgpu::Buffer,
 }
 
-pub(crate) struct TelemetryReduceKernel {
+pub(crate) struct ChunkKernel {
+    name: &'static str,
+    /// f32 values each workgroup writes.
+    outputs_per_chunk: usize,
+    /// Whether binding 2 is the per-wheel reference buffer (then partials are binding 3).
+    uses_refs: bool,
     pipeline: wgpu::ComputePipeline,
     layout: wgpu::BindGroupLayout,
     scratch: Mutex<Option<(u64, u64, Scratch)>>,
@@ -35,13 +43,18 @@ fn storage(
     })
 }
 
-impl TelemetryReduceKernel {
-    pub(crate) fn new(device: &wgpu::Device) -> Result<Self, GpuError> {
+impl ChunkKernel {
+    pub(crate) fn new(
+        device: &wgpu::Device,
+        name: &'static str,
+        source: wgpu::ShaderModuleDescriptor,
+        outputs_per_chunk: usize,
+        uses_refs: bool,
+    ) -> Result<Self, GpuError> {
         let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
-        let module =
-            device.create_shader_module(wgpu::include_wgsl!("../../shaders/telemetry_reduce.wgsl"));
+        let module = device.create_shader_module(source);
         let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-            label: Some("telemetry_reduce"),
+            label: Some(name),
             layout: None,
             module: &module,
             entry_point: Some("main"),
@@ -50,12 +63,15 @@ impl TelemetryReduceKernel {
         });
         if let Some(e) = pollster::block_on(scope.pop()) {
             return Err(GpuError::Validation {
-                kernel: "telemetry_reduce",
+                kernel: name,
                 message: e.to_string(),
             });
         }
         let layout = pipeline.get_bind_group_layout(0);
-        Ok(TelemetryReduceKernel {
+        Ok(ChunkKernel {
+            name,
+            outputs_per_chunk,
+            uses_refs,
             pipeline,
             layout,
             scratch: Mutex::new(None),
@@ -75,17 +91,41 @@ impl GpuContext {
             .map_or(device, |o| o.clamp(CHUNK, device))
     }
 
-    /// Every chunk's partial sums (f32 on the device, returned as f64) and the time split.
+    /// Every chunk's partial sums of the telemetry reduction (f32 on the
+    /// device, returned as f64) and the time split.
     pub fn telemetry_reduce(
         &self,
         batch: &ReduceBatch,
     ) -> Result<(Vec<[f64; SUMS]>, GpuTimings), GpuError> {
-        let mut out = Vec::with_capacity(batch.chunks.len());
+        let (flat, t) = self.run_chunks(&self.telemetry_reduce, batch)?;
+        let sums = flat
+            .chunks_exact(SUMS)
+            .map(|c| std::array::from_fn(|m| c[m] as f64))
+            .collect();
+        Ok((sums, t))
+    }
+
+    /// Every chunk's partial energy map (`energy_map_kernel::BINS` values) and the time split.
+    pub fn energy_map(&self, batch: &ReduceBatch) -> Result<(Vec<Vec<f64>>, GpuTimings), GpuError> {
+        let (flat, t) = self.run_chunks(&self.energy_map, batch)?;
+        let maps = flat
+            .chunks_exact(BINS)
+            .map(|c| c.iter().map(|&v| v as f64).collect())
+            .collect();
+        Ok((maps, t))
+    }
+
+    fn run_chunks(
+        &self,
+        k: &ChunkKernel,
+        batch: &ReduceBatch,
+    ) -> Result<(Vec<f32>, GpuTimings), GpuError> {
+        let mut out = Vec::with_capacity(batch.chunks.len() * k.outputs_per_chunk);
         let mut timings = GpuTimings::default();
         let refs = self
             .device
             .create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some("telemetry_reduce refs"),
+                label: Some("refs"),
                 contents: bytemuck::cast_slice(&batch.refs),
                 usage: wgpu::BufferUsages::STORAGE,
             });
@@ -110,7 +150,7 @@ impl GpuContext {
                     ..*c
                 })
                 .collect();
-            let (p, t) = self.reduce_dispatch(&batch.samples[start..end], &chunks, &refs)?;
+            let (p, t) = self.dispatch(k, &batch.samples[start..end], &chunks, &refs)?;
             out.extend(p);
             timings.add(&t);
             first = last;
@@ -118,16 +158,16 @@ impl GpuContext {
         Ok((out, timings))
     }
 
-    fn reduce_dispatch(
+    fn dispatch(
         &self,
+        k: &ChunkKernel,
         samples: &[ReduceSample],
         chunks: &[ReduceChunk],
         refs: &wgpu::Buffer,
-    ) -> Result<(Vec<[f64; SUMS]>, GpuTimings), GpuError> {
-        let k = &self.telemetry_reduce;
+    ) -> Result<(Vec<f32>, GpuTimings), GpuError> {
         let sample_bytes = size_of_val(samples) as u64;
         let chunk_bytes = size_of_val(chunks) as u64;
-        let partial_bytes = (chunks.len() * SUMS * 4) as u64;
+        let partial_bytes = (chunks.len() * k.outputs_per_chunk * 4) as u64;
         let mut guard = k.scratch.lock().expect("scratch lock");
         let fits = matches!(&*guard, Some((s, c, _)) if *s >= sample_bytes && *c >= chunk_bytes);
         if !fits {
@@ -135,7 +175,7 @@ impl GpuContext {
                 sample_bytes.next_power_of_two(),
                 chunk_bytes.next_power_of_two(),
             );
-            let p = c / size_of::<ReduceChunk>() as u64 * SUMS as u64 * 4;
+            let p = c / size_of::<ReduceChunk>() as u64 * k.outputs_per_chunk as u64 * 4;
             use wgpu::BufferUsages as U;
             *guard = Some((
                 s,
@@ -166,27 +206,30 @@ impl GpuContext {
                 size: wgpu::BufferSize::new(size.max(4)),
             })
         }
+        let mut entries = vec![
+            wgpu::BindGroupEntry {
+                binding: 0,
+                resource: bind(&sc.samples, sample_bytes),
+            },
+            wgpu::BindGroupEntry {
+                binding: 1,
+                resource: bind(&sc.chunks, chunk_bytes),
+            },
+        ];
+        if k.uses_refs {
+            entries.push(wgpu::BindGroupEntry {
+                binding: 2,
+                resource: refs.as_entire_binding(),
+            });
+        }
+        entries.push(wgpu::BindGroupEntry {
+            binding: entries.len() as u32,
+            resource: bind(&sc.partials, partial_bytes),
+        });
         let group = self.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("telemetry_reduce"),
+            label: Some(k.name),
             layout: &k.layout,
-            entries: &[
-                wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: bind(&sc.samples, sample_bytes),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 1,
-                    resource: bind(&sc.chunks, chunk_bytes),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 2,
-                    resource: refs.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 3,
-                    resource: bind(&sc.partials, partial_bytes),
-                },
-            ],
+            entries: &entries,
         });
         let t0 = Instant::now();
         let scope = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
@@ -202,7 +245,7 @@ impl GpuContext {
         self.wait()?;
         if let Some(e) = pollster::block_on(scope.pop()) {
             return Err(GpuError::Validation {
-                kernel: "telemetry_reduce",
+                kernel: k.name,
                 message: e.to_string(),
             });
         }
@@ -213,11 +256,7 @@ impl GpuContext {
         enc.copy_buffer_to_buffer(&sc.partials, 0, &sc.readback, 0, partial_bytes);
         self.queue.submit([enc.finish()]);
         let bytes = self.read_back(&sc.readback, partial_bytes)?;
-        let f: &[f32] = bytemuck::cast_slice(&bytes);
-        let out = f
-            .chunks_exact(SUMS)
-            .map(|c| std::array::from_fn(|m| c[m] as f64))
-            .collect();
+        let out = bytemuck::cast_slice::<u8, f32>(&bytes).to_vec();
         t.readback = t0.elapsed();
         Ok((out, t))
     }
