@@ -40,6 +40,19 @@ fn bench(c: &mut Criterion) {
             g.bench_function("gpu", |b| b.iter(|| gpu.telemetry_reduce(&batch).unwrap()));
         }
         g.finish();
+        let mut g = c.benchmark_group(format!("energy_map/4x{n}"));
+        g.throughput(Throughput::Elements(batch.samples.len() as u64));
+        g.sample_size(10);
+        g.bench_function("cpu_1_thread", |b| {
+            b.iter(|| one_thread(|| CpuEngine.energy_map(&batch).unwrap()))
+        });
+        g.bench_function("cpu_all_threads", |b| {
+            b.iter(|| CpuEngine.energy_map(&batch).unwrap())
+        });
+        if let Some(gpu) = &gpu {
+            g.bench_function("gpu", |b| b.iter(|| gpu.energy_map(&batch).unwrap()));
+        }
+        g.finish();
     }
 }
 
