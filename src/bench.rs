@@ -5,7 +5,8 @@
 
 use crate::engine::{CpuEngine, GpuEngine, ReduceEngine};
 use crate::ingest::road::Profile;
-use crate::kpi::road::profile_indices;
+use crate::kpi::road::spectral;
+use crate::kpi::roughness_batch::batches;
 use crate::kpi::telemetry_reduce::{ReduceBatch, ReduceSample};
 use rayon::prelude::*;
 use std::fmt::Write;
@@ -295,61 +296,113 @@ pub fn run_bench(o: &BenchOptions) -> BenchReport {
         );
     }
 
-    // Roughness: one profile's moments, Gaussian split, Welch PSD and HDC.
+    // Roughness: moments, Welch PSD and HDC per profile (the engines' part).
     for log2 in [14u32, 18] {
         let len = 1usize << log2;
-        let count = if o.small {
-            2
-        } else if log2 == 14 {
-            64
-        } else {
-            4
+        let count = match (o.small, log2) {
+            (true, _) => 2,
+            (false, 14) => 256,
+            _ => 16,
         };
-        let profiles: Vec<Profile> = (0..count)
-            .map(|k| Profile {
-                track: "bench".into(),
-                location: format!("L{k}"),
-                x0_mm: 0.0,
-                dx_mm: 0.01,
-                z_mm: (0..len)
+        let heights: Vec<Vec<f64>> = (0..count)
+            .map(|k| {
+                (0..len)
                     .map(|i| {
                         let x = i as f64 * 0.01;
                         (x * 0.7 + k as f64).sin()
                             + 0.3 * (x * 13.0).sin()
                             + 0.05 * (x * 171.0).cos()
                     })
-                    .collect(),
+                    .collect()
             })
             .collect();
-        let pbytes = (count * len * 8) as f64;
-        let all: Vec<u8> = profiles
+        let refs: Vec<(&[f64], f64)> = heights.iter().map(|z| (z.as_slice(), 0.01)).collect();
+        let groups = batches(&refs);
+        // The kernels read f32 heights: the reference pass reads the same bytes.
+        let bytes: Vec<u8> = groups
             .iter()
-            .flat_map(|p| bytemuck::cast_slice::<f64, u8>(&p.z_mm).to_vec())
+            .flat_map(|(_, b)| bytemuck::cast_slice::<f32, u8>(&b.heights).to_vec())
             .collect();
-        let (pmem, _) = best(o.repeats, || memory_pass(&all));
+        let nb = bytes.len() as f64;
+        let (pmem, _) = best(o.repeats, || memory_pass(&bytes));
         let size = format!("{count} × 2^{log2} samples");
-        let (d, _) = best(o.repeats, || {
-            profiles
-                .par_iter()
-                .map(|p| profile_indices(p).0.rq_mm)
-                .sum::<f64>()
-        });
+        let items = count as f64;
         line(
-            &format!("cpu, {threads} threads"),
-            d,
+            "memory pass",
+            pmem,
             None,
-            count as f64,
+            items,
             "profiles/s",
-            pbytes,
+            nb,
             "roughness",
             &size,
             pmem,
         );
-    }
-    if gpu.is_some() {
-        report.notes.push(
-            "roughness runs on the CPU engine only so far (its GPU kernel: issue 4, open)".into(),
+        let profiles: Vec<Profile> = heights
+            .iter()
+            .map(|z| Profile {
+                track: "bench".into(),
+                location: String::new(),
+                x0_mm: 0.0,
+                dx_mm: 0.01,
+                z_mm: z.clone(),
+            })
+            .collect();
+        let (d, _) = best(o.repeats, || {
+            profiles
+                .par_iter()
+                .map(|p| spectral(p).moments.1)
+                .sum::<f64>()
+        });
+        line(
+            &format!("cpu realfft, {threads} thr"),
+            d,
+            None,
+            items,
+            "profiles/s",
+            nb,
+            "roughness",
+            &size,
+            pmem,
         );
+        let (d, _) = best(o.repeats, || {
+            groups
+                .iter()
+                .map(|(_, b)| CpuEngine.roughness(b).map(|r| r.len()).unwrap_or(0))
+                .sum::<usize>()
+        });
+        line(
+            &format!("cpu twins, {threads} thr"),
+            d,
+            None,
+            items,
+            "profiles/s",
+            nb,
+            "roughness",
+            &size,
+            pmem,
+        );
+        if let Some(g) = &gpu
+            && let Some((d, split)) = gpu_best(o.repeats, &mut report.notes, || {
+                let mut total = crate::gpu::GpuTimings::default();
+                for (_, b) in &groups {
+                    total.add(&g.ctx.roughness(b)?.1);
+                }
+                Ok(total)
+            })
+        {
+            line(
+                "gpu",
+                d,
+                Some(split),
+                items,
+                "profiles/s",
+                nb,
+                "roughness",
+                &size,
+                pmem,
+            );
+        }
     }
     report
 }
@@ -361,7 +414,7 @@ pub fn render(r: &BenchReport) -> String {
     let _ = writeln!(s, "GPU: {}", r.gpu.as_deref().unwrap_or("none"));
     let _ = writeln!(
         s,
-        "{:<17} {:<28} {:<14} {:>10} {:>14} {:>9} {:>8}  gpu upload/compute/readback",
+        "{:<17} {:<28} {:<20} {:>10} {:>14} {:>9} {:>8}  gpu upload/compute/readback",
         "kernel", "size", "engine", "time ms", "rate", "GB/s", "vs mem"
     );
     for l in &r.lines {
@@ -370,7 +423,7 @@ pub fn render(r: &BenchReport) -> String {
         });
         let _ = writeln!(
             s,
-            "{:<17} {:<28} {:<14} {:>10.2} {:>10.3e} {:>3} {:>9.2} {:>8.2}  {split}",
+            "{:<17} {:<28} {:<20} {:>10.2} {:>10.3e} {:>3} {:>9.2} {:>8.2}  {split}",
             l.kernel,
             l.size,
             l.engine,

@@ -4,6 +4,7 @@
 
 use crate::gpu::{GpuContext, GpuError, GpuTimings};
 use crate::kpi::energy_map_kernel::{energy_map, merge_maps};
+use crate::kpi::roughness_batch::{RoughnessBatch, Spectral, cpu_twins};
 use crate::kpi::telemetry::finish_wheel;
 use crate::kpi::telemetry_reduce::{ReduceBatch, SUMS, merge, telemetry_reduce};
 use std::sync::Mutex;
@@ -20,6 +21,9 @@ pub trait ReduceEngine: Send + Sync {
     /// Every chunk's partial energy map (`shaders/energy_map.wgsl`); merge
     /// with `energy_map_kernel::merge_maps`.
     fn energy_map(&self, batch: &ReduceBatch) -> Result<Vec<Vec<f64>>, GpuError>;
+    /// Height moments, HDC and Welch PSD of every profile (the roughness
+    /// kernels); finish with `road::profile_indices_from`.
+    fn roughness(&self, batch: &RoughnessBatch) -> Result<Vec<Spectral>, GpuError>;
 }
 
 /// The CPU engine: the shaders' Rust twins in f64, parallel over chunks.
@@ -37,6 +41,9 @@ impl ReduceEngine for CpuEngine {
     }
     fn energy_map(&self, batch: &ReduceBatch) -> Result<Vec<Vec<f64>>, GpuError> {
         Ok(energy_map(batch))
+    }
+    fn roughness(&self, batch: &RoughnessBatch) -> Result<Vec<Spectral>, GpuError> {
+        Ok(cpu_twins(batch))
     }
 }
 
@@ -78,6 +85,11 @@ impl ReduceEngine for GpuEngine {
     }
     fn energy_map(&self, batch: &ReduceBatch) -> Result<Vec<Vec<f64>>, GpuError> {
         let (p, t) = self.ctx.energy_map(batch)?;
+        self.timings.lock().expect("timings lock").add(&t);
+        Ok(p)
+    }
+    fn roughness(&self, batch: &RoughnessBatch) -> Result<Vec<Spectral>, GpuError> {
+        let (p, t) = self.ctx.roughness(batch)?;
         self.timings.lock().expect("timings lock").add(&t);
         Ok(p)
     }

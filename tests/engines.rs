@@ -251,3 +251,89 @@ fn extract_on_gpu_equals_extract_on_cpu() {
     );
     assert!(worst.1 <= TELEMETRY_TOLERANCE, "{worst:?}");
 }
+
+/// Simulated road profiles as the simulator writes them (self-affine,
+/// skewed), rounded to f32 so both routes see the same heights.
+fn road_profiles() -> Vec<Vec<f64>> {
+    use rand::SeedableRng;
+    use tirewear::sim::road::{Amplitudes, gaussian_profile, shape_heights};
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
+    let tracks = tirewear::sim::preset::track_catalogue();
+    [(0usize, 1usize << 14), (3, 20_000), (5, 1 << 17)]
+        .iter()
+        .map(|&(t, n)| {
+            let road = &tracks[t].road;
+            let mut z = gaussian_profile(road, n, 0.01, Amplitudes::Random, &mut rng);
+            shape_heights(&mut z, road);
+            z.iter().map(|&v| v as f32 as f64).collect()
+        })
+        .collect()
+}
+
+/// GPU roughness tolerances against the CPU's f64: moments and HDC 1e-5
+/// relative (skewness 1e-5 absolute): f32 sums over ≤ 1024 samples merged in
+/// f64. PSD: 1e-5 relative per log band (48 bands) inside the Hurst band
+/// (0.1–5 mm), where H is fitted — an f32 FFT of 4096 points has a noise
+/// floor near 1e-14 of the spectrum's peak power, which the band clears by
+/// orders of magnitude; above the simulator's cut-off wavenumber the spectrum
+/// is that floor on both sides and is not compared.
+const ROUGHNESS_TOLERANCE: (f64, f64) = (1e-5, 1e-5);
+
+#[test]
+fn roughness_on_every_engine_matches_the_f64_road_functions() {
+    use tirewear::kpi::road::{HURST_BAND_MM, hdc, height_moments, hurst_from_psd, log_bin, psd};
+    let profiles = road_profiles();
+    let mut batch = tirewear::kpi::roughness_batch::RoughnessBatch::default();
+    for z in &profiles {
+        batch.push(z, 0.01);
+    }
+    let band = (
+        std::f64::consts::TAU / HURST_BAND_MM.1,
+        std::f64::consts::TAU / HURST_BAND_MM.0,
+    );
+    for (e, tol) in engines("roughness_on_every_engine_matches_the_f64_road_functions") {
+        let (tol_sums, tol_psd) = if e.name() == "cpu" {
+            (tol, tol)
+        } else {
+            ROUGHNESS_TOLERANCE
+        };
+        let out = e.roughness(&batch).unwrap();
+        let (mut worst_m, mut worst_h, mut worst_p, mut worst_hurst) =
+            (0.0f64, 0.0f64, 0.0f64, 0.0f64);
+        for (o, z) in out.iter().zip(&profiles) {
+            let m = height_moments(z);
+            worst_m = worst_m
+                .max((o.moments.0 - m.0).abs() / m.0)
+                .max((o.moments.1 - m.1).abs() / m.1)
+                .max((o.moments.2 - m.2).abs())
+                .max((o.moments.3 - m.3).abs() / m.3);
+            let (_, h) = hdc(z, 0.01);
+            assert_eq!(o.hdc_c.len(), h.len());
+            for (a, b) in o.hdc_c.iter().zip(&h) {
+                worst_h = worst_h.max((a - b).abs() / b);
+            }
+            let (q, c) = psd(z, 0.01);
+            let (bq, want) = log_bin(&q, &c, 48);
+            let (_, got) = log_bin(&o.psd_q, &o.psd_c, 48);
+            for ((qb, a), b) in bq.iter().zip(&got).zip(&want) {
+                if *qb >= band.0 && *qb <= band.1 {
+                    worst_p = worst_p.max((a - b).abs() / b);
+                }
+            }
+            worst_hurst = worst_hurst
+                .max((hurst_from_psd(&o.psd_q, &o.psd_c) - hurst_from_psd(&q, &c)).abs());
+        }
+        eprintln!(
+            "{} engine: moments {worst_m:.2e}, HDC {worst_h:.2e}, PSD per log band {worst_p:.2e}, Hurst {worst_hurst:.1e}",
+            e.name()
+        );
+        // The CPU twins see f32-rounded means for Ra (≤ 1e-6, see roughness_batch).
+        assert!(
+            worst_m <= tol_sums.max(1e-6) && worst_h <= tol_sums,
+            "{}",
+            e.name()
+        );
+        assert!(worst_p <= tol_psd.max(1e-6), "{}", e.name());
+        assert!(worst_hurst <= 1e-4, "{}", e.name());
+    }
+}

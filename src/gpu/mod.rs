@@ -4,6 +4,7 @@
 
 mod chunk_kernel;
 mod error;
+mod roughness;
 
 pub use error::GpuError;
 
@@ -17,6 +18,7 @@ pub struct GpuContext {
     pub limits: wgpu::Limits,
     telemetry_reduce: chunk_kernel::ChunkKernel,
     energy_map: chunk_kernel::ChunkKernel,
+    roughness: roughness::RoughnessKernels,
     /// Test overrides: samples per dispatch and workgroups per grid dimension.
     dispatch_samples: Option<usize>,
     grid_dim: Option<u32>,
@@ -93,6 +95,7 @@ impl GpuContext {
             crate::kpi::energy_map_kernel::BINS,
             false,
         )?;
+        let roughness = roughness::RoughnessKernels::new(&device)?;
         tracing::info!(
             "GPU: {} ({:?}, {:?} backend, driver {})",
             info.name,
@@ -107,6 +110,7 @@ impl GpuContext {
             limits,
             telemetry_reduce,
             energy_map,
+            roughness,
             dispatch_samples: None,
             grid_dim: None,
         })

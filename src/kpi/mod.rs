@@ -5,7 +5,13 @@
 pub mod energy_map;
 pub mod energy_map_kernel;
 pub mod extract;
+pub mod fft_pass;
 pub mod road;
+pub mod roughness_batch;
+pub mod roughness_hdc;
+pub mod roughness_moments;
+pub mod roughness_psd;
+pub mod roughness_window;
 pub mod table;
 pub mod telemetry;
 pub mod telemetry_reduce;

@@ -1,6 +1,7 @@
 //! Road roughness indices (paper table 3) of one profile, and their mean
 //! over a track's measurement locations. Formulas and units: docs/kpis.md.
 
+use super::roughness_batch::Spectral;
 use crate::ingest::road::Profile;
 use realfft::RealFftPlanner;
 
@@ -114,7 +115,20 @@ pub fn psd(z: &[f64], dx_mm: f64) -> (Vec<f64>, Vec<f64>) {
 /// Height-difference correlation `C(Δ) = ⟨(z(x+Δ) − z(x))²⟩` (mm²) at
 /// log-spaced integer lags from 1 sample to a quarter of the profile.
 pub fn hdc(z: &[f64], dx_mm: f64) -> (Vec<f64>, Vec<f64>) {
-    let max_lag = (z.len() / 4).max(2);
+    let lags = hdc_lags(z.len());
+    let c = lags
+        .iter()
+        .map(|&k| {
+            z.windows(k + 1).map(|w| (w[k] - w[0]).powi(2)).sum::<f64>() / (z.len() - k) as f64
+        })
+        .collect();
+    (lags.iter().map(|&k| k as f64 * dx_mm).collect(), c)
+}
+
+/// The HDC's lags (samples) for a profile of `n` samples: [`HDC_LAGS`]
+/// log-spaced integers from 1 to n/4, duplicates dropped.
+pub fn hdc_lags(n: usize) -> Vec<usize> {
+    let max_lag = (n / 4).max(2);
     let mut lags: Vec<usize> = (0..HDC_LAGS)
         .map(|i| {
             (max_lag as f64)
@@ -123,13 +137,7 @@ pub fn hdc(z: &[f64], dx_mm: f64) -> (Vec<f64>, Vec<f64>) {
         })
         .collect();
     lags.dedup();
-    let c = lags
-        .iter()
-        .map(|&k| {
-            z.windows(k + 1).map(|w| (w[k] - w[0]).powi(2)).sum::<f64>() / (z.len() - k) as f64
-        })
-        .collect();
-    (lags.iter().map(|&k| k as f64 * dx_mm).collect(), c)
+    lags
 }
 
 /// Least-squares slope of log y against log x over points with x in [lo, hi].
@@ -222,13 +230,33 @@ pub struct RoadCurves {
 
 /// All indices and curves of one profile.
 pub fn profile_indices(p: &Profile) -> (RoadIndices, RoadCurves) {
+    profile_indices_from(p, spectral(p))
+}
+
+/// The engine part of a profile's indices on the CPU (f64): height moments,
+/// Welch PSD and HDC — what the GPU engine's roughness kernels compute.
+pub fn spectral(p: &Profile) -> Spectral {
+    let (psd_q, psd_c) = psd(&p.z_mm, p.dx_mm);
+    let (hdc_lag_mm, hdc_c) = hdc(&p.z_mm, p.dx_mm);
+    Spectral {
+        moments: height_moments(&p.z_mm),
+        psd_q,
+        psd_c,
+        hdc_lag_mm,
+        hdc_c,
+    }
+}
+
+/// A profile's indices and curves from the engine part; the ISO 16610-21
+/// split, λa and the Hurst fits are computed here, on the CPU.
+pub fn profile_indices_from(p: &Profile, s: Spectral) -> (RoadIndices, RoadCurves) {
     let z = &p.z_mm;
     let dx = p.dx_mm;
-    let (ra, rq, sk, ku) = height_moments(z);
+    let (ra, rq, sk, ku) = s.moments;
     let low = gaussian_lowpass(z, dx, MACRO_MICRO_CUTOFF_MM);
     let high: Vec<f64> = z.iter().zip(&low).map(|(a, b)| a - b).collect();
-    let (q, c) = psd(z, dx);
-    let (lag, h) = hdc(z, dx);
+    let (q, c) = (s.psd_q, s.psd_c);
+    let (lag, h) = (s.hdc_lag_mm, s.hdc_c);
     let idx = RoadIndices {
         macro_wavelength_mm: average_wavelength(&low, dx),
         micro_wavelength_mm: average_wavelength(&high, dx),
