@@ -56,5 +56,40 @@ fn bench(c: &mut Criterion) {
     }
 }
 
-criterion_group!(benches, bench);
+/// Roughness (moments, HDC, Welch PSD) of profiles of 2^14 and 2^18 samples.
+fn roughness(c: &mut Criterion) {
+    let small = std::env::var_os("TIREWEAR_BENCH_SMALL").is_some();
+    let sizes: &[(u32, usize)] = if small {
+        &[(13, 2)]
+    } else {
+        &[(14, 64), (18, 4)]
+    };
+    let gpu = GpuEngine::new().ok();
+    for &(log2, count) in sizes {
+        let heights: Vec<Vec<f64>> = (0..count)
+            .map(|k| {
+                (0..1usize << log2)
+                    .map(|i| (i as f64 * 0.007 + k as f64).sin() + 0.1 * (i as f64 * 0.31).cos())
+                    .collect()
+            })
+            .collect();
+        let refs: Vec<(&[f64], f64)> = heights.iter().map(|z| (z.as_slice(), 0.01)).collect();
+        let batch = &tirewear::kpi::roughness_batch::batches(&refs)[0].1;
+        let mut g = c.benchmark_group(format!("roughness/{count}x2^{log2}"));
+        g.throughput(Throughput::Elements(count as u64));
+        g.sample_size(10);
+        g.bench_function("cpu_1_thread", |b| {
+            b.iter(|| one_thread(|| CpuEngine.roughness(batch).unwrap()))
+        });
+        g.bench_function("cpu_all_threads", |b| {
+            b.iter(|| CpuEngine.roughness(batch).unwrap())
+        });
+        if let Some(gpu) = &gpu {
+            g.bench_function("gpu", |b| b.iter(|| gpu.roughness(batch).unwrap()));
+        }
+        g.finish();
+    }
+}
+
+criterion_group!(benches, bench, roughness);
 criterion_main!(benches);

@@ -225,3 +225,46 @@ pub fn compare_energy_maps(
     }
     Ok(worst)
 }
+
+/// Tolerances of the GPU roughness against the CPU's f64: (moments and HDC,
+/// PSD per log band in the Hurst band). Moments and HDC: f32 sums over ≤ 1024
+/// samples merged in f64 (skewness compared absolutely, being near 0). PSD:
+/// 48 log bands inside 0.1–5 mm, where H is fitted; an f32 FFT of 4096 points
+/// has a noise floor near 1e-14 of the peak power, far below the band, and
+/// the spectrum above a profile's own cut-off is that floor on both sides.
+pub const ROUGHNESS_TOLERANCE: (f64, f64) = (1e-5, 1e-5);
+
+/// Largest differences between two engines' roughness on one batch:
+/// (moments, HDC, PSD per log band in the Hurst band), each relative.
+pub fn compare_roughness(
+    reference: &dyn ReduceEngine,
+    other: &dyn ReduceEngine,
+    batch: &RoughnessBatch,
+) -> Result<(f64, f64, f64), GpuError> {
+    use crate::kpi::road::{HURST_BAND_MM, log_bin};
+    let (a, b) = (reference.roughness(batch)?, other.roughness(batch)?);
+    let band = (
+        std::f64::consts::TAU / HURST_BAND_MM.1,
+        std::f64::consts::TAU / HURST_BAND_MM.0,
+    );
+    let (mut m, mut h, mut p) = (0.0f64, 0.0f64, 0.0f64);
+    for (x, y) in a.iter().zip(&b) {
+        let rel = |u: f64, v: f64| (u - v).abs() / u.abs().max(1e-300);
+        m = m
+            .max(rel(x.moments.0, y.moments.0))
+            .max(rel(x.moments.1, y.moments.1))
+            .max((x.moments.2 - y.moments.2).abs())
+            .max(rel(x.moments.3, y.moments.3));
+        for (u, v) in x.hdc_c.iter().zip(&y.hdc_c) {
+            h = h.max(rel(*u, *v));
+        }
+        let (bq, bx) = log_bin(&x.psd_q, &x.psd_c, 48);
+        let (_, by) = log_bin(&y.psd_q, &y.psd_c, 48);
+        for ((q, u), v) in bq.iter().zip(&bx).zip(&by) {
+            if *q >= band.0 && *q <= band.1 {
+                p = p.max(rel(*u, *v));
+            }
+        }
+    }
+    Ok((m, h, p))
+}

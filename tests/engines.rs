@@ -8,8 +8,8 @@
 //! - `extract --engine gpu` on the demo season equals `--engine cpu`.
 
 use tirewear::engine::{
-    CpuEngine, ENERGY_MAP_TOLERANCE, ReduceEngine, TELEMETRY_TOLERANCE, compare_energy_maps,
-    compare_telemetry, gpu_for_tests,
+    CpuEngine, ENERGY_MAP_TOLERANCE, ROUGHNESS_TOLERANCE, ReduceEngine, TELEMETRY_TOLERANCE,
+    compare_energy_maps, compare_roughness, compare_telemetry, gpu_for_tests,
 };
 use tirewear::kpi::energy_map_kernel::merge_maps;
 use tirewear::kpi::table::read_parquet;
@@ -270,15 +270,6 @@ fn road_profiles() -> Vec<Vec<f64>> {
         .collect()
 }
 
-/// GPU roughness tolerances against the CPU's f64: moments and HDC 1e-5
-/// relative (skewness 1e-5 absolute): f32 sums over ≤ 1024 samples merged in
-/// f64. PSD: 1e-5 relative per log band (48 bands) inside the Hurst band
-/// (0.1–5 mm), where H is fitted — an f32 FFT of 4096 points has a noise
-/// floor near 1e-14 of the spectrum's peak power, which the band clears by
-/// orders of magnitude; above the simulator's cut-off wavenumber the spectrum
-/// is that floor on both sides and is not compared.
-const ROUGHNESS_TOLERANCE: (f64, f64) = (1e-5, 1e-5);
-
 #[test]
 fn roughness_on_every_engine_matches_the_f64_road_functions() {
     use tirewear::kpi::road::{HURST_BAND_MM, hdc, height_moments, hurst_from_psd, log_bin, psd};
@@ -336,4 +327,22 @@ fn roughness_on_every_engine_matches_the_f64_road_functions() {
         assert!(worst_p <= tol_psd.max(1e-6), "{}", e.name());
         assert!(worst_hurst <= 1e-4, "{}", e.name());
     }
+}
+
+#[test]
+fn gpu_roughness_within_tolerance_of_the_cpu_twins() {
+    let Some(g) = gpu_for_tests("gpu_roughness_within_tolerance_of_the_cpu_twins") else {
+        return;
+    };
+    let profiles = road_profiles();
+    let refs: Vec<(&[f64], f64)> = profiles.iter().map(|z| (z.as_slice(), 0.01)).collect();
+    let groups = tirewear::kpi::roughness_batch::batches(&refs);
+    assert_eq!(groups.len(), 1);
+    let (m, h, p) = compare_roughness(&CpuEngine, &g, &groups[0].1).unwrap();
+    eprintln!("GPU vs CPU twins: moments {m:.2e}, HDC {h:.2e}, PSD per band {p:.2e}");
+    let (tol_sums, tol_psd) = ROUGHNESS_TOLERANCE;
+    assert!(
+        m <= tol_sums && h <= tol_sums && p <= tol_psd,
+        "{m} {h} {p}"
+    );
 }
