@@ -226,6 +226,15 @@ fn run_extract(opts: &tirewear::kpi::ExtractOptions) -> Result<tirewear::kpi::Ex
         100.0 * s.decode_seconds / (s.decode_seconds + s.reduce_seconds),
         100.0 * s.reduce_seconds / (s.decode_seconds + s.reduce_seconds)
     );
+    println!("engine device: {}", s.device);
+    if let Some(t) = s.gpu_timings {
+        println!(
+            "GPU time: upload {:.0} ms, compute {:.0} ms, readback {:.0} ms",
+            t.upload.as_secs_f64() * 1e3,
+            t.compute.as_secs_f64() * 1e3,
+            t.readback.as_secs_f64() * 1e3
+        );
+    }
     for k in &s.skipped {
         println!("skipped run {}: {}", k.run, k.reason);
     }
