@@ -7,6 +7,7 @@
 pub mod atomic;
 pub mod bench;
 pub mod engine;
+pub mod gap;
 pub mod gpu;
 pub mod ingest;
 pub mod kpi;

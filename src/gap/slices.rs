@@ -1,0 +1,188 @@
+//! Step 1 of the diagnosis, where the gap lies: the residual (measured −
+//! baseline) sliced by the categorical columns, by wear level and by the
+//! quartile bands of every KPI, singly and in pairs. Each slice is tested
+//! against the rest with Welch's t-test; Benjamini–Hochberg controls the false
+//! discovery rate over all distinct slices tested (slices with the same rows
+//! are one test under several names); survivors are ranked by the part of the
+//! total squared gap their offset accounts for, n·mean²/Σr².
+
+use super::stats::{benjamini_hochberg, welch};
+use crate::kpi::KpiRow;
+use crate::model::data::candidate_inputs;
+
+/// Smallest slice tested.
+pub const MIN_SLICE: usize = 10;
+
+/// One slice of the residuals.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct Slice {
+    /// e.g. "axle = front", "t_surface_avg_c in Q4 [82.1, 96.0]", "axle = front & track = x".
+    pub name: String,
+    pub n: usize,
+    /// Mean residual in the slice (% of tread).
+    pub mean_residual_pct: f64,
+    /// Slice mean minus the rest's mean, with its 95 % confidence interval.
+    pub difference_pct: f64,
+    pub ci_pct: (f64, f64),
+    /// Difference over the standard deviation of all residuals.
+    pub effect_size: f64,
+    pub p: f64,
+    /// Benjamini–Hochberg adjusted p-value over every slice tested.
+    pub p_adjusted: f64,
+    /// Σ residual² in the slice / Σ residual² overall.
+    pub share_of_squared_gap: f64,
+    /// n·(mean residual)² / Σ residual² overall: the part of the squared gap
+    /// the slice's offset accounts for (what correcting it would remove). Ranks slices.
+    pub explained_share: f64,
+    /// Other names of the same rows (e.g. road indices constant per track).
+    pub aliases: Vec<String>,
+}
+
+/// A named row predicate: (variable, level name, members).
+struct Single {
+    variable: String,
+    name: String,
+    members: Vec<bool>,
+}
+
+fn singles(rows: &[&KpiRow]) -> Vec<Single> {
+    let mut out = Vec::new();
+    type Getter = fn(&KpiRow) -> &str;
+    let text: [(&str, Getter); 6] = [
+        ("axle", |r| &r.axle),
+        ("wheel", |r| &r.wheel),
+        ("track", |r| &r.track),
+        ("event", |r| &r.event),
+        ("compound", |r| &r.compound),
+        ("car", |r| &r.car),
+    ];
+    for (var, get) in text {
+        let mut levels: Vec<&str> = rows.iter().map(|r| get(r)).collect();
+        levels.sort();
+        levels.dedup();
+        for l in levels {
+            out.push(Single {
+                variable: var.into(),
+                name: format!("{var} = {l}"),
+                members: rows.iter().map(|r| get(r) == l).collect(),
+            });
+        }
+    }
+    let numeric = std::iter::once("wear_mean_pct").chain(
+        candidate_inputs()
+            .into_iter()
+            .filter(|c| *c != "wear_mean_pct"),
+    );
+    for col in numeric {
+        let v: Vec<f64> = rows
+            .iter()
+            .map(|r| r.number(col).unwrap_or(f64::NAN))
+            .collect();
+        let mut sorted: Vec<f64> = v.iter().copied().filter(|x| x.is_finite()).collect();
+        sorted.sort_by(f64::total_cmp);
+        if sorted.len() < 2 * MIN_SLICE || sorted[0] == sorted[sorted.len() - 1] {
+            continue;
+        }
+        let q = |f: f64| sorted[((sorted.len() - 1) as f64 * f).round() as usize];
+        let edges = [
+            sorted[0],
+            q(0.25),
+            q(0.5),
+            q(0.75),
+            sorted[sorted.len() - 1],
+        ];
+        for b in 0..4 {
+            let (lo, hi) = (edges[b], edges[b + 1]);
+            let members: Vec<bool> = v
+                .iter()
+                .map(|&x| x.is_finite() && x >= lo && (x < hi || (b == 3 && x <= hi)))
+                .collect();
+            out.push(Single {
+                variable: col.into(),
+                name: format!("{col} in Q{} [{lo:.4}, {hi:.4}]", b + 1),
+                members,
+            });
+        }
+    }
+    out
+}
+
+fn test(name: String, members: &[bool], residual: &[f64], sd: f64, total_sq: f64) -> Option<Slice> {
+    let (inside, rest): (Vec<f64>, Vec<f64>) = {
+        let mut a = Vec::new();
+        let mut b = Vec::new();
+        for (m, r) in members.iter().zip(residual) {
+            if *m { a.push(*r) } else { b.push(*r) }
+        }
+        (a, b)
+    };
+    if inside.len() < MIN_SLICE || rest.len() < MIN_SLICE {
+        return None;
+    }
+    let (d, ci, p) = welch(&inside, &rest);
+    let mean = inside.iter().sum::<f64>() / inside.len() as f64;
+    Some(Slice {
+        name,
+        n: inside.len(),
+        mean_residual_pct: mean,
+        explained_share: inside.len() as f64 * mean * mean / total_sq,
+        aliases: Vec::new(),
+        difference_pct: d,
+        ci_pct: ci,
+        effect_size: d / sd,
+        p,
+        p_adjusted: f64::NAN,
+        share_of_squared_gap: inside.iter().map(|r| r * r).sum::<f64>() / total_sq,
+    })
+}
+
+/// Every slice tested, with BH-adjusted p-values; those with p_adjusted ≤
+/// `fdr` first, by the squared gap their offset accounts for, then the rest by p.
+pub fn slice_residuals(rows: &[&KpiRow], residual: &[f64], fdr: f64) -> (Vec<Slice>, usize) {
+    let n = residual.len() as f64;
+    let mean = residual.iter().sum::<f64>() / n;
+    let sd = (residual.iter().map(|r| (r - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();
+    let total_sq: f64 = residual.iter().map(|r| r * r).sum();
+    // Slices with the same rows are one test under several names.
+    let mut seen: std::collections::HashMap<Vec<bool>, usize> = std::collections::HashMap::new();
+    let mut tested: Vec<Slice> = Vec::new();
+    let mut add = |name: String, members: Vec<bool>, tested: &mut Vec<Slice>| {
+        if let Some(&i) = seen.get(&members) {
+            tested[i].aliases.push(name);
+        } else if let Some(t) = test(name, &members, residual, sd, total_sq) {
+            seen.insert(members, tested.len());
+            tested.push(t);
+        }
+    };
+    let s = singles(rows);
+    for a in &s {
+        add(a.name.clone(), a.members.clone(), &mut tested);
+    }
+    for (i, a) in s.iter().enumerate() {
+        for b in &s[i + 1..] {
+            if a.variable != b.variable {
+                let both: Vec<bool> = a
+                    .members
+                    .iter()
+                    .zip(&b.members)
+                    .map(|(x, y)| *x && *y)
+                    .collect();
+                add(format!("{} & {}", a.name, b.name), both, &mut tested);
+            }
+        }
+    }
+    let adj = benjamini_hochberg(&tested.iter().map(|t| t.p).collect::<Vec<_>>());
+    for (t, a) in tested.iter_mut().zip(adj) {
+        t.p_adjusted = a;
+    }
+    let count = tested.len();
+    tested.sort_by(|a, b| {
+        let (sa, sb) = (a.p_adjusted <= fdr, b.p_adjusted <= fdr);
+        sb.cmp(&sa).then(if sa {
+            b.explained_share.total_cmp(&a.explained_share)
+        } else {
+            a.p.total_cmp(&b.p)
+        })
+    });
+    (tested, count)
+}
