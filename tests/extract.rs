@@ -71,6 +71,25 @@ fn demo_season_extracts_to_complete_rows() {
     ] {
         assert!(dir.path().join(side).exists(), "{side}");
     }
+    // The energy maps read back: one per row, each holding the row's friction
+    // energy (both maps bin every sample's energy once; f32 channels: 1e-9).
+    let maps =
+        tirewear::kpi::energy_map::read_energy_maps(&dir.path().join("kpis.energy_maps.parquet"))
+            .unwrap();
+    assert_eq!(maps.len(), rows.len());
+    for r in &rows {
+        let m = &maps[&(r.run.clone(), r.wheel.clone())];
+        let speed: f64 = m.speed_surface.iter().sum();
+        for total in [m.total(), speed] {
+            assert!(
+                (total - r.friction_energy_j).abs() <= 1e-9 * r.friction_energy_j.abs(),
+                "{} {}: {total} vs {}",
+                r.run,
+                r.wheel,
+                r.friction_energy_j
+            );
+        }
+    }
     // The extracted wear target tracks the simulator's truth (readings noise and
     // the virtual-rib interpolation of a non-uniform profile: within 3 points),
     // except on nearly bald tires, where the tread bottoms out before the law's wear.
@@ -130,4 +149,39 @@ fn a_damaged_run_fails_alone() {
         assert_eq!((g.rows, g.skipped.len()), (12, 1));
         assert_eq!(g.skipped[0].run, victim.id);
     }
+}
+
+#[test]
+fn a_bad_energy_map_record_is_named() {
+    use arrow_array::{ArrayRef, Float64Array, RecordBatch, StringArray, UInt32Array};
+    use arrow_schema::{DataType, Field, Schema};
+    use std::sync::Arc;
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("bad.energy_maps.parquet");
+    let schema = Arc::new(Schema::new(vec![
+        Field::new("run", DataType::Utf8, false),
+        Field::new("wheel", DataType::Utf8, false),
+        Field::new("map", DataType::Utf8, false),
+        Field::new("i", DataType::UInt32, false),
+        Field::new("j", DataType::UInt32, false),
+        Field::new("energy_j", DataType::Float64, false),
+    ]));
+    let cols: Vec<ArrayRef> = vec![
+        Arc::new(StringArray::from(vec!["R1", "R1"])),
+        Arc::new(StringArray::from(vec!["FL", "FL"])),
+        Arc::new(StringArray::from(vec!["surface_inner", "surface_inner"])),
+        Arc::new(UInt32Array::from(vec![3, 40])),
+        Arc::new(UInt32Array::from(vec![4, 2])),
+        Arc::new(Float64Array::from(vec![10.0, 5.0])),
+    ];
+    tirewear::kpi::table::write_batch(&path, &RecordBatch::try_new(schema, cols).unwrap()).unwrap();
+    let err = tirewear::kpi::energy_map::read_energy_maps(&path)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("bad.energy_maps.parquet")
+            && err.contains("record 2")
+            && err.contains("(40, 2)"),
+        "{err}"
+    );
 }

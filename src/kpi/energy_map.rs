@@ -101,3 +101,96 @@ mod tests {
         assert_eq!(m.total(), 15.0);
     }
 }
+
+/// Reads the energy-map side table written by `tirewear extract`
+/// (`NAME.energy_maps.parquet`: run, wheel, map, i, j, x_lo, y_lo, energy_j;
+/// non-empty bins only) back into maps keyed by (run, wheel). A bin outside
+/// the fixed grid, or an unknown map name, is an error naming the record.
+pub fn read_energy_maps(
+    path: &std::path::Path,
+) -> Result<std::collections::BTreeMap<(String, String), EnergyMaps>, crate::ingest::IngestError> {
+    use crate::ingest::IngestError;
+    use arrow_array::{Array, Float64Array, StringArray, UInt32Array};
+    use arrow_schema::DataType;
+    let perr = |e: parquet::errors::ParquetError| IngestError::Parquet {
+        path: path.to_path_buf(),
+        source: e,
+    };
+    let file = std::fs::File::open(path).map_err(|e| IngestError::io(path, e))?;
+    let reader = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file)
+        .map_err(perr)?
+        .build()
+        .map_err(perr)?;
+    let mut out: std::collections::BTreeMap<(String, String), EnergyMaps> = Default::default();
+    let mut record = 0usize;
+    for batch in reader {
+        let batch = batch.map_err(|e| perr(e.into()))?;
+        let col = |name: &str, ty: &DataType| -> Result<std::sync::Arc<dyn Array>, IngestError> {
+            let c = batch.column_by_name(name).ok_or_else(|| {
+                IngestError::invalid(path, "schema", format!("missing column '{name}'"))
+            })?;
+            arrow_cast::cast(c, ty).map_err(|e| perr(e.into()))
+        };
+        let (run, wheel, map) = (
+            col("run", &DataType::Utf8)?,
+            col("wheel", &DataType::Utf8)?,
+            col("map", &DataType::Utf8)?,
+        );
+        let (i, j, e) = (
+            col("i", &DataType::UInt32)?,
+            col("j", &DataType::UInt32)?,
+            col("energy_j", &DataType::Float64)?,
+        );
+        let s = |a: &std::sync::Arc<dyn Array>| {
+            a.as_any()
+                .downcast_ref::<StringArray>()
+                .expect("cast")
+                .clone()
+        };
+        let u = |a: &std::sync::Arc<dyn Array>| {
+            a.as_any()
+                .downcast_ref::<UInt32Array>()
+                .expect("cast")
+                .clone()
+        };
+        let (run, wheel, map, i, j) = (s(&run), s(&wheel), s(&map), u(&i), u(&j));
+        let e = e
+            .as_any()
+            .downcast_ref::<Float64Array>()
+            .expect("cast")
+            .clone();
+        for k in 0..batch.num_rows() {
+            record += 1;
+            let m = out
+                .entry((run.value(k).to_string(), wheel.value(k).to_string()))
+                .or_default();
+            let (bi, bj) = (i.value(k) as usize, j.value(k) as usize);
+            let (data, (ni, nj)) = match map.value(k) {
+                "surface_inner" => (&mut m.surface_inner, (T_SURFACE_BINS.n, T_INNER_BINS.n)),
+                "speed_surface" => (
+                    &mut m.speed_surface,
+                    (SLIDING_SPEED_BINS.n, T_SURFACE_BINS.n),
+                ),
+                other => {
+                    return Err(IngestError::invalid(
+                        path,
+                        format!("record {record}"),
+                        format!("unknown map '{other}'"),
+                    ));
+                }
+            };
+            if bi >= ni || bj >= nj {
+                return Err(IngestError::invalid(
+                    path,
+                    format!("record {record}"),
+                    format!(
+                        "bin ({bi}, {bj}) outside the {ni}×{nj} grid of map '{}'",
+                        map.value(k)
+                    ),
+                ));
+            }
+            data[bi * nj + bj] += e.value(k);
+        }
+    }
+    Ok(out)
+}
