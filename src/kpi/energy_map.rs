@@ -80,28 +80,6 @@ impl EnergyMaps {
     }
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn bins_clamp_and_split_by_hand() {
-        assert_eq!(T_SURFACE_BINS.index(19.0), 0);
-        assert_eq!(T_SURFACE_BINS.index(24.999), 0);
-        assert_eq!(T_SURFACE_BINS.index(25.0), 1);
-        assert_eq!(T_SURFACE_BINS.index(500.0), 23);
-        assert_eq!(T_SURFACE_BINS.index(f64::NAN), 0);
-        let mut m = EnergyMaps::new();
-        m.add(72.0, 101.0, 1.2, 10.0);
-        m.add(72.0, 131.0, 6.0, 5.0);
-        assert_eq!(m.surface_inner[10 * 24 + 12], 10.0);
-        assert_eq!(m.surface_inner[10 * 24 + 18], 5.0);
-        assert_eq!(m.speed_surface[2 * 24 + 10], 10.0);
-        assert_eq!(m.speed_surface[12 * 24 + 10], 5.0);
-        assert_eq!(m.total(), 15.0);
-    }
-}
-
 /// Reads the energy-map side table written by `tirewear extract`
 /// (`NAME.energy_maps.parquet`: run, wheel, map, i, j, x_lo, y_lo, energy_j;
 /// non-empty bins only) back into maps keyed by (run, wheel). A bin outside
@@ -193,4 +171,26 @@ pub fn read_energy_maps(
         }
     }
     Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn bins_clamp_and_split_by_hand() {
+        assert_eq!(T_SURFACE_BINS.index(19.0), 0);
+        assert_eq!(T_SURFACE_BINS.index(24.999), 0);
+        assert_eq!(T_SURFACE_BINS.index(25.0), 1);
+        assert_eq!(T_SURFACE_BINS.index(500.0), 23);
+        assert_eq!(T_SURFACE_BINS.index(f64::NAN), 0);
+        let mut m = EnergyMaps::new();
+        m.add(72.0, 101.0, 1.2, 10.0);
+        m.add(72.0, 131.0, 6.0, 5.0);
+        assert_eq!(m.surface_inner[10 * 24 + 12], 10.0);
+        assert_eq!(m.surface_inner[10 * 24 + 18], 5.0);
+        assert_eq!(m.speed_surface[2 * 24 + 10], 10.0);
+        assert_eq!(m.speed_surface[12 * 24 + 10], 5.0);
+        assert_eq!(m.total(), 15.0);
+    }
 }
