@@ -407,7 +407,18 @@ fn run_gap(
             .with_context(|| format!("{} against {baseline}", kpis.display()))?;
         Baseline::Model(Box::new(m))
     };
-    let d = diagnose(&rows, &base, test_events, fdr)
+    let stem = kpis.file_stem().and_then(|s| s.to_str()).unwrap_or("kpis");
+    let maps_path = kpis.with_file_name(format!("{stem}.energy_maps.parquet"));
+    let maps = if maps_path.exists() {
+        tirewear::kpi::energy_map::read_energy_maps(&maps_path)?
+    } else {
+        tracing::warn!(
+            "{} not found: candidate effects and shrinkage are skipped",
+            maps_path.display()
+        );
+        Default::default()
+    };
+    let d = diagnose(&rows, &maps, &base, test_events, fdr)
         .with_context(|| format!("diagnosing {}", kpis.display()))?;
     print!("{}", render_markdown(&d, 12));
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;

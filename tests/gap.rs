@@ -65,7 +65,10 @@ fn demo_gap_lies_on_the_front_axle() {
     })
     .unwrap();
     let rows = tirewear::kpi::table::read_parquet(&dir.path().join("kpis.parquet")).unwrap();
-    let d = diagnose(&rows, &Baseline::Physics, None, 0.05).unwrap();
+    let maps =
+        tirewear::kpi::energy_map::read_energy_maps(&dir.path().join("kpis.energy_maps.parquet"))
+            .unwrap();
+    let d = diagnose(&rows, &maps, &Baseline::Physics, None, 0.05).unwrap();
     // Truth: irregular wear adds 5–45 % of base wear on the fronts only.
     let front = d
         .slices
