@@ -25,16 +25,21 @@ pub enum Feature {
     FastSlidingEnergy,
     /// Friction energy (MJ) on roads whose micro-texture Ra is above θ mm (road abrasion).
     RoughRoadEnergy,
+    /// Total friction energy (MJ); with an axle, the mechanism is "extra wear
+    /// on that axle per joule" (the paper's irregular front wear).
+    Energy,
     /// A KPI's value (no threshold).
     Kpi(&'static str),
 }
 
-/// A named candidate with its threshold grid.
+/// A named candidate with its threshold grid, acting on one axle or both.
 #[derive(Debug, Clone, serde::Serialize)]
 pub struct Candidate {
     pub name: String,
     pub feature: Feature,
     pub thresholds: Vec<f64>,
+    /// "front", "rear", or None for both axles.
+    pub axle: Option<&'static str>,
 }
 
 /// The library: five mechanisms and every KPI the physics baseline does not use.
@@ -52,39 +57,64 @@ pub fn library(rows: &[&KpiRow]) -> Vec<Candidate> {
         .collect();
     micro.sort_by(f64::total_cmp);
     micro.dedup();
-    let mut out = vec![
-        Candidate {
-            name: "graining (energy with a cold surface)".into(),
-            feature: Feature::ColdSurfaceEnergy,
-            thresholds: steps(40.0, 90.0, 5.0),
-        },
-        Candidate {
-            name: "blistering (energy with a hot inner liner)".into(),
-            feature: Feature::HotInnerEnergy,
-            thresholds: steps(90.0, 140.0, 5.0),
-        },
-        Candidate {
-            name: "thermal degradation (energy with a hot surface)".into(),
-            feature: Feature::HotSurfaceEnergy,
-            thresholds: steps(70.0, 120.0, 5.0),
-        },
-        Candidate {
-            name: "fast sliding (energy at high sliding speed)".into(),
-            feature: Feature::FastSlidingEnergy,
-            thresholds: steps(0.5, 5.0, 0.5),
-        },
-        Candidate {
-            name: "road abrasion (energy on micro-rough roads)".into(),
-            feature: Feature::RoughRoadEnergy,
-            thresholds: micro,
-        },
+    let mechanisms: Vec<(&str, Feature, Vec<f64>)> = vec![
+        (
+            "graining (energy with a cold surface)",
+            Feature::ColdSurfaceEnergy,
+            steps(40.0, 90.0, 5.0),
+        ),
+        (
+            "blistering (energy with a hot inner liner)",
+            Feature::HotInnerEnergy,
+            steps(90.0, 140.0, 5.0),
+        ),
+        (
+            "thermal degradation (energy with a hot surface)",
+            Feature::HotSurfaceEnergy,
+            steps(70.0, 120.0, 5.0),
+        ),
+        (
+            "fast sliding (energy at high sliding speed)",
+            Feature::FastSlidingEnergy,
+            steps(0.5, 5.0, 0.5),
+        ),
+        (
+            "road abrasion (energy on micro-rough roads)",
+            Feature::RoughRoadEnergy,
+            micro,
+        ),
     ];
+    let mut out = Vec::new();
+    // Each mechanism on both axles and on each axle alone (the paper treats
+    // the axles apart: steering, irregular front wear).
+    for (name, feature, thresholds) in mechanisms {
+        for axle in [None, Some("front"), Some("rear")] {
+            out.push(Candidate {
+                name: match axle {
+                    None => name.to_string(),
+                    Some(a) => format!("{name}, {a} axle"),
+                },
+                feature,
+                thresholds: thresholds.clone(),
+                axle,
+            });
+        }
+    }
+    for axle in ["front", "rear"] {
+        out.push(Candidate {
+            name: format!("extra wear per joule, {axle} axle (irregular wear)"),
+            feature: Feature::Energy,
+            thresholds: vec![f64::NAN],
+            axle: Some(axle),
+        });
+    }
     for c in candidate_inputs() {
         if !matches!(c, "friction_energy_j" | "t_surface_avg_c") {
             out.push(Candidate {
                 name: format!("KPI {c}"),
                 feature: Feature::Kpi(c),
                 thresholds: vec![f64::NAN],
+                axle: None,
             });
         }
     }
@@ -131,7 +161,16 @@ pub fn feature(f: Feature, r: &KpiRow, maps: Option<&EnergyMaps>, theta: f64) ->
                 0.0
             }
         }
+        Feature::Energy => r.friction_energy_j * mj,
         Feature::Kpi(c) => r.number(c).unwrap_or(f64::NAN),
+    }
+}
+
+/// A candidate's feature for a row: zero on the other axle.
+pub fn candidate_feature(c: &Candidate, r: &KpiRow, maps: Option<&EnergyMaps>, theta: f64) -> f64 {
+    match c.axle {
+        Some(a) if r.axle != a => 0.0,
+        _ => feature(c.feature, r, maps, theta),
     }
 }
 
@@ -174,6 +213,7 @@ pub fn fit_candidate(
 pub struct Score {
     pub name: String,
     pub feature: Feature,
+    pub axle: Option<&'static str>,
     /// Threshold chosen on all rows given (NaN for KPI candidates).
     pub threshold: f64,
     /// Coefficient c of `residual ≈ a + c·feature` (% per MJ, or % per KPI unit).
@@ -206,7 +246,7 @@ pub fn rank(
                 .map(|(r, m)| {
                     c.thresholds
                         .iter()
-                        .map(|&t| feature(c.feature, r, *m, t))
+                        .map(|&t| candidate_feature(c, r, *m, t))
                         .collect()
                 })
                 .collect();
@@ -245,6 +285,7 @@ pub fn rank(
             Some(Score {
                 name: c.name.clone(),
                 feature: c.feature,
+                axle: c.axle,
                 threshold: c.thresholds[t],
                 coefficient: k,
                 cv_gain: 1.0 - with / without,
@@ -298,7 +339,7 @@ mod tests {
         let refs: Vec<&KpiRow> = rows.iter().collect();
         let mref: Vec<Option<&EnergyMaps>> = maps.iter().map(Some).collect();
         let res: Vec<f64> = rows.iter().map(|r| r.wear_mean_pct).collect();
-        let lib: Vec<Candidate> = library(&refs).into_iter().take(5).collect();
+        let lib: Vec<Candidate> = library(&refs).into_iter().take(15).collect();
         let s = rank(&refs, &mref, &res, &lib);
         assert!(matches!(s[0].feature, Feature::ColdSurfaceEnergy), "{s:?}");
         assert_eq!(s[0].threshold, 60.0);

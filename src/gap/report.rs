@@ -2,7 +2,7 @@
 //! events, and where it lies; written as JSON and Markdown.
 
 use super::baseline::PhysicsBaseline;
-use super::candidates::{Score, feature, library, rank};
+use super::candidates::{Candidate, Score, candidate_feature, library, rank};
 use super::slices::{Slice, slice_residuals};
 use crate::kpi::KpiRow;
 use crate::kpi::energy_map::EnergyMaps;
@@ -169,16 +169,22 @@ pub fn diagnose(
             else {
                 break;
             };
+            let cand = Candidate {
+                name: best.name.clone(),
+                feature: best.feature,
+                thresholds: vec![best.threshold],
+                axle: best.axle,
+            };
             let a = {
                 let x: Vec<f64> = (0..n_train)
-                    .map(|i| feature(best.feature, all_rows[i], row_maps[i], best.threshold))
+                    .map(|i| candidate_feature(&cand, all_rows[i], row_maps[i], best.threshold))
                     .collect();
                 let mx = x.iter().sum::<f64>() / n_train as f64;
                 res[..n_train].iter().sum::<f64>() / n_train as f64 - best.coefficient * mx
             };
             for i in 0..res.len() {
                 res[i] -= a + best.coefficient
-                    * feature(best.feature, all_rows[i], row_maps[i], best.threshold);
+                    * candidate_feature(&cand, all_rows[i], row_maps[i], best.threshold);
             }
             used.push(best.name.clone());
             steps.push(step_of(
