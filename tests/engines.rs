@@ -7,6 +7,8 @@
 //! - the multi-dispatch and 2-D grid paths, reached by lowering the limits;
 //! - `extract --engine gpu` on the demo season equals `--engine cpu`.
 
+mod common;
+
 use tirewear::engine::{
     CpuEngine, ENERGY_MAP_TOLERANCE, ROUGHNESS_TOLERANCE, ReduceEngine, TELEMETRY_TOLERANCE,
     compare_energy_maps, compare_roughness, compare_telemetry, gpu_for_tests,
@@ -196,18 +198,7 @@ fn extract_on_gpu_equals_extract_on_cpu() {
         return;
     }
     let dir = tempfile::tempdir().unwrap();
-    tirewear::sim::simulate(&tirewear::sim::SimOptions {
-        preset: tirewear::sim::Preset::Demo,
-        scale: 1.0,
-        seed: 7,
-        effects: vec![],
-        encoding: tirewear::ingest::telemetry::Encoding::Block,
-        rate_hz: Some(5.0),
-        out: dir.path().to_path_buf(),
-        sensor_noise: true,
-        progress: false,
-    })
-    .unwrap();
+    common::simulate_demo(dir.path());
     let tables: Vec<Vec<KpiRow>> = [Engine::Cpu, Engine::Gpu]
         .into_iter()
         .map(|engine| {

@@ -4,39 +4,15 @@
 //! saved models reload and predict the same numbers; `predict` refuses a
 //! table with a missing column or a different unit, naming it.
 
+mod common;
+
 use std::collections::HashMap;
 use std::sync::Arc;
-use tirewear::ingest::telemetry::Encoding;
-use tirewear::kpi::table::{read_parquet, read_units, write_batch};
-use tirewear::kpi::{Engine, ExtractOptions, KpiRow, extract};
+use tirewear::kpi::KpiRow;
+use tirewear::kpi::table::{read_units, write_batch};
 use tirewear::model::fit::{FitSettings, Method, fit_method, split};
 use tirewear::model::network::NetworkSettings;
 use tirewear::model::saved::{ModelBody, SavedModel};
-use tirewear::sim::{Preset, SimOptions, simulate};
-
-fn demo_kpis(dir: &std::path::Path) -> Vec<KpiRow> {
-    simulate(&SimOptions {
-        preset: Preset::Demo,
-        scale: 1.0,
-        seed: 7,
-        effects: vec![],
-        encoding: Encoding::Block,
-        rate_hz: Some(5.0),
-        out: dir.to_path_buf(),
-        sensor_noise: true,
-        progress: false,
-    })
-    .unwrap();
-    extract(&ExtractOptions {
-        season: dir.to_path_buf(),
-        out: dir.join("kpis.parquet"),
-        csv: None,
-        engine: Engine::Cpu,
-        progress: false,
-    })
-    .unwrap();
-    read_parquet(&dir.join("kpis.parquet")).unwrap()
-}
 
 fn testing_r2(m: &SavedModel, label: &str) -> f64 {
     m.indicators
@@ -50,7 +26,7 @@ fn testing_r2(m: &SavedModel, label: &str) -> f64 {
 #[test]
 fn demo_fit_ranks_like_the_paper_and_models_round_trip() {
     let dir = tempfile::tempdir().unwrap();
-    let rows = demo_kpis(dir.path());
+    let rows = common::demo_kpis(dir.path());
     let s = split(&rows, None).unwrap();
     // Whole events: no event on both sides.
     assert!(s.train_events.iter().all(|e| !s.test_events.contains(e)));

@@ -3,6 +3,8 @@
 //! demo season, where the truth says the fronts carry irregular wear that the
 //! frictional-energy law does not model.
 
+mod common;
+
 use tirewear::gap::report::{Baseline, diagnose};
 use tirewear::gap::stats::{benjamini_hochberg, welch};
 
@@ -44,27 +46,7 @@ fn statistics_equal_statsmodels_and_scipy() {
 #[test]
 fn demo_gap_lies_on_the_front_axle() {
     let dir = tempfile::tempdir().unwrap();
-    tirewear::sim::simulate(&tirewear::sim::SimOptions {
-        preset: tirewear::sim::Preset::Demo,
-        scale: 1.0,
-        seed: 7,
-        effects: vec![],
-        encoding: tirewear::ingest::telemetry::Encoding::Block,
-        rate_hz: Some(5.0),
-        out: dir.path().to_path_buf(),
-        sensor_noise: true,
-        progress: false,
-    })
-    .unwrap();
-    tirewear::kpi::extract(&tirewear::kpi::ExtractOptions {
-        season: dir.path().to_path_buf(),
-        out: dir.path().join("kpis.parquet"),
-        csv: None,
-        engine: tirewear::kpi::Engine::Cpu,
-        progress: false,
-    })
-    .unwrap();
-    let rows = tirewear::kpi::table::read_parquet(&dir.path().join("kpis.parquet")).unwrap();
+    let rows = common::demo_kpis(dir.path());
     let maps =
         tirewear::kpi::energy_map::read_energy_maps(&dir.path().join("kpis.energy_maps.parquet"))
             .unwrap();

@@ -51,23 +51,7 @@ impl ChunkKernel {
         outputs_per_chunk: usize,
         uses_refs: bool,
     ) -> Result<Self, GpuError> {
-        let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
-        let module = device.create_shader_module(source);
-        let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-            label: Some(name),
-            layout: None,
-            module: &module,
-            entry_point: Some("main"),
-            compilation_options: Default::default(),
-            cache: None,
-        });
-        if let Some(e) = pollster::block_on(scope.pop()) {
-            return Err(GpuError::Validation {
-                kernel: name,
-                message: e.to_string(),
-            });
-        }
-        let layout = pipeline.get_bind_group_layout(0);
+        let (pipeline, layout) = super::compute_pipeline(device, name, source)?;
         Ok(ChunkKernel {
             name,
             outputs_per_chunk,

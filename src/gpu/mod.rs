@@ -10,6 +10,34 @@ pub use error::GpuError;
 
 use std::time::Duration;
 
+/// Builds a kernel's compute pipeline (entry point `main`, layout from the
+/// shader) and its bind-group layout; a shader that does not validate is an
+/// error naming the kernel, not a panic.
+pub(crate) fn compute_pipeline(
+    device: &wgpu::Device,
+    name: &'static str,
+    source: wgpu::ShaderModuleDescriptor,
+) -> Result<(wgpu::ComputePipeline, wgpu::BindGroupLayout), GpuError> {
+    let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
+    let module = device.create_shader_module(source);
+    let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+        label: Some(name),
+        layout: None,
+        module: &module,
+        entry_point: Some("main"),
+        compilation_options: Default::default(),
+        cache: None,
+    });
+    if let Some(e) = pollster::block_on(scope.pop()) {
+        return Err(GpuError::Validation {
+            kernel: name,
+            message: e.to_string(),
+        });
+    }
+    let layout = pipeline.get_bind_group_layout(0);
+    Ok((pipeline, layout))
+}
+
 /// Device, queue and pipelines, created once and shared by every run.
 pub struct GpuContext {
     pub device: wgpu::Device,

@@ -31,23 +31,7 @@ fn kernel(
     name: &'static str,
     source: wgpu::ShaderModuleDescriptor,
 ) -> Result<Kernel, GpuError> {
-    let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
-    let module = device.create_shader_module(source);
-    let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-        label: Some(name),
-        layout: None,
-        module: &module,
-        entry_point: Some("main"),
-        compilation_options: Default::default(),
-        cache: None,
-    });
-    if let Some(e) = pollster::block_on(scope.pop()) {
-        return Err(GpuError::Validation {
-            kernel: name,
-            message: e.to_string(),
-        });
-    }
-    let layout = pipeline.get_bind_group_layout(0);
+    let (pipeline, layout) = super::compute_pipeline(device, name, source)?;
     Ok(Kernel { pipeline, layout })
 }
 
