@@ -49,6 +49,35 @@ pub struct BenchReport {
     pub notes: Vec<String>,
 }
 
+/// One kernel's input, shared by its measured lines.
+struct Workload {
+    kernel: &'static str,
+    size: String,
+    /// Items (samples or profiles) in the input.
+    items: f64,
+    unit: &'static str,
+    bytes: f64,
+    /// The plain memory pass over the same bytes.
+    memory_pass: Duration,
+}
+
+impl Workload {
+    fn line(&self, engine: &str, d: Duration, gpu_split_s: Option<[f64; 3]>) -> BenchLine {
+        let t = d.as_secs_f64();
+        BenchLine {
+            kernel: self.kernel.into(),
+            size: self.size.clone(),
+            engine: engine.into(),
+            seconds: t,
+            items_per_s: self.items / t,
+            unit: self.unit.into(),
+            gb_per_s: self.bytes / t / 1e9,
+            vs_memory_pass: self.memory_pass.as_secs_f64() / t,
+            gpu_split_s,
+        }
+    }
+}
+
 fn best<T>(repeats: usize, mut f: impl FnMut() -> T) -> (Duration, T) {
     let mut out = None;
     let mut best = Duration::MAX;
@@ -176,124 +205,45 @@ pub fn run_bench(o: &BenchOptions) -> BenchReport {
         "4 × {per_wheel} samples ({:.0} MB)",
         bytes.len() as f64 / 1e6
     );
-    let mut line = |engine: &str,
-                    d: Duration,
-                    split: Option<[f64; 3]>,
-                    items: f64,
-                    unit: &str,
-                    nbytes: f64,
-                    kernel: &str,
-                    size: &str,
-                    mem: Duration| {
-        report.lines.push(BenchLine {
-            kernel: kernel.into(),
-            size: size.into(),
-            engine: engine.into(),
-            seconds: d.as_secs_f64(),
-            items_per_s: items / d.as_secs_f64(),
-            unit: unit.into(),
-            gb_per_s: nbytes / d.as_secs_f64() / 1e9,
-            vs_memory_pass: mem.as_secs_f64() / d.as_secs_f64(),
-            gpu_split_s: split,
-        })
+    let mut w = Workload {
+        kernel: "telemetry_reduce",
+        size,
+        items: n,
+        unit: "samples/s",
+        bytes: bytes.len() as f64,
+        memory_pass: mem,
     };
-    let nb = bytes.len() as f64;
-    line(
-        "memory pass",
-        mem,
-        None,
-        n,
-        "samples/s",
-        nb,
-        "telemetry_reduce",
-        &size,
-        mem,
-    );
+    report.lines.push(w.line("memory pass", mem, None));
     let (d, _) = best(o.repeats, || {
         one_thread(|| CpuEngine.telemetry_reduce(&batch))
     });
-    line(
-        "cpu, 1 thread",
-        d,
-        None,
-        n,
-        "samples/s",
-        nb,
-        "telemetry_reduce",
-        &size,
-        mem,
-    );
+    report.lines.push(w.line("cpu, 1 thread", d, None));
     let (d, _) = best(o.repeats, || CpuEngine.telemetry_reduce(&batch));
-    line(
-        &format!("cpu, {threads} threads"),
-        d,
-        None,
-        n,
-        "samples/s",
-        nb,
-        "telemetry_reduce",
-        &size,
-        mem,
-    );
+    report
+        .lines
+        .push(w.line(&format!("cpu, {threads} threads"), d, None));
     if let Some(g) = &gpu
         && let Some((d, split)) = gpu_best(o.repeats, &mut report.notes, || {
             g.ctx.telemetry_reduce(&batch).map(|r| r.1)
         })
     {
-        line(
-            "gpu",
-            d,
-            Some(split),
-            n,
-            "samples/s",
-            nb,
-            "telemetry_reduce",
-            &size,
-            mem,
-        );
+        report.lines.push(w.line("gpu", d, Some(split)));
     }
 
     // Energy maps over the same samples.
+    w.kernel = "energy_map";
     let (d, _) = best(o.repeats, || one_thread(|| CpuEngine.energy_map(&batch)));
-    line(
-        "cpu, 1 thread",
-        d,
-        None,
-        n,
-        "samples/s",
-        nb,
-        "energy_map",
-        &size,
-        mem,
-    );
+    report.lines.push(w.line("cpu, 1 thread", d, None));
     let (d, _) = best(o.repeats, || CpuEngine.energy_map(&batch));
-    line(
-        &format!("cpu, {threads} threads"),
-        d,
-        None,
-        n,
-        "samples/s",
-        nb,
-        "energy_map",
-        &size,
-        mem,
-    );
+    report
+        .lines
+        .push(w.line(&format!("cpu, {threads} threads"), d, None));
     if let Some(g) = &gpu
         && let Some((d, split)) = gpu_best(o.repeats, &mut report.notes, || {
             g.ctx.energy_map(&batch).map(|r| r.1)
         })
     {
-        line(
-            "gpu",
-            d,
-            Some(split),
-            n,
-            "samples/s",
-            nb,
-            "energy_map",
-            &size,
-            mem,
-        );
+        report.lines.push(w.line("gpu", d, Some(split)));
     }
 
     // Roughness: moments, Welch PSD and HDC per profile (the engines' part).
@@ -323,21 +273,16 @@ pub fn run_bench(o: &BenchOptions) -> BenchReport {
             .iter()
             .flat_map(|(_, b)| bytemuck::cast_slice::<f32, u8>(&b.heights).to_vec())
             .collect();
-        let nb = bytes.len() as f64;
         let (pmem, _) = best(o.repeats, || memory_pass(&bytes));
-        let size = format!("{count} × 2^{log2} samples");
-        let items = count as f64;
-        line(
-            "memory pass",
-            pmem,
-            None,
-            items,
-            "profiles/s",
-            nb,
-            "roughness",
-            &size,
-            pmem,
-        );
+        let w = Workload {
+            kernel: "roughness",
+            size: format!("{count} × 2^{log2} samples"),
+            items: count as f64,
+            unit: "profiles/s",
+            bytes: bytes.len() as f64,
+            memory_pass: pmem,
+        };
+        report.lines.push(w.line("memory pass", pmem, None));
         let profiles: Vec<Profile> = heights
             .iter()
             .map(|z| Profile {
@@ -354,34 +299,18 @@ pub fn run_bench(o: &BenchOptions) -> BenchReport {
                 .map(|p| spectral(p).moments.1)
                 .sum::<f64>()
         });
-        line(
-            &format!("cpu realfft, {threads} thr"),
-            d,
-            None,
-            items,
-            "profiles/s",
-            nb,
-            "roughness",
-            &size,
-            pmem,
-        );
+        report
+            .lines
+            .push(w.line(&format!("cpu realfft, {threads} thr"), d, None));
         let (d, _) = best(o.repeats, || {
             groups
                 .iter()
                 .map(|(_, b)| CpuEngine.roughness(b).map(|r| r.len()).unwrap_or(0))
                 .sum::<usize>()
         });
-        line(
-            &format!("cpu twins, {threads} thr"),
-            d,
-            None,
-            items,
-            "profiles/s",
-            nb,
-            "roughness",
-            &size,
-            pmem,
-        );
+        report
+            .lines
+            .push(w.line(&format!("cpu twins, {threads} thr"), d, None));
         if let Some(g) = &gpu
             && let Some((d, split)) = gpu_best(o.repeats, &mut report.notes, || {
                 let mut total = crate::gpu::GpuTimings::default();
@@ -391,17 +320,7 @@ pub fn run_bench(o: &BenchOptions) -> BenchReport {
                 Ok(total)
             })
         {
-            line(
-                "gpu",
-                d,
-                Some(split),
-                items,
-                "profiles/s",
-                nb,
-                "roughness",
-                &size,
-                pmem,
-            );
+            report.lines.push(w.line("gpu", d, Some(split)));
         }
     }
     report
