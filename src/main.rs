@@ -29,6 +29,7 @@ struct Cli {
 }
 
 #[derive(Subcommand)]
+#[allow(clippy::large_enum_variant)] // parsed once; boxing would only obscure the CLI
 enum Command {
     /// Simulate a whole season (telemetry, road profiles, compounds, wear
     /// readings) with known physics and optionally planted effects; the
@@ -56,25 +57,39 @@ enum Command {
         #[arg(long, default_value = "predictions.csv")]
         out: PathBuf,
     },
-    /// Diagnose the sim-to-real gap: calibrate the physics baseline (the
-    /// frictional-energy wear law) on the training events, or take a saved
-    /// model, then show how large the gap is on training and testing events
-    /// and where it lies (slices of the residual, singly and in pairs, with
-    /// false-discovery control). Writes OUT/gap.json and OUT/gap.md.
-    /// (Which unmodelled effect explains it, and how far it shrinks, are
-    /// still to come.)
+    /// Diagnose the sim-to-real gap. Calibrates the physics baseline (the
+    /// frictional-energy wear law per compound and axle, with the rubber's
+    /// temperature factor over the energy map and the road's skewness) on the
+    /// training events, or takes a saved model; then (1) where the gap lies:
+    /// bias and RMSE on training and testing events and slices of the
+    /// residual with false-discovery control; (2) which unmodelled effect
+    /// explains it: candidate mechanisms (graining, blistering, thermal
+    /// degradation, fast sliding, road abrasion, every unused KPI) scored by
+    /// track-grouped cross-validation and a permutation test; (3) how far it
+    /// shrinks as significant terms are added in turn. Writes OUT/gap.json
+    /// and OUT/gap.md. `tirewear gap validate` proves it on seasons with
+    /// planted effects.
+    #[command(args_conflicts_with_subcommands = true, subcommand_negates_reqs = true)]
     Gap {
-        /// KPI database (Parquet, as written by `tirewear extract`).
-        kpis: PathBuf,
+        #[command(subcommand)]
+        action: Option<GapAction>,
+        /// KPI database (Parquet, as written by `tirewear extract`); its
+        /// energy maps are read from NAME.energy_maps.parquet beside it.
+        #[arg(required = true)]
+        kpis: Option<PathBuf>,
         /// `physics`, or a model file written by `tirewear fit`.
         #[arg(long, default_value = "physics")]
         baseline: String,
         /// Testing events (comma-separated); default every third event.
         #[arg(long, value_delimiter = ',')]
         test_events: Option<Vec<String>>,
-        /// False-discovery rate of the slice tests.
-        #[arg(long, default_value_t = 0.05)]
-        fdr: f64,
+        /// Folder of compound files (TOML) whose WLF constants give the
+        /// physics baseline its temperature factor; default `compounds/`
+        /// beside the KPI file when it exists, else the exponential approximation.
+        #[arg(long)]
+        compounds: Option<PathBuf>,
+        #[command(flatten)]
+        stats: GapStatsArgs,
         #[arg(long, default_value = "gap")]
         out: PathBuf,
     },
@@ -143,6 +158,79 @@ struct FitArgs {
     /// Seed of the network's initial weights and its training/validation split.
     #[arg(long, default_value_t = 1)]
     seed: u64,
+}
+
+/// Statistics settings shared by `gap` and `gap validate`.
+#[derive(clap::Args)]
+struct GapStatsArgs {
+    /// False-discovery rate of the slice and candidate tests (Benjamini–Hochberg).
+    #[arg(long, default_value_t = 0.05)]
+    fdr: f64,
+    /// Permutations of each candidate's significance test.
+    #[arg(long, default_value_t = 1999)]
+    permutations: usize,
+    /// Seed of the permutations (the same seed gives the same p-values).
+    #[arg(long, default_value_t = 2026)]
+    perm_seed: u64,
+    /// Most terms forward selection adds.
+    #[arg(long, default_value_t = 4)]
+    max_terms: usize,
+}
+
+impl GapStatsArgs {
+    fn settings(&self, test_events: Option<Vec<String>>) -> tirewear::gap::report::GapSettings {
+        tirewear::gap::report::GapSettings {
+            test_events,
+            fdr: self.fdr,
+            scoring: tirewear::gap::scoring::ScoringSettings {
+                permutations: self.permutations,
+                seed: self.perm_seed,
+            },
+            max_terms: self.max_terms,
+            wlf: Default::default(),
+        }
+    }
+}
+
+#[derive(Subcommand)]
+enum GapAction {
+    /// Prove the diagnosis on seasons with withheld effects: simulate demo
+    /// seasons with each planted effect (magnitudes × seeds, thresholds off
+    /// the defaults) and clean ones, extract and diagnose each with the
+    /// physics baseline (the diagnosis never reads truth/), then score hit
+    /// rate, shrinkage against the ideal and false discoveries. Writes
+    /// OUT/validate.json and OUT/validate.md.
+    Validate {
+        /// Effects to plant (comma-separated).
+        #[arg(
+            long,
+            value_delimiter = ',',
+            default_value = "graining,blistering,thermal,road-abrasion"
+        )]
+        effects: Vec<String>,
+        /// Magnitudes of each planted effect (abrasion per joule relative to base wear where it acts).
+        #[arg(long, value_delimiter = ',', default_value = "0.25,0.5,1")]
+        magnitudes: Vec<f64>,
+        /// Seeds of the planted seasons.
+        #[arg(long, value_delimiter = ',', default_value = "1,2,3")]
+        seeds: Vec<u64>,
+        /// Seeds of the clean seasons.
+        #[arg(long, value_delimiter = ',', default_value = "1,2,3,4,5,6,7,8,9,10")]
+        clean_seeds: Vec<u64>,
+        /// Telemetry rate of the simulated seasons (Hz).
+        #[arg(long, default_value_t = 5.0)]
+        rate: f64,
+        /// Scratch folder for the seasons (default: OUT/seasons).
+        #[arg(long)]
+        work: Option<PathBuf>,
+        /// Keep each season's files.
+        #[arg(long)]
+        keep: bool,
+        #[command(flatten)]
+        stats: GapStatsArgs,
+        #[arg(long, default_value = "gap-validate")]
+        out: PathBuf,
+    },
 }
 
 #[derive(Clone, Copy, PartialEq, clap::ValueEnum)]
@@ -390,11 +478,41 @@ fn run_predict(
     Ok(())
 }
 
+fn run_validate(
+    settings: &tirewear::gap::validate::ValidateSettings,
+    out: &std::path::Path,
+) -> Result<()> {
+    let started = std::time::Instant::now();
+    let cases = tirewear::gap::validate::validate(settings);
+    let table = tirewear::gap::validate::render(&cases);
+    println!("{table}");
+    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    tirewear::atomic::write_bytes(
+        &out.join("validate.json"),
+        serde_json::to_string_pretty(&cases)?.as_bytes(),
+    )?;
+    let md = format!(
+        "# Gap diagnosis on withheld effects\n\n{} seasons (demo preset, {} Hz) in {:.0} s.\n\n{table}",
+        cases.len(),
+        settings.rate_hz,
+        started.elapsed().as_secs_f64()
+    );
+    tirewear::atomic::write_bytes(&out.join("validate.md"), md.as_bytes())?;
+    println!(
+        "wrote {} and {}",
+        out.join("validate.json").display(),
+        out.join("validate.md").display()
+    );
+    if cases.iter().any(|c| c.error.is_some()) {
+        anyhow::bail!("some seasons failed (listed above)");
+    }
+    Ok(())
+}
+
 fn run_gap(
     kpis: &std::path::Path,
     baseline: &str,
-    test_events: Option<&[String]>,
-    fdr: f64,
+    settings: &tirewear::gap::report::GapSettings,
     out: &std::path::Path,
 ) -> Result<()> {
     use tirewear::gap::report::{Baseline, diagnose, render_markdown};
@@ -418,7 +536,7 @@ fn run_gap(
         );
         Default::default()
     };
-    let d = diagnose(&rows, &maps, &base, test_events, fdr)
+    let d = diagnose(&rows, &maps, &base, settings)
         .with_context(|| format!("diagnosing {}", kpis.display()))?;
     print!("{}", render_markdown(&d, 12));
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
@@ -495,12 +613,69 @@ fn main() -> Result<()> {
         }
         Command::Predict { model, kpis, out } => run_predict(&model, &kpis, &out)?,
         Command::Gap {
+            action:
+                Some(GapAction::Validate {
+                    effects,
+                    magnitudes,
+                    seeds,
+                    clean_seeds,
+                    rate,
+                    work,
+                    keep,
+                    stats,
+                    out,
+                }),
+            ..
+        } => {
+            let effects = effects
+                .iter()
+                .map(|e| {
+                    tirewear::sim::EffectKind::ALL
+                        .into_iter()
+                        .find(|k| k.name() == e)
+                        .ok_or_else(|| anyhow::anyhow!("unknown effect '{e}' (graining, blistering, thermal, road-abrasion)"))
+                })
+                .collect::<Result<Vec<_>>>()?;
+            let settings = tirewear::gap::validate::ValidateSettings {
+                effects,
+                magnitudes,
+                seeds,
+                clean_seeds,
+                rate_hz: rate,
+                work: work.unwrap_or_else(|| out.join("seasons")),
+                keep,
+                gap: stats.settings(None),
+                progress,
+            };
+            run_validate(&settings, &out)?;
+        }
+        Command::Gap {
             kpis,
             baseline,
             test_events,
-            fdr,
+            compounds,
+            stats,
             out,
-        } => run_gap(&kpis, &baseline, test_events.as_deref(), fdr, &out)?,
+            ..
+        } => {
+            let kpis = kpis.expect("clap requires it");
+            let mut settings = stats.settings(test_events);
+            let dir = compounds.clone().unwrap_or_else(|| {
+                kpis.parent()
+                    .unwrap_or(std::path::Path::new("."))
+                    .join("compounds")
+            });
+            if compounds.is_some() || dir.is_dir() {
+                settings.wlf = tirewear::gap::validate::read_wlf(&dir)
+                    .with_context(|| format!("reading compound files in {}", dir.display()))?;
+            } else {
+                tracing::warn!(
+                    "no compounds/ beside {}: the baseline's temperature factor is exponential",
+                    kpis.display()
+                );
+            }
+            run_gap(&kpis, &baseline, &settings, &out)?
+        }
         Command::Bench {
             engine,
             small,
@@ -562,11 +737,14 @@ fn main() -> Result<()> {
                 &out.join("models"),
             )?;
             println!();
+            let settings = tirewear::gap::report::GapSettings {
+                wlf: tirewear::gap::validate::read_wlf(&out.join("compounds"))?,
+                ..Default::default()
+            };
             run_gap(
                 &out.join("kpis.parquet"),
                 "physics",
-                None,
-                0.05,
+                &settings,
                 &out.join("gap"),
             )?;
         }

@@ -1,12 +1,13 @@
-//! The gap diagnosis, started (issue 6): its statistics against statsmodels
-//! and scipy (goldens from tests/oracles/gap_oracle.py), and step 1 on the
-//! demo season, where the truth says the fronts carry irregular wear that the
-//! frictional-energy law does not model.
+//! The gap diagnosis: its statistics against statsmodels and scipy (goldens
+//! from tests/oracles/gap_oracle.py), and a small matrix of the validation on
+//! withheld effects: a planted effect is found where the truth put it, and a
+//! clean season reports nothing.
 
-mod common;
-
-use tirewear::gap::report::{Baseline, diagnose};
+use tirewear::gap::report::GapSettings;
+use tirewear::gap::scoring::ScoringSettings;
 use tirewear::gap::stats::{benjamini_hochberg, welch};
+use tirewear::gap::validate::{ValidateSettings, run_case};
+use tirewear::sim::{Effect, EffectKind};
 
 #[derive(serde::Deserialize)]
 struct Welch {
@@ -43,29 +44,60 @@ fn statistics_equal_statsmodels_and_scipy() {
     }
 }
 
+fn settings(work: &std::path::Path) -> ValidateSettings {
+    ValidateSettings {
+        effects: vec![],
+        magnitudes: vec![],
+        seeds: vec![],
+        clean_seeds: vec![],
+        rate_hz: 5.0,
+        work: work.to_path_buf(),
+        keep: false,
+        gap: GapSettings {
+            scoring: ScoringSettings {
+                permutations: 999,
+                seed: 2026,
+            },
+            ..Default::default()
+        },
+        progress: false,
+    }
+}
+
+/// Graining planted at magnitude 1 with its threshold moved off the default
+/// (81 °C tread bulk): the first term forward selection adds is the graining
+/// mechanism on the front axle (truth: fronts carry 5× the rear's graining),
+/// and the testing-event gap shrinks close to the ideal.
 #[test]
-fn demo_gap_lies_on_the_front_axle() {
+fn planted_graining_is_found_on_the_front_axle() {
     let dir = tempfile::tempdir().unwrap();
-    let rows = common::demo_kpis(dir.path());
-    let maps =
-        tirewear::kpi::energy_map::read_energy_maps(&dir.path().join("kpis.energy_maps.parquet"))
-            .unwrap();
-    let d = diagnose(&rows, &maps, &Baseline::Physics, None, 0.05).unwrap();
-    // Truth: irregular wear adds 5–45 % of base wear on the fronts only.
-    let front = d
-        .slices
-        .iter()
-        .find(|s| s.name == "axle = front")
-        .expect("front axle flagged");
+    let s = settings(dir.path());
+    let mut e = Effect::with_defaults(EffectKind::Graining, 1.0);
+    e.threshold = 81.0;
+    let (case, d) = run_case(Some(&e), 1, &s).unwrap();
+    assert!(case.hit, "{case:?}\n{:?}", d.candidates.first());
     assert!(
-        front.mean_residual_pct > 0.0 && front.ci_pct.0 > 0.0,
-        "{front:?}"
+        case.first_front_share > 0.7 && case.truth_front_share > 0.7,
+        "{case:?}"
     );
-    assert!(d.slices.iter().all(|s| s.p_adjusted <= 0.05));
     assert!(
-        d.slices
+        d.steps[1].p_adjusted <= 0.05 && d.steps[1].cv_gain > 0.0,
+        "{:?}",
+        d.steps[1]
+    );
+    assert!(case.rmse_diagnosed_pct < case.rmse_baseline_pct, "{case:?}");
+}
+
+/// A clean season: nothing is significant, so nothing is added.
+#[test]
+fn clean_season_reports_no_effect() {
+    let dir = tempfile::tempdir().unwrap();
+    let (case, d) = run_case(None, 2, &settings(dir.path())).unwrap();
+    assert_eq!(case.significant_terms, 0, "{:?}", d.steps);
+    assert!(
+        d.candidates
             .iter()
-            .all(|s| s.name != "axle = rear" || s.mean_residual_pct < 0.0)
+            .all(|c| c.p_adjusted > 0.05 || c.cv_gain <= 0.0)
     );
     // The physics law is calibrated: small bias on the training events.
     assert!(

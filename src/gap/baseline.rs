@@ -1,75 +1,203 @@
 //! The physics baseline of the gap ("the simulation"): the frictional-energy
-//! wear law, wear = k_c · E · exp(β·(T_surf − 60 °C)), with a coefficient k_c
-//! per compound and one temperature sensitivity β standing for the rubber's
-//! viscoelastic temperature factor (a WLF shift is close to log-linear over a
-//! race tire's working range), calibrated on the training events by least
-//! squares (β on a grid, k_c in closed form for each β).
+//! wear law
+//!
+//! wear = k_{c,a} · Σ_b E_b · φ_c(T_b) · exp(s·Sk)
+//!
+//! with a coefficient k per compound c and axle a (the paper fits the axles
+//! apart: a steered front wears differently per joule), the friction energy
+//! E_b of each surface-temperature bin b of the energy map weighted by the
+//! compound's viscoelastic temperature factor φ_c, and the road's texture
+//! factor exp(s·Sk) (negatively skewed, plateau-like surfaces abrade less).
+//!
+//! φ_c(T) = 10^(γ·(log a_T(60 °C) − log a_T(T))) through the compound's WLF
+//! shift (Grosch: abrasion follows the rubber's reduced viscoelastic state)
+//! when the compound files are given; otherwise exp(β·(T − 60 °C)), its
+//! log-linear approximation. Calibrated on the training events by least
+//! squares: γ (or β) and s on a grid, the k in closed form for each pair.
+//! Without an energy map the factor uses the run's mean surface temperature.
 
+use crate::ingest::compound::Wlf;
 use crate::kpi::KpiRow;
+use crate::kpi::energy_map::{EnergyMaps, T_INNER_BINS, T_SURFACE_BINS};
 use std::collections::BTreeMap;
 
 /// Temperature of the law's reference state (°C).
 pub const REFERENCE_C: f64 = 60.0;
+const BETA_GRID: (f64, f64, usize) = (-0.05, 0.0025, 81); // −0.05 ..= 0.15 1/K
+const GAMMA_GRID: (f64, f64, usize) = (-0.2, 0.005, 141); // −0.2 ..= 0.5
+const SKEW_GRID: (f64, f64, usize) = (-0.5, 0.025, 41); // −0.5 ..= 0.5
+
+/// The temperature factor φ of the law.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub enum TemperatureFactor {
+    /// exp(β·(T − 60 °C)), β in 1/K.
+    Exponential { beta_per_k: f64 },
+    /// 10^(γ·(log a_T(60 °C) − log a_T(T))) with each compound's WLF constants.
+    Wlf {
+        gamma: f64,
+        wlf: BTreeMap<String, Wlf>,
+    },
+}
+
+impl TemperatureFactor {
+    /// φ of `compound` at `t_c` (NaN for a compound without WLF constants).
+    pub fn at(&self, compound: &str, t_c: f64) -> f64 {
+        match self {
+            TemperatureFactor::Exponential { beta_per_k } => {
+                (beta_per_k * (t_c - REFERENCE_C)).exp()
+            }
+            TemperatureFactor::Wlf { gamma, wlf } => wlf.get(compound).map_or(f64::NAN, |w| {
+                10f64.powf(gamma * (w.log10_shift(REFERENCE_C) - w.log10_shift(t_c)))
+            }),
+        }
+    }
+
+    /// The calibrated parameter in words.
+    pub fn describe(&self) -> String {
+        match self {
+            TemperatureFactor::Exponential { beta_per_k } => {
+                format!("φ = exp(β(T − 60 °C)), β = {beta_per_k:.4} /K")
+            }
+            TemperatureFactor::Wlf { gamma, .. } => {
+                format!(
+                    "φ = (a_T(60 °C)/a_T(T))^γ by each compound's WLF constants, γ = {gamma:.3}"
+                )
+            }
+        }
+    }
+}
 
 /// A calibrated baseline.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct PhysicsBaseline {
-    /// % of tread per MJ of friction energy at the reference temperature, per compound.
+    /// % of tread per MJ of friction energy at the reference temperature on a
+    /// road of zero skewness, per `compound/axle`.
     pub k_pct_per_mj: BTreeMap<String, f64>,
-    /// β (1/K).
-    pub beta_per_k: f64,
+    pub temperature_factor: TemperatureFactor,
+    /// s: the road factor is exp(s·skewness).
+    pub skewness_coefficient: f64,
 }
 
-fn term(r: &KpiRow, beta: f64) -> f64 {
-    r.friction_energy_j / 1e6 * (beta * (r.t_surface_avg_c - REFERENCE_C)).exp()
+/// The calibration group of a row: `compound/axle`.
+pub fn group(r: &KpiRow) -> String {
+    format!("{}/{}", r.compound, r.axle)
+}
+
+/// Temperature-weighted friction energy Σ E_b·φ(T_b) (MJ).
+pub fn weighted_energy_mj(r: &KpiRow, maps: Option<&EnergyMaps>, phi: &TemperatureFactor) -> f64 {
+    match maps {
+        Some(m) => {
+            let mut s = 0.0;
+            for i in 0..T_SURFACE_BINS.n {
+                let e: f64 = m.surface_inner[i * T_INNER_BINS.n..(i + 1) * T_INNER_BINS.n]
+                    .iter()
+                    .sum();
+                if e != 0.0 {
+                    let t_mid = T_SURFACE_BINS.lower_edge(i) + 0.5 * T_SURFACE_BINS.width;
+                    s += e * phi.at(&r.compound, t_mid);
+                }
+            }
+            s / 1e6
+        }
+        None => r.friction_energy_j / 1e6 * phi.at(&r.compound, r.t_surface_avg_c),
+    }
 }
 
 impl PhysicsBaseline {
-    /// Calibrates on rows with finite wear, energy and temperature.
-    pub fn fit(rows: &[&KpiRow]) -> PhysicsBaseline {
-        let ok: Vec<&&KpiRow> = rows
-            .iter()
-            .filter(|r| {
+    /// Calibrates on rows with finite wear, energy, temperature and skewness;
+    /// `maps[i]` belongs to `rows[i]`. With WLF constants for every compound
+    /// the factor is the WLF one, else the exponential.
+    pub fn fit(
+        rows: &[&KpiRow],
+        maps: &[Option<&EnergyMaps>],
+        wlf: &BTreeMap<String, Wlf>,
+    ) -> PhysicsBaseline {
+        let ok: Vec<usize> = (0..rows.len())
+            .filter(|&i| {
+                let r = rows[i];
                 r.wear_mean_pct.is_finite()
                     && r.friction_energy_j.is_finite()
                     && r.t_surface_avg_c.is_finite()
+                    && r.skewness.is_finite()
             })
             .collect();
-        let fit_for = |beta: f64| -> (f64, BTreeMap<String, f64>) {
-            let mut sums: BTreeMap<String, (f64, f64)> = BTreeMap::new();
-            for r in &ok {
-                let x = term(r, beta);
-                let s = sums.entry(r.compound.clone()).or_default();
-                s.0 += x * r.wear_mean_pct;
-                s.1 += x * x;
-            }
-            let k: BTreeMap<String, f64> =
-                sums.into_iter().map(|(c, (xy, xx))| (c, xy / xx)).collect();
-            let sse = ok
-                .iter()
-                .map(|r| (r.wear_mean_pct - k[&r.compound] * term(r, beta)).powi(2))
-                .sum();
-            (sse, k)
+        let use_wlf = !wlf.is_empty() && ok.iter().all(|&i| wlf.contains_key(&rows[i].compound));
+        let laws: Vec<TemperatureFactor> = if use_wlf {
+            (0..GAMMA_GRID.2)
+                .map(|i| TemperatureFactor::Wlf {
+                    gamma: GAMMA_GRID.0 + GAMMA_GRID.1 * i as f64,
+                    wlf: wlf.clone(),
+                })
+                .collect()
+        } else {
+            (0..BETA_GRID.2)
+                .map(|i| TemperatureFactor::Exponential {
+                    beta_per_k: BETA_GRID.0 + BETA_GRID.1 * i as f64,
+                })
+                .collect()
         };
-        let mut best = (f64::INFINITY, BTreeMap::new(), 0.0);
-        for i in 0..=200 {
-            let beta = -0.05 + 0.001 * i as f64;
-            let (sse, k) = fit_for(beta);
-            if sse < best.0 {
-                best = (sse, k, beta);
+        let groups: Vec<String> = ok.iter().map(|&i| group(rows[i])).collect();
+        let mut best = (f64::INFINITY, BTreeMap::new(), 0, 0.0);
+        for (li, law) in laws.iter().enumerate() {
+            let w: Vec<f64> = ok
+                .iter()
+                .map(|&i| weighted_energy_mj(rows[i], maps[i], law))
+                .collect();
+            for si in 0..SKEW_GRID.2 {
+                let s = SKEW_GRID.0 + SKEW_GRID.1 * si as f64;
+                let mut sums: BTreeMap<&str, (f64, f64, f64)> = BTreeMap::new();
+                for ((&i, w), g) in ok.iter().zip(&w).zip(&groups) {
+                    let x = w * (s * rows[i].skewness).exp();
+                    let y = rows[i].wear_mean_pct;
+                    let e = sums.entry(g.as_str()).or_default();
+                    e.0 += x * y;
+                    e.1 += x * x;
+                    e.2 += y * y;
+                }
+                // SSE of the closed-form k per group: Σy² − (Σxy)²/Σx².
+                let sse: f64 = sums.values().map(|(xy, xx, yy)| yy - xy * xy / xx).sum();
+                if sse < best.0 {
+                    let k = sums
+                        .iter()
+                        .map(|(g, (xy, xx, _))| (g.to_string(), xy / xx))
+                        .collect();
+                    best = (sse, k, li, s);
+                }
             }
         }
         PhysicsBaseline {
             k_pct_per_mj: best.1,
-            beta_per_k: best.2,
+            temperature_factor: laws[best.2].clone(),
+            skewness_coefficient: best.3,
         }
     }
 
-    /// Predicted mean wear (%); NaN for a compound not seen in calibration.
-    pub fn predict(&self, r: &KpiRow) -> f64 {
+    /// The law's energy term of a row, before its group's k (MJ).
+    pub fn energy_term(&self, r: &KpiRow, maps: Option<&EnergyMaps>) -> f64 {
+        weighted_energy_mj(r, maps, &self.temperature_factor)
+            * (self.skewness_coefficient * r.skewness).exp()
+    }
+
+    /// Predicted mean wear (%); NaN for a compound and axle not seen in calibration.
+    pub fn predict(&self, r: &KpiRow, maps: Option<&EnergyMaps>) -> f64 {
         self.k_pct_per_mj
-            .get(&r.compound)
-            .map_or(f64::NAN, |k| k * term(r, self.beta_per_k))
+            .get(&group(r))
+            .map_or(f64::NAN, |k| k * self.energy_term(r, maps))
+    }
+
+    /// The law as design columns, one per calibration group (the term in its
+    /// group's column, zero elsewhere), so later steps can refit the k's
+    /// together with candidate terms.
+    pub fn columns(&self, rows: &[&KpiRow], maps: &[Option<&EnergyMaps>]) -> Vec<Vec<f64>> {
+        let groups: Vec<&String> = self.k_pct_per_mj.keys().collect();
+        let mut cols = vec![vec![0.0; rows.len()]; groups.len()];
+        for (i, r) in rows.iter().enumerate() {
+            let g = group(r);
+            if let Some(j) = groups.iter().position(|k| **k == g) {
+                cols[j][i] = self.energy_term(r, maps[i]);
+            }
+        }
+        cols
     }
 }
 
@@ -79,29 +207,88 @@ mod tests {
 
     #[test]
     fn recovers_a_planted_law() {
-        // wear = k_c·E·exp(0.03(T − 60)), k = 1.5 (soft), 0.8 (hard): exact recovery.
+        // wear = k·E·exp(0.03(T − 60))·exp(0.2·Sk), k = 1.5 (soft front), 0.8
+        // (hard rear): exact recovery, β and s on their grids.
         let rows: Vec<KpiRow> = (0..40)
             .map(|i| {
-                let (c, k) = if i % 2 == 0 {
-                    ("soft", 1.5)
+                let (c, a, k) = if i % 2 == 0 {
+                    ("soft", "front", 1.5)
                 } else {
-                    ("hard", 0.8)
+                    ("hard", "rear", 0.8)
                 };
                 let e = 5.0 + i as f64;
                 let t = 50.0 + (i % 7) as f64 * 6.0;
+                let sk = -1.0 + 0.1 * (i % 9) as f64;
                 KpiRow {
                     compound: c.into(),
+                    axle: a.into(),
                     friction_energy_j: e * 1e6,
                     t_surface_avg_c: t,
-                    wear_mean_pct: k * e * (0.03 * (t - 60.0)).exp(),
+                    skewness: sk,
+                    wear_mean_pct: k * e * (0.03 * (t - 60.0)).exp() * (0.2 * sk).exp(),
                     ..Default::default()
                 }
             })
             .collect();
         let refs: Vec<&KpiRow> = rows.iter().collect();
-        let b = PhysicsBaseline::fit(&refs);
-        assert!((b.beta_per_k - 0.03).abs() < 1e-9);
-        assert!((b.k_pct_per_mj["soft"] - 1.5).abs() < 1e-9);
-        assert!((b.k_pct_per_mj["hard"] - 0.8).abs() < 1e-9);
+        let b = PhysicsBaseline::fit(&refs, &vec![None; refs.len()], &BTreeMap::new());
+        assert_eq!(
+            b.temperature_factor,
+            TemperatureFactor::Exponential { beta_per_k: 0.03 }
+        );
+        assert!((b.skewness_coefficient - 0.2).abs() < 1e-9);
+        assert!((b.k_pct_per_mj["soft/front"] - 1.5).abs() < 1e-9);
+        assert!((b.k_pct_per_mj["hard/rear"] - 0.8).abs() < 1e-9);
+    }
+
+    #[test]
+    fn energy_map_weights_each_temperature_bin() {
+        // 2 MJ at 62.5 °C and 1 MJ at 82.5 °C (bin midpoints), β = 0.01:
+        // 2·e^0.025 + e^0.225 by hand.
+        let mut m = EnergyMaps::new();
+        m.add(61.0, 100.0, 1.0, 2e6);
+        m.add(84.0, 100.0, 1.0, 1e6);
+        let r = KpiRow::default();
+        let phi = TemperatureFactor::Exponential { beta_per_k: 0.01 };
+        let w = weighted_energy_mj(&r, Some(&m), &phi);
+        assert!(
+            (w - (2.0 * 0.025f64.exp() + 0.225f64.exp())).abs() < 1e-12,
+            "{w}"
+        );
+    }
+
+    #[test]
+    fn wlf_factor_recovers_gamma() {
+        // wear = 2·E·(a_T(60)/a_T(T))^0.17 with C1 8.86, C2 101.6 K, T_ref 50 °C:
+        // the WLF law is chosen and γ found on its grid.
+        let w = Wlf {
+            c1: 8.86,
+            c2_k: 101.6,
+            t_ref_c: 50.0,
+        };
+        let rows: Vec<KpiRow> = (0..30)
+            .map(|i| {
+                let t = 40.0 + 3.0 * i as f64;
+                let e = 4.0 + (i % 5) as f64;
+                KpiRow {
+                    compound: "soft".into(),
+                    axle: "rear".into(),
+                    friction_energy_j: e * 1e6,
+                    t_surface_avg_c: t,
+                    wear_mean_pct: 2.0
+                        * e
+                        * 10f64.powf(0.17 * (w.log10_shift(60.0) - w.log10_shift(t))),
+                    ..Default::default()
+                }
+            })
+            .collect();
+        let refs: Vec<&KpiRow> = rows.iter().collect();
+        let wlf = BTreeMap::from([("soft".to_string(), w)]);
+        let b = PhysicsBaseline::fit(&refs, &vec![None; refs.len()], &wlf);
+        match &b.temperature_factor {
+            TemperatureFactor::Wlf { gamma, .. } => assert!((gamma - 0.17).abs() < 1e-9),
+            other => panic!("{other:?}"),
+        }
+        assert!((b.k_pct_per_mj["soft/rear"] - 2.0).abs() < 1e-9);
     }
 }

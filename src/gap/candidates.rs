@@ -1,35 +1,74 @@
-//! Step 2 of the diagnosis, which unmodelled effect explains the gap: a
-//! library of candidate effects, each a physical mechanism computed from the
-//! energy maps or the KPIs with a threshold scanned inside the
-//! cross-validation, plus every KPI the baseline does not use. Each candidate
-//! is scored by leave-one-event-out cross-validation of
-//! `residual ~ a + c·feature` against `residual ~ a`, with a one-sided t-test
-//! of the per-event held-out gains and Benjamini–Hochberg over candidates.
+//! Step 2's library of candidate effects: named physical mechanisms computed
+//! from the energy maps and KPIs, each with a threshold grid that is scanned
+//! inside the cross-validation (the thresholds are not known in advance),
+//! plus every KPI the physics baseline does not use as a generic candidate.
+//! Formulas and units: docs/gap.md.
 
-use super::stats::benjamini_hochberg;
 use crate::kpi::KpiRow;
 use crate::kpi::energy_map::{EnergyMaps, SLIDING_SPEED_BINS, T_INNER_BINS, T_SURFACE_BINS};
 use crate::model::data::candidate_inputs;
-use statrs::distribution::{ContinuousCDF, StudentsT};
 
-/// How a candidate's feature is computed for a row at threshold θ.
+/// How a candidate's term is computed for a row at threshold θ.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
 pub enum Feature {
-    /// Friction energy (MJ) with the surface below θ °C (graining: a cold tread).
-    ColdSurfaceEnergy,
-    /// Friction energy (MJ) with the inner liner above θ °C (blistering).
+    /// Graining: lateral friction energy with a cold tread, i.e. the energy of
+    /// the map bins whose tread-bulk temperature (mean of surface and inner
+    /// liner) is below θ °C, times the run's lateral share E_y/E (MJ).
+    ColdTreadLateralEnergy,
+    /// Blistering: friction energy with the inner liner above θ °C (MJ).
     HotInnerEnergy,
-    /// Friction energy (MJ) with the surface above θ °C (thermal degradation).
+    /// Thermal degradation: friction energy with the surface above θ °C (MJ).
     HotSurfaceEnergy,
-    /// Friction energy (MJ) at sliding speeds above θ m/s.
+    /// Friction energy at sliding speeds above θ m/s (MJ).
     FastSlidingEnergy,
-    /// Friction energy (MJ) on roads whose micro-texture Ra is above θ mm (road abrasion).
+    /// Road abrasion: friction energy scaled by the road's micro-texture
+    /// above θ, E·max(0, Ra_micro − θ)/(0.01 mm) (MJ per 0.01 mm).
     RoughRoadEnergy,
-    /// Total friction energy (MJ); with an axle, the mechanism is "extra wear
-    /// on that axle per joule" (the paper's irregular front wear).
-    Energy,
-    /// A KPI's value (no threshold).
+    /// Generic: friction energy × the KPI standardised over the rows scored,
+    /// E·(x − mean)/sd (MJ): wear per joule that varies with the KPI.
     Kpi(&'static str),
+}
+
+impl Feature {
+    /// The simulator's effect this mechanism stands for (`EffectKind::name`), if any.
+    pub fn mechanism(&self) -> Option<&'static str> {
+        match self {
+            Feature::ColdTreadLateralEnergy => Some("graining"),
+            Feature::HotInnerEnergy => Some("blistering"),
+            Feature::HotSurfaceEnergy => Some("thermal"),
+            Feature::RoughRoadEnergy => Some("road-abrasion"),
+            Feature::FastSlidingEnergy | Feature::Kpi(_) => None,
+        }
+    }
+
+    /// A physical mechanism only adds wear: its coefficient must be positive.
+    /// A generic KPI may act either way.
+    pub fn adds_wear_only(&self) -> bool {
+        !matches!(self, Feature::Kpi(_))
+    }
+
+    /// A term that is the row's energy times a value of its track (road
+    /// candidates): it can only be told apart from the other track-level
+    /// causes by comparing tracks, so it is tested across tracks.
+    pub fn track_level(&self) -> bool {
+        match self {
+            Feature::RoughRoadEnergy => true,
+            Feature::Kpi(c) => ROAD_KPIS.contains(c),
+            _ => false,
+        }
+    }
+
+    /// Unit of the threshold.
+    pub fn threshold_unit(&self) -> &'static str {
+        match self {
+            Feature::ColdTreadLateralEnergy
+            | Feature::HotInnerEnergy
+            | Feature::HotSurfaceEnergy => "°C",
+            Feature::FastSlidingEnergy => "m/s",
+            Feature::RoughRoadEnergy => "mm",
+            Feature::Kpi(_) => "",
+        }
+    }
 }
 
 /// A named candidate with its threshold grid, acting on one axle or both.
@@ -42,7 +81,26 @@ pub struct Candidate {
     pub axle: Option<&'static str>,
 }
 
-/// The library: five mechanisms and every KPI the physics baseline does not use.
+/// The road KPIs (paper table 3): one value per track.
+pub const ROAD_KPIS: [&str; 11] = [
+    "macro_wavelength_mm",
+    "micro_wavelength_mm",
+    "hurst",
+    "hurst_hdc",
+    "ra_macro_mm",
+    "ra_micro_mm",
+    "peakyness_mm",
+    "skewness",
+    "kurtosis",
+    "rq_mm",
+    "ra_mm",
+];
+
+/// KPI columns the physics baseline already uses.
+pub const BASELINE_KPIS: [&str; 3] = ["friction_energy_j", "t_surface_avg_c", "skewness"];
+
+/// The library: five mechanisms, each on both axles and on each axle alone,
+/// and every KPI the physics baseline does not use.
 pub fn library(rows: &[&KpiRow]) -> Vec<Candidate> {
     let steps = |lo: f64, hi: f64, step: f64| -> Vec<f64> {
         (0..)
@@ -50,6 +108,7 @@ pub fn library(rows: &[&KpiRow]) -> Vec<Candidate> {
             .take_while(|v| *v <= hi + 1e-9)
             .collect()
     };
+    // Road abrasion: no threshold, or each track's micro-texture value but the roughest.
     let mut micro: Vec<f64> = rows
         .iter()
         .map(|r| r.ra_micro_mm)
@@ -57,11 +116,13 @@ pub fn library(rows: &[&KpiRow]) -> Vec<Candidate> {
         .collect();
     micro.sort_by(f64::total_cmp);
     micro.dedup();
+    micro.pop();
+    micro.insert(0, 0.0);
     let mechanisms: Vec<(&str, Feature, Vec<f64>)> = vec![
         (
-            "graining (energy with a cold surface)",
-            Feature::ColdSurfaceEnergy,
-            steps(40.0, 90.0, 5.0),
+            "graining (lateral energy with a cold tread)",
+            Feature::ColdTreadLateralEnergy,
+            steps(60.0, 110.0, 5.0),
         ),
         (
             "blistering (energy with a hot inner liner)",
@@ -85,8 +146,6 @@ pub fn library(rows: &[&KpiRow]) -> Vec<Candidate> {
         ),
     ];
     let mut out = Vec::new();
-    // Each mechanism on both axles and on each axle alone (the paper treats
-    // the axles apart: steering, irregular front wear).
     for (name, feature, thresholds) in mechanisms {
         for axle in [None, Some("front"), Some("rear")] {
             out.push(Candidate {
@@ -100,16 +159,8 @@ pub fn library(rows: &[&KpiRow]) -> Vec<Candidate> {
             });
         }
     }
-    for axle in ["front", "rear"] {
-        out.push(Candidate {
-            name: format!("extra wear per joule, {axle} axle (irregular wear)"),
-            feature: Feature::Energy,
-            thresholds: vec![f64::NAN],
-            axle: Some(axle),
-        });
-    }
     for c in candidate_inputs() {
-        if !matches!(c, "friction_energy_j" | "t_surface_avg_c") {
+        if !BASELINE_KPIS.contains(&c) {
             out.push(Candidate {
                 name: format!("KPI {c}"),
                 feature: Feature::Kpi(c),
@@ -121,15 +172,32 @@ pub fn library(rows: &[&KpiRow]) -> Vec<Candidate> {
     out
 }
 
-/// The feature of one row at threshold θ.
-pub fn feature(f: Feature, r: &KpiRow, maps: Option<&EnergyMaps>, theta: f64) -> f64 {
+/// Micro-texture above θ, in units of 0.01 mm.
+fn road_excess(ra_micro_mm: f64, theta: f64) -> f64 {
+    (ra_micro_mm - theta).max(0.0) / 0.01
+}
+
+/// Bin midpoint.
+fn mid(b: &crate::kpi::energy_map::Bins, i: usize) -> f64 {
+    b.lower_edge(i) + 0.5 * b.width
+}
+
+/// The term of one row at threshold θ (MJ); `kpi_scale` = (mean, sd) of a
+/// generic KPI over the rows scored.
+pub fn feature(
+    f: Feature,
+    r: &KpiRow,
+    maps: Option<&EnergyMaps>,
+    theta: f64,
+    kpi_scale: (f64, f64),
+) -> f64 {
     let mj = 1e-6;
     let sum_surface_inner = |keep: &dyn Fn(f64, f64) -> bool| -> f64 {
         maps.map_or(f64::NAN, |m| {
             let mut s = 0.0;
             for i in 0..T_SURFACE_BINS.n {
                 for j in 0..T_INNER_BINS.n {
-                    if keep(T_SURFACE_BINS.lower_edge(i), T_INNER_BINS.lower_edge(j)) {
+                    if keep(mid(&T_SURFACE_BINS, i), mid(&T_INNER_BINS, j)) {
                         s += m.surface_inner[i * T_INNER_BINS.n + j];
                     }
                 }
@@ -138,15 +206,20 @@ pub fn feature(f: Feature, r: &KpiRow, maps: Option<&EnergyMaps>, theta: f64) ->
         })
     };
     match f {
-        Feature::ColdSurfaceEnergy => {
-            sum_surface_inner(&|ts, _| ts + T_SURFACE_BINS.width <= theta)
+        Feature::ColdTreadLateralEnergy => {
+            let lateral_share = if r.friction_energy_j > 0.0 {
+                r.friction_energy_y_j / r.friction_energy_j
+            } else {
+                0.0
+            };
+            lateral_share * sum_surface_inner(&|ts, ti| 0.5 * (ts + ti) < theta)
         }
-        Feature::HotInnerEnergy => sum_surface_inner(&|_, ti| ti >= theta),
-        Feature::HotSurfaceEnergy => sum_surface_inner(&|ts, _| ts >= theta),
+        Feature::HotInnerEnergy => sum_surface_inner(&|_, ti| ti > theta),
+        Feature::HotSurfaceEnergy => sum_surface_inner(&|ts, _| ts > theta),
         Feature::FastSlidingEnergy => maps.map_or(f64::NAN, |m| {
             let mut s = 0.0;
             for v in 0..SLIDING_SPEED_BINS.n {
-                if SLIDING_SPEED_BINS.lower_edge(v) >= theta {
+                if mid(&SLIDING_SPEED_BINS, v) > theta {
                     s += m.speed_surface[v * T_SURFACE_BINS.n..(v + 1) * T_SURFACE_BINS.n]
                         .iter()
                         .sum::<f64>();
@@ -154,152 +227,65 @@ pub fn feature(f: Feature, r: &KpiRow, maps: Option<&EnergyMaps>, theta: f64) ->
             }
             s * mj
         }),
-        Feature::RoughRoadEnergy => {
-            if r.ra_micro_mm >= theta {
-                r.friction_energy_j * mj
+        Feature::RoughRoadEnergy => r.friction_energy_j * mj * road_excess(r.ra_micro_mm, theta),
+        Feature::Kpi(c) => {
+            let (m, sd) = kpi_scale;
+            let x = r.number(c).unwrap_or(f64::NAN);
+            if sd > 0.0 {
+                r.friction_energy_j * mj * (x - m) / sd
             } else {
                 0.0
             }
         }
-        Feature::Energy => r.friction_energy_j * mj,
-        Feature::Kpi(c) => r.number(c).unwrap_or(f64::NAN),
     }
 }
 
-/// A candidate's feature for a row: zero on the other axle.
-pub fn candidate_feature(c: &Candidate, r: &KpiRow, maps: Option<&EnergyMaps>, theta: f64) -> f64 {
+/// A candidate's term for a row: zero on the other axle.
+pub fn candidate_feature(
+    c: &Candidate,
+    r: &KpiRow,
+    maps: Option<&EnergyMaps>,
+    theta: f64,
+    kpi_scale: (f64, f64),
+) -> f64 {
     match c.axle {
         Some(a) if r.axle != a => 0.0,
-        _ => feature(c.feature, r, maps, theta),
+        _ => feature(c.feature, r, maps, theta, kpi_scale),
     }
 }
 
-/// Least squares of y on [1, x]: (a, c).
-fn line(x: &[f64], y: &[f64]) -> (f64, f64) {
-    let n = x.len() as f64;
-    let (mx, my) = (x.iter().sum::<f64>() / n, y.iter().sum::<f64>() / n);
-    let sxx: f64 = x.iter().map(|v| (v - mx).powi(2)).sum();
-    let sxy: f64 = x.iter().zip(y).map(|(a, b)| (a - mx) * (b - my)).sum();
-    let c = if sxx > 0.0 { sxy / sxx } else { 0.0 };
-    (my - c * mx, c)
+/// (mean, sd) of a generic KPI candidate's column over `rows`; (0, 1) otherwise.
+pub fn kpi_scale(c: &Candidate, rows: &[&KpiRow]) -> (f64, f64) {
+    let Feature::Kpi(col) = c.feature else {
+        return (0.0, 1.0);
+    };
+    let v: Vec<f64> = rows.iter().filter_map(|r| r.number(col)).collect();
+    let n = v.len() as f64;
+    let m = v.iter().sum::<f64>() / n;
+    let sd = (v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();
+    (m, if sd.is_finite() { sd } else { 0.0 })
 }
 
-/// A candidate's fit: threshold θ and `residual ≈ a + c·feature`, chosen by SSE on `rows`.
-pub fn fit_candidate(
-    c: &Candidate,
-    x: &[Vec<f64>],
-    res: &[f64],
-    rows: &[usize],
-) -> (usize, f64, f64, f64) {
-    let mut best = (0, 0.0, 0.0, f64::INFINITY);
-    for t in 0..c.thresholds.len() {
-        let xs: Vec<f64> = rows.iter().map(|&i| x[i][t]).collect();
-        let ys: Vec<f64> = rows.iter().map(|&i| res[i]).collect();
-        let (a, k) = line(&xs, &ys);
-        let sse: f64 = xs
-            .iter()
-            .zip(&ys)
-            .map(|(x, y)| (y - a - k * x).powi(2))
-            .sum();
-        if sse < best.3 {
-            best = (t, a, k, sse);
+/// A track-level term factored as `row_factor · track_value`: the row's
+/// energy (MJ, zero off the candidate's axle) and its track's value at θ.
+pub fn row_factor(c: &Candidate, r: &KpiRow) -> f64 {
+    match c.axle {
+        Some(a) if r.axle != a => 0.0,
+        _ => r.friction_energy_j * 1e-6,
+    }
+}
+
+/// The track's value of a track-level candidate at θ (see [`row_factor`]).
+pub fn track_value(c: &Candidate, track_row: &KpiRow, theta: f64, kpi_scale: (f64, f64)) -> f64 {
+    match c.feature {
+        Feature::RoughRoadEnergy => road_excess(track_row.ra_micro_mm, theta),
+        Feature::Kpi(col) => {
+            let (m, sd) = kpi_scale;
+            let x = track_row.number(col).unwrap_or(f64::NAN);
+            if sd > 0.0 { (x - m) / sd } else { 0.0 }
         }
+        _ => f64::NAN,
     }
-    best
-}
-
-/// How a candidate scored.
-#[derive(Debug, Clone, serde::Serialize)]
-pub struct Score {
-    pub name: String,
-    pub feature: Feature,
-    pub axle: Option<&'static str>,
-    /// Threshold chosen on all rows given (NaN for KPI candidates).
-    pub threshold: f64,
-    /// Coefficient c of `residual ≈ a + c·feature` (% per MJ, or % per KPI unit).
-    pub coefficient: f64,
-    /// 1 − held-out SSE(with)/held-out SSE(intercept only), over events left out in turn.
-    pub cv_gain: f64,
-    /// One-sided t-test of the per-event held-out SSE reductions.
-    pub p: f64,
-    /// Benjamini–Hochberg over the candidates.
-    pub p_adjusted: f64,
-}
-
-/// Scores every candidate on rows with residuals; `maps` per row (None: map candidates are NaN there).
-pub fn rank(
-    rows: &[&KpiRow],
-    maps: &[Option<&EnergyMaps>],
-    res: &[f64],
-    library: &[Candidate],
-) -> Vec<Score> {
-    let mut events: Vec<&str> = rows.iter().map(|r| r.event.as_str()).collect();
-    events.sort();
-    events.dedup();
-    let all: Vec<usize> = (0..rows.len()).collect();
-    let mut scores: Vec<Score> = library
-        .iter()
-        .filter_map(|c| {
-            let x: Vec<Vec<f64>> = rows
-                .iter()
-                .zip(maps)
-                .map(|(r, m)| {
-                    c.thresholds
-                        .iter()
-                        .map(|&t| candidate_feature(c, r, *m, t))
-                        .collect()
-                })
-                .collect();
-            if x.iter().flatten().any(|v| !v.is_finite()) {
-                return None;
-            }
-            let (mut with, mut without, mut gains) = (0.0, 0.0, Vec::new());
-            for e in &events {
-                let (test, train): (Vec<usize>, Vec<usize>) =
-                    all.iter().partition(|&&i| rows[i].event == *e);
-                if test.is_empty() || train.len() < 10 {
-                    continue;
-                }
-                let (t, a, k, _) = fit_candidate(c, &x, res, &train);
-                let a0 = train.iter().map(|&i| res[i]).sum::<f64>() / train.len() as f64;
-                let sse_with: f64 = test
-                    .iter()
-                    .map(|&i| (res[i] - a - k * x[i][t]).powi(2))
-                    .sum();
-                let sse_without: f64 = test.iter().map(|&i| (res[i] - a0).powi(2)).sum();
-                with += sse_with;
-                without += sse_without;
-                gains.push((sse_without - sse_with) / test.len() as f64);
-            }
-            let n = gains.len() as f64;
-            let m = gains.iter().sum::<f64>() / n;
-            let sd = (gains.iter().map(|g| (g - m).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();
-            let p = if sd > 0.0 && n > 2.0 {
-                1.0 - StudentsT::new(0.0, 1.0, n - 1.0)
-                    .expect("df")
-                    .cdf(m / (sd / n.sqrt()))
-            } else {
-                1.0
-            };
-            let (t, _, k, _) = fit_candidate(c, &x, res, &all);
-            Some(Score {
-                name: c.name.clone(),
-                feature: c.feature,
-                axle: c.axle,
-                threshold: c.thresholds[t],
-                coefficient: k,
-                cv_gain: 1.0 - with / without,
-                p,
-                p_adjusted: f64::NAN,
-            })
-        })
-        .collect();
-    let adj = benjamini_hochberg(&scores.iter().map(|s| s.p).collect::<Vec<_>>());
-    for (s, a) in scores.iter_mut().zip(adj) {
-        s.p_adjusted = a;
-    }
-    scores.sort_by(|a, b| b.cv_gain.total_cmp(&a.cv_gain));
-    scores
 }
 
 #[cfg(test)]
@@ -307,47 +293,43 @@ mod tests {
     use super::*;
 
     #[test]
-    fn a_planted_cold_surface_term_ranks_first_with_its_threshold() {
-        // 10 events × 12 tires. Each tire's map puts energy at surface temperatures
-        // 42.5 … 97.5 °C in varying amounts; the residual is 0.5 %/MJ of the energy
-        // with the surface below 60 °C, plus a small deterministic wobble.
-        let mut rows = Vec::new();
-        let mut maps = Vec::new();
-        for e in 0..10 {
-            for t in 0..12 {
-                let k = e * 12 + t;
-                let mut m = EnergyMaps::new();
-                let mut cold = 0.0;
-                for (b, ts) in (4..16).zip((0..).map(|i| 42.5 + 5.0 * i as f64)) {
-                    let mj = 1.0 + ((k * 7 + b * 3) % 11) as f64;
-                    m.add(ts, 100.0, 1.0, mj * 1e6);
-                    if ts < 60.0 {
-                        cold += mj;
-                    }
-                }
-                rows.push(KpiRow {
-                    event: format!("E{e:02}"),
-                    run: format!("R{k}"),
-                    friction_energy_j: m.total(),
-                    ra_micro_mm: 0.1,
-                    wear_mean_pct: 0.5 * cold + 0.01 * ((k * 13) % 5) as f64,
-                    ..Default::default()
-                });
-                maps.push(m);
+    fn track_level_terms_factor_into_row_and_track() {
+        let r = KpiRow {
+            axle: "front".into(),
+            friction_energy_j: 3e6,
+            ra_micro_mm: 0.02,
+            kurtosis: 3.5,
+            ..Default::default()
+        };
+        let rows = vec![&r];
+        for c in library(&rows).iter().filter(|c| c.feature.track_level()) {
+            let scale = (3.0, 0.25);
+            for &t in &c.thresholds {
+                let whole = candidate_feature(c, &r, None, t, scale);
+                let parts = row_factor(c, &r) * track_value(c, &r, t, scale);
+                assert!(
+                    (whole - parts).abs() < 1e-12,
+                    "{}: {whole} vs {parts}",
+                    c.name
+                );
             }
         }
-        let refs: Vec<&KpiRow> = rows.iter().collect();
-        let mref: Vec<Option<&EnergyMaps>> = maps.iter().map(Some).collect();
-        let res: Vec<f64> = rows.iter().map(|r| r.wear_mean_pct).collect();
-        let lib: Vec<Candidate> = library(&refs).into_iter().take(15).collect();
-        let s = rank(&refs, &mref, &res, &lib);
-        assert!(matches!(s[0].feature, Feature::ColdSurfaceEnergy), "{s:?}");
-        assert_eq!(s[0].threshold, 60.0);
-        assert!(
-            (s[0].coefficient - 0.5).abs() < 0.01,
-            "{}",
-            s[0].coefficient
+        // Graining: lateral share × energy of the map bins with a cold tread bulk.
+        let mut m = EnergyMaps::new();
+        m.add(62.0, 92.0, 1.0, 2e6); // bulk (62.5 + 92.5)/2 = 77.5 °C
+        m.add(90.0, 100.0, 1.0, 1e6); // bulk 96.25 °C
+        let g = KpiRow {
+            friction_energy_j: 3e6,
+            friction_energy_y_j: 1.5e6,
+            ..Default::default()
+        };
+        let f = feature(
+            Feature::ColdTreadLateralEnergy,
+            &g,
+            Some(&m),
+            80.0,
+            (0.0, 1.0),
         );
-        assert!(s[0].cv_gain > 0.95 && s[0].p_adjusted < 0.01, "{:?}", s[0]);
+        assert!((f - 0.5 * 2.0).abs() < 1e-12, "{f}");
     }
 }

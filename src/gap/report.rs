@@ -2,8 +2,11 @@
 //! events, and where it lies; written as JSON and Markdown.
 
 use super::baseline::PhysicsBaseline;
-use super::candidates::{Candidate, Score, candidate_feature, library, rank};
+use super::candidates::{candidate_feature, library};
+use super::linear::{lstsq, residual};
+use super::scoring::{Problem, Score, ScoringSettings, rank, relative_weights};
 use super::slices::{Slice, slice_residuals};
+use crate::ingest::compound::Wlf;
 use crate::kpi::KpiRow;
 use crate::kpi::energy_map::EnergyMaps;
 use crate::model::ModelError;
@@ -36,6 +39,9 @@ pub struct Step {
     pub added: String,
     pub threshold: f64,
     pub coefficient: f64,
+    /// The term's held-out gain and adjusted p-value when it was added.
+    pub cv_gain: f64,
+    pub p_adjusted: f64,
     pub training: GapSize,
     pub testing: Option<GapSize>,
     /// RMSE (%) inside each slice of `Diagnosis::slices` shown (same order, at most 5).
@@ -70,37 +76,68 @@ fn size(r: &[f64]) -> GapSize {
     }
 }
 
-/// Runs steps 0–1 of the diagnosis on a KPI table.
+/// Settings of a diagnosis.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct GapSettings {
+    /// Testing events (default: every third event, as `fit`).
+    pub test_events: Option<Vec<String>>,
+    /// False-discovery rate of the slice and candidate tests.
+    pub fdr: f64,
+    pub scoring: ScoringSettings,
+    /// Most terms forward selection adds.
+    pub max_terms: usize,
+    /// WLF constants per compound id for the physics baseline's temperature
+    /// factor (empty: the exponential approximation).
+    pub wlf: BTreeMap<String, Wlf>,
+}
+
+impl Default for GapSettings {
+    fn default() -> Self {
+        GapSettings {
+            test_events: None,
+            fdr: 0.05,
+            scoring: ScoringSettings::default(),
+            max_terms: 4,
+            wlf: BTreeMap::new(),
+        }
+    }
+}
+
+/// Runs the diagnosis on a KPI table: the gap's size and slices (step 1), the
+/// candidate effects (step 2) and the forward selection (step 3).
 pub fn diagnose(
     rows: &[KpiRow],
     maps: &BTreeMap<(String, String), EnergyMaps>,
     baseline: &Baseline,
-    test_events: Option<&[String]>,
-    fdr: f64,
+    settings: &GapSettings,
 ) -> Result<Diagnosis, ModelError> {
-    let s = split(rows, test_events)?;
+    let fdr = settings.fdr;
+    let s = split(rows, settings.test_events.as_deref())?;
+    let map_of = |r: &KpiRow| maps.get(&(r.run.clone(), r.wheel.clone()));
     let (name, physics) = match baseline {
-        Baseline::Physics => (
-            "physics (wear = k_compound · E · exp(β(T_surf − 60 °C)))".to_string(),
-            Some(PhysicsBaseline::fit(&s.train)),
-        ),
+        Baseline::Physics => {
+            let train_maps: Vec<Option<&EnergyMaps>> = s.train.iter().map(|r| map_of(r)).collect();
+            (
+                "physics (wear = k_compound,axle · Σ E_bin·φ_compound(T_bin) · exp(s·Sk))"
+                    .to_string(),
+                Some(PhysicsBaseline::fit(&s.train, &train_maps, &settings.wlf)),
+            )
+        }
         Baseline::Model(m) => (format!("{} model", m.method()), None),
     };
     let predict = |r: &KpiRow| -> f64 {
         match (baseline, &physics) {
             (Baseline::Model(m), _) => m.predict_row(r).unwrap_or(f64::NAN),
-            (_, Some(p)) => p.predict(r),
+            (_, Some(p)) => p.predict(r, map_of(r)),
             _ => f64::NAN,
         }
     };
-    let residuals = |set: &[&KpiRow]| -> Vec<(usize, f64)> {
-        set.iter()
-            .enumerate()
-            .map(|(i, r)| (i, r.wear_mean_pct - predict(r)))
-            .filter(|(_, v)| v.is_finite())
+    let usable = |set: &[&KpiRow]| -> Vec<usize> {
+        (0..set.len())
+            .filter(|&i| (set[i].wear_mean_pct - predict(set[i])).is_finite())
             .collect()
     };
-    let (tr, te) = (residuals(&s.train), residuals(&s.test));
+    let (tr, te) = (usable(&s.train), usable(&s.test));
     if tr.len() < 20 {
         return Err(ModelError::TooFewObservations {
             what: "gap diagnosis".into(),
@@ -108,32 +145,42 @@ pub fn diagnose(
             got: tr.len(),
         });
     }
-    let trv: Vec<f64> = tr.iter().map(|x| x.1).collect();
-    let tev: Vec<f64> = te.iter().map(|x| x.1).collect();
-    // Slices over all rows with a residual: the gap is judged where it lies, in and out of training.
-    let mut all_rows: Vec<&KpiRow> = tr.iter().map(|(i, _)| s.train[*i]).collect();
-    all_rows.extend(te.iter().map(|(i, _)| s.test[*i]));
-    let all_res: Vec<f64> = trv.iter().chain(&tev).copied().collect();
+    // Training rows first, then testing rows.
+    let mut all_rows: Vec<&KpiRow> = tr.iter().map(|&i| s.train[i]).collect();
+    all_rows.extend(te.iter().map(|&i| s.test[i]));
+    let n_train = tr.len();
+    let row_maps: Vec<Option<&EnergyMaps>> = all_rows.iter().map(|r| map_of(r)).collect();
+    let y: Vec<f64> = all_rows.iter().map(|r| r.wear_mean_pct).collect();
+    let all_res: Vec<f64> = all_rows
+        .iter()
+        .map(|r| r.wear_mean_pct - predict(r))
+        .collect();
+    let (trv, tev) = all_res.split_at(n_train);
+
+    // Step 1 over all rows with a residual: the gap is judged where it lies, in and out of training.
     let (tested, count) = slice_residuals(&all_rows, &all_res, fdr);
     let slices: Vec<Slice> = tested.into_iter().filter(|t| t.p_adjusted <= fdr).collect();
 
-    // Steps 2 and 3 on the training rows; terms then apply to every row.
-    let n_train = tr.len();
-    let row_maps: Vec<Option<&EnergyMaps>> = all_rows
-        .iter()
-        .map(|r| maps.get(&(r.run.clone(), r.wheel.clone())))
-        .collect();
-    let lib = library(&all_rows);
-    let mut res = all_res.clone();
+    // Steps 2 and 3: candidates scored on the training rows, added to the
+    // baseline's design in turn; each step's fit applies to every row.
+    let mut base: Vec<Vec<f64>> = match &physics {
+        Some(p) => p.columns(&all_rows, &row_maps),
+        None => vec![
+            vec![1.0; all_rows.len()],
+            all_rows.iter().map(|r| predict(r)).collect(),
+        ],
+    };
     let members: Vec<Vec<bool>> = slices
         .iter()
         .take(5)
         .map(|s| slice_members(&s.name, &all_rows))
         .collect();
-    let step_of = |added: String, threshold: f64, coefficient: f64, res: &[f64]| Step {
+    let step_of = |added: String, score: Option<&Score>, res: &[f64]| Step {
         added,
-        threshold,
-        coefficient,
+        threshold: score.map_or(f64::NAN, |s| s.threshold),
+        coefficient: score.map_or(f64::NAN, |s| s.coefficient),
+        cv_gain: score.map_or(f64::NAN, |s| s.cv_gain),
+        p_adjusted: score.map_or(f64::NAN, |s| s.p_adjusted),
         training: size(&res[..n_train]),
         testing: (res.len() > n_train).then(|| size(&res[n_train..])),
         slice_rmse_pct: members
@@ -149,50 +196,94 @@ pub fn diagnose(
             })
             .collect(),
     };
-    let mut steps = vec![step_of("baseline".into(), f64::NAN, f64::NAN, &res)];
+    let mut steps = vec![step_of("baseline".into(), None, &all_res)];
     let mut candidates = Vec::new();
     if !maps.is_empty() {
+        let lib = library(&all_rows[..n_train]);
+        let train_idx: Vec<usize> = (0..n_train).collect();
         let mut used: Vec<String> = Vec::new();
-        for round in 0..5 {
-            let ranked = rank(
-                &all_rows[..n_train],
-                &row_maps[..n_train],
-                &res[..n_train],
-                &lib,
-            );
+        let n_groups = base.len();
+        // Coefficients of the terms added so far, in `base[n_groups..]`.
+        let mut terms: Vec<f64> = Vec::new();
+        let w = relative_weights(
+            &base
+                .iter()
+                .map(|c| c[..n_train].to_vec())
+                .collect::<Vec<_>>(),
+            &y[..n_train],
+        );
+        for round in 0..settings.max_terms {
+            let problem = Problem {
+                rows: &all_rows[..n_train],
+                maps: &row_maps[..n_train],
+                y: &y[..n_train],
+                base: base.iter().map(|c| c[..n_train].to_vec()).collect(),
+            };
+            let ranked = rank(&problem, &lib, &settings.scoring);
             if round == 0 {
                 candidates = ranked.clone();
             }
-            let Some(best) = ranked
-                .iter()
-                .find(|s| s.p_adjusted <= fdr && s.cv_gain > 0.0 && !used.contains(&s.name))
-            else {
+            // A term enters only if it was significant on its own in step 2
+            // and still is given the terms already added: a candidate that
+            // only turns significant after another entered is fitting that
+            // term's misfit, and does not carry to new events.
+            let significant = |s: &Score| s.p_adjusted <= fdr && s.cv_gain > 0.0;
+            let Some(best) = ranked.iter().find(|s| {
+                significant(s)
+                    && !used.contains(&s.name)
+                    && candidates
+                        .iter()
+                        .any(|c| c.name == s.name && significant(c))
+            }) else {
                 break;
             };
-            let cand = Candidate {
-                name: best.name.clone(),
-                feature: best.feature,
-                thresholds: vec![best.threshold],
-                axle: best.axle,
-            };
-            let a = {
-                let x: Vec<f64> = (0..n_train)
-                    .map(|i| candidate_feature(&cand, all_rows[i], row_maps[i], best.threshold))
-                    .collect();
-                let mx = x.iter().sum::<f64>() / n_train as f64;
-                res[..n_train].iter().sum::<f64>() / n_train as f64 - best.coefficient * mx
-            };
-            for i in 0..res.len() {
-                res[i] -= a + best.coefficient
-                    * candidate_feature(&cand, all_rows[i], row_maps[i], best.threshold);
+            let cand = best.as_candidate();
+            let column: Vec<f64> = (0..all_rows.len())
+                .map(|i| {
+                    candidate_feature(
+                        &cand,
+                        all_rows[i],
+                        row_maps[i],
+                        best.threshold,
+                        best.kpi_scale,
+                    )
+                })
+                .collect();
+            // The term keeps the coefficient its test estimated (within
+            // tracks, or across them for a road term): refitting it without
+            // the track factors would let it soak up track differences. The
+            // baseline's k's are refitted around it (relative scale).
+            base.push(column);
+            // Earlier terms take the coefficients refitted with this one.
+            for (j, c) in terms.iter_mut().enumerate() {
+                if let Some(k) = best.base_coefficients.get(n_groups + j) {
+                    *c = *k;
+                }
             }
+            terms.push(best.coefficient);
+            let offset: Vec<f64> = (0..all_rows.len())
+                .map(|i| {
+                    terms
+                        .iter()
+                        .zip(&base[n_groups..])
+                        .map(|(k, col)| k * col[i])
+                        .sum()
+                })
+                .collect();
+            let group_refs: Vec<&[f64]> = base[..n_groups].iter().map(|c| c.as_slice()).collect();
+            let scaled: Vec<Vec<f64>> = base[..n_groups]
+                .iter()
+                .map(|c| c[..n_train].iter().zip(&w).map(|(v, w)| v * w).collect())
+                .collect();
+            let scaled_refs: Vec<&[f64]> = scaled.iter().map(|c| c.as_slice()).collect();
+            let yw: Vec<f64> = (0..n_train).map(|i| (y[i] - offset[i]) * w[i]).collect();
+            let k = lstsq(&scaled_refs, &yw, &train_idx);
+            let shifted: Vec<f64> = y.iter().zip(&offset).map(|(y, o)| y - o).collect();
+            let res: Vec<f64> = (0..all_rows.len())
+                .map(|i| residual(&group_refs, &k, &shifted, i))
+                .collect();
             used.push(best.name.clone());
-            steps.push(step_of(
-                best.name.clone(),
-                best.threshold,
-                best.coefficient,
-                &res,
-            ));
+            steps.push(step_of(best.name.clone(), Some(best), &res));
         }
     }
     Ok(Diagnosis {
@@ -200,8 +291,8 @@ pub fn diagnose(
         physics,
         training_events: s.train_events.clone(),
         testing_events: s.test_events.clone(),
-        training: size(&trv),
-        testing: (!tev.is_empty()).then(|| size(&tev)),
+        training: size(trv),
+        testing: (!tev.is_empty()).then(|| size(tev)),
         fdr,
         slices_tested: count,
         slices,
@@ -256,9 +347,10 @@ pub fn render_markdown(d: &Diagnosis, max_slices: usize) -> String {
             .collect();
         let _ = writeln!(
             s,
-            "Calibrated on the training events: k (%/MJ) {}; β = {:.3} /K",
+            "Calibrated on the training events: k (%/MJ) {}; {}; s = {:.3}",
             ks.join(", "),
-            p.beta_per_k
+            p.temperature_factor.describe(),
+            p.skewness_coefficient
         );
     }
     let _ = writeln!(
@@ -324,14 +416,28 @@ pub fn render_markdown(d: &Diagnosis, max_slices: usize) -> String {
     if !d.candidates.is_empty() {
         let _ = writeln!(
             s,
-            "\n## Which unmodelled effect\n\nEach candidate fitted as residual ≈ a + c·feature on the training events, its threshold scanned inside leave-one-event-out cross-validation; gain = 1 − held-out SSE / held-out SSE of the intercept alone; p from a one-sided t-test of the per-event gains, Benjamini–Hochberg over {} candidates.\n\n| candidate | threshold | coefficient | CV gain | p adj. |\n|---|---|---|---|---|",
+            "\n## Which unmodelled effect\n\nEach candidate term is refitted together with the baseline's per-group energy terms on the training events. CV gain: 1 − held-out SSE / held-out SSE of the baseline alone, whole tracks left out in turn, the threshold scanned on the training folds only. p: permutation test of the nested models (baseline residuals permuted within axles, max F over the threshold grid), Benjamini–Hochberg over {} candidates. Front share: the part of the term's wear on the front axle.\n\n| candidate | threshold | coefficient | CV gain | p adj. | front share |\n|---|---|---|---|---|---|",
             d.candidates.len()
         );
         for c in d.candidates.iter().take(max_slices.min(10)) {
+            let th = if c.threshold.is_finite() {
+                format!("{} {}", c.threshold, c.feature.threshold_unit())
+            } else {
+                "–".into()
+            };
             let _ = writeln!(
                 s,
-                "| {} | {:.3} | {:+.4} | {:+.3} | {:.1e} |",
-                c.name, c.threshold, c.coefficient, c.cv_gain, c.p_adjusted
+                "| {}{} | {th} | {:+.4} | {:+.3} | {:.1e} | {:.0} % |",
+                c.name,
+                if c.p_adjusted <= d.fdr && c.cv_gain > 0.0 {
+                    " **(significant)**"
+                } else {
+                    ""
+                },
+                c.coefficient,
+                c.cv_gain,
+                c.p_adjusted,
+                100.0 * c.front_share
             );
         }
         let _ = writeln!(

@@ -1,0 +1,437 @@
+//! `tirewear gap validate`: the proof on withheld effects. Seasons are
+//! simulated with one planted effect each (at several magnitudes, seeds and
+//! thresholds off the defaults) and clean ones with none; each is extracted
+//! and diagnosed with the default physics baseline, which does not contain
+//! the effect, and the diagnosis never reads `truth/`. Only the scoring
+//! afterwards compares it with the truth:
+//!
+//! - hit: the first term forward selection adds is the planted mechanism,
+//!   and its front-axle share is within 0.25 of the truth's;
+//! - shrinkage: the testing-event RMSE reduction the diagnosis achieves,
+//!   over the ideal one (baseline recalibrated on wear minus the exact planted
+//!   contribution, which is then added back);
+//! - false discovery: a clean season with any significant term.
+
+use super::error::GapError;
+use super::report::{Baseline, Diagnosis, GapSettings, diagnose};
+use crate::kpi::KpiRow;
+use crate::sim::{Effect, EffectKind};
+use std::collections::BTreeMap;
+use std::fmt::Write;
+use std::path::{Path, PathBuf};
+
+/// What to run.
+#[derive(Debug, Clone)]
+pub struct ValidateSettings {
+    pub effects: Vec<EffectKind>,
+    pub magnitudes: Vec<f64>,
+    pub seeds: Vec<u64>,
+    /// Seeds of the clean seasons.
+    pub clean_seeds: Vec<u64>,
+    /// Telemetry rate of the simulated seasons (Hz).
+    pub rate_hz: f64,
+    /// Scratch folder for the seasons.
+    pub work: PathBuf,
+    /// Keep each season's files instead of deleting them after scoring.
+    pub keep: bool,
+    pub gap: GapSettings,
+    pub progress: bool,
+}
+
+/// One season of the matrix and how its diagnosis scored.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct Case {
+    /// Planted effect (`None` for a clean season).
+    pub effect: Option<Effect>,
+    pub seed: u64,
+    /// Variance of the planted contribution over the variance of measured wear (truth).
+    pub variance_share: f64,
+    /// Truth: share of the planted wear on the front axle.
+    pub truth_front_share: f64,
+    /// The first term forward selection added (None: nothing significant).
+    pub first_term: Option<String>,
+    pub first_mechanism: Option<String>,
+    pub first_front_share: f64,
+    pub significant_terms: usize,
+    pub hit: bool,
+    pub hit_axle: bool,
+    /// Testing-event RMSE (%): baseline, after the diagnosis's terms, ideal.
+    pub rmse_baseline_pct: f64,
+    pub rmse_diagnosed_pct: f64,
+    pub rmse_ideal_pct: f64,
+    /// (baseline − diagnosed) / (baseline − ideal).
+    pub shrinkage_ratio: f64,
+    pub error: Option<String>,
+}
+
+/// The matrix: planted cases first, then the clean seasons.
+pub fn matrix(s: &ValidateSettings) -> Vec<(Option<Effect>, u64)> {
+    let mut out = Vec::new();
+    for &kind in &s.effects {
+        for &m in &s.magnitudes {
+            for (i, &seed) in s.seeds.iter().enumerate() {
+                let mut e = Effect::with_defaults(kind, m);
+                // Thresholds off the defaults, in turn: the candidates' grids
+                // must find them, not know them.
+                let shift = [0.0, -1.0, 1.0][i % 3];
+                e.threshold += shift
+                    * match kind {
+                        EffectKind::RoadAbrasion => 0.005,
+                        _ => 3.0,
+                    };
+                out.push((Some(e), seed));
+            }
+        }
+    }
+    out.extend(s.clean_seeds.iter().map(|&seed| (None, seed)));
+    out
+}
+
+/// WLF constants of every `*.toml` compound file in `dir`, by compound id.
+pub fn read_wlf(dir: &Path) -> Result<BTreeMap<String, crate::ingest::compound::Wlf>, GapError> {
+    let io = |e| GapError::Io {
+        path: dir.display().to_string(),
+        source: e,
+    };
+    let mut out = BTreeMap::new();
+    let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
+        .map_err(io)?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|x| x == "toml"))
+        .collect();
+    files.sort();
+    for f in files {
+        let c = crate::ingest::compound::Compound::load(&f)?;
+        out.insert(c.id, c.wlf);
+    }
+    Ok(out)
+}
+
+/// Planted wear (%) per (run, wheel) from `truth/wear_truth.csv`.
+pub fn read_planted(
+    truth: &Path,
+    kind: Option<EffectKind>,
+) -> Result<BTreeMap<(String, String), f64>, GapError> {
+    let file = truth.display().to_string();
+    let mut rd = csv::Reader::from_path(truth).map_err(|e| GapError::Truth {
+        file: file.clone(),
+        line: 0,
+        message: e.to_string(),
+    })?;
+    let headers = rd
+        .headers()
+        .map_err(|e| GapError::Truth {
+            file: file.clone(),
+            line: 1,
+            message: e.to_string(),
+        })?
+        .clone();
+    let col = |name: &str| {
+        headers
+            .iter()
+            .position(|h| h == name)
+            .ok_or_else(|| GapError::Truth {
+                file: file.clone(),
+                line: 1,
+                message: format!("no column '{name}'"),
+            })
+    };
+    let (run, wheel) = (col("run")?, col("wheel")?);
+    let effect = match kind {
+        Some(k) => Some(col(&format!("wear_{}_pct", k.name().replace('-', "_")))?),
+        None => None,
+    };
+    let mut out = BTreeMap::new();
+    for (i, rec) in rd.records().enumerate() {
+        let rec = rec.map_err(|e| GapError::Truth {
+            file: file.clone(),
+            line: i + 2,
+            message: e.to_string(),
+        })?;
+        let v = match effect {
+            Some(c) => rec[c].parse::<f64>().map_err(|_| GapError::Truth {
+                file: file.clone(),
+                line: i + 2,
+                message: format!("'{}' is not a number", &rec[c]),
+            })?,
+            None => 0.0,
+        };
+        out.insert((rec[run].to_string(), rec[wheel].to_string()), v);
+    }
+    Ok(out)
+}
+
+fn variance(v: &[f64]) -> f64 {
+    let m = v.iter().sum::<f64>() / v.len() as f64;
+    v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (v.len() as f64 - 1.0)
+}
+
+/// Scores a diagnosis of `rows` against the planted wear.
+pub fn score_case(
+    effect: Option<&Effect>,
+    seed: u64,
+    rows: &[KpiRow],
+    maps: &BTreeMap<(String, String), crate::kpi::energy_map::EnergyMaps>,
+    planted: &BTreeMap<(String, String), f64>,
+    d: &Diagnosis,
+    gap: &GapSettings,
+) -> Result<Case, GapError> {
+    let planted_of = |r: &KpiRow| {
+        planted
+            .get(&(r.run.clone(), r.wheel.clone()))
+            .copied()
+            .unwrap_or(0.0)
+    };
+    let p: Vec<f64> = rows.iter().map(planted_of).collect();
+    let w: Vec<f64> = rows.iter().map(|r| r.wear_mean_pct).collect();
+    let total: f64 = p.iter().sum();
+    let front: f64 = rows
+        .iter()
+        .zip(&p)
+        .filter(|(r, _)| r.axle == "front")
+        .map(|(_, v)| v)
+        .sum();
+    // Ideal: the same baseline calibrated on wear minus the planted part,
+    // the planted part then added back exactly.
+    let cleaned: Vec<KpiRow> = rows
+        .iter()
+        .zip(&p)
+        .map(|(r, v)| KpiRow {
+            wear_mean_pct: r.wear_mean_pct - v,
+            ..r.clone()
+        })
+        .collect();
+    let ideal = diagnose(
+        &cleaned,
+        maps,
+        &Baseline::Physics,
+        &GapSettings {
+            max_terms: 0,
+            ..gap.clone()
+        },
+    )?;
+    let rmse_ideal = ideal.testing.map_or(f64::NAN, |t| t.rmse_pct);
+    let rmse_base = d.testing.map_or(f64::NAN, |t| t.rmse_pct);
+    let last = d.steps.last().expect("the baseline step");
+    let rmse_diag = last.testing.map_or(f64::NAN, |t| t.rmse_pct);
+    let first = d.steps.get(1);
+    let first_score = first.and_then(|st| d.candidates.iter().find(|c| c.name == st.added));
+    let first_mechanism = first_score
+        .and_then(|c| c.feature.mechanism())
+        .map(str::to_string);
+    let first_front_share = first_score.map_or(f64::NAN, |c| c.front_share);
+    let truth_front_share = front / total;
+    let hit = effect.is_some_and(|e| first_mechanism.as_deref() == Some(e.kind.name()));
+    Ok(Case {
+        effect: effect.cloned(),
+        seed,
+        variance_share: if effect.is_some() {
+            variance(&p) / variance(&w)
+        } else {
+            0.0
+        },
+        truth_front_share,
+        first_term: first.map(|s| s.added.clone()),
+        first_mechanism,
+        first_front_share,
+        significant_terms: d.steps.len() - 1,
+        hit,
+        hit_axle: hit && (first_front_share - truth_front_share).abs() <= 0.25,
+        rmse_baseline_pct: rmse_base,
+        rmse_diagnosed_pct: rmse_diag,
+        rmse_ideal_pct: rmse_ideal,
+        shrinkage_ratio: (rmse_base - rmse_diag) / (rmse_base - rmse_ideal),
+        error: None,
+    })
+}
+
+/// Simulates, extracts, diagnoses and scores one season.
+pub fn run_case(
+    effect: Option<&Effect>,
+    seed: u64,
+    s: &ValidateSettings,
+) -> Result<(Case, Diagnosis), GapError> {
+    let name = match effect {
+        Some(e) => format!(
+            "{}-m{}-t{}-s{seed}",
+            e.kind.name(),
+            e.magnitude,
+            e.threshold
+        ),
+        None => format!("clean-s{seed}"),
+    };
+    let dir = s.work.join(name);
+    let _ = std::fs::remove_dir_all(&dir);
+    crate::sim::simulate(&crate::sim::SimOptions {
+        preset: crate::sim::Preset::Demo,
+        scale: 1.0,
+        seed,
+        effects: effect.into_iter().cloned().collect(),
+        encoding: crate::ingest::telemetry::Encoding::Block,
+        rate_hz: Some(s.rate_hz),
+        out: dir.clone(),
+        sensor_noise: true,
+        progress: false,
+    })?;
+    let kpis = dir.join("kpis.parquet");
+    crate::kpi::extract(&crate::kpi::ExtractOptions {
+        season: dir.clone(),
+        out: kpis.clone(),
+        csv: None,
+        engine: crate::kpi::Engine::Cpu,
+        progress: false,
+    })?;
+    let rows = crate::kpi::table::read_parquet(&kpis)?;
+    let maps = crate::kpi::energy_map::read_energy_maps(&dir.join("kpis.energy_maps.parquet"))?;
+    // The diagnosis sees the KPI tables and the compound files only.
+    let gap = GapSettings {
+        wlf: read_wlf(&dir.join("compounds"))?,
+        ..s.gap.clone()
+    };
+    let d = diagnose(&rows, &maps, &Baseline::Physics, &gap)?;
+    let planted = read_planted(
+        &dir.join("truth").join("wear_truth.csv"),
+        effect.map(|e| e.kind),
+    )?;
+    let case = score_case(effect, seed, &rows, &maps, &planted, &d, &gap)?;
+    if !s.keep {
+        std::fs::remove_dir_all(&dir).map_err(|e| GapError::Io {
+            path: dir.display().to_string(),
+            source: e,
+        })?;
+    }
+    Ok((case, d))
+}
+
+/// Runs the whole matrix; a season that fails is recorded with its error and the rest go on.
+pub fn validate(s: &ValidateSettings) -> Vec<Case> {
+    let cases = matrix(s);
+    let pb = if s.progress {
+        let pb = indicatif::ProgressBar::new(cases.len() as u64);
+        pb.set_style(
+            indicatif::ProgressStyle::with_template(
+                "{spinner} validating seasons [{bar:40}] {pos}/{len} ({eta} left) {msg}",
+            )
+            .expect("valid template")
+            .progress_chars("=> "),
+        );
+        pb
+    } else {
+        indicatif::ProgressBar::hidden()
+    };
+    let mut out = Vec::new();
+    for (effect, seed) in &cases {
+        pb.set_message(effect.as_ref().map_or("clean".into(), |e| e.to_string()));
+        let case = match run_case(effect.as_ref(), *seed, s) {
+            Ok((c, _)) => c,
+            Err(e) => {
+                tracing::error!("season {:?} seed {seed}: {e}", effect);
+                Case {
+                    effect: effect.clone(),
+                    seed: *seed,
+                    variance_share: f64::NAN,
+                    truth_front_share: f64::NAN,
+                    first_term: None,
+                    first_mechanism: None,
+                    first_front_share: f64::NAN,
+                    significant_terms: 0,
+                    hit: false,
+                    hit_axle: false,
+                    rmse_baseline_pct: f64::NAN,
+                    rmse_diagnosed_pct: f64::NAN,
+                    rmse_ideal_pct: f64::NAN,
+                    shrinkage_ratio: f64::NAN,
+                    error: Some(e.to_string()),
+                }
+            }
+        };
+        tracing::info!(
+            "{} seed {seed}: first term {:?}, share {:.3}, shrinkage {:.2}",
+            effect.as_ref().map_or("clean".into(), |e| e.to_string()),
+            case.first_term,
+            case.variance_share,
+            case.shrinkage_ratio
+        );
+        out.push(case);
+        pb.inc(1);
+    }
+    pb.finish_and_clear();
+    out
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.retain(|x| x.is_finite());
+    if v.is_empty() {
+        return f64::NAN;
+    }
+    v.sort_by(f64::total_cmp);
+    let n = v.len();
+    if n % 2 == 1 {
+        v[n / 2]
+    } else {
+        0.5 * (v[n / 2 - 1] + v[n / 2])
+    }
+}
+
+/// The summary table (per effect and magnitude) and the clean seasons' false discoveries.
+pub fn render(cases: &[Case]) -> String {
+    let mut s = String::from(
+        "| effect | magnitude | seasons | variance share (median) | hit rate | hit incl. axle | shrinkage / ideal (median) | within 20 % of ideal |\n|---|---|---|---|---|---|---|---|\n",
+    );
+    let mut groups: BTreeMap<(String, String), Vec<&Case>> = BTreeMap::new();
+    for c in cases.iter().filter(|c| c.effect.is_some()) {
+        let e = c.effect.as_ref().expect("planted");
+        groups
+            .entry((e.kind.name().to_string(), format!("{:.2}", e.magnitude)))
+            .or_default()
+            .push(c);
+    }
+    for ((kind, mag), g) in &groups {
+        let n = g.len();
+        let rate = |f: &dyn Fn(&Case) -> bool| {
+            format!(
+                "{}/{n} ({:.0} %)",
+                g.iter().filter(|c| f(c)).count(),
+                100.0 * g.iter().filter(|c| f(c)).count() as f64 / n as f64
+            )
+        };
+        let _ = writeln!(
+            s,
+            "| {kind} | {mag} | {n} | {:.1} % | {} | {} | {:.2} | {} |",
+            100.0 * median(g.iter().map(|c| c.variance_share).collect()),
+            rate(&|c| c.hit),
+            rate(&|c| c.hit_axle),
+            median(g.iter().map(|c| c.shrinkage_ratio).collect()),
+            rate(&|c| (c.shrinkage_ratio - 1.0).abs() <= 0.2),
+        );
+    }
+    let clean: Vec<&Case> = cases.iter().filter(|c| c.effect.is_none()).collect();
+    if !clean.is_empty() {
+        let fd = clean.iter().filter(|c| c.significant_terms > 0).count();
+        let _ = writeln!(
+            s,
+            "\nClean seasons: {fd} of {} report a significant effect ({:.0} %).",
+            clean.len(),
+            100.0 * fd as f64 / clean.len() as f64
+        );
+        for c in clean.iter().filter(|c| c.significant_terms > 0) {
+            let _ = writeln!(
+                s,
+                "- seed {}: {}",
+                c.seed,
+                c.first_term.as_deref().unwrap_or("?")
+            );
+        }
+    }
+    let failed: Vec<&Case> = cases.iter().filter(|c| c.error.is_some()).collect();
+    for c in failed {
+        let _ = writeln!(
+            s,
+            "- failed: {:?} seed {}: {}",
+            c.effect.as_ref().map(|e| e.to_string()),
+            c.seed,
+            c.error.as_deref().unwrap_or("")
+        );
+    }
+    s
+}
