@@ -96,8 +96,14 @@ pub const ROAD_KPIS: [&str; 11] = [
     "ra_mm",
 ];
 
-/// KPI columns the physics baseline already uses.
-pub const BASELINE_KPIS: [&str; 3] = ["friction_energy_j", "t_surface_avg_c", "skewness"];
+/// KPI columns the physics baseline already uses, and the one the road
+/// abrasion mechanism scales by: not generic candidates.
+pub const BASELINE_KPIS: [&str; 4] = [
+    "friction_energy_j",
+    "t_surface_avg_c",
+    "skewness",
+    "ra_micro_mm",
+];
 
 /// The library: five mechanisms, each on both axles and on each axle alone,
 /// and every KPI the physics baseline does not use.

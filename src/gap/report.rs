@@ -416,7 +416,7 @@ pub fn render_markdown(d: &Diagnosis, max_slices: usize) -> String {
     if !d.candidates.is_empty() {
         let _ = writeln!(
             s,
-            "\n## Which unmodelled effect\n\nEach candidate term is refitted together with the baseline's per-group energy terms on the training events. CV gain: 1 − held-out SSE / held-out SSE of the baseline alone, whole tracks left out in turn, the threshold scanned on the training folds only. p: permutation test of the nested models (baseline residuals permuted within axles, max F over the threshold grid), Benjamini–Hochberg over {} candidates. Front share: the part of the term's wear on the front axle.\n\n| candidate | threshold | coefficient | CV gain | p adj. | front share |\n|---|---|---|---|---|---|",
+            "\n## Which unmodelled effect\n\nEach candidate term is refitted with the baseline's per-group energy terms on the training events, on the relative scale (rows divided by the baseline). CV gain: 1 − held-out SSE / held-out SSE of the baseline alone, whole tracks left out in turn, the threshold scanned on the training folds only. p: Freedman–Lane permutation test of the nested models (residuals permuted within track and axle; road terms: tracks exchanged), max F over the threshold grid, Benjamini–Hochberg over {} candidates. Front share: the part of the term's wear on the front axle. Definitions: docs/gap.md.\n\n| candidate | threshold | coefficient | CV gain | p adj. | front share |\n|---|---|---|---|---|---|",
             d.candidates.len()
         );
         for c in d.candidates.iter().take(max_slices.min(10)) {
