@@ -217,6 +217,13 @@ enum GapAction {
         /// Seeds of the clean seasons.
         #[arg(long, value_delimiter = ',', default_value = "1,2,3,4,5,6,7,8,9,10")]
         clean_seeds: Vec<u64>,
+        /// Season preset of the simulated seasons (`season` has 12 tracks:
+        /// more power for track-level effects such as road abrasion).
+        #[arg(long, value_enum, default_value = "demo")]
+        preset: tirewear::sim::Preset,
+        /// Multiplies the number of events of the `season` preset.
+        #[arg(long, default_value_t = 1.0)]
+        scale: f64,
         /// Telemetry rate of the simulated seasons (Hz).
         #[arg(long, default_value_t = 5.0)]
         rate: f64,
@@ -492,8 +499,10 @@ fn run_validate(
         serde_json::to_string_pretty(&cases)?.as_bytes(),
     )?;
     let md = format!(
-        "# Gap diagnosis on withheld effects\n\n{} seasons (demo preset, {} Hz) in {:.0} s.\n\n{table}",
+        "# Gap diagnosis on withheld effects\n\n{} seasons ({:?} preset, scale {}, {} Hz) in {:.0} s.\n\n{table}",
         cases.len(),
+        settings.preset,
+        settings.scale,
         settings.rate_hz,
         started.elapsed().as_secs_f64()
     );
@@ -619,6 +628,8 @@ fn main() -> Result<()> {
                     magnitudes,
                     seeds,
                     clean_seeds,
+                    preset,
+                    scale,
                     rate,
                     work,
                     keep,
@@ -641,6 +652,8 @@ fn main() -> Result<()> {
                 magnitudes,
                 seeds,
                 clean_seeds,
+                preset,
+                scale,
                 rate_hz: rate,
                 work: work.unwrap_or_else(|| out.join("seasons")),
                 keep,

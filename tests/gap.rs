@@ -50,6 +50,8 @@ fn settings(work: &std::path::Path) -> ValidateSettings {
         magnitudes: vec![],
         seeds: vec![],
         clean_seeds: vec![],
+        preset: tirewear::sim::Preset::Demo,
+        scale: 1.0,
         rate_hz: 5.0,
         work: work.to_path_buf(),
         keep: false,
@@ -85,6 +87,24 @@ fn planted_graining_is_found_on_the_front_axle() {
         "{:?}",
         d.steps[1]
     );
+    assert!(case.rmse_diagnosed_pct < case.rmse_baseline_pct, "{case:?}");
+}
+
+/// Blistering planted at magnitude 1, threshold 125 °C inner liner: the
+/// truth puts almost all of it on the rears; the first term is the
+/// blistering mechanism and the testing-event gap shrinks.
+#[test]
+fn planted_blistering_is_found() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut e = Effect::with_defaults(EffectKind::Blistering, 1.0);
+    e.threshold = 125.0;
+    let (case, d) = run_case(Some(&e), 3, &settings(dir.path())).unwrap();
+    assert!(
+        case.hit && case.hit_axle,
+        "{case:?}\n{:?}",
+        d.candidates.first()
+    );
+    assert!(case.truth_front_share < 0.2, "{case:?}");
     assert!(case.rmse_diagnosed_pct < case.rmse_baseline_pct, "{case:?}");
 }
 

@@ -52,6 +52,18 @@ impl TemperatureFactor {
         }
     }
 
+    /// ∂φ/∂(its parameter) of `compound` at `t_c` (γ for WLF, β for the exponential).
+    pub fn derivative_at(&self, compound: &str, t_c: f64) -> f64 {
+        match self {
+            TemperatureFactor::Exponential { .. } => self.at(compound, t_c) * (t_c - REFERENCE_C),
+            TemperatureFactor::Wlf { wlf, .. } => wlf.get(compound).map_or(f64::NAN, |w| {
+                self.at(compound, t_c)
+                    * std::f64::consts::LN_10
+                    * (w.log10_shift(REFERENCE_C) - w.log10_shift(t_c))
+            }),
+        }
+    }
+
     /// The calibrated parameter in words.
     pub fn describe(&self) -> String {
         match self {
@@ -85,6 +97,11 @@ pub fn group(r: &KpiRow) -> String {
 
 /// Temperature-weighted friction energy Σ E_b·φ(T_b) (MJ).
 pub fn weighted_energy_mj(r: &KpiRow, maps: Option<&EnergyMaps>, phi: &TemperatureFactor) -> f64 {
+    weighted_by(r, maps, &|t| phi.at(&r.compound, t))
+}
+
+/// Σ E_b·f(T_b) over the surface-temperature bins (MJ).
+fn weighted_by(r: &KpiRow, maps: Option<&EnergyMaps>, f: &dyn Fn(f64) -> f64) -> f64 {
     match maps {
         Some(m) => {
             let mut s = 0.0;
@@ -94,12 +111,12 @@ pub fn weighted_energy_mj(r: &KpiRow, maps: Option<&EnergyMaps>, phi: &Temperatu
                     .sum();
                 if e != 0.0 {
                     let t_mid = T_SURFACE_BINS.lower_edge(i) + 0.5 * T_SURFACE_BINS.width;
-                    s += e * phi.at(&r.compound, t_mid);
+                    s += e * f(t_mid);
                 }
             }
             s / 1e6
         }
-        None => r.friction_energy_j / 1e6 * phi.at(&r.compound, r.t_surface_avg_c),
+        None => r.friction_energy_j / 1e6 * f(r.t_surface_avg_c),
     }
 }
 
@@ -186,15 +203,25 @@ impl PhysicsBaseline {
     }
 
     /// The law as design columns, one per calibration group (the term in its
-    /// group's column, zero elsewhere), so later steps can refit the k's
-    /// together with candidate terms.
+    /// group's column, zero elsewhere), then its derivatives with respect to
+    /// the temperature parameter and s times the k's (the law linearised
+    /// around its calibration), so later steps refit the k's, γ and s
+    /// together with candidate terms: an effect the calibration soaked into
+    /// γ or s is given back when its own term is present.
     pub fn columns(&self, rows: &[&KpiRow], maps: &[Option<&EnergyMaps>]) -> Vec<Vec<f64>> {
         let groups: Vec<&String> = self.k_pct_per_mj.keys().collect();
-        let mut cols = vec![vec![0.0; rows.len()]; groups.len()];
+        let mut cols = vec![vec![0.0; rows.len()]; groups.len() + 2];
+        let phi = &self.temperature_factor;
         for (i, r) in rows.iter().enumerate() {
             let g = group(r);
             if let Some(j) = groups.iter().position(|k| **k == g) {
-                cols[j][i] = self.energy_term(r, maps[i]);
+                let road = (self.skewness_coefficient * r.skewness).exp();
+                let term = self.energy_term(r, maps[i]);
+                let k = self.k_pct_per_mj[&g];
+                cols[j][i] = term;
+                cols[groups.len()][i] =
+                    k * road * weighted_by(r, maps[i], &|t| phi.derivative_at(&r.compound, t));
+                cols[groups.len() + 1][i] = k * term * r.skewness;
             }
         }
         cols
@@ -290,5 +317,53 @@ mod tests {
             other => panic!("{other:?}"),
         }
         assert!((b.k_pct_per_mj["soft/rear"] - 2.0).abs() < 1e-9);
+    }
+
+    #[test]
+    fn derivative_columns_match_finite_differences() {
+        // The γ and s columns are k·∂term/∂γ and k·∂term/∂s: central differences agree.
+        let w = Wlf {
+            c1: 8.86,
+            c2_k: 101.6,
+            t_ref_c: 50.0,
+        };
+        let mut m = EnergyMaps::new();
+        m.add(52.0, 90.0, 1.0, 2e6);
+        m.add(88.0, 110.0, 1.0, 1e6);
+        let r = KpiRow {
+            compound: "soft".into(),
+            axle: "front".into(),
+            skewness: -0.7,
+            ..Default::default()
+        };
+        let wlf = BTreeMap::from([("soft".to_string(), w)]);
+        let at = |gamma: f64, s: f64| PhysicsBaseline {
+            k_pct_per_mj: BTreeMap::from([("soft/front".to_string(), 1.7)]),
+            temperature_factor: TemperatureFactor::Wlf {
+                gamma,
+                wlf: wlf.clone(),
+            },
+            skewness_coefficient: s,
+        };
+        let b = at(0.17, 0.15);
+        let cols = b.columns(&[&r], &[Some(&m)]);
+        let h = 1e-6;
+        let d_gamma = (at(0.17 + h, 0.15).predict(&r, Some(&m))
+            - at(0.17 - h, 0.15).predict(&r, Some(&m)))
+            / (2.0 * h);
+        let d_s = (at(0.17, 0.15 + h).predict(&r, Some(&m))
+            - at(0.17, 0.15 - h).predict(&r, Some(&m)))
+            / (2.0 * h);
+        assert!(
+            (cols[1][0] - d_gamma).abs() < 1e-6 * d_gamma.abs(),
+            "{} {d_gamma}",
+            cols[1][0]
+        );
+        assert!(
+            (cols[2][0] - d_s).abs() < 1e-6 * d_s.abs(),
+            "{} {d_s}",
+            cols[2][0]
+        );
+        assert!((1.7 * cols[0][0] - b.predict(&r, Some(&m))).abs() < 1e-12);
     }
 }

@@ -202,22 +202,36 @@ pub fn relative_weights(base: &[Vec<f64>], y: &[f64]) -> Vec<f64> {
     b.iter().map(|v| 1.0 / v.max(floor)).collect()
 }
 
-/// Per-track scale columns `b·1[track = t]` (b: the baseline's prediction)
-/// for the tracks among `idx` but the first, which the per-group columns
-/// already carry.
+/// Per track-and-axle scale columns `b·1[track = t, axle = a]` (b: the
+/// baseline's prediction) for the cells among `idx` but each axle's first
+/// track, which the per-group columns already carry. Per axle, because an
+/// effect on one axle that differs between tracks would otherwise show as a
+/// front/rear ratio differing between tracks, which a term on the other axle
+/// could mimic.
 fn track_columns(rows: &[&KpiRow], b: &[f64], idx: &[usize]) -> Vec<Vec<f64>> {
-    let mut tracks: Vec<&str> = idx.iter().map(|&i| rows[i].track.as_str()).collect();
-    tracks.sort();
-    tracks.dedup();
-    tracks
+    let mut cells: Vec<(&str, &str)> = idx
         .iter()
-        .skip(1)
-        .map(|t| {
-            (0..rows.len())
-                .map(|i| if rows[i].track == *t { b[i] } else { 0.0 })
-                .collect()
-        })
-        .collect()
+        .map(|&i| (rows[i].axle.as_str(), rows[i].track.as_str()))
+        .collect();
+    cells.sort();
+    cells.dedup();
+    let mut out = Vec::new();
+    for (k, (axle, track)) in cells.iter().enumerate() {
+        if k > 0 && cells[k - 1].0 == *axle {
+            out.push(
+                (0..rows.len())
+                    .map(|i| {
+                        if rows[i].track == *track && rows[i].axle == *axle {
+                            b[i]
+                        } else {
+                            0.0
+                        }
+                    })
+                    .collect(),
+            );
+        }
+    }
+    out
 }
 
 /// One cross-validation fold of a null model: training rows, columns, coefficients.
@@ -268,11 +282,12 @@ impl Null {
 }
 
 /// 1 − held-out SSE with the term / without it, groups left out in turn.
-/// With `calibrate`, each held-out track gets its own scale in both models
-/// (on the relative scale, its mean residual is removed): a within-track
+/// With `calibrate`, each held-out track gets its own scale per axle in both
+/// models (on the relative scale, the mean residual of each cell is removed): a within-track
 /// term is judged on what it adds beyond the track's severity, which no
 /// model knows before running there.
 fn cv_gain(
+    rows: &[&KpiRow],
     null: &Null,
     groups: &[Vec<usize>],
     x: &[Vec<f64>],
@@ -299,13 +314,30 @@ fn cv_gain(
                 (r0, r1)
             })
             .unzip();
-        let sse = |r: &[f64]| {
-            let m = if calibrate {
-                r.iter().sum::<f64>() / r.len() as f64
-            } else {
-                0.0
-            };
-            r.iter().map(|v| (v - m).powi(2)).sum::<f64>()
+        // Each held-out (track, axle) cell gets its own scale when calibrating.
+        let sse = |r: &[f64]| -> f64 {
+            let mut total = 0.0;
+            for axle in ["front", "rear", ""] {
+                let cell: Vec<f64> = test
+                    .iter()
+                    .zip(r)
+                    .filter(|(i, _)| match axle {
+                        "" => !matches!(rows[**i].axle.as_str(), "front" | "rear"),
+                        a => rows[**i].axle == a,
+                    })
+                    .map(|(_, v)| *v)
+                    .collect();
+                if cell.is_empty() {
+                    continue;
+                }
+                let m = if calibrate {
+                    cell.iter().sum::<f64>() / cell.len() as f64
+                } else {
+                    0.0
+                };
+                total += cell.iter().map(|v| (v - m).powi(2)).sum::<f64>();
+            }
+            total
         };
         sse_with += sse(&r1);
         sse_without += sse(&r0);
@@ -399,7 +431,7 @@ pub fn rank(problem: &Problem, library: &[Candidate], settings: &ScoringSettings
             let positive = c.feature.adds_wear_only();
             let track_level = c.feature.track_level();
             let null = if track_level { &across } else { &within };
-            let gain = cv_gain(null, &groups, &x, y, positive, !track_level);
+            let gain = cv_gain(rows, null, &groups, &x, y, positive, !track_level);
             // Fit on all rows, and the permutation test.
             let cols: Vec<&[f64]> = null.cols.iter().map(|c| c.as_slice()).collect();
             let fit = best_threshold(&cols, &x, y, &all, positive);

@@ -28,6 +28,9 @@ pub struct ValidateSettings {
     pub seeds: Vec<u64>,
     /// Seeds of the clean seasons.
     pub clean_seeds: Vec<u64>,
+    /// Season preset and scale of the simulated seasons.
+    pub preset: crate::sim::Preset,
+    pub scale: f64,
     /// Telemetry rate of the simulated seasons (Hz).
     pub rate_hz: f64,
     /// Scratch folder for the seasons.
@@ -263,8 +266,8 @@ pub fn run_case(
     let dir = s.work.join(name);
     let _ = std::fs::remove_dir_all(&dir);
     crate::sim::simulate(&crate::sim::SimOptions {
-        preset: crate::sim::Preset::Demo,
-        scale: 1.0,
+        preset: s.preset,
+        scale: s.scale,
         seed,
         effects: effect.into_iter().cloned().collect(),
         encoding: crate::ingest::telemetry::Encoding::Block,
