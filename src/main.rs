@@ -88,6 +88,11 @@ enum Command {
         /// beside the KPI file when it exists, else the exponential approximation.
         #[arg(long)]
         compounds: Option<PathBuf>,
+        /// Your own hypotheses (TOML): named expressions over the energy-map
+        /// bins and the KPIs, scored beside the built-in candidates (format:
+        /// docs/gap.md).
+        #[arg(long)]
+        effects: Option<PathBuf>,
         #[command(flatten)]
         stats: GapStatsArgs,
         #[arg(long, default_value = "gap")]
@@ -188,6 +193,7 @@ impl GapStatsArgs {
             },
             max_terms: self.max_terms,
             wlf: Default::default(),
+            user_effects: Vec::new(),
         }
     }
 }
@@ -667,12 +673,16 @@ fn main() -> Result<()> {
             baseline,
             test_events,
             compounds,
+            effects,
             stats,
             out,
             ..
         } => {
             let kpis = kpis.expect("clap requires it");
             let mut settings = stats.settings(test_events);
+            if let Some(f) = &effects {
+                settings.user_effects = tirewear::gap::user_effects::load(f)?;
+            }
             let dir = compounds.clone().unwrap_or_else(|| {
                 kpis.parent()
                     .unwrap_or(std::path::Path::new("."))

@@ -4,9 +4,11 @@
 //! plus every KPI the physics baseline does not use as a generic candidate.
 //! Formulas and units: docs/gap.md.
 
+use super::user_effects::UserEffect;
 use crate::kpi::KpiRow;
 use crate::kpi::energy_map::{EnergyMaps, SLIDING_SPEED_BINS, T_INNER_BINS, T_SURFACE_BINS};
 use crate::model::data::candidate_inputs;
+use std::sync::Arc;
 
 /// How a candidate's term is computed for a row at threshold θ.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
@@ -27,6 +29,8 @@ pub enum Feature {
     /// Generic: friction energy × the KPI standardised over the rows scored,
     /// E·(x − mean)/sd (MJ): wear per joule that varies with the KPI.
     Kpi(&'static str),
+    /// A user hypothesis from `effects.toml` (`Candidate::user`).
+    User,
 }
 
 impl Feature {
@@ -37,7 +41,7 @@ impl Feature {
             Feature::HotInnerEnergy => Some("blistering"),
             Feature::HotSurfaceEnergy => Some("thermal"),
             Feature::RoughRoadEnergy => Some("road-abrasion"),
-            Feature::FastSlidingEnergy | Feature::Kpi(_) => None,
+            Feature::FastSlidingEnergy | Feature::Kpi(_) | Feature::User => None,
         }
     }
 
@@ -66,7 +70,7 @@ impl Feature {
             | Feature::HotSurfaceEnergy => "°C",
             Feature::FastSlidingEnergy => "m/s",
             Feature::RoughRoadEnergy => "mm",
-            Feature::Kpi(_) => "",
+            Feature::Kpi(_) | Feature::User => "",
         }
     }
 }
@@ -79,6 +83,20 @@ pub struct Candidate {
     pub thresholds: Vec<f64>,
     /// "front", "rear", or None for both axles.
     pub axle: Option<&'static str>,
+    /// The compiled expression of a user hypothesis.
+    #[serde(skip)]
+    pub user: Option<Arc<UserEffect>>,
+}
+
+impl Candidate {
+    /// Only positive coefficients count: built-in mechanisms, and user
+    /// hypotheses unless they say otherwise.
+    pub fn adds_wear_only(&self) -> bool {
+        match &self.user {
+            Some(u) => u.adds_wear,
+            None => self.feature.adds_wear_only(),
+        }
+    }
 }
 
 /// The road KPIs (paper table 3): one value per track.
@@ -162,6 +180,7 @@ pub fn library(rows: &[&KpiRow]) -> Vec<Candidate> {
                 feature,
                 thresholds: thresholds.clone(),
                 axle,
+                user: None,
             });
         }
     }
@@ -172,6 +191,7 @@ pub fn library(rows: &[&KpiRow]) -> Vec<Candidate> {
                 feature: Feature::Kpi(c),
                 thresholds: vec![f64::NAN],
                 axle: None,
+                user: None,
             });
         }
     }
@@ -243,6 +263,8 @@ pub fn feature(
                 0.0
             }
         }
+        // Needs the candidate's expression: see `candidate_feature`.
+        Feature::User => f64::NAN,
     }
 }
 
@@ -254,8 +276,9 @@ pub fn candidate_feature(
     theta: f64,
     kpi_scale: (f64, f64),
 ) -> f64 {
-    match c.axle {
-        Some(a) if r.axle != a => 0.0,
+    match (c.axle, &c.user) {
+        (Some(a), _) if r.axle != a => 0.0,
+        (_, Some(u)) => u.feature(r, maps, theta),
         _ => feature(c.feature, r, maps, theta, kpi_scale),
     }
 }

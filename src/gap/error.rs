@@ -14,6 +14,12 @@ pub enum GapError {
         line: usize,
         message: String,
     },
+    #[error("{file}: {effect}: {message}")]
+    Effects {
+        file: String,
+        effect: String,
+        message: String,
+    },
     #[error("{path}: {source}")]
     Io {
         path: String,

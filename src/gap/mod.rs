@@ -13,4 +13,5 @@ pub mod report;
 pub mod scoring;
 pub mod slices;
 pub mod stats;
+pub mod user_effects;
 pub mod validate;

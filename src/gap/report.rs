@@ -2,7 +2,7 @@
 //! events, and where it lies; written as JSON and Markdown.
 
 use super::baseline::PhysicsBaseline;
-use super::candidates::{candidate_feature, library};
+use super::candidates::{Candidate, candidate_feature, library};
 use super::linear::{lstsq, residual};
 use super::scoring::{Problem, Score, ScoringSettings, rank, relative_weights};
 use super::slices::{Slice, slice_residuals};
@@ -77,7 +77,7 @@ fn size(r: &[f64]) -> GapSize {
 }
 
 /// Settings of a diagnosis.
-#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+#[derive(Debug, Clone, serde::Serialize)]
 pub struct GapSettings {
     /// Testing events (default: every third event, as `fit`).
     pub test_events: Option<Vec<String>>,
@@ -89,6 +89,9 @@ pub struct GapSettings {
     /// WLF constants per compound id for the physics baseline's temperature
     /// factor (empty: the exponential approximation).
     pub wlf: BTreeMap<String, Wlf>,
+    /// User hypotheses (`effects.toml`), scored beside the library.
+    #[serde(skip)]
+    pub user_effects: Vec<Candidate>,
 }
 
 impl Default for GapSettings {
@@ -99,6 +102,7 @@ impl Default for GapSettings {
             scoring: ScoringSettings::default(),
             max_terms: 4,
             wlf: BTreeMap::new(),
+            user_effects: Vec::new(),
         }
     }
 }
@@ -199,7 +203,8 @@ pub fn diagnose(
     let mut steps = vec![step_of("baseline".into(), None, &all_res)];
     let mut candidates = Vec::new();
     if !maps.is_empty() {
-        let lib = library(&all_rows[..n_train]);
+        let mut lib = library(&all_rows[..n_train]);
+        lib.extend(settings.user_effects.iter().cloned());
         let train_idx: Vec<usize> = (0..n_train).collect();
         let mut used: Vec<String> = Vec::new();
         let n_groups = base.len();
@@ -237,7 +242,14 @@ pub fn diagnose(
             }) else {
                 break;
             };
-            let cand = best.as_candidate();
+            let cand = lib
+                .iter()
+                .find(|c| c.name == best.name)
+                .map(|c| Candidate {
+                    thresholds: vec![best.threshold],
+                    ..c.clone()
+                })
+                .unwrap_or_else(|| best.as_candidate());
             let column: Vec<f64> = (0..all_rows.len())
                 .map(|i| {
                     candidate_feature(

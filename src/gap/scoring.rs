@@ -79,13 +79,15 @@ pub struct Score {
 }
 
 impl Score {
-    /// The scored term as a candidate at its chosen threshold.
+    /// The scored term as a candidate at its chosen threshold (without a
+    /// user hypothesis's expression: take that from the library).
     pub fn as_candidate(&self) -> Candidate {
         Candidate {
             name: self.name.clone(),
             feature: self.feature,
             thresholds: vec![self.threshold],
             axle: self.axle,
+            user: None,
         }
     }
 }
@@ -428,7 +430,7 @@ pub fn rank(problem: &Problem, library: &[Candidate], settings: &ScoringSettings
             if x.iter().flatten().any(|v| !v.is_finite()) {
                 return None;
             }
-            let positive = c.feature.adds_wear_only();
+            let positive = c.adds_wear_only();
             let track_level = c.feature.track_level();
             let null = if track_level { &across } else { &within };
             let gain = cv_gain(rows, null, &groups, &x, y, positive, !track_level);

@@ -1,0 +1,375 @@
+//! User hypotheses for step 2, from `effects.toml`: each a named expression
+//! over the energy-map bins and the KPIs, scored like the built-in
+//! candidates. The term of a tire and run is
+//!
+//! Σ_bins E_bin (MJ) · value(expression at that bin, θ)
+//!
+//! over the (surface × inner-liner temperature) map, or over the (sliding
+//! speed × surface temperature) map when the expression reads
+//! `sliding_speed`. Bin variables are the bin mid-points; a comparison counts
+//! as 1 when true and 0 when false. Format: docs/gap.md.
+
+use super::candidates::{Candidate, Feature};
+use super::error::GapError;
+use crate::kpi::KpiRow;
+use crate::kpi::energy_map::{Bins, EnergyMaps, SLIDING_SPEED_BINS, T_INNER_BINS, T_SURFACE_BINS};
+use evalexpr::{Context, DefaultNumericTypes, EvalexprError, EvalexprResult, Node, Value};
+use std::path::Path;
+use std::sync::Arc;
+
+/// Variables a user expression may read besides the KPI columns.
+pub const BIN_VARIABLES: [&str; 4] = ["t_surface", "t_inner", "sliding_speed", "theta"];
+
+#[derive(Debug, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+struct EffectsFile {
+    effect: Vec<EffectEntry>,
+}
+
+#[derive(Debug, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+struct EffectEntry {
+    name: String,
+    expression: String,
+    #[serde(default)]
+    thresholds: Vec<f64>,
+    /// "front", "rear" or "both" (default).
+    #[serde(default)]
+    axle: Option<String>,
+    /// Only positive coefficients count (default true: a mechanism adds wear).
+    #[serde(default = "yes")]
+    adds_wear: bool,
+}
+
+fn yes() -> bool {
+    true
+}
+
+/// One compiled user hypothesis.
+#[derive(Debug)]
+pub struct UserEffect {
+    pub name: String,
+    pub expression: String,
+    pub adds_wear: bool,
+    node: Node<DefaultNumericTypes>,
+    /// Variables read, in a fixed order; values are filled per evaluation.
+    variables: Vec<String>,
+    /// Reads `sliding_speed` (the speed × surface map) rather than `t_inner`.
+    speed_map: bool,
+}
+
+/// A context with the few variables an expression reads, looked up by position.
+struct Vars<'a> {
+    names: &'a [String],
+    values: Vec<Value<DefaultNumericTypes>>,
+}
+
+impl Context for Vars<'_> {
+    type NumericTypes = DefaultNumericTypes;
+
+    fn get_value(&self, identifier: &str) -> Option<&Value<DefaultNumericTypes>> {
+        self.names
+            .iter()
+            .position(|n| n == identifier)
+            .map(|i| &self.values[i])
+    }
+
+    fn call_function(
+        &self,
+        identifier: &str,
+        _argument: &Value<DefaultNumericTypes>,
+    ) -> EvalexprResult<Value<DefaultNumericTypes>, DefaultNumericTypes> {
+        Err(EvalexprError::FunctionIdentifierNotFound(
+            identifier.to_string(),
+        ))
+    }
+
+    fn are_builtin_functions_disabled(&self) -> bool {
+        false
+    }
+
+    fn set_builtin_functions_disabled(
+        &mut self,
+        _disabled: bool,
+    ) -> EvalexprResult<(), DefaultNumericTypes> {
+        Err(EvalexprError::CustomMessage(
+            "builtin functions stay enabled".into(),
+        ))
+    }
+}
+
+fn mid(b: &Bins, i: usize) -> f64 {
+    b.lower_edge(i) + 0.5 * b.width
+}
+
+impl UserEffect {
+    /// Compiles one expression, checking every variable it reads.
+    pub fn compile(name: &str, expression: &str, adds_wear: bool) -> Result<UserEffect, String> {
+        let node = evalexpr::build_operator_tree::<DefaultNumericTypes>(expression)
+            .map_err(|e| format!("cannot parse '{expression}': {e}"))?;
+        let mut variables: Vec<String> = node
+            .iter_variable_identifiers()
+            .map(str::to_string)
+            .collect();
+        variables.sort();
+        variables.dedup();
+        for v in &variables {
+            if !BIN_VARIABLES.contains(&v.as_str()) && !KpiRow::NUMBER_COLUMNS.contains(&v.as_str())
+            {
+                return Err(format!(
+                    "unknown variable '{v}' (bin variables: {}; or a KPI column, docs/kpis.md)",
+                    BIN_VARIABLES.join(", ")
+                ));
+            }
+        }
+        let speed_map = variables.iter().any(|v| v == "sliding_speed");
+        if speed_map && variables.iter().any(|v| v == "t_inner") {
+            return Err(
+                "reads both sliding_speed and t_inner, which no energy map holds together".into(),
+            );
+        }
+        // evalexpr accepts some incomplete trees ("t_surface >"): try one
+        // evaluation with every variable at 1 so they fail here, not mid-run.
+        let probe = Vars {
+            names: &variables,
+            values: vec![Value::Float(1.0); variables.len()],
+        };
+        match node.eval_with_context(&probe) {
+            Ok(Value::Float(_) | Value::Int(_) | Value::Boolean(_)) => {}
+            Ok(other) => {
+                return Err(format!(
+                    "cannot parse '{expression}': gives {other:?}, not a number"
+                ));
+            }
+            Err(e) => return Err(format!("cannot parse '{expression}': {e}")),
+        }
+        Ok(UserEffect {
+            name: name.to_string(),
+            expression: expression.to_string(),
+            adds_wear,
+            node,
+            variables,
+            speed_map,
+        })
+    }
+
+    fn value(&self, vars: &Vars) -> f64 {
+        match self.node.eval_with_context(vars) {
+            Ok(Value::Float(x)) => x,
+            Ok(Value::Int(i)) => i as f64,
+            Ok(Value::Boolean(b)) => b as u8 as f64,
+            _ => f64::NAN,
+        }
+    }
+
+    /// The term of one row at θ (MJ); NaN without a map or where the
+    /// expression does not give a number.
+    pub fn feature(&self, r: &KpiRow, maps: Option<&EnergyMaps>, theta: f64) -> f64 {
+        let Some(m) = maps else {
+            return f64::NAN;
+        };
+        let mut vars = Vars {
+            names: &self.variables,
+            values: self
+                .variables
+                .iter()
+                .map(|v| match v.as_str() {
+                    "theta" => Value::Float(theta),
+                    "t_surface" | "t_inner" | "sliding_speed" => Value::Float(f64::NAN),
+                    kpi => Value::Float(r.number(kpi).unwrap_or(f64::NAN)),
+                })
+                .collect(),
+        };
+        let slot = |name: &str| self.variables.iter().position(|v| v == name);
+        let (ts, ti, vs) = (slot("t_surface"), slot("t_inner"), slot("sliding_speed"));
+        let set = |i: Option<usize>, x: f64, vars: &mut Vars| {
+            if let Some(i) = i {
+                vars.values[i] = Value::Float(x);
+            }
+        };
+        let mut s = 0.0;
+        if self.speed_map {
+            for v in 0..SLIDING_SPEED_BINS.n {
+                set(vs, mid(&SLIDING_SPEED_BINS, v), &mut vars);
+                for i in 0..T_SURFACE_BINS.n {
+                    let e = m.speed_surface[v * T_SURFACE_BINS.n + i];
+                    if e != 0.0 {
+                        set(ts, mid(&T_SURFACE_BINS, i), &mut vars);
+                        s += e * self.value(&vars);
+                    }
+                }
+            }
+        } else {
+            for i in 0..T_SURFACE_BINS.n {
+                set(ts, mid(&T_SURFACE_BINS, i), &mut vars);
+                for j in 0..T_INNER_BINS.n {
+                    let e = m.surface_inner[i * T_INNER_BINS.n + j];
+                    if e != 0.0 {
+                        set(ti, mid(&T_INNER_BINS, j), &mut vars);
+                        s += e * self.value(&vars);
+                    }
+                }
+            }
+        }
+        s * 1e-6
+    }
+}
+
+/// Reads `effects.toml` into candidates; errors name the file and the effect.
+pub fn load(path: &Path) -> Result<Vec<Candidate>, GapError> {
+    let file = path.display().to_string();
+    let text = std::fs::read_to_string(path).map_err(|e| GapError::Io {
+        path: file.clone(),
+        source: e,
+    })?;
+    let parsed: EffectsFile = toml::from_str(&text).map_err(|e| GapError::Effects {
+        file: file.clone(),
+        effect: String::new(),
+        message: e.to_string(),
+    })?;
+    parsed
+        .effect
+        .into_iter()
+        .enumerate()
+        .map(|(k, e)| {
+            let err = |message: String| GapError::Effects {
+                file: file.clone(),
+                effect: format!("effect {} ('{}')", k + 1, e.name),
+                message,
+            };
+            let user = UserEffect::compile(&e.name, &e.expression, e.adds_wear).map_err(err)?;
+            let axle = match e.axle.as_deref() {
+                None | Some("both") => None,
+                Some("front") => Some("front"),
+                Some("rear") => Some("rear"),
+                Some(other) => {
+                    return Err(err(format!("axle '{other}' (front, rear or both)")));
+                }
+            };
+            let thresholds = if user.variables.iter().any(|v| v == "theta") {
+                if e.thresholds.is_empty() {
+                    return Err(err("reads theta but gives no thresholds".into()));
+                }
+                e.thresholds
+            } else {
+                vec![f64::NAN]
+            };
+            Ok(Candidate {
+                name: format!("user: {}", e.name),
+                feature: Feature::User,
+                thresholds,
+                axle,
+                user: Some(Arc::new(user)),
+            })
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::gap::candidates::{candidate_feature, feature};
+
+    fn map() -> EnergyMaps {
+        let mut m = EnergyMaps::new();
+        m.add(62.0, 92.0, 0.7, 2e6);
+        m.add(88.0, 101.0, 2.2, 1e6);
+        m.add(97.0, 131.0, 4.1, 0.5e6);
+        m
+    }
+
+    #[test]
+    fn expressions_equal_the_built_in_mechanisms() {
+        let m = map();
+        let r = KpiRow {
+            friction_energy_j: 3.5e6,
+            friction_energy_y_j: 1.4e6,
+            ..Default::default()
+        };
+        let hot = UserEffect::compile("hot", "t_surface > theta", true).unwrap();
+        let cold = UserEffect::compile(
+            "cold",
+            "if(0.5 * (t_surface + t_inner) < theta, 1.0, 0.0) * friction_energy_y_j / friction_energy_j",
+            true,
+        )
+        .unwrap();
+        let fast = UserEffect::compile("fast", "sliding_speed > theta", true).unwrap();
+        for theta in [70.0, 85.0, 95.0, 100.0] {
+            let want = feature(Feature::HotSurfaceEnergy, &r, Some(&m), theta, (0.0, 1.0));
+            assert!((hot.feature(&r, Some(&m), theta) - want).abs() < 1e-12);
+            let want = feature(
+                Feature::ColdTreadLateralEnergy,
+                &r,
+                Some(&m),
+                theta,
+                (0.0, 1.0),
+            );
+            assert!((cold.feature(&r, Some(&m), theta) - want).abs() < 1e-12);
+        }
+        for theta in [0.5, 2.0, 4.0] {
+            let want = feature(Feature::FastSlidingEnergy, &r, Some(&m), theta, (0.0, 1.0));
+            assert!((fast.feature(&r, Some(&m), theta) - want).abs() < 1e-12);
+        }
+        // By hand: 1 MJ at 87.5 °C and 0.5 MJ at 97.5 °C lie above 85 °C.
+        assert!((hot.feature(&r, Some(&m), 85.0) - 1.5).abs() < 1e-12);
+    }
+
+    #[test]
+    fn the_shipped_example_loads() {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("datasets/effects.example.toml");
+        let c = load(&path).unwrap();
+        assert_eq!(c.len(), 3);
+        assert!(c[2].thresholds[0].is_nan() && !c[2].adds_wear_only());
+        let r = KpiRow {
+            pressure_avg_pa: 2e5,
+            ..Default::default()
+        };
+        // Σ E·v·p/1e5 by hand: (2·0.75 + 1·2.25 + 0.5·4.25) MJ·m/s × 2.
+        let want = (2.0 * 0.75 + 2.25 + 0.5 * 4.25) * 2.0;
+        let got = candidate_feature(&c[2], &r, Some(&map()), f64::NAN, (0.0, 1.0));
+        assert!((got - want).abs() < 1e-12, "{got} vs {want}");
+    }
+
+    #[test]
+    fn bad_files_are_refused_by_name() {
+        let dir = tempfile::tempdir().unwrap();
+        let write = |text: &str| {
+            let p = dir.path().join("effects.toml");
+            std::fs::write(&p, text).unwrap();
+            p
+        };
+        let msg = |text: &str| load(&write(text)).unwrap_err().to_string();
+        let e = msg(
+            "[[effect]]\nname = \"a\"\nexpression = \"t_surface > 80\"\n\n[[effect]]\nname = \"b\"\nexpression = \"t_surf > 80\"\n",
+        );
+        assert!(
+            e.contains("effects.toml") && e.contains("effect 2 ('b')") && e.contains("'t_surf'"),
+            "{e}"
+        );
+        let e = msg("[[effect]]\nname = \"c\"\nexpression = \"t_surface > theta\"\n");
+        assert!(e.contains("no thresholds"), "{e}");
+        let e = msg("[[effect]]\nname = \"d\"\nexpression = \"sliding_speed * t_inner\"\n");
+        assert!(e.contains("no energy map"), "{e}");
+        let e = msg("[[effect]]\nname = \"e\"\nexpression = \"t_surface >\"\n");
+        assert!(e.contains("cannot parse"), "{e}");
+        let e = msg("[[effect]]\nname = \"f\"\nexpression = \"1\"\naxle = \"left\"\n");
+        assert!(e.contains("axle 'left'"), "{e}");
+        // A good one: a rear-axle candidate that is zero on the fronts.
+        let c = load(&write(
+            "[[effect]]\nname = \"g\"\nexpression = \"t_inner > theta\"\nthresholds = [100, 120]\naxle = \"rear\"\n",
+        ))
+        .unwrap();
+        assert_eq!(
+            (c.len(), c[0].axle, c[0].thresholds.len()),
+            (1, Some("rear"), 2)
+        );
+        let front = KpiRow {
+            axle: "front".into(),
+            ..Default::default()
+        };
+        assert_eq!(
+            candidate_feature(&c[0], &front, Some(&map()), 100.0, (0.0, 1.0)),
+            0.0
+        );
+    }
+}
