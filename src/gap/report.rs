@@ -454,7 +454,13 @@ pub fn render_markdown(d: &Diagnosis, max_slices: usize) -> String {
         }
         let _ = writeln!(
             s,
-            "\n## How far the gap shrinks\n\n| step | training bias / RMSE (%) | testing bias / RMSE (%) | RMSE in the top flagged slices (%) |\n|---|---|---|---|"
+            "\n## How far the gap shrinks\n\nEach step adds the best significant candidate (one that was significant on its own in step 2) and refits the baseline around the terms on the training events. Slices: the top flagged slices of step 1, in order{}.\n\n| step | training bias / RMSE (%) | testing bias / RMSE (%) | RMSE in slices 1… (%) |\n|---|---|---|---|",
+            d.slices
+                .iter()
+                .take(5)
+                .enumerate()
+                .map(|(i, sl)| format!("; {} = {}", i + 1, sl.name))
+                .collect::<String>()
         );
         for st in &d.steps {
             let te = st.testing.map_or("–".to_string(), |t| {
@@ -468,7 +474,16 @@ pub fn render_markdown(d: &Diagnosis, max_slices: usize) -> String {
             let _ = writeln!(
                 s,
                 "| {} | {:+.3} / {:.3} | {te} | {} |",
-                st.added,
+                if st.added == "baseline" {
+                    st.added.clone()
+                } else if st.threshold.is_finite() {
+                    format!(
+                        "+ {} (θ = {}, c = {:+.4})",
+                        st.added, st.threshold, st.coefficient
+                    )
+                } else {
+                    format!("+ {} (c = {:+.4})", st.added, st.coefficient)
+                },
                 st.training.bias_pct,
                 st.training.rmse_pct,
                 sl.join(", ")
