@@ -207,22 +207,24 @@ pub fn diagnose(
         lib.extend(settings.user_effects.iter().cloned());
         let train_idx: Vec<usize> = (0..n_train).collect();
         let mut used: Vec<String> = Vec::new();
-        let n_groups = base.len();
-        // Coefficients of the terms added so far, in `base[n_groups..]`.
-        let mut terms: Vec<f64> = Vec::new();
-        let w = relative_weights(
-            &base
-                .iter()
-                .map(|c| c[..n_train].to_vec())
-                .collect::<Vec<_>>(),
-            &y[..n_train],
-        );
+        let w = if physics.is_some() {
+            relative_weights(
+                &base
+                    .iter()
+                    .map(|c| c[..n_train].to_vec())
+                    .collect::<Vec<_>>(),
+                &y[..n_train],
+            )
+        } else {
+            vec![1.0; n_train]
+        };
         for round in 0..settings.max_terms {
             let problem = Problem {
                 rows: &all_rows[..n_train],
                 maps: &row_maps[..n_train],
                 y: &y[..n_train],
                 base: base.iter().map(|c| c[..n_train].to_vec()).collect(),
+                relative: physics.is_some(),
             };
             let ranked = rank(&problem, &lib, &settings.scoring);
             if round == 0 {
@@ -261,41 +263,25 @@ pub fn diagnose(
                     )
                 })
                 .collect();
-            // The term keeps the coefficient its test estimated (within
-            // tracks, or across them for a road term): refitting it without
-            // the track factors would let it soak up track differences. The
-            // baseline's k's are refitted around it (relative scale).
+            // Baseline and terms refitted together on the training events
+            // (relative scale for the physics law), without track scales:
+            // the model a user would run on a new event.
             base.push(column);
-            // Earlier terms take the coefficients refitted with this one.
-            for (j, c) in terms.iter_mut().enumerate() {
-                if let Some(k) = best.base_coefficients.get(n_groups + j) {
-                    *c = *k;
-                }
-            }
-            terms.push(best.coefficient);
-            let offset: Vec<f64> = (0..all_rows.len())
-                .map(|i| {
-                    terms
-                        .iter()
-                        .zip(&base[n_groups..])
-                        .map(|(k, col)| k * col[i])
-                        .sum()
-                })
-                .collect();
-            let group_refs: Vec<&[f64]> = base[..n_groups].iter().map(|c| c.as_slice()).collect();
-            let scaled: Vec<Vec<f64>> = base[..n_groups]
+            let cols: Vec<&[f64]> = base.iter().map(|c| c.as_slice()).collect();
+            let scaled: Vec<Vec<f64>> = base
                 .iter()
                 .map(|c| c[..n_train].iter().zip(&w).map(|(v, w)| v * w).collect())
                 .collect();
             let scaled_refs: Vec<&[f64]> = scaled.iter().map(|c| c.as_slice()).collect();
-            let yw: Vec<f64> = (0..n_train).map(|i| (y[i] - offset[i]) * w[i]).collect();
+            let yw: Vec<f64> = (0..n_train).map(|i| y[i] * w[i]).collect();
             let k = lstsq(&scaled_refs, &yw, &train_idx);
-            let shifted: Vec<f64> = y.iter().zip(&offset).map(|(y, o)| y - o).collect();
             let res: Vec<f64> = (0..all_rows.len())
-                .map(|i| residual(&group_refs, &k, &shifted, i))
+                .map(|i| residual(&cols, &k, &y, i))
                 .collect();
+            let mut refitted = best.clone();
+            refitted.coefficient = k[k.len() - 1];
             used.push(best.name.clone());
-            steps.push(step_of(best.name.clone(), Some(best), &res));
+            steps.push(step_of(best.name.clone(), Some(&refitted), &res));
         }
     }
     Ok(Diagnosis {

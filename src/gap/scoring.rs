@@ -48,6 +48,10 @@ pub struct Problem<'a> {
     pub y: &'a [f64],
     /// Baseline design columns (and terms already selected), one value per row.
     pub base: Vec<Vec<f64>>,
+    /// Work on the relative scale (rows divided by the baseline's
+    /// prediction): right for the multiplicative physics law; a statistical
+    /// model's errors are additive, so its rows keep their weight.
+    pub relative: bool,
 }
 
 /// How a candidate scored.
@@ -379,7 +383,11 @@ pub fn rank(problem: &Problem, library: &[Candidate], settings: &ScoringSettings
     let all: Vec<usize> = (0..n).collect();
     let groups = folds(rows);
     // Relative scale: every row divided by the baseline's prediction.
-    let w = relative_weights(&problem.base, problem.y);
+    let w = if problem.relative {
+        relative_weights(&problem.base, problem.y)
+    } else {
+        vec![1.0; n]
+    };
     let y: Vec<f64> = problem.y.iter().zip(&w).map(|(v, w)| v * w).collect();
     let y = y.as_slice();
     let base: Vec<Vec<f64>> = problem
@@ -387,7 +395,14 @@ pub fn rank(problem: &Problem, library: &[Candidate], settings: &ScoringSettings
         .iter()
         .map(|c| c.iter().zip(&w).map(|(v, w)| v * w).collect())
         .collect();
-    let prediction: Vec<f64> = w.iter().map(|_| 1.0).collect();
+    // The baseline's prediction on the (weighted) scale, for the track scales.
+    let prediction: Vec<f64> = {
+        let refs: Vec<&[f64]> = base.iter().map(|c| c.as_slice()).collect();
+        let k = lstsq(&refs, y, &all);
+        all.iter()
+            .map(|&i| y[i] - residual(&refs, &k, y, i))
+            .collect()
+    };
     let within = Null::new(rows, &base, y, &groups, Some(&prediction));
     let across = Null::new(rows, &base, y, &groups, None);
     let mut tracks: Vec<&str> = rows.iter().map(|r| r.track.as_str()).collect();
@@ -580,6 +595,7 @@ mod tests {
             maps: &mref,
             y: &y,
             base,
+            relative: true,
         };
         let settings = ScoringSettings {
             permutations: 199,
