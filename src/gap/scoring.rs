@@ -396,7 +396,10 @@ pub fn rank(problem: &Problem, library: &[Candidate], settings: &ScoringSettings
         .map(|c| c.iter().zip(&w).map(|(v, w)| v * w).collect())
         .collect();
     // The baseline's prediction on the (weighted) scale, for the track scales.
-    let prediction: Vec<f64> = {
+    // On the relative scale it is 1 by construction (w = 1/prediction).
+    let prediction: Vec<f64> = if problem.relative {
+        vec![1.0; n]
+    } else {
         let refs: Vec<&[f64]> = base.iter().map(|c| c.as_slice()).collect();
         let k = lstsq(&refs, y, &all);
         all.iter()
