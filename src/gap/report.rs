@@ -1,5 +1,7 @@
 //! `tirewear gap`: the baseline, the gap's size on training and testing
-//! events, and where it lies; written as JSON and Markdown.
+//! events, where it lies (step 1), which candidate effect explains it (step
+//! 2) and how far it shrinks as terms are added (step 3); written as JSON
+//! and Markdown.
 
 use super::baseline::PhysicsBaseline;
 use super::candidates::{Candidate, candidate_feature, library};

@@ -1,16 +1,20 @@
-//! Step 2's scoring of candidate effects. Each candidate term is added to the
-//! baseline's design (its per-group energy columns, refitted together with
-//! the term, so the baseline cannot already have soaked the effect up):
+//! Step 2's scoring of candidate effects. Each candidate term is added to
+//! the baseline's design (its per-group energy columns and its derivatives
+//! in γ and s, all refitted together with the term, so the calibration
+//! cannot keep an effect it soaked up), on the relative scale:
 //!
 //! - held-out gain: grouped cross-validation with whole tracks left out in
 //!   turn (whole events when there are fewer than three tracks), the
 //!   threshold scanned on the training folds only; gain = 1 − SSE(baseline +
 //!   term) / SSE(baseline) over the held-out rows;
-//! - significance: a Freedman–Lane permutation test of the nested models.
-//!   The baseline's residuals are permuted within axles and the statistic is
-//!   the largest F ratio over the threshold grid, so the scan is paid for;
-//!   Benjamini–Hochberg over the candidates then controls the false-discovery
-//!   rate. A mechanism only adds wear, so only positive coefficients count.
+//! - significance: a Freedman–Lane permutation test of the nested models,
+//!   within tracks for a term that varies within tracks (residuals permuted
+//!   within track × axle, a scale per track and axle in the null) and across
+//!   tracks for a road term (the tracks' road values exchanged); the
+//!   statistic is the largest F ratio over the threshold grid, so the scan
+//!   is paid for; Benjamini–Hochberg over the candidates then controls the
+//!   false-discovery rate. A mechanism only adds wear, so only positive
+//!   coefficients count. Details and measured behaviour: docs/gap.md.
 
 use super::candidates::{
     Candidate, Feature, candidate_feature, kpi_scale, row_factor, track_value,
@@ -76,10 +80,6 @@ pub struct Score {
     /// (mean, sd) standardising a KPI candidate.
     #[serde(skip)]
     pub kpi_scale: (f64, f64),
-    /// Coefficients of the problem's base columns in the same fit (the
-    /// terms selected before are refitted together with this one).
-    #[serde(skip)]
-    pub base_coefficients: Vec<f64>,
 }
 
 impl Score {
@@ -455,9 +455,6 @@ pub fn rank(problem: &Problem, library: &[Candidate], settings: &ScoringSettings
             // Fit on all rows, and the permutation test.
             let cols: Vec<&[f64]> = null.cols.iter().map(|c| c.as_slice()).collect();
             let fit = best_threshold(&cols, &x, y, &all, positive);
-            let base_coefficients = fit
-                .as_ref()
-                .map_or(Vec::new(), |(_, k)| k[..problem.base.len()].to_vec());
             let (threshold, coefficient, front_share) = match &fit {
                 Some((t, k)) => {
                     let c1 = k[k.len() - 1];
@@ -531,7 +528,6 @@ pub fn rank(problem: &Problem, library: &[Candidate], settings: &ScoringSettings
                 p_adjusted: f64::NAN,
                 front_share,
                 kpi_scale: scale,
-                base_coefficients,
             })
         })
         .collect();
