@@ -18,7 +18,7 @@
 
 use crate::ingest::compound::Wlf;
 use crate::kpi::KpiRow;
-use crate::kpi::energy_map::{EnergyMaps, T_INNER_BINS, T_SURFACE_BINS};
+use crate::kpi::energy_map::EnergyMaps;
 use std::collections::BTreeMap;
 
 /// Temperature of the law's reference state (°C).
@@ -103,19 +103,7 @@ pub fn weighted_energy_mj(r: &KpiRow, maps: Option<&EnergyMaps>, phi: &Temperatu
 /// Σ E_b·f(T_b) over the surface-temperature bins (MJ).
 fn weighted_by(r: &KpiRow, maps: Option<&EnergyMaps>, f: &dyn Fn(f64) -> f64) -> f64 {
     match maps {
-        Some(m) => {
-            let mut s = 0.0;
-            for i in 0..T_SURFACE_BINS.n {
-                let e: f64 = m.surface_inner[i * T_INNER_BINS.n..(i + 1) * T_INNER_BINS.n]
-                    .iter()
-                    .sum();
-                if e != 0.0 {
-                    let t_mid = T_SURFACE_BINS.lower_edge(i) + 0.5 * T_SURFACE_BINS.width;
-                    s += e * f(t_mid);
-                }
-            }
-            s / 1e6
-        }
+        Some(m) => m.weighted_surface_inner(|ts, _| f(ts)) / 1e6,
         None => r.friction_energy_j / 1e6 * f(r.t_surface_avg_c),
     }
 }

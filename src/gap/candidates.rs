@@ -6,7 +6,7 @@
 
 use super::user_effects::UserEffect;
 use crate::kpi::KpiRow;
-use crate::kpi::energy_map::{EnergyMaps, SLIDING_SPEED_BINS, T_INNER_BINS, T_SURFACE_BINS};
+use crate::kpi::energy_map::EnergyMaps;
 use crate::model::data::candidate_inputs;
 use std::sync::Arc;
 
@@ -203,11 +203,6 @@ fn road_excess(ra_micro_mm: f64, theta: f64) -> f64 {
     (ra_micro_mm - theta).max(0.0) / 0.01
 }
 
-/// Bin midpoint.
-fn mid(b: &crate::kpi::energy_map::Bins, i: usize) -> f64 {
-    b.lower_edge(i) + 0.5 * b.width
-}
-
 /// The term of one row at threshold θ (MJ); `kpi_scale` = (mean, sd) of a
 /// generic KPI over the rows scored.
 pub fn feature(
@@ -220,15 +215,7 @@ pub fn feature(
     let mj = 1e-6;
     let sum_surface_inner = |keep: &dyn Fn(f64, f64) -> bool| -> f64 {
         maps.map_or(f64::NAN, |m| {
-            let mut s = 0.0;
-            for i in 0..T_SURFACE_BINS.n {
-                for j in 0..T_INNER_BINS.n {
-                    if keep(mid(&T_SURFACE_BINS, i), mid(&T_INNER_BINS, j)) {
-                        s += m.surface_inner[i * T_INNER_BINS.n + j];
-                    }
-                }
-            }
-            s * mj
+            m.weighted_surface_inner(|ts, ti| keep(ts, ti) as u8 as f64) * mj
         })
     };
     match f {
@@ -243,15 +230,7 @@ pub fn feature(
         Feature::HotInnerEnergy => sum_surface_inner(&|_, ti| ti > theta),
         Feature::HotSurfaceEnergy => sum_surface_inner(&|ts, _| ts > theta),
         Feature::FastSlidingEnergy => maps.map_or(f64::NAN, |m| {
-            let mut s = 0.0;
-            for v in 0..SLIDING_SPEED_BINS.n {
-                if mid(&SLIDING_SPEED_BINS, v) > theta {
-                    s += m.speed_surface[v * T_SURFACE_BINS.n..(v + 1) * T_SURFACE_BINS.n]
-                        .iter()
-                        .sum::<f64>();
-                }
-            }
-            s * mj
+            m.weighted_speed_surface(|v, _| (v > theta) as u8 as f64) * mj
         }),
         Feature::RoughRoadEnergy => r.friction_energy_j * mj * road_excess(r.ra_micro_mm, theta),
         Feature::Kpi(c) => {

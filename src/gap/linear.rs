@@ -110,6 +110,11 @@ pub fn project_out(q: &[Vec<f64>], v: &mut [f64]) {
     }
 }
 
+/// `v` times the row weights `w`, element by element (over `w`'s length).
+pub fn weighted(v: &[f64], w: &[f64]) -> Vec<f64> {
+    v.iter().zip(w).map(|(a, b)| a * b).collect()
+}
+
 pub fn dot(a: &[f64], b: &[f64]) -> f64 {
     a.iter().zip(b).map(|(x, y)| x * y).sum()
 }

@@ -5,7 +5,7 @@
 
 use super::baseline::PhysicsBaseline;
 use super::candidates::{Candidate, candidate_feature, library};
-use super::linear::{lstsq, residual};
+use super::linear::{lstsq, residual, weighted};
 use super::scoring::{Problem, Score, ScoringSettings, rank, relative_weights};
 use super::slices::{Slice, slice_residuals};
 use crate::ingest::compound::Wlf;
@@ -270,12 +270,9 @@ pub fn diagnose(
             // the model a user would run on a new event.
             base.push(column);
             let cols: Vec<&[f64]> = base.iter().map(|c| c.as_slice()).collect();
-            let scaled: Vec<Vec<f64>> = base
-                .iter()
-                .map(|c| c[..n_train].iter().zip(&w).map(|(v, w)| v * w).collect())
-                .collect();
+            let scaled: Vec<Vec<f64>> = base.iter().map(|c| weighted(c, &w)).collect();
             let scaled_refs: Vec<&[f64]> = scaled.iter().map(|c| c.as_slice()).collect();
-            let yw: Vec<f64> = (0..n_train).map(|i| y[i] * w[i]).collect();
+            let yw = weighted(&y, &w);
             let k = lstsq(&scaled_refs, &yw, &train_idx);
             let res: Vec<f64> = (0..all_rows.len())
                 .map(|i| residual(&cols, &k, &y, i))

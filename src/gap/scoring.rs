@@ -19,7 +19,7 @@
 use super::candidates::{
     Candidate, Feature, candidate_feature, kpi_scale, row_factor, track_value,
 };
-use super::linear::{dot, lstsq, orthonormal_basis, project_out, residual};
+use super::linear::{dot, lstsq, orthonormal_basis, project_out, residual, weighted};
 use super::stats::benjamini_hochberg;
 use crate::kpi::KpiRow;
 use crate::kpi::energy_map::EnergyMaps;
@@ -388,13 +388,9 @@ pub fn rank(problem: &Problem, library: &[Candidate], settings: &ScoringSettings
     } else {
         vec![1.0; n]
     };
-    let y: Vec<f64> = problem.y.iter().zip(&w).map(|(v, w)| v * w).collect();
+    let y = weighted(problem.y, &w);
     let y = y.as_slice();
-    let base: Vec<Vec<f64>> = problem
-        .base
-        .iter()
-        .map(|c| c.iter().zip(&w).map(|(v, w)| v * w).collect())
-        .collect();
+    let base: Vec<Vec<f64>> = problem.base.iter().map(|c| weighted(c, &w)).collect();
     // The baseline's prediction on the (weighted) scale, for the track scales.
     // On the relative scale it is 1 by construction (w = 1/prediction).
     let prediction: Vec<f64> = if problem.relative {

@@ -12,7 +12,7 @@
 use super::candidates::{Candidate, Feature};
 use super::error::GapError;
 use crate::kpi::KpiRow;
-use crate::kpi::energy_map::{Bins, EnergyMaps, SLIDING_SPEED_BINS, T_INNER_BINS, T_SURFACE_BINS};
+use crate::kpi::energy_map::EnergyMaps;
 use evalexpr::{Context, DefaultNumericTypes, EvalexprError, EvalexprResult, Node, Value};
 use std::path::Path;
 use std::sync::Arc;
@@ -98,10 +98,6 @@ impl Context for Vars<'_> {
     }
 }
 
-fn mid(b: &Bins, i: usize) -> f64 {
-    b.lower_edge(i) + 0.5 * b.width
-}
-
 impl UserEffect {
     /// Compiles one expression, checking every variable it reads.
     pub fn compile(name: &str, expression: &str, adds_wear: bool) -> Result<UserEffect, String> {
@@ -182,35 +178,19 @@ impl UserEffect {
         };
         let slot = |name: &str| self.variables.iter().position(|v| v == name);
         let (ts, ti, vs) = (slot("t_surface"), slot("t_inner"), slot("sliding_speed"));
-        let set = |i: Option<usize>, x: f64, vars: &mut Vars| {
-            if let Some(i) = i {
-                vars.values[i] = Value::Float(x);
+        let mut at = |slots: [(Option<usize>, f64); 2]| {
+            for (i, x) in slots {
+                if let Some(i) = i {
+                    vars.values[i] = Value::Float(x);
+                }
             }
+            self.value(&vars)
         };
-        let mut s = 0.0;
-        if self.speed_map {
-            for v in 0..SLIDING_SPEED_BINS.n {
-                set(vs, mid(&SLIDING_SPEED_BINS, v), &mut vars);
-                for i in 0..T_SURFACE_BINS.n {
-                    let e = m.speed_surface[v * T_SURFACE_BINS.n + i];
-                    if e != 0.0 {
-                        set(ts, mid(&T_SURFACE_BINS, i), &mut vars);
-                        s += e * self.value(&vars);
-                    }
-                }
-            }
+        let s = if self.speed_map {
+            m.weighted_speed_surface(|v, t| at([(vs, v), (ts, t)]))
         } else {
-            for i in 0..T_SURFACE_BINS.n {
-                set(ts, mid(&T_SURFACE_BINS, i), &mut vars);
-                for j in 0..T_INNER_BINS.n {
-                    let e = m.surface_inner[i * T_INNER_BINS.n + j];
-                    if e != 0.0 {
-                        set(ti, mid(&T_INNER_BINS, j), &mut vars);
-                        s += e * self.value(&vars);
-                    }
-                }
-            }
-        }
+            m.weighted_surface_inner(|t, i| at([(ts, t), (ti, i)]))
+        };
         s * 1e-6
     }
 }

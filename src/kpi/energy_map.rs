@@ -43,6 +43,10 @@ impl Bins {
     pub fn lower_edge(&self, i: usize) -> f64 {
         self.lo + self.width * i as f64
     }
+    /// Mid-point of bin i: the value a bin stands for in sums over the map.
+    pub fn mid(&self, i: usize) -> f64 {
+        self.lower_edge(i) + 0.5 * self.width
+    }
 }
 
 /// Both maps of one tire and run (J per bin, row-major).
@@ -77,6 +81,36 @@ impl EnergyMaps {
 
     pub fn total(&self) -> f64 {
         self.surface_inner.iter().sum()
+    }
+
+    /// Σ E·f(T_surface, T_inner) over the non-empty bins of the
+    /// surface × inner-liner map, at the bin mid-points (J).
+    pub fn weighted_surface_inner(&self, mut f: impl FnMut(f64, f64) -> f64) -> f64 {
+        let mut s = 0.0;
+        for i in 0..T_SURFACE_BINS.n {
+            for j in 0..T_INNER_BINS.n {
+                let e = self.surface_inner[i * T_INNER_BINS.n + j];
+                if e != 0.0 {
+                    s += e * f(T_SURFACE_BINS.mid(i), T_INNER_BINS.mid(j));
+                }
+            }
+        }
+        s
+    }
+
+    /// Σ E·f(sliding speed, T_surface) over the non-empty bins of the
+    /// sliding-speed × surface map, at the bin mid-points (J).
+    pub fn weighted_speed_surface(&self, mut f: impl FnMut(f64, f64) -> f64) -> f64 {
+        let mut s = 0.0;
+        for v in 0..SLIDING_SPEED_BINS.n {
+            for i in 0..T_SURFACE_BINS.n {
+                let e = self.speed_surface[v * T_SURFACE_BINS.n + i];
+                if e != 0.0 {
+                    s += e * f(SLIDING_SPEED_BINS.mid(v), T_SURFACE_BINS.mid(i));
+                }
+            }
+        }
+        s
     }
 }
 
