@@ -12,7 +12,7 @@ pub enum Preset {
     Tiny,
     /// 8 tracks, 10 events, 2 cars, 320 tire-runs at 20 Hz: under a minute.
     Demo,
-    /// 12 tracks, 24 events × scale, 3 cars, 6 runs each at 200 Hz: tens of GB at scale 1.
+    /// 12 tracks, 24 events × scale, 3 cars, 6 runs each at 200 Hz: ~20 GB at scale 1.
     Season,
 }
 
@@ -273,7 +273,7 @@ impl Plan {
             Preset::Demo => ("demo", 8, 10, 2, 4, 20.0, (30e3, 110e3)),
             Preset::Season => {
                 let events = ((24.0 * scale).round() as usize).max(1);
-                ("season", 12, events, 3, 6, 200.0, (30e3, 250e3))
+                ("season", 12, events, 3, 6, 200.0, (30e3, 110e3))
             }
         };
         let tracks: Vec<TrackDef> = all_tracks.into_iter().take(n_tracks).collect();
