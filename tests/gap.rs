@@ -5,14 +5,15 @@
 
 use tirewear::gap::report::GapSettings;
 use tirewear::gap::scoring::ScoringSettings;
-use tirewear::gap::stats::{benjamini_hochberg, welch};
+use tirewear::gap::stats::{VarianceComponents, benjamini_hochberg, clustered_difference};
 use tirewear::gap::validate::{ValidateSettings, run_case};
 use tirewear::sim::{Effect, EffectKind};
 
 #[derive(serde::Deserialize)]
-struct Welch {
-    a: Vec<f64>,
-    b: Vec<f64>,
+struct Clustered {
+    r: Vec<f64>,
+    event: Vec<usize>,
+    inside: Vec<bool>,
     difference: f64,
     ci: [f64; 2],
     p: f64,
@@ -22,7 +23,7 @@ struct Welch {
 struct Golden {
     p: Vec<f64>,
     p_bh: Vec<f64>,
-    welch: Vec<Welch>,
+    clustered: Vec<Clustered>,
 }
 
 #[test]
@@ -32,8 +33,9 @@ fn statistics_equal_statsmodels_and_scipy() {
     for (got, want) in benjamini_hochberg(&g.p).iter().zip(&g.p_bh) {
         assert!((got - want).abs() < 1e-12, "BH {got} vs {want}");
     }
-    for w in &g.welch {
-        let (d, ci, p) = welch(&w.a, &w.b);
+    for w in &g.clustered {
+        let vc = VarianceComponents::estimate(&w.r, &w.event);
+        let (d, ci, p) = clustered_difference(&w.inside, &w.r, &w.event, &vc);
         assert!((d - w.difference).abs() < 1e-12);
         assert!(
             (ci.0 - w.ci[0]).abs() < 1e-9 && (ci.1 - w.ci[1]).abs() < 1e-9,

@@ -13,5 +13,6 @@ pub mod report;
 pub mod scoring;
 pub mod slices;
 pub mod stats;
+pub mod track_test;
 pub mod user_effects;
 pub mod validate;

@@ -4,7 +4,7 @@
 //! and Markdown.
 
 use super::baseline::PhysicsBaseline;
-use super::candidates::{Candidate, candidate_feature, library};
+use super::candidates::{Candidate, candidate_feature, library, significant};
 use super::linear::{lstsq, residual, weighted};
 use super::scoring::{Problem, Score, ScoringSettings, rank, relative_weights};
 use super::slices::{Slice, slice_residuals};
@@ -176,6 +176,11 @@ pub fn diagnose(
             all_rows.iter().map(|r| predict(r)).collect(),
         ],
     };
+    // The physics law's last column (its skewness derivative) is constant
+    // within tracks; so are road terms once selected.
+    let mut track_level: Vec<bool> = (0..base.len())
+        .map(|j| physics.is_some() && j + 1 == base.len())
+        .collect();
     let members: Vec<Vec<bool>> = slices
         .iter()
         .take(5)
@@ -226,6 +231,7 @@ pub fn diagnose(
                 maps: &row_maps[..n_train],
                 y: &y[..n_train],
                 base: base.iter().map(|c| c[..n_train].to_vec()).collect(),
+                track_level: track_level.clone(),
                 relative: physics.is_some(),
             };
             let ranked = rank(&problem, &lib, &settings.scoring);
@@ -269,6 +275,7 @@ pub fn diagnose(
             // (relative scale for the physics law), without track scales:
             // the model a user would run on a new event.
             base.push(column);
+            track_level.push(cand.feature.track_level());
             let cols: Vec<&[f64]> = base.iter().map(|c| c.as_slice()).collect();
             let scaled: Vec<Vec<f64>> = base.iter().map(|c| weighted(c, &w)).collect();
             let scaled_refs: Vec<&[f64]> = scaled.iter().map(|c| c.as_slice()).collect();
@@ -371,7 +378,7 @@ pub fn render_markdown(d: &Diagnosis, max_slices: usize) -> String {
     }
     let _ = writeln!(
         s,
-        "\n## Where the gap lies\n\n{} distinct slices tested (singly and in pairs, against the rest, Welch's t); {} survive Benjamini–Hochberg at FDR {}. Ranked by the part of the squared gap their offset accounts for (n·mean²/Σr²).\n",
+        "\n## Where the gap lies\n\n{} distinct slices tested (singly and in pairs, against the rest, t-test allowing for the residuals' correlation within events); {} survive Benjamini–Hochberg at FDR {}. Ranked by the part of the squared gap their offset accounts for (n·mean²/Σr²).\n",
         d.slices_tested,
         d.slices.len(),
         d.fdr
@@ -418,7 +425,7 @@ pub fn render_markdown(d: &Diagnosis, max_slices: usize) -> String {
         );
         for c in d.candidates.iter().take(max_slices.min(10)) {
             let th = if c.threshold.is_finite() {
-                format!("{} {}", c.threshold, c.feature.threshold_unit())
+                c.feature.format_threshold(c.threshold)
             } else {
                 "–".into()
             };
@@ -464,7 +471,9 @@ pub fn render_markdown(d: &Diagnosis, max_slices: usize) -> String {
                 } else if st.threshold.is_finite() {
                     format!(
                         "+ {} (θ = {}, c = {:+.4})",
-                        st.added, st.threshold, st.coefficient
+                        st.added,
+                        significant(st.threshold),
+                        st.coefficient
                     )
                 } else {
                     format!("+ {} (c = {:+.4})", st.added, st.coefficient)

@@ -16,11 +16,10 @@
 //!   false-discovery rate. A mechanism only adds wear, so only positive
 //!   coefficients count. Details and measured behaviour: docs/gap.md.
 
-use super::candidates::{
-    Candidate, Feature, candidate_feature, kpi_scale, row_factor, track_value,
-};
+use super::candidates::{Candidate, Feature, candidate_feature, kpi_scale};
 use super::linear::{dot, lstsq, orthonormal_basis, project_out, residual, weighted};
 use super::stats::benjamini_hochberg;
+use super::track_test::Severities;
 use crate::kpi::KpiRow;
 use crate::kpi::energy_map::EnergyMaps;
 use rand::SeedableRng;
@@ -52,6 +51,10 @@ pub struct Problem<'a> {
     pub y: &'a [f64],
     /// Baseline design columns (and terms already selected), one value per row.
     pub base: Vec<Vec<f64>>,
+    /// Which base columns are constant within tracks (the physics law's
+    /// skewness derivative, road terms already selected): the track-level
+    /// test takes them as the tracks' null (`track_test`).
+    pub track_level: Vec<bool>,
     /// Work on the relative scale (rows divided by the baseline's
     /// prediction): right for the multiplicative physics law; a statistical
     /// model's errors are additive, so its rows keep their weight.
@@ -176,7 +179,13 @@ fn block_permutations(blocks: &[usize], count: usize, seed: u64) -> Vec<Vec<usiz
 
 /// The max-F statistic of residual vector `e` (length n) against the
 /// projected terms `ft` (with squared norms `nf`), given the baseline basis `q`.
-fn max_f(e: &[f64], q: &[Vec<f64>], ft: &[Vec<f64>], nf: &[f64], positive_only: bool) -> f64 {
+pub(super) fn max_f(
+    e: &[f64],
+    q: &[Vec<f64>],
+    ft: &[Vec<f64>],
+    nf: &[f64],
+    positive_only: bool,
+) -> f64 {
     let sse0 = dot(e, e) - q.iter().map(|u| dot(u, e).powi(2)).sum::<f64>();
     let mut best = 0.0f64;
     for (f, n) in ft.iter().zip(nf) {
@@ -210,20 +219,26 @@ pub fn relative_weights(base: &[Vec<f64>], y: &[f64]) -> Vec<f64> {
 
 /// Per track-and-axle scale columns `b·1[track = t, axle = a]` (b: the
 /// baseline's prediction) for the cells among `idx` but each axle's first
-/// track, which the per-group columns already carry. Per axle, because an
-/// effect on one axle that differs between tracks would otherwise show as a
-/// front/rear ratio differing between tracks, which a term on the other axle
-/// could mimic.
-fn track_columns(rows: &[&KpiRow], b: &[f64], idx: &[usize]) -> Vec<Vec<f64>> {
+/// track, which the per-group columns already carry, with their (axle,
+/// track) cells. Per axle, because an effect on one axle that differs
+/// between tracks would otherwise show as a front/rear ratio differing
+/// between tracks, which a term on the other axle could mimic.
+pub(super) fn track_cells<'r>(
+    rows: &[&'r KpiRow],
+    b: &[f64],
+    idx: &[usize],
+) -> (Vec<(&'r str, &'r str)>, Vec<Vec<f64>>) {
     let mut cells: Vec<(&str, &str)> = idx
         .iter()
         .map(|&i| (rows[i].axle.as_str(), rows[i].track.as_str()))
         .collect();
     cells.sort();
     cells.dedup();
+    let mut kept = Vec::new();
     let mut out = Vec::new();
     for (k, (axle, track)) in cells.iter().enumerate() {
         if k > 0 && cells[k - 1].0 == *axle {
+            kept.push((*axle, *track));
             out.push(
                 (0..rows.len())
                     .map(|i| {
@@ -237,7 +252,7 @@ fn track_columns(rows: &[&KpiRow], b: &[f64], idx: &[usize]) -> Vec<Vec<f64>> {
             );
         }
     }
-    out
+    (kept, out)
 }
 
 /// One cross-validation fold of a null model: training rows, columns, coefficients.
@@ -264,7 +279,7 @@ impl Null {
         let with_tracks = |idx: &[usize]| -> Vec<Vec<f64>> {
             let mut c = base.to_vec();
             if let Some(b) = track_scale {
-                c.extend(track_columns(rows, b, idx));
+                c.extend(track_cells(rows, b, idx).1);
             }
             c
         };
@@ -356,7 +371,7 @@ fn cv_gain(
 }
 
 /// Projects each threshold's term off the null's span: (terms, squared norms).
-fn projected(q: &[Vec<f64>], x: &[Vec<f64>]) -> (Vec<Vec<f64>>, Vec<f64>) {
+pub(super) fn projected(q: &[Vec<f64>], x: &[Vec<f64>]) -> (Vec<Vec<f64>>, Vec<f64>) {
     x.iter()
         .map(|xt| {
             let mut v = xt.clone();
@@ -404,6 +419,7 @@ pub fn rank(problem: &Problem, library: &[Candidate], settings: &ScoringSettings
     };
     let within = Null::new(rows, &base, y, &groups, Some(&prediction));
     let across = Null::new(rows, &base, y, &groups, None);
+    let severities = Severities::new(rows, y, &base, &problem.track_level, &prediction);
     let mut tracks: Vec<&str> = rows.iter().map(|r| r.track.as_str()).collect();
     tracks.sort();
     tracks.dedup();
@@ -417,16 +433,6 @@ pub fn rank(problem: &Problem, library: &[Candidate], settings: &ScoringSettings
         .map(|(r, t)| 2 * t + (r.axle == "rear") as usize)
         .collect();
     let perms = block_permutations(&blocks, settings.permutations, settings.seed);
-    let track_perms = block_permutations(
-        &vec![0; tracks.len()],
-        settings.permutations,
-        settings.seed ^ 0x7472_6163_6b73,
-    );
-    // A representative row per track for its road values.
-    let track_rows: Vec<&KpiRow> = tracks
-        .iter()
-        .map(|t| *rows.iter().find(|r| r.track == *t).expect("listed"))
-        .collect();
 
     let mut scores: Vec<Score> = library
         .par_iter()
@@ -468,34 +474,12 @@ pub fn rank(problem: &Problem, library: &[Candidate], settings: &ScoringSettings
             let p = if fit.is_none() || observed <= 0.0 {
                 1.0
             } else if track_level {
-                // Exchange the tracks' road values; the rows keep their energy.
-                let factor: Vec<f64> = rows
-                    .iter()
-                    .zip(&w)
-                    .map(|(r, w)| w * row_factor(c, r))
-                    .collect();
-                let values: Vec<Vec<f64>> = c
-                    .thresholds
-                    .iter()
-                    .map(|&t| {
-                        track_rows
-                            .iter()
-                            .map(|r| track_value(c, r, t, scale))
-                            .collect()
-                    })
-                    .collect();
-                let exceed = track_perms
-                    .iter()
-                    .filter(|perm| {
-                        let xp: Vec<Vec<f64>> = values
-                            .iter()
-                            .map(|v| (0..n).map(|i| factor[i] * v[perm[track_of[i]]]).collect())
-                            .collect();
-                        let (ft, nf) = projected(&null.q, &xp);
-                        max_f(&null.e0, &null.q, &ft, &nf, positive) >= observed
-                    })
-                    .count();
-                (1 + exceed) as f64 / (1 + track_perms.len()) as f64
+                severities.p_value(
+                    c,
+                    scale,
+                    settings.permutations,
+                    settings.seed ^ 0x7472_6163_6b73,
+                )
             } else {
                 let mut e = vec![0.0; n];
                 let exceed = perms
@@ -590,6 +574,7 @@ mod tests {
             maps: &mref,
             y: &y,
             base,
+            track_level: vec![false],
             relative: true,
         };
         let settings = ScoringSettings {

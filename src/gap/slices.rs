@@ -1,12 +1,15 @@
 //! Step 1 of the diagnosis, where the gap lies: the residual (measured −
 //! baseline) sliced by the categorical columns, by wear level and by the
 //! quartile bands of every KPI, singly and in pairs. Each slice is tested
-//! against the rest with Welch's t-test; Benjamini–Hochberg controls the false
+//! against the rest allowing for the residuals' correlation within events (a
+//! random intercept per event: all tires of an event share its track, day
+//! and conditions), so a handful of events cannot make many overlapping
+//! slices look significant; Benjamini–Hochberg controls the false
 //! discovery rate over all distinct slices tested (slices with the same rows
 //! are one test under several names); survivors are ranked by the part of the
 //! total squared gap their offset accounts for, n·mean²/Σr².
 
-use super::stats::{benjamini_hochberg, welch};
+use super::stats::{VarianceComponents, benjamini_hochberg, clustered_difference};
 use crate::kpi::KpiRow;
 use crate::model::data::candidate_inputs;
 
@@ -107,19 +110,27 @@ fn singles(rows: &[&KpiRow]) -> Vec<Single> {
     out
 }
 
-fn test(name: String, members: &[bool], residual: &[f64], sd: f64, total_sq: f64) -> Option<Slice> {
-    let (inside, rest): (Vec<f64>, Vec<f64>) = {
-        let mut a = Vec::new();
-        let mut b = Vec::new();
-        for (m, r) in members.iter().zip(residual) {
-            if *m { a.push(*r) } else { b.push(*r) }
-        }
-        (a, b)
-    };
-    if inside.len() < MIN_SLICE || rest.len() < MIN_SLICE {
+/// The residuals, their events and the events' variance components.
+struct Residuals<'a> {
+    r: &'a [f64],
+    event: Vec<usize>,
+    vc: VarianceComponents,
+    sd: f64,
+    total_sq: f64,
+}
+
+fn test(name: String, members: &[bool], res: &Residuals) -> Option<Slice> {
+    let inside: Vec<f64> = members
+        .iter()
+        .zip(res.r)
+        .filter(|(m, _)| **m)
+        .map(|(_, r)| *r)
+        .collect();
+    if inside.len() < MIN_SLICE || res.r.len() - inside.len() < MIN_SLICE {
         return None;
     }
-    let (d, ci, p) = welch(&inside, &rest);
+    let (d, ci, p) = clustered_difference(members, res.r, &res.event, &res.vc);
+    let (sd, total_sq) = (res.sd, res.total_sq);
     let mean = inside.iter().sum::<f64>() / inside.len() as f64;
     Some(Slice {
         name,
@@ -143,13 +154,28 @@ pub fn slice_residuals(rows: &[&KpiRow], residual: &[f64], fdr: f64) -> (Vec<Sli
     let mean = residual.iter().sum::<f64>() / n;
     let sd = (residual.iter().map(|r| (r - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();
     let total_sq: f64 = residual.iter().map(|r| r * r).sum();
+    let mut events: Vec<&str> = rows.iter().map(|r| r.event.as_str()).collect();
+    events.sort();
+    events.dedup();
+    let event: Vec<usize> = rows
+        .iter()
+        .map(|r| events.binary_search(&r.event.as_str()).expect("listed"))
+        .collect();
+    let vc = VarianceComponents::estimate(residual, &event);
+    let res = Residuals {
+        r: residual,
+        event,
+        vc,
+        sd,
+        total_sq,
+    };
     // Slices with the same rows are one test under several names.
     let mut seen: std::collections::HashMap<Vec<bool>, usize> = std::collections::HashMap::new();
     let mut tested: Vec<Slice> = Vec::new();
     let mut add = |name: String, members: Vec<bool>, tested: &mut Vec<Slice>| {
         if let Some(&i) = seen.get(&members) {
             tested[i].aliases.push(name);
-        } else if let Some(t) = test(name, &members, residual, sd, total_sq) {
+        } else if let Some(t) = test(name, &members, &res) {
             seen.insert(members, tested.len());
             tested.push(t);
         }

@@ -1,27 +1,106 @@
-//! Small statistics of the gap diagnosis: Welch's two-sample t-test with its
-//! confidence interval, and Benjamini–Hochberg false-discovery control.
+//! Small statistics of the gap diagnosis: the difference of a slice's mean
+//! residual from the rest's for residuals clustered in events (a random
+//! intercept per event), and Benjamini–Hochberg false-discovery control.
 
 use statrs::distribution::{ContinuousCDF, StudentsT};
 
-/// Welch's test of mean(a) − mean(b): (difference, 95 % CI, two-sided p).
-pub fn welch(a: &[f64], b: &[f64]) -> (f64, (f64, f64), f64) {
-    let mv = |x: &[f64]| {
-        let n = x.len() as f64;
-        let m = x.iter().sum::<f64>() / n;
-        (
-            m,
-            x.iter().map(|v| (v - m).powi(2)).sum::<f64>() / (n - 1.0),
+/// One-way variance components of residuals grouped in clusters (events):
+/// r = e_cluster + ε, by the ANOVA method of moments (unbalanced).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct VarianceComponents {
+    /// Within-cluster variance σ_w² (the mean square within), N − G degrees of freedom.
+    pub within: f64,
+    /// Between-cluster variance σ_e² (floored at 0), G − 1 degrees of freedom.
+    pub between: f64,
+    pub clusters: usize,
+    pub n: usize,
+}
+
+impl VarianceComponents {
+    /// `cluster[i]` in 0..G for each residual.
+    pub fn estimate(r: &[f64], cluster: &[usize]) -> VarianceComponents {
+        let g = cluster.iter().copied().max().map_or(0, |m| m + 1);
+        let (mut sum, mut count) = (vec![0.0; g], vec![0usize; g]);
+        for (v, &c) in r.iter().zip(cluster) {
+            sum[c] += v;
+            count[c] += 1;
+        }
+        let n = r.len();
+        let groups = count.iter().filter(|&&c| c > 0).count();
+        let grand = r.iter().sum::<f64>() / n as f64;
+        let mean = |c: usize| sum[c] / count[c] as f64;
+        let ssw: f64 = r
+            .iter()
+            .zip(cluster)
+            .map(|(v, &c)| (v - mean(c)).powi(2))
+            .sum();
+        let ssb: f64 = (0..g)
+            .filter(|&c| count[c] > 0)
+            .map(|c| count[c] as f64 * (mean(c) - grand).powi(2))
+            .sum();
+        let within = if n > groups {
+            ssw / (n - groups) as f64
+        } else {
+            0.0
+        };
+        let between = if groups > 1 {
+            let msb = ssb / (groups - 1) as f64;
+            let sq: f64 = count.iter().map(|&c| (c * c) as f64).sum();
+            let n0 = (n as f64 - sq / n as f64) / (groups - 1) as f64;
+            ((msb - within) / n0).max(0.0)
+        } else {
+            0.0
+        };
+        VarianceComponents {
+            within,
+            between,
+            clusters: groups,
             n,
-        )
-    };
-    let ((ma, va, na), (mb, vb, nb)) = (mv(a), mv(b));
-    let (sa, sb) = (va / na, vb / nb);
-    let se = (sa + sb).sqrt();
-    let df = (sa + sb).powi(2) / (sa * sa / (na - 1.0) + sb * sb / (nb - 1.0));
-    let d = ma - mb;
-    if se.is_nan() || se <= 0.0 || !df.is_finite() {
+        }
+    }
+}
+
+/// mean(r | inside) − mean(r | outside) for residuals with a random
+/// intercept per cluster: (difference, 95 % CI, two-sided p). Its variance
+/// σ_w²(1/n_a + 1/n_b) + σ_e² Σ_g (n_ag/n_a − n_bg/n_b)² is exact under the
+/// model: a slice that is one event carries that event's whole offset, a
+/// slice spread evenly over the events (an axle) none. Student's t with
+/// Satterthwaite's degrees of freedom (σ_w² on N − G, σ_e² on G − 1).
+pub fn clustered_difference(
+    inside: &[bool],
+    r: &[f64],
+    cluster: &[usize],
+    vc: &VarianceComponents,
+) -> (f64, (f64, f64), f64) {
+    let g = cluster.iter().copied().max().map_or(0, |m| m + 1);
+    let (mut na_g, mut nb_g) = (vec![0.0; g], vec![0.0; g]);
+    let (mut sa, mut sb) = (0.0, 0.0);
+    for ((&m, &v), &c) in inside.iter().zip(r).zip(cluster) {
+        if m {
+            na_g[c] += 1.0;
+            sa += v;
+        } else {
+            nb_g[c] += 1.0;
+            sb += v;
+        }
+    }
+    let (na, nb): (f64, f64) = (na_g.iter().sum(), nb_g.iter().sum());
+    let d = sa / na - sb / nb;
+    let a = vc.within * (1.0 / na + 1.0 / nb);
+    let b = vc.between
+        * na_g
+            .iter()
+            .zip(&nb_g)
+            .map(|(x, y)| (x / na - y / nb).powi(2))
+            .sum::<f64>();
+    let var = a + b;
+    let df_w = (vc.n as f64 - vc.clusters as f64).max(1.0);
+    let df_b = (vc.clusters as f64 - 1.0).max(1.0);
+    let df = var * var / (a * a / df_w + b * b / df_b);
+    if var.is_nan() || var <= 0.0 || !df.is_finite() {
         return (d, (d, d), if d == 0.0 { 1.0 } else { 0.0 });
     }
+    let se = var.sqrt();
     let t = StudentsT::new(0.0, 1.0, df).expect("df > 0");
     let p = 2.0 * (1.0 - t.cdf((d / se).abs()));
     let q = t.inverse_cdf(0.975);
@@ -41,4 +120,40 @@ pub fn benjamini_hochberg(p: &[f64]) -> Vec<f64> {
         adj[i] = running.min(1.0);
     }
     adj
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn clustered_difference_by_hand() {
+        // Two events of 4 residuals: event 0 = [1, 3, 1, 3], event 1 = [−1, 1, −1, 1].
+        // Means 2 and 0, grand 1; SSW = 4 + 4 = 8 on 6 df → σ_w² = 4/3;
+        // MSB = 4·1 + 4·1 = 8 on 1 df, n0 = (8 − 32/8)/1 = 4 → σ_e² = (8 − 4/3)/4 = 5/3.
+        let r = [1.0, 3.0, 1.0, 3.0, -1.0, 1.0, -1.0, 1.0];
+        let cl = [0, 0, 0, 0, 1, 1, 1, 1];
+        let vc = VarianceComponents::estimate(&r, &cl);
+        assert!((vc.within - 4.0 / 3.0).abs() < 1e-12 && (vc.between - 5.0 / 3.0).abs() < 1e-12);
+        // Slice = event 0: d = 2, var = σ_w²(1/4 + 1/4) + σ_e²(1 + 1) = 2/3 + 10/3 = 4.
+        let event0 = [true, true, true, true, false, false, false, false];
+        let (d, ci, _) = clustered_difference(&event0, &r, &cl, &vc);
+        let (a, b) = (2.0f64 / 3.0, 10.0f64 / 3.0);
+        let df = 16.0 / (a * a / 6.0 + b * b / 1.0);
+        let q = StudentsT::new(0.0, 1.0, df).unwrap().inverse_cdf(0.975);
+        assert!(
+            (d - 2.0).abs() < 1e-12 && (ci.1 - d - 2.0 * q).abs() < 1e-9,
+            "{ci:?}"
+        );
+        // Slice = the second and fourth tire of each event: balanced over the
+        // events, so no event variance: d = 2, var = σ_w²(1/4 + 1/4) = 2/3,
+        // df = N − G = 6; t = 2/sqrt(2/3).
+        let inside = [false, true, false, true, false, true, false, true];
+        let (d, ci, p) = clustered_difference(&inside, &r, &cl, &vc);
+        let se = (2.0f64 / 3.0).sqrt();
+        let t = StudentsT::new(0.0, 1.0, 6.0).unwrap();
+        assert!((d - 2.0).abs() < 1e-12);
+        assert!((p - 2.0 * (1.0 - t.cdf(2.0 / se))).abs() < 1e-12);
+        assert!((ci.1 - (2.0 + t.inverse_cdf(0.975) * se)).abs() < 1e-12);
+    }
 }
