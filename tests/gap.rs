@@ -128,3 +128,27 @@ fn clean_season_reports_no_effect() {
         d.training
     );
 }
+
+/// Road abrasion planted at magnitude 4 (extra wear 4·softplus of the
+/// road's micro-texture rms, a per-track factor): only the six training
+/// tracks can show it. The first term is a road-abrasion term, found by the
+/// tracks' severities (the track-level F test), and it narrows the gap on
+/// the training events.
+#[test]
+fn planted_road_abrasion_is_found_across_tracks() {
+    let dir = tempfile::tempdir().unwrap();
+    let e = Effect::with_defaults(EffectKind::RoadAbrasion, 4.0);
+    // The tool's default draws: Benjamini–Hochberg over ~50 candidates needs
+    // the first p ≤ 0.05/50 = 0.001, the smallest that 999 draws can give.
+    let mut s = settings(dir.path());
+    s.gap.scoring.permutations = 1999;
+    let (case, d) = run_case(Some(&e), 1, &s).unwrap();
+    assert!(case.hit, "{case:?}\n{:?}", d.steps);
+    let first = &d.steps[1];
+    assert!(first.p_adjusted <= 0.05, "{first:?}");
+    assert!(
+        first.training.rmse_pct < 0.8 * d.steps[0].training.rmse_pct,
+        "{:?}",
+        d.steps
+    );
+}

@@ -225,7 +225,10 @@ pub fn diagnose(
         } else {
             vec![1.0; n_train]
         };
-        for round in 0..settings.max_terms {
+        // Rounds: one per term added, plus one per term refused below.
+        let mut round = 0;
+        while steps.len() <= settings.max_terms && round < 2 * settings.max_terms + 2 {
+            round += 1;
             let problem = Problem {
                 rows: &all_rows[..n_train],
                 maps: &row_maps[..n_train],
@@ -235,22 +238,42 @@ pub fn diagnose(
                 relative: physics.is_some(),
             };
             let ranked = rank(&problem, &lib, &settings.scoring);
-            if round == 0 {
+            if round == 1 {
                 candidates = ranked.clone();
             }
             // A term enters only if it was significant on its own in step 2
             // and still is given the terms already added: a candidate that
             // only turns significant after another entered is fitting that
             // term's misfit, and does not carry to new events.
+            //
+            // A road term rests on a handful of track means, which any
+            // unmodelled within-track effect also moves (a thermal effect is
+            // strongest at the hot tracks), and its CV gain includes the
+            // tracks' severities that a within-track term's held-out
+            // calibration removes. So the best of each kind is taken by its
+            // own gain, and the two compare on the common footing: held-out
+            // gain against the baseline without track scales.
             let significant = |s: &Score| s.p_adjusted <= fdr && s.cv_gain > 0.0;
-            let Some(best) = ranked.iter().find(|s| {
+            let eligible = |s: &&Score| {
                 significant(s)
                     && !used.contains(&s.name)
                     && candidates
                         .iter()
                         .any(|c| c.name == s.name && significant(c))
-            }) else {
-                break;
+            };
+            let within = ranked
+                .iter()
+                .filter(eligible)
+                .find(|s| !s.feature.track_level());
+            let road = ranked
+                .iter()
+                .filter(eligible)
+                .find(|s| s.feature.track_level());
+            let best = match (within, road) {
+                (Some(w), Some(r)) if r.cv_gain_across > w.cv_gain_across => r,
+                (Some(w), _) => w,
+                (None, Some(r)) => r,
+                (None, None) => break,
             };
             let cand = lib
                 .iter()
@@ -284,6 +307,20 @@ pub fn diagnose(
             let res: Vec<f64> = (0..all_rows.len())
                 .map(|i| residual(&cols, &k, &y, i))
                 .collect();
+            // A mechanism that adds wear must keep a positive coefficient
+            // once refitted without track scales; if it turns negative it was
+            // fitting something else (a track-level effect, say): refused.
+            if cand.adds_wear_only() && k[k.len() - 1] <= 0.0 {
+                tracing::info!(
+                    term = %best.name,
+                    coefficient = k[k.len() - 1],
+                    "refused: the refitted coefficient of a wear mechanism is not positive"
+                );
+                base.pop();
+                track_level.pop();
+                used.push(best.name.clone());
+                continue;
+            }
             let mut refitted = best.clone();
             refitted.coefficient = k[k.len() - 1];
             used.push(best.name.clone());
@@ -420,7 +457,7 @@ pub fn render_markdown(d: &Diagnosis, max_slices: usize) -> String {
     if !d.candidates.is_empty() {
         let _ = writeln!(
             s,
-            "\n## Which unmodelled effect\n\nEach candidate term is refitted with the baseline's per-group energy terms on the training events, on the relative scale (rows divided by the baseline). CV gain: 1 − held-out SSE / held-out SSE of the baseline alone, whole tracks left out in turn, the threshold scanned on the training folds only. p: Freedman–Lane permutation test of the nested models (residuals permuted within track and axle; road terms: tracks exchanged), max F over the threshold grid, Benjamini–Hochberg over {} candidates. Front share: the part of the term's wear on the front axle. Definitions: docs/gap.md.\n\n| candidate | threshold | coefficient | CV gain | p adj. | front share |\n|---|---|---|---|---|---|",
+            "\n## Which unmodelled effect\n\nEach candidate term is refitted with the baseline's per-group energy terms on the training events, on the relative scale (rows divided by the baseline). CV gain: 1 − held-out SSE / held-out SSE of the baseline alone, whole tracks left out in turn, the threshold scanned on the training folds only. p: Freedman–Lane permutation test of the nested models (residuals permuted within track and axle), max F over the threshold grid; road terms: F test of the tracks' severities on their road value, max F over the grid against Monte Carlo draws, Benjamini–Hochberg over {} candidates. Front share: the part of the term's wear on the front axle. Definitions: docs/gap.md.\n\n| candidate | threshold | coefficient | CV gain | p adj. | front share |\n|---|---|---|---|---|---|",
             d.candidates.len()
         );
         for c in d.candidates.iter().take(max_slices.min(10)) {

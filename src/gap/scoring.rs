@@ -74,6 +74,10 @@ pub struct Score {
     pub coefficient: f64,
     /// 1 − held-out SSE(baseline + term) / held-out SSE(baseline), groups left out in turn.
     pub cv_gain: f64,
+    /// The same against the null without track scales and without the
+    /// held-out calibration (equal to `cv_gain` for a road term): the
+    /// footing on which a within-track term and a road term compare.
+    pub cv_gain_across: f64,
     /// Permutation p-value (max-F over the threshold grid).
     pub p: f64,
     /// Benjamini–Hochberg over the candidates.
@@ -454,6 +458,11 @@ pub fn rank(problem: &Problem, library: &[Candidate], settings: &ScoringSettings
             let track_level = c.feature.track_level();
             let null = if track_level { &across } else { &within };
             let gain = cv_gain(rows, null, &groups, &x, y, positive, !track_level);
+            let gain_across = if track_level {
+                gain
+            } else {
+                cv_gain(rows, &across, &groups, &x, y, positive, false)
+            };
             // Fit on all rows, and the permutation test.
             let cols: Vec<&[f64]> = null.cols.iter().map(|c| c.as_slice()).collect();
             let fit = best_threshold(&cols, &x, y, &all, positive);
@@ -504,6 +513,7 @@ pub fn rank(problem: &Problem, library: &[Candidate], settings: &ScoringSettings
                 },
                 coefficient,
                 cv_gain: gain,
+                cv_gain_across: gain_across,
                 p,
                 p_adjusted: f64::NAN,
                 front_share,

@@ -408,6 +408,38 @@ pub fn render(cases: &[Case]) -> String {
             rate(&|c| (c.shrinkage_ratio - 1.0).abs() <= 0.2),
         );
     }
+    // The targets, over the seasons where the planted effect carries
+    // at least 10 % of the wear variance (whatever the magnitude).
+    let mut kinds: BTreeMap<String, Vec<&Case>> = BTreeMap::new();
+    for c in cases.iter().filter(|c| c.error.is_none()) {
+        if let Some(e) = &c.effect {
+            kinds.entry(e.kind.name().to_string()).or_default().push(c);
+        }
+    }
+    if !kinds.is_empty() {
+        s.push_str(
+            "\nTargets, over the seasons where the planted effect carries ≥ 10 % of the wear variance: hit rate ≥ 90 %, shrinkage within 20 % of the ideal.\n\n| effect | seasons ≥ 10 % | hit rate | hit incl. axle | shrinkage within 20 % |\n|---|---|---|---|---|\n",
+        );
+        for (kind, g) in &kinds {
+            let big: Vec<&&Case> = g.iter().filter(|c| c.variance_share >= 0.1).collect();
+            let n = big.len();
+            let count = |f: &dyn Fn(&Case) -> bool| big.iter().filter(|c| f(c)).count();
+            let pct = |k: usize| {
+                if n == 0 {
+                    "–".to_string()
+                } else {
+                    format!("{k}/{n} ({:.0} %)", 100.0 * k as f64 / n as f64)
+                }
+            };
+            let _ = writeln!(
+                s,
+                "| {kind} | {n} | {} | {} | {} |",
+                pct(count(&|c| c.hit)),
+                pct(count(&|c| c.hit_axle)),
+                pct(count(&|c| (c.shrinkage_ratio - 1.0).abs() <= 0.2)),
+            );
+        }
+    }
     let clean: Vec<&Case> = cases.iter().filter(|c| c.effect.is_none()).collect();
     if !clean.is_empty() {
         let fd = clean.iter().filter(|c| c.significant_terms > 0).count();
