@@ -9,10 +9,11 @@
 //!   term) / SSE(baseline) over the held-out rows;
 //! - significance: a Freedman–Lane permutation test of the nested models,
 //!   within tracks for a term that varies within tracks (residuals permuted
-//!   within track × axle, a scale per track and axle in the null) and across
-//!   tracks for a road term (the tracks' road values exchanged); the
+//!   within track × axle, a scale per track and axle in the null); the
 //!   statistic is the largest F ratio over the threshold grid, so the scan
-//!   is paid for; Benjamini–Hochberg over the candidates then controls the
+//!   is paid for. A road term is tested on the tracks' severities instead
+//!   (`track_test`: exchanging six tracks' values cannot give p < 1/720).
+//!   Benjamini–Hochberg over the candidates then controls the
 //!   false-discovery rate. A mechanism only adds wear, so only positive
 //!   coefficients count. Details and measured behaviour: docs/gap.md.
 
@@ -394,8 +395,9 @@ pub(super) fn projected(q: &[Vec<f64>], x: &[Vec<f64>]) -> (Vec<Vec<f64>>, Vec<f
 /// model has a scale factor per track (the road's hidden abrasiveness, which
 /// no KPI measures, would otherwise make anything that differs between
 /// tracks look like an effect), and residuals are permuted within track and
-/// axle. A track-level candidate (road) is tested across tracks: its null has
-/// no track factors, and the permutations exchange the tracks' values.
+/// axle. A track-level candidate (road) is tested across tracks: its CV gain
+/// uses the null without track factors, its p-value the F test of the
+/// tracks' severities (`track_test`).
 pub fn rank(problem: &Problem, library: &[Candidate], settings: &ScoringSettings) -> Vec<Score> {
     let rows = problem.rows;
     let n = rows.len();
