@@ -168,6 +168,8 @@ pub fn simulate_run<E>(
     let mut truth = RunTruth::default();
     let (mut s_lap, mut distance, mut time) = (0.0f64, 0.0f64, 0.0f64);
     let mut lap_pace: f64 = 1.0;
+    // The driver's tire management (1: none), following its target with a lag.
+    let mut manage: f64 = 1.0;
     let mut tires = [TireSample::default(); 4];
     while distance < set.distance_m {
         // Interpolate the lap profile at s, scaled by this lap's pace.
@@ -176,9 +178,10 @@ pub fn simulate_run<E>(
         let j = (i + 1) % lap.v.len();
         let w = x - i as f64;
         let lerp = |a: &[f64]| a[i] * (1.0 - w) + a[j] * w;
-        let v = lerp(&lap.v) * lap_pace.sqrt();
-        let ax = lerp(&lap.ax) * lap_pace;
-        let ay = lerp(&lap.ay) * lap_pace;
+        let pace = lap_pace * manage;
+        let v = lerp(&lap.v) * pace.sqrt();
+        let ax = lerp(&lap.ax) * pace;
+        let ay = lerp(&lap.ay) * pace;
         let kappa = lerp(&lap.curvature);
         let yaw_rate = v * kappa;
         let weather = (std::f64::consts::TAU * time / 3600.0 + weather_phase).sin();
@@ -245,6 +248,7 @@ pub fn simulate_run<E>(
             };
             temps[k] = ctx.thermal.step(temps[k], dt, p, f.fz, vx, t_air, t_track);
         }
+        manage += (tire_management(&temps) - manage) * (dt / MANAGE_LAG_S).min(1.0);
         let vehicle = VehicleSample {
             speed_mps: (v + noise.speed.sample(rng)) as f32,
             t_track_c: (t_track + noise.t_track.sample(rng)) as f32,
@@ -276,4 +280,43 @@ pub fn simulate_run<E>(
     }
     truth.duration_s = time;
     Ok(truth)
+}
+
+/// Surface temperature (°C) above which the driver manages the tires.
+pub const MANAGE_ABOVE_C: f64 = 105.0;
+
+/// Reaction time (s) of the driver's tire management.
+pub const MANAGE_LAG_S: f64 = 3.0;
+
+/// The pace factor a driver aims for: with the hottest tire's surface
+/// above [`MANAGE_ABOVE_C`] they back off 2 % per kelvin over, at most 25 %,
+/// as drivers do to save an overheating tire (followed with a lag of
+/// [`MANAGE_LAG_S`]). Without it a hot tire's lower grip means more
+/// sliding, more heat, and a run-away that wore tires several times
+/// through their tread in long stints at two of the twelve tracks.
+pub fn tire_management(temps: &[TireTemps; 4]) -> f64 {
+    let hottest = temps.iter().map(|t| t.surface_c).fold(f64::MIN, f64::max);
+    (1.0 - 0.02 * (hottest - MANAGE_ABOVE_C).max(0.0)).max(0.75)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn management_backs_off_only_above_the_window() {
+        let at = |hot: f64| {
+            let mut t = [TireTemps {
+                surface_c: 90.0,
+                inner_c: 100.0,
+            }; 4];
+            t[3].surface_c = hot;
+            tire_management(&t)
+        };
+        // Exactly 1 up to 105 °C (seasons that stay below are unchanged),
+        // 2 %/K above, floored at 0.75.
+        assert_eq!(at(104.9), 1.0);
+        assert!((at(110.0) - 0.9).abs() < 1e-12);
+        assert_eq!(at(150.0), 0.75);
+    }
 }
