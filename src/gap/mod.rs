@@ -5,6 +5,7 @@
 //! and the validation on seasons with planted effects. Definitions and
 //! measured results: docs/gap.md.
 
+pub mod acts;
 pub mod baseline;
 pub mod candidates;
 pub mod error;

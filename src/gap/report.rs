@@ -3,6 +3,7 @@
 //! 2) and how far it shrinks as terms are added (step 3); written as JSON
 //! and Markdown.
 
+use super::acts::acts_in;
 use super::baseline::PhysicsBaseline;
 use super::candidates::{Candidate, candidate_feature, library, significant};
 use super::linear::{lstsq, residual, weighted};
@@ -25,6 +26,9 @@ pub enum Baseline {
     Model(Box<SavedModel>),
 }
 
+/// Candidates (the leading ones by CV gain) whose slices are listed.
+const ACTS_FOR: usize = 10;
+
 /// Size of the gap on a set of rows.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
 pub struct GapSize {
@@ -46,8 +50,8 @@ pub struct Step {
     pub p_adjusted: f64,
     pub training: GapSize,
     pub testing: Option<GapSize>,
-    /// RMSE (%) inside each slice of `Diagnosis::slices` shown (same order, at most 5).
-    pub slice_rmse_pct: Vec<f64>,
+    /// The gap inside each slice of `Diagnosis::slices` (same order).
+    pub slices: Vec<GapSize>,
 }
 
 #[derive(Debug, Clone, serde::Serialize)]
@@ -183,7 +187,6 @@ pub fn diagnose(
         .collect();
     let members: Vec<Vec<bool>> = slices
         .iter()
-        .take(5)
         .map(|s| slice_members(&s.name, &all_rows))
         .collect();
     let step_of = |added: String, score: Option<&Score>, res: &[f64]| Step {
@@ -194,7 +197,7 @@ pub fn diagnose(
         p_adjusted: score.map_or(f64::NAN, |s| s.p_adjusted),
         training: size(&res[..n_train]),
         testing: (res.len() > n_train).then(|| size(&res[n_train..])),
-        slice_rmse_pct: members
+        slices: members
             .iter()
             .map(|m| {
                 let v: Vec<f64> = res
@@ -203,7 +206,7 @@ pub fn diagnose(
                     .filter(|(_, k)| **k)
                     .map(|(r, _)| *r)
                     .collect();
-                size(&v).rmse_pct
+                size(&v)
             })
             .collect(),
     };
@@ -240,6 +243,55 @@ pub fn diagnose(
             let ranked = rank(&problem, &lib, &settings.scoring);
             if round == 1 {
                 candidates = ranked.clone();
+                // Where each of the leading candidates acts, over all rows.
+                let named: Vec<(&str, Vec<bool>)> = slices
+                    .iter()
+                    .zip(&members)
+                    .map(|(s, m)| (s.name.as_str(), m.clone()))
+                    .collect();
+                for c in candidates.iter_mut().take(ACTS_FOR) {
+                    let Some(cand) = lib.iter().find(|l| l.name == c.name) else {
+                        continue;
+                    };
+                    if c.coefficient == 0.0 {
+                        continue;
+                    }
+                    let column: Vec<f64> = (0..all_rows.len())
+                        .map(|i| {
+                            candidate_feature(
+                                cand,
+                                all_rows[i],
+                                row_maps[i],
+                                c.threshold,
+                                c.kpi_scale,
+                            )
+                        })
+                        .collect();
+                    if column.iter().any(|v| !v.is_finite()) {
+                        continue;
+                    }
+                    // What the term changes: the prediction of baseline +
+                    // term minus the baseline's, both refitted as in step 3
+                    // (the baseline gives back what the term takes over).
+                    let prediction = |cols: &[Vec<f64>]| -> Vec<f64> {
+                        let refs: Vec<&[f64]> = cols.iter().map(|c| c.as_slice()).collect();
+                        let scaled: Vec<Vec<f64>> = cols.iter().map(|c| weighted(c, &w)).collect();
+                        let sref: Vec<&[f64]> = scaled.iter().map(|c| c.as_slice()).collect();
+                        let k = lstsq(&sref, &weighted(&y, &w), &train_idx);
+                        (0..all_rows.len())
+                            .map(|i| y[i] - residual(&refs, &k, &y, i))
+                            .collect()
+                    };
+                    let before = prediction(&base);
+                    let mut with = base.clone();
+                    with.push(column);
+                    let change: Vec<f64> = prediction(&with)
+                        .iter()
+                        .zip(&before)
+                        .map(|(a, b)| a - b)
+                        .collect();
+                    c.acts_in = acts_in(&change, &all_res, &named, 3);
+                }
             }
             // A term enters only if it was significant on its own in step 2
             // and still is given the terms already added: a candidate that
@@ -457,7 +509,7 @@ pub fn render_markdown(d: &Diagnosis, max_slices: usize) -> String {
     if !d.candidates.is_empty() {
         let _ = writeln!(
             s,
-            "\n## Which unmodelled effect\n\nEach candidate term is refitted with the baseline's per-group energy terms on the training events, on the relative scale (rows divided by the baseline). CV gain: 1 − held-out SSE / held-out SSE of the baseline alone, whole tracks left out in turn, the threshold scanned on the training folds only. p: Freedman–Lane permutation test of the nested models (residuals permuted within track and axle), max F over the threshold grid; road terms: F test of the tracks' severities on their road value, max F over the grid against Monte Carlo draws, Benjamini–Hochberg over {} candidates. Front share: the part of the term's wear on the front axle. Definitions: docs/gap.md.\n\n| candidate | threshold | coefficient | CV gain | p adj. | front share |\n|---|---|---|---|---|---|",
+            "\n## Which unmodelled effect\n\nEach candidate term is refitted with the baseline's per-group energy terms on the training events, on the relative scale (rows divided by the baseline). CV gain: 1 − held-out SSE / held-out SSE of the baseline alone, whole tracks left out in turn, the threshold scanned on the training folds only. p: Freedman–Lane permutation test of the nested models (residuals permuted within track and axle), max F over the threshold grid; road terms: F test of the tracks' severities on their road value, max F over the grid against Monte Carlo draws, Benjamini–Hochberg over {} candidates. Front share: the part of the term's wear on the front axle. Acts in: the flagged slices of step 1 whose gap the fitted term follows most, with the part of the slice's mean residual it accounts for. Definitions: docs/gap.md.\n\n| candidate | threshold | coefficient | CV gain | p adj. | front share | acts in (part of the slice's mean gap) |\n|---|---|---|---|---|---|---|",
             d.candidates.len()
         );
         for c in d.candidates.iter().take(max_slices.min(10)) {
@@ -468,7 +520,7 @@ pub fn render_markdown(d: &Diagnosis, max_slices: usize) -> String {
             };
             let _ = writeln!(
                 s,
-                "| {}{} | {th} | {:+.4} | {:+.3} | {:.1e} | {:.0} % |",
+                "| {}{} | {th} | {:+.4} | {:+.3} | {:.1e} | {} | {} |",
                 c.name,
                 if c.p_adjusted <= d.fdr && c.cv_gain > 0.0 {
                     " **(significant)**"
@@ -478,12 +530,26 @@ pub fn render_markdown(d: &Diagnosis, max_slices: usize) -> String {
                 c.coefficient,
                 c.cv_gain,
                 c.p_adjusted,
-                100.0 * c.front_share
+                // A generic KPI term changes sign across rows: no share.
+                if (0.0..=1.0).contains(&c.front_share) {
+                    format!("{:.0} %", 100.0 * c.front_share)
+                } else {
+                    "–".to_string()
+                },
+                if c.acts_in.is_empty() {
+                    "–".to_string()
+                } else {
+                    c.acts_in
+                        .iter()
+                        .map(|a| format!("{} ({:.0} %)", a.slice, 100.0 * a.share_of_offset))
+                        .collect::<Vec<_>>()
+                        .join("; ")
+                }
             );
         }
         let _ = writeln!(
             s,
-            "\n## How far the gap shrinks\n\nEach step adds the best significant candidate (one that was significant on its own in step 2) and refits the baseline around the terms on the training events. Slices: the top flagged slices of step 1, in order{}.\n\n| step | training bias / RMSE (%) | testing bias / RMSE (%) | RMSE in slices 1… (%) |\n|---|---|---|---|",
+            "\n## How far the gap shrinks\n\nEach step adds the best significant candidate (one that was significant on its own in step 2) and refits the baseline around the terms on the training events. Slices: the top flagged slices of step 1, in order{}.\n\n| step | training bias / RMSE (%) | testing bias / RMSE (%) | bias / RMSE in slices 1… (%) |\n|---|---|---|---|",
             d.slices
                 .iter()
                 .take(5)
@@ -496,9 +562,10 @@ pub fn render_markdown(d: &Diagnosis, max_slices: usize) -> String {
                 format!("{:+.3} / {:.3}", t.bias_pct, t.rmse_pct)
             });
             let sl: Vec<String> = st
-                .slice_rmse_pct
+                .slices
                 .iter()
-                .map(|v| format!("{v:.2}"))
+                .take(5)
+                .map(|g| format!("{:+.2} / {:.2}", g.bias_pct, g.rmse_pct))
                 .collect();
             let _ = writeln!(
                 s,

@@ -17,6 +17,7 @@
 //!   false-discovery rate. A mechanism only adds wear, so only positive
 //!   coefficients count. Details and measured behaviour: docs/gap.md.
 
+use super::acts::ActsIn;
 use super::candidates::{Candidate, Feature, candidate_feature, kpi_scale};
 use super::linear::{dot, lstsq, orthonormal_basis, project_out, residual, weighted};
 use super::stats::benjamini_hochberg;
@@ -88,6 +89,8 @@ pub struct Score {
     /// (mean, sd) standardising a KPI candidate.
     #[serde(skip)]
     pub kpi_scale: (f64, f64),
+    /// The step-1 slices where the fitted term acts (filled by the report).
+    pub acts_in: Vec<ActsIn>,
 }
 
 impl Score {
@@ -520,6 +523,7 @@ pub fn rank(problem: &Problem, library: &[Candidate], settings: &ScoringSettings
                 p_adjusted: f64::NAN,
                 front_share,
                 kpi_scale: scale,
+                acts_in: Vec::new(),
             })
         })
         .collect();
