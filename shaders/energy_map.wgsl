@@ -1,6 +1,7 @@
 // Friction-energy maps: each sample's friction energy binned over
 // (surface temperature × inner-liner temperature) and (sliding speed ×
-// surface temperature), one partial map per chunk of one wheel. No float
+// surface temperature), and its lateral part over (surface × inner-liner
+// temperature), one partial map per chunk of one wheel. No float
 // atomics in WGSL: every thread owns the bins b with b % WG_SIZE == lid and
 // adds the chunk's samples in order, so each bin's sum is deterministic.
 // CPU twin: src/kpi/energy_map_kernel.rs; chunks and samples are those of
@@ -20,8 +21,9 @@ const SPEED_LO: f32 = 0.0;
 const SPEED_WIDTH: f32 = 0.5;
 const SPEED_N: u32 = 20u;
 const SURFACE_INNER_BINS: u32 = 576u; // T_SURFACE_N * T_INNER_N
-const BINS: u32 = 1056u; // + SPEED_N * T_SURFACE_N
-const OWNED: u32 = 9u; // ceil(BINS / WG_SIZE)
+const LATERAL_BINS_AT: u32 = 1056u; // SURFACE_INNER_BINS + SPEED_N * T_SURFACE_N
+const BINS: u32 = 1632u; // + SURFACE_INNER_BINS (lateral map)
+const OWNED: u32 = 13u; // ceil(BINS / WG_SIZE)
 
 // Keep in sync with ReduceSample (src/kpi/telemetry_reduce.rs).
 struct Sample {
@@ -55,6 +57,7 @@ struct Chunk {
 var<workgroup> bin_a: array<u32, CHUNK>;
 var<workgroup> bin_b: array<u32, CHUNK>;
 var<workgroup> energy: array<f32, CHUNK>;
+var<workgroup> energy_y: array<f32, CHUNK>; // 16 KiB of workgroup memory in all
 
 // Equal-width bins clamped at both ends; NaN goes to bin 0 (as Bins::index).
 fn bin_index(x: f32, lo: f32, width: f32, n: u32) -> u32 {
@@ -93,6 +96,7 @@ fn main(
             bin_a[j] = s * T_INNER_N + i;
             bin_b[j] = SURFACE_INNER_BINS + v * T_SURFACE_N + s;
             energy[j] = power * p.dt;
+            energy_y[j] = -p.fy * v_sy * p.dt; // eq. 24
         }
     }
     workgroupBarrier();
@@ -106,6 +110,10 @@ fn main(
         let b = bin_b[j];
         if b % WG_SIZE == lid {
             acc[b / WG_SIZE] += energy[j];
+        }
+        let c = LATERAL_BINS_AT + a;
+        if c % WG_SIZE == lid {
+            acc[c / WG_SIZE] += energy_y[j];
         }
     }
     if in_range {

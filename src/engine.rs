@@ -215,6 +215,7 @@ pub fn compare_energy_maps(
             m.surface_inner
                 .iter()
                 .chain(&m.speed_surface)
+                .chain(&m.lateral_surface_inner)
                 .copied()
                 .collect()
         };

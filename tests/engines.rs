@@ -137,7 +137,8 @@ fn full_length_run_matches_the_f64_reference() {
 #[test]
 fn energy_maps_by_hand_on_every_engine() {
     // 1500 samples at T_s 82 °C, T_i 101 °C, v_s 0.5 m/s, P = 1000 W and
-    // 700 at T_s 19 (first bin), T_i 170 (last), v_s 12 m/s (last), P = 300 W; 10 ms each.
+    // 700 at T_s 19 (first bin), T_i 170 (last), v_s 12 m/s (last), P = 300 W
+    // all lateral; 10 ms each.
     let a = ReduceSample {
         vx: 50.5,
         omega: 100.0,
@@ -170,6 +171,10 @@ fn energy_maps_by_hand_on_every_engine() {
         assert!(close(m.surface_inner[23], eb), "{}", e.name());
         assert!(close(m.speed_surface[19 * 24], eb), "{}", e.name());
         assert!(close(m.total(), ea + eb), "{}", e.name());
+        // Lateral map: only b slides sideways (−F_y·v_sy = 300 W).
+        assert!(close(m.lateral_surface_inner[23], eb), "{}", e.name());
+        let lateral: f64 = m.lateral_surface_inner.iter().sum();
+        assert!(close(lateral, eb), "{}", e.name());
     }
 }
 

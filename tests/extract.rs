@@ -72,7 +72,8 @@ fn demo_season_extracts_to_complete_rows() {
         assert!(dir.path().join(side).exists(), "{side}");
     }
     // The energy maps read back: one per row, each holding the row's friction
-    // energy (both maps bin every sample's energy once; f32 channels: 1e-9).
+    // energy (both maps bin every sample's energy once; f32 channels: 1e-9),
+    // and the lateral map its lateral energy.
     let maps =
         tirewear::kpi::energy_map::read_energy_maps(&dir.path().join("kpis.energy_maps.parquet"))
             .unwrap();
@@ -89,6 +90,15 @@ fn demo_season_extracts_to_complete_rows() {
                 r.friction_energy_j
             );
         }
+        // The lateral map holds the lateral part, friction_energy_y_j.
+        let lateral: f64 = m.lateral_surface_inner.iter().sum();
+        assert!(
+            (lateral - r.friction_energy_y_j).abs() <= 1e-9 * r.friction_energy_y_j.abs(),
+            "{} {}: lateral {lateral} vs {}",
+            r.run,
+            r.wheel,
+            r.friction_energy_y_j
+        );
     }
     // The extracted wear target tracks the simulator's truth (readings noise and
     // the virtual-rib interpolation of a non-uniform profile: within 3 points),

@@ -13,9 +13,10 @@ use std::sync::Arc;
 /// How a candidate's term is computed for a row at threshold θ.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
 pub enum Feature {
-    /// Graining: lateral friction energy with a cold tread, i.e. the energy of
-    /// the map bins whose tread-bulk temperature (mean of surface and inner
-    /// liner) is below θ °C, times the run's lateral share E_y/E (MJ).
+    /// Graining: lateral friction energy with a cold tread, i.e. the lateral
+    /// map's energy in the bins whose tread-bulk temperature (mean of surface
+    /// and inner liner) is below θ °C (MJ); for maps without the lateral map,
+    /// the total map's energy there times the run's lateral share E_y/E.
     ColdTreadLateralEnergy,
     /// Blistering: friction energy with the inner liner above θ °C (MJ).
     HotInnerEnergy,
@@ -321,14 +322,24 @@ pub fn feature(
         })
     };
     match f {
-        Feature::ColdTreadLateralEnergy => {
-            let lateral_share = if r.friction_energy_j > 0.0 {
-                r.friction_energy_y_j / r.friction_energy_j
-            } else {
-                0.0
-            };
-            lateral_share * sum_surface_inner(&|ts, ti| 0.5 * (ts + ti) < theta)
-        }
+        Feature::ColdTreadLateralEnergy => match maps {
+            // The lateral map bins each sample's lateral energy by its own
+            // temperatures.
+            Some(m) if m.has_lateral() => {
+                m.weighted_lateral_surface_inner(|ts, ti| (0.5 * (ts + ti) < theta) as u8 as f64)
+                    * mj
+            }
+            // Maps written before the lateral map: the run's lateral share
+            // of the energy with a cold tread.
+            _ => {
+                let lateral_share = if r.friction_energy_j > 0.0 {
+                    r.friction_energy_y_j / r.friction_energy_j
+                } else {
+                    0.0
+                };
+                lateral_share * sum_surface_inner(&|ts, ti| 0.5 * (ts + ti) < theta)
+            }
+        },
         Feature::HotInnerEnergy => sum_surface_inner(&|_, ti| ti > theta),
         Feature::HotSurfaceEnergy => sum_surface_inner(&|ts, _| ts > theta),
         Feature::FastSlidingEnergy => maps.map_or(f64::NAN, |m| {

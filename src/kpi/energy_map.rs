@@ -1,6 +1,7 @@
 //! Friction-energy maps: the friction energy of one tire and run binned over
 //! (surface temperature × inner-liner temperature) and over (sliding speed ×
-//! surface temperature), on fixed bin edges, so that threshold effects can be
+//! surface temperature), and its lateral part over (surface × inner-liner
+//! temperature), on fixed bin edges, so that threshold effects can be
 //! tested later without re-reading telemetry. Values outside the edges go
 //! to the first or last bin.
 
@@ -49,13 +50,16 @@ impl Bins {
     }
 }
 
-/// Both maps of one tire and run (J per bin, row-major).
+/// The maps of one tire and run (J per bin, row-major).
 #[derive(Debug, Clone, PartialEq)]
 pub struct EnergyMaps {
     /// [T_surface bin][T_inner bin].
     pub surface_inner: Vec<f64>,
     /// [sliding-speed bin][T_surface bin].
     pub speed_surface: Vec<f64>,
+    /// Lateral friction energy −F_y·v_sy·Δt, [T_surface bin][T_inner bin]
+    /// (all zero in files written before it existed).
+    pub lateral_surface_inner: Vec<f64>,
 }
 
 impl Default for EnergyMaps {
@@ -69,7 +73,20 @@ impl EnergyMaps {
         EnergyMaps {
             surface_inner: vec![0.0; T_SURFACE_BINS.n * T_INNER_BINS.n],
             speed_surface: vec![0.0; SLIDING_SPEED_BINS.n * T_SURFACE_BINS.n],
+            lateral_surface_inner: vec![0.0; T_SURFACE_BINS.n * T_INNER_BINS.n],
         }
+    }
+
+    /// Adds lateral friction energy to the lateral map (the total maps take
+    /// it through [`EnergyMaps::add`]).
+    pub fn add_lateral(&mut self, t_surface: f64, t_inner: f64, lateral_j: f64) {
+        let s = T_SURFACE_BINS.index(t_surface);
+        self.lateral_surface_inner[s * T_INNER_BINS.n + T_INNER_BINS.index(t_inner)] += lateral_j;
+    }
+
+    /// Whether the lateral map was filled (files from before it are not).
+    pub fn has_lateral(&self) -> bool {
+        self.lateral_surface_inner.iter().any(|e| *e != 0.0)
     }
 
     pub fn add(&mut self, t_surface: f64, t_inner: f64, sliding_speed: f64, energy_j: f64) {
@@ -98,6 +115,21 @@ impl EnergyMaps {
         s
     }
 
+    /// Σ E_y·f(T_surface, T_inner) over the non-empty bins of the lateral
+    /// map, at the bin mid-points (J).
+    pub fn weighted_lateral_surface_inner(&self, mut f: impl FnMut(f64, f64) -> f64) -> f64 {
+        let mut s = 0.0;
+        for i in 0..T_SURFACE_BINS.n {
+            for j in 0..T_INNER_BINS.n {
+                let e = self.lateral_surface_inner[i * T_INNER_BINS.n + j];
+                if e != 0.0 {
+                    s += e * f(T_SURFACE_BINS.mid(i), T_INNER_BINS.mid(j));
+                }
+            }
+        }
+        s
+    }
+
     /// Σ E·f(sliding speed, T_surface) over the non-empty bins of the
     /// sliding-speed × surface map, at the bin mid-points (J).
     pub fn weighted_speed_surface(&self, mut f: impl FnMut(f64, f64) -> f64) -> f64 {
@@ -116,6 +148,7 @@ impl EnergyMaps {
 
 /// Reads the energy-map side table written by `tirewear extract`
 /// (`NAME.energy_maps.parquet`: run, wheel, map, i, j, x_lo, y_lo, energy_j;
+/// maps `surface_inner`, `speed_surface`, `lateral_surface_inner`;
 /// non-empty bins only) back into maps keyed by (run, wheel). A bin outside
 /// the fixed grid, or an unknown map name, is an error naming the record.
 pub fn read_energy_maps(
@@ -179,6 +212,10 @@ pub fn read_energy_maps(
             let (bi, bj) = (i.value(k) as usize, j.value(k) as usize);
             let (data, (ni, nj)) = match map.value(k) {
                 "surface_inner" => (&mut m.surface_inner, (T_SURFACE_BINS.n, T_INNER_BINS.n)),
+                "lateral_surface_inner" => (
+                    &mut m.lateral_surface_inner,
+                    (T_SURFACE_BINS.n, T_INNER_BINS.n),
+                ),
                 "speed_surface" => (
                     &mut m.speed_surface,
                     (SLIDING_SPEED_BINS.n, T_SURFACE_BINS.n),

@@ -1,9 +1,10 @@
 //! CPU twin of `shaders/energy_map.wgsl`: per chunk of one wheel, every
-//! sample's friction energy binned into both energy maps, as one partial map
-//! of `BINS` values; partials are merged per wheel in f64. Phase 1 is the
-//! shader's loop for loop; phase 2 adds each sample to its two bins in sample
-//! order, which is the order in which the shader's owner thread of that bin
-//! adds it, so the two differ only by f32 against f64.
+//! sample's friction energy binned into both energy maps and its lateral
+//! part into the lateral map, as one partial map of `BINS` values; partials
+//! are merged per wheel in f64. Phase 1 is the shader's loop for loop;
+//! phase 2 adds each sample to its three bins in sample order, which is the
+//! order in which the shader's owner thread of that bin adds it, so the two
+//! differ only by f32 against f64.
 
 use super::energy_map::{EnergyMaps, SLIDING_SPEED_BINS, T_INNER_BINS, T_SURFACE_BINS};
 use super::telemetry_reduce::{CHUNK, ITEMS, ReduceBatch, ReduceChunk, WG_SIZE};
@@ -11,15 +12,20 @@ use rayon::prelude::*;
 
 /// Bins of the (surface × inner) map. Keep in sync with `SURFACE_INNER_BINS` in the shader.
 pub const SURFACE_INNER_BINS: usize = 576;
-/// Bins of both maps. Keep in sync with `BINS` in the shader.
-pub const BINS: usize = 1056;
+/// First bin of the lateral map. Keep in sync with `LATERAL_BINS_AT` in the shader.
+pub const LATERAL_BINS_AT: usize = 1056;
+/// Bins of the three maps. Keep in sync with `BINS` in the shader.
+pub const BINS: usize = 1632;
 
 const _: () = assert!(SURFACE_INNER_BINS == T_SURFACE_BINS.n * T_INNER_BINS.n);
-const _: () = assert!(BINS == SURFACE_INNER_BINS + SLIDING_SPEED_BINS.n * T_SURFACE_BINS.n);
+const _: () =
+    assert!(LATERAL_BINS_AT == SURFACE_INNER_BINS + SLIDING_SPEED_BINS.n * T_SURFACE_BINS.n);
+const _: () = assert!(BINS == LATERAL_BINS_AT + SURFACE_INNER_BINS);
 
 fn workgroup(batch: &ReduceBatch, chunk: &ReduceChunk) -> Vec<f64> {
     let count = chunk.count as usize;
-    let (mut bin_a, mut bin_b, mut energy) = ([0usize; CHUNK], [0usize; CHUNK], [0.0f64; CHUNK]);
+    let (mut bin_a, mut bin_b) = ([0usize; CHUNK], [0usize; CHUNK]);
+    let (mut energy, mut energy_y) = ([0.0f64; CHUNK], [0.0f64; CHUNK]);
     // Phase 1.
     for lid in 0..WG_SIZE {
         for k in 0..ITEMS {
@@ -36,6 +42,7 @@ fn workgroup(batch: &ReduceBatch, chunk: &ReduceChunk) -> Vec<f64> {
                 bin_a[j] = s * T_INNER_BINS.n + i;
                 bin_b[j] = SURFACE_INNER_BINS + v * T_SURFACE_BINS.n + s;
                 energy[j] = power * (f(p.dt) + f(p.dt_lo));
+                energy_y[j] = -f(p.fy) * v_sy * (f(p.dt) + f(p.dt_lo)); // eq. 24
             }
         }
     }
@@ -44,6 +51,7 @@ fn workgroup(batch: &ReduceBatch, chunk: &ReduceChunk) -> Vec<f64> {
     for j in 0..count {
         out[bin_a[j]] += energy[j];
         out[bin_b[j]] += energy[j];
+        out[LATERAL_BINS_AT + bin_a[j]] += energy_y[j];
     }
     out
 }
@@ -65,7 +73,18 @@ pub fn merge_maps(batch: &ReduceBatch, partials: &[Vec<f64>]) -> Vec<EnergyMaps>
         for (d, s) in m.surface_inner.iter_mut().zip(&p[..SURFACE_INNER_BINS]) {
             *d += s;
         }
-        for (d, s) in m.speed_surface.iter_mut().zip(&p[SURFACE_INNER_BINS..]) {
+        for (d, s) in m
+            .speed_surface
+            .iter_mut()
+            .zip(&p[SURFACE_INNER_BINS..LATERAL_BINS_AT])
+        {
+            *d += s;
+        }
+        for (d, s) in m
+            .lateral_surface_inner
+            .iter_mut()
+            .zip(&p[LATERAL_BINS_AT..])
+        {
             *d += s;
         }
     }
@@ -118,5 +137,9 @@ mod tests {
         assert!((m.surface_inner[23] - eb).abs() < 1e-9);
         assert!((m.speed_surface[19 * 24] - eb).abs() < 1e-9);
         assert!((m.total() - ea - eb).abs() < 1e-9);
+        // Lateral map: only b slides sideways (−F_y·v_sy = 25·12 = 300 W).
+        assert!((m.lateral_surface_inner[23] - eb).abs() < 1e-9);
+        assert_eq!(m.lateral_surface_inner[12 * 24 + 12], 0.0);
+        assert!((m.lateral_surface_inner.iter().sum::<f64>() - eb).abs() < 1e-9);
     }
 }

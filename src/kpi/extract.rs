@@ -542,6 +542,12 @@ fn write_energy_maps(path: &Path, maps: &[(String, Wheel, EnergyMaps)]) -> Resul
                 SLIDING_SPEED_BINS,
                 T_SURFACE_BINS,
             ),
+            (
+                "lateral_surface_inner",
+                &m.lateral_surface_inner,
+                T_SURFACE_BINS,
+                T_INNER_BINS,
+            ),
         ] {
             for (idx, &e) in data.iter().enumerate() {
                 if e == 0.0 {

@@ -356,6 +356,8 @@ mod tests {
         assert!((k.contact_patch_mm2 - 20_000.0).abs() < 1e-6);
         assert_eq!(k.t_surface_std_c, 0.0);
         assert!((maps.total() - k.friction_energy_j).abs() < 1e-6);
+        let lateral: f64 = maps.lateral_surface_inner.iter().sum();
+        assert!((lateral - k.friction_energy_y_j).abs() < 1e-6);
         assert_eq!((rep.dropouts, rep.sample_periods), (0, 1));
     }
 
