@@ -60,6 +60,8 @@ pub struct Diagnosis {
     pub physics: Option<PhysicsBaseline>,
     pub training_events: Vec<String>,
     pub testing_events: Vec<String>,
+    /// Tires left out because their tread was worn through (run/wheel).
+    pub censored: Vec<String>,
     pub training: GapSize,
     pub testing: Option<GapSize>,
     /// False-discovery rate of the slice tests.
@@ -122,6 +124,23 @@ pub fn diagnose(
     settings: &GapSettings,
 ) -> Result<Diagnosis, ModelError> {
     let fdr = settings.fdr;
+    // A tire with readings at zero depth was worn through: its measured wear
+    // is a lower bound, which no law can be calibrated on.
+    let (rows, censored): (Vec<KpiRow>, Vec<KpiRow>) = rows
+        .iter()
+        .cloned()
+        .partition(|r| r.worn_through_readings <= 0.0);
+    let censored: Vec<String> = censored
+        .iter()
+        .map(|r| format!("{}/{}", r.run, r.wheel))
+        .collect();
+    if !censored.is_empty() {
+        tracing::warn!(
+            tires = censored.len(),
+            "left out: tread worn through (readings at zero depth), wear censored"
+        );
+    }
+    let rows = rows.as_slice();
     let s = split(rows, settings.test_events.as_deref())?;
     let map_of = |r: &KpiRow| maps.get(&(r.run.clone(), r.wheel.clone()));
     let (name, physics) = match baseline {
@@ -384,6 +403,7 @@ pub fn diagnose(
         physics,
         training_events: s.train_events.clone(),
         testing_events: s.test_events.clone(),
+        censored,
         training: size(trv),
         testing: (!tev.is_empty()).then(|| size(tev)),
         fdr,
@@ -444,6 +464,20 @@ pub fn render_markdown(d: &Diagnosis, max_slices: usize) -> String {
             ks.join(", "),
             p.temperature_factor.describe(),
             p.skewness_coefficient
+        );
+    }
+    if !d.censored.is_empty() {
+        let _ = writeln!(
+            s,
+            "\n{} tires left out: tread worn through (depth readings at zero), so their wear is only a lower bound: {}{}",
+            d.censored.len(),
+            d.censored
+                .iter()
+                .take(10)
+                .cloned()
+                .collect::<Vec<_>>()
+                .join(", "),
+            if d.censored.len() > 10 { ", …" } else { "" }
         );
     }
     let _ = writeln!(

@@ -14,7 +14,7 @@ use super::table::{KpiRow, write_batch, write_csv, write_parquet};
 use super::telemetry::{CleaningReport, finish_wheel, prepare_wheel, vehicle_indices};
 use super::telemetry_reduce::{ReduceBatch, merge};
 use super::viscoelastic::viscoelastic_indices;
-use super::wear::mean_wear;
+use super::wear::{mean_wear, worn_through_readings};
 use crate::Wheel;
 use crate::engine::{CpuEngine, GpuEngine, ReduceEngine};
 use crate::ingest::IngestError;
@@ -197,7 +197,8 @@ fn run_rows(
     run: &Run,
     compounds: &HashMap<String, Compound>,
     roads: &HashMap<String, RoadIndices>,
-    wear: &BTreeMap<(String, Wheel), f64>,
+    // (mean wear %, readings at zero depth) per tire.
+    wear: &BTreeMap<(String, Wheel), (f64, f64)>,
     engine: &dyn ReduceEngine,
 ) -> Result<RunOutput, String> {
     let path = season.path(&run.telemetry);
@@ -316,10 +317,11 @@ fn run_rows(
             shifted_temperature_c: ve.shifted_temperature_c,
             storage_modulus_mpa: ve.storage_modulus_mpa,
             loss_factor: ve.loss_factor,
-            wear_mean_pct: wear.get(&(run.id.clone(), w)).copied().unwrap_or(f64::NAN),
+            wear_mean_pct: wear.get(&(run.id.clone(), w)).map_or(f64::NAN, |t| t.0),
             telemetry_duration_s: k.duration_s,
             dropout_time_s: rep.dropout_time_s,
             invalid_samples: (rep.samples - rep.kept) as f64,
+            worn_through_readings: wear.get(&(run.id.clone(), w)).map_or(0.0, |t| t.1),
         };
         out.rows.push(row);
         out.maps.push((w, maps));
@@ -382,7 +384,14 @@ pub fn extract(opts: &ExtractOptions) -> Result<ExtractSummary, IngestError> {
     for f in &m.wear_readings {
         readings.extend(read_wear_csv(&season.path(f))?);
     }
-    let wear = mean_wear(&readings);
+    let worn = worn_through_readings(&readings);
+    let wear: BTreeMap<(String, Wheel), (f64, f64)> = mean_wear(&readings)
+        .into_iter()
+        .map(|(k, m)| {
+            let z = worn.get(&k).copied().unwrap_or(0.0);
+            (k, (m, z))
+        })
+        .collect();
 
     let pb = if opts.progress {
         let pb = indicatif::ProgressBar::new(m.runs.len() as u64);

@@ -72,7 +72,7 @@ kpi_table!(
         // Target
         wear_mean_pct,
         // Data quality
-        telemetry_duration_s, dropout_time_s, invalid_samples,
+        telemetry_duration_s, dropout_time_s, invalid_samples, worn_through_readings,
     ]
 );
 
@@ -165,6 +165,10 @@ pub fn write_csv(path: &Path, rows: &[KpiRow]) -> Result<(), IngestError> {
     crate::atomic::write_csv(path, rows).map_err(|e| IngestError::io(path, e))
 }
 
+/// Numeric columns added after the first KPI files were written: an older
+/// file without them reads them as 0.
+pub const LATER_COLUMNS: [&str; 1] = ["worn_through_readings"];
+
 /// Reads a KPI Parquet file back (for `fit`, `gap` and tests).
 pub fn read_parquet(path: &Path) -> Result<Vec<KpiRow>, IngestError> {
     let file = std::fs::File::open(path).map_err(|e| IngestError::io(path, e))?;
@@ -202,9 +206,15 @@ pub fn read_parquet(path: &Path) -> Result<Vec<KpiRow>, IngestError> {
             .iter()
             .map(|n| text(n))
             .collect::<Result<Vec<_>, _>>()?;
+        // Columns added after the first files were written read as 0 when absent.
         let nums = KpiRow::NUMBER_COLUMNS
             .iter()
-            .map(|n| num(n))
+            .map(|n| match num(n) {
+                Err(_) if LATER_COLUMNS.contains(n) && batch.column_by_name(n).is_none() => {
+                    Ok(Float64Array::from(vec![0.0; batch.num_rows()]))
+                }
+                other => other,
+            })
             .collect::<Result<Vec<_>, _>>()?;
         for i in 0..batch.num_rows() {
             let mut r = KpiRow::default();
@@ -223,6 +233,44 @@ pub fn read_parquet(path: &Path) -> Result<Vec<KpiRow>, IngestError> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn files_without_later_columns_read_them_as_zero() {
+        let rows = vec![
+            KpiRow {
+                run: "R1".into(),
+                wear_mean_pct: 12.5,
+                worn_through_readings: 3.0,
+                ..Default::default()
+            };
+            2
+        ];
+        let dir = tempfile::tempdir().unwrap();
+        // As written today: the column round-trips.
+        let now = dir.path().join("now.parquet");
+        write_parquet(&now, &rows).unwrap();
+        assert_eq!(read_parquet(&now).unwrap()[0].worn_through_readings, 3.0);
+        // An older file: the same table without `worn_through_readings`.
+        let full = RecordBatch::try_new(schema(), KpiRow::arrays(&rows)).unwrap();
+        let keep: Vec<usize> = (0..full.num_columns())
+            .filter(|&i| full.schema().field(i).name() != "worn_through_readings")
+            .collect();
+        let old = dir.path().join("old.parquet");
+        write_batch(&old, &full.project(&keep).unwrap()).unwrap();
+        let back = read_parquet(&old).unwrap();
+        assert_eq!(back.len(), 2);
+        assert_eq!(
+            (back[0].wear_mean_pct, back[0].worn_through_readings),
+            (12.5, 0.0)
+        );
+        // Any other missing column is still an error naming it.
+        let keep: Vec<usize> = (0..full.num_columns())
+            .filter(|&i| full.schema().field(i).name() != "hurst")
+            .collect();
+        write_batch(&old, &full.project(&keep).unwrap()).unwrap();
+        let err = read_parquet(&old).unwrap_err().to_string();
+        assert!(err.contains("missing column 'hurst'"), "{err}");
+    }
 
     #[test]
     fn units_follow_the_suffix_rule() {

@@ -55,6 +55,16 @@ pub fn mean_wear(readings: &[WearReading]) -> BTreeMap<(String, Wheel), f64> {
         .collect()
 }
 
+/// Readings at zero depth per (run, wheel): the tread worn through at that
+/// spot, so the tire's mean wear is only a lower bound (censored).
+pub fn worn_through_readings(readings: &[WearReading]) -> BTreeMap<(String, Wheel), f64> {
+    let mut out: BTreeMap<(String, Wheel), f64> = BTreeMap::new();
+    for r in readings {
+        *out.entry((r.run.clone(), r.wheel)).or_default() += (r.depth_mm <= 0.0) as u8 as f64;
+    }
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -82,5 +92,17 @@ mod tests {
         ];
         let w = mean_wear(&rows);
         assert!((w[&("R".to_string(), Wheel::FL)] - 37.5).abs() < 1e-9);
+        // Two of four readings at zero depth: worn through there.
+        let mut worn = rows.clone();
+        worn.push(row(2, 80.0, 2, 0.0));
+        worn[0].depth_mm = 0.0;
+        assert_eq!(
+            worn_through_readings(&worn)[&("R".to_string(), Wheel::FL)],
+            2.0
+        );
+        assert_eq!(
+            worn_through_readings(&rows)[&("R".to_string(), Wheel::FL)],
+            0.0
+        );
     }
 }

@@ -22,6 +22,7 @@ pub fn candidate_inputs() -> Vec<&'static str> {
                     | "telemetry_duration_s"
                     | "dropout_time_s"
                     | "invalid_samples"
+                    | "worn_through_readings"
             )
         })
         .collect()
@@ -118,7 +119,7 @@ mod tests {
         let (_, te, _) = split_by_events(&rows, Some(&["E1".to_string()]));
         assert_eq!(te, [0, 3]);
         assert!(!candidate_inputs().contains(&TARGET));
-        assert_eq!(candidate_inputs().len(), KpiRow::NUMBER_COLUMNS.len() - 5);
+        assert_eq!(candidate_inputs().len(), KpiRow::NUMBER_COLUMNS.len() - 6);
     }
 
     #[test]

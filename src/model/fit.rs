@@ -38,8 +38,9 @@ pub struct FitSettings {
     pub pca_threshold: f64,
 }
 
-/// Rows usable by a model: finite target and inputs. Returns the kept rows and
-/// a note for each dropped one.
+/// Rows usable by a model: finite target and inputs, and a tread not worn
+/// through (censored wear). Returns the kept rows and a note for each
+/// dropped one.
 fn usable<'a>(rows: &[&'a KpiRow], inputs: &[String]) -> (Vec<&'a KpiRow>, Vec<String>) {
     let (mut ok, mut dropped) = (Vec::new(), Vec::new());
     for r in rows {
@@ -47,7 +48,14 @@ fn usable<'a>(rows: &[&'a KpiRow], inputs: &[String]) -> (Vec<&'a KpiRow>, Vec<S
             .chain(inputs.iter().map(String::as_str))
             .filter(|c| !r.number(c).is_some_and(f64::is_finite))
             .collect();
-        if bad.is_empty() {
+        if r.worn_through_readings > 0.0 {
+            // A reading at zero depth: the tread is gone there, and the
+            // tire's wear is only a lower bound.
+            dropped.push(format!(
+                "run {} wheel {}: tread worn through at {} readings, the wear is censored",
+                r.run, r.wheel, r.worn_through_readings
+            ))
+        } else if bad.is_empty() {
             ok.push(*r)
         } else {
             dropped.push(format!(
