@@ -20,7 +20,7 @@
 use super::acts::ActsIn;
 use super::candidates::{Candidate, Feature, candidate_feature, kpi_scale};
 use super::linear::{dot, lstsq, orthonormal_basis, project_out, residual, weighted};
-use super::stats::benjamini_hochberg;
+use super::stats::{benjamini_hochberg, levels};
 use super::track_test::Severities;
 use crate::kpi::KpiRow;
 use crate::kpi::energy_map::EnergyMaps;
@@ -429,13 +429,7 @@ pub fn rank(problem: &Problem, library: &[Candidate], settings: &ScoringSettings
     let within = Null::new(rows, &base, y, &groups, Some(&prediction));
     let across = Null::new(rows, &base, y, &groups, None);
     let severities = Severities::new(rows, y, &base, &problem.track_level, &prediction);
-    let mut tracks: Vec<&str> = rows.iter().map(|r| r.track.as_str()).collect();
-    tracks.sort();
-    tracks.dedup();
-    let track_of: Vec<usize> = rows
-        .iter()
-        .map(|r| tracks.binary_search(&r.track.as_str()).expect("listed"))
-        .collect();
+    let (_, track_of) = levels(rows.iter().map(|r| r.track.as_str()));
     let blocks: Vec<usize> = rows
         .iter()
         .zip(&track_of)

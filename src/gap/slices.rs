@@ -9,7 +9,7 @@
 //! are one test under several names); survivors are ranked by the part of the
 //! total squared gap their offset accounts for, n·mean²/Σr².
 
-use super::stats::{VarianceComponents, benjamini_hochberg, clustered_difference};
+use super::stats::{VarianceComponents, benjamini_hochberg, clustered_difference, levels};
 use crate::kpi::KpiRow;
 use crate::model::data::candidate_inputs;
 
@@ -154,13 +154,7 @@ pub fn slice_residuals(rows: &[&KpiRow], residual: &[f64], fdr: f64) -> (Vec<Sli
     let mean = residual.iter().sum::<f64>() / n;
     let sd = (residual.iter().map(|r| (r - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();
     let total_sq: f64 = residual.iter().map(|r| r * r).sum();
-    let mut events: Vec<&str> = rows.iter().map(|r| r.event.as_str()).collect();
-    events.sort();
-    events.dedup();
-    let event: Vec<usize> = rows
-        .iter()
-        .map(|r| events.binary_search(&r.event.as_str()).expect("listed"))
-        .collect();
+    let (_, event) = levels(rows.iter().map(|r| r.event.as_str()));
     let vc = VarianceComponents::estimate(residual, &event);
     let res = Residuals {
         r: residual,

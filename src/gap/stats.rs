@@ -4,6 +4,17 @@
 
 use statrs::distribution::{ContinuousCDF, StudentsT};
 
+/// The distinct levels of `keys` (sorted) and each key's level index.
+pub fn levels<'a>(keys: impl Iterator<Item = &'a str> + Clone) -> (Vec<&'a str>, Vec<usize>) {
+    let mut names: Vec<&str> = keys.clone().collect();
+    names.sort();
+    names.dedup();
+    let index = keys
+        .map(|k| names.binary_search(&k).expect("listed"))
+        .collect();
+    (names, index)
+}
+
 /// One-way variance components of residuals grouped in clusters (events):
 /// r = e_cluster + ε, by the ANOVA method of moments (unbalanced).
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -29,6 +29,7 @@
 use super::candidates::{Candidate, track_value};
 use super::linear::{lstsq, orthonormal_basis};
 use super::scoring::{max_f, projected, track_cells};
+use super::stats::levels;
 use crate::kpi::KpiRow;
 use rand::SeedableRng;
 use rand_distr::{Distribution, StandardNormal};
@@ -44,13 +45,7 @@ pub struct Tracks<'a> {
 
 impl<'a> Tracks<'a> {
     pub fn new(rows: &[&'a KpiRow]) -> Tracks<'a> {
-        let mut names: Vec<&str> = rows.iter().map(|r| r.track.as_str()).collect();
-        names.sort();
-        names.dedup();
-        let of_row = rows
-            .iter()
-            .map(|r| names.binary_search(&r.track.as_str()).expect("listed"))
-            .collect();
+        let (names, of_row) = levels(rows.iter().map(|r| r.track.as_str()));
         let track_rows = names
             .iter()
             .map(|t| *rows.iter().find(|r| r.track == *t).expect("listed"))

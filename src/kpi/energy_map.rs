@@ -102,48 +102,35 @@ impl EnergyMaps {
 
     /// Σ E·f(T_surface, T_inner) over the non-empty bins of the
     /// surface × inner-liner map, at the bin mid-points (J).
-    pub fn weighted_surface_inner(&self, mut f: impl FnMut(f64, f64) -> f64) -> f64 {
-        let mut s = 0.0;
-        for i in 0..T_SURFACE_BINS.n {
-            for j in 0..T_INNER_BINS.n {
-                let e = self.surface_inner[i * T_INNER_BINS.n + j];
-                if e != 0.0 {
-                    s += e * f(T_SURFACE_BINS.mid(i), T_INNER_BINS.mid(j));
-                }
-            }
-        }
-        s
+    pub fn weighted_surface_inner(&self, f: impl FnMut(f64, f64) -> f64) -> f64 {
+        weighted(&self.surface_inner, T_SURFACE_BINS, T_INNER_BINS, f)
     }
 
     /// Σ E_y·f(T_surface, T_inner) over the non-empty bins of the lateral
     /// map, at the bin mid-points (J).
-    pub fn weighted_lateral_surface_inner(&self, mut f: impl FnMut(f64, f64) -> f64) -> f64 {
-        let mut s = 0.0;
-        for i in 0..T_SURFACE_BINS.n {
-            for j in 0..T_INNER_BINS.n {
-                let e = self.lateral_surface_inner[i * T_INNER_BINS.n + j];
-                if e != 0.0 {
-                    s += e * f(T_SURFACE_BINS.mid(i), T_INNER_BINS.mid(j));
-                }
-            }
-        }
-        s
+    pub fn weighted_lateral_surface_inner(&self, f: impl FnMut(f64, f64) -> f64) -> f64 {
+        weighted(&self.lateral_surface_inner, T_SURFACE_BINS, T_INNER_BINS, f)
     }
 
     /// Σ E·f(sliding speed, T_surface) over the non-empty bins of the
     /// sliding-speed × surface map, at the bin mid-points (J).
-    pub fn weighted_speed_surface(&self, mut f: impl FnMut(f64, f64) -> f64) -> f64 {
-        let mut s = 0.0;
-        for v in 0..SLIDING_SPEED_BINS.n {
-            for i in 0..T_SURFACE_BINS.n {
-                let e = self.speed_surface[v * T_SURFACE_BINS.n + i];
-                if e != 0.0 {
-                    s += e * f(SLIDING_SPEED_BINS.mid(v), T_SURFACE_BINS.mid(i));
-                }
+    pub fn weighted_speed_surface(&self, f: impl FnMut(f64, f64) -> f64) -> f64 {
+        weighted(&self.speed_surface, SLIDING_SPEED_BINS, T_SURFACE_BINS, f)
+    }
+}
+
+/// Σ E·f(row mid-point, column mid-point) over the non-empty bins of a map.
+fn weighted(map: &[f64], rows: Bins, cols: Bins, mut f: impl FnMut(f64, f64) -> f64) -> f64 {
+    let mut s = 0.0;
+    for i in 0..rows.n {
+        for j in 0..cols.n {
+            let e = map[i * cols.n + j];
+            if e != 0.0 {
+                s += e * f(rows.mid(i), cols.mid(j));
             }
         }
-        s
     }
+    s
 }
 
 /// Reads the energy-map side table written by `tirewear extract`
