@@ -268,6 +268,7 @@ pub fn diagnose(
                     .zip(&members)
                     .map(|(s, m)| (s.name.as_str(), m.clone()))
                     .collect();
+                let before = refit(&base, &w, &y, &train_idx).1;
                 for c in candidates.iter_mut().take(ACTS_FOR) {
                     let Some(cand) = lib.iter().find(|l| l.name == c.name) else {
                         continue;
@@ -292,19 +293,10 @@ pub fn diagnose(
                     // What the term changes: the prediction of baseline +
                     // term minus the baseline's, both refitted as in step 3
                     // (the baseline gives back what the term takes over).
-                    let prediction = |cols: &[Vec<f64>]| -> Vec<f64> {
-                        let refs: Vec<&[f64]> = cols.iter().map(|c| c.as_slice()).collect();
-                        let scaled: Vec<Vec<f64>> = cols.iter().map(|c| weighted(c, &w)).collect();
-                        let sref: Vec<&[f64]> = scaled.iter().map(|c| c.as_slice()).collect();
-                        let k = lstsq(&sref, &weighted(&y, &w), &train_idx);
-                        (0..all_rows.len())
-                            .map(|i| y[i] - residual(&refs, &k, &y, i))
-                            .collect()
-                    };
-                    let before = prediction(&base);
                     let mut with = base.clone();
                     with.push(column);
-                    let change: Vec<f64> = prediction(&with)
+                    let change: Vec<f64> = refit(&with, &w, &y, &train_idx)
+                        .1
                         .iter()
                         .zip(&before)
                         .map(|(a, b)| a - b)
@@ -370,14 +362,8 @@ pub fn diagnose(
             // the model a user would run on a new event.
             base.push(column);
             track_level.push(cand.feature.track_level());
-            let cols: Vec<&[f64]> = base.iter().map(|c| c.as_slice()).collect();
-            let scaled: Vec<Vec<f64>> = base.iter().map(|c| weighted(c, &w)).collect();
-            let scaled_refs: Vec<&[f64]> = scaled.iter().map(|c| c.as_slice()).collect();
-            let yw = weighted(&y, &w);
-            let k = lstsq(&scaled_refs, &yw, &train_idx);
-            let res: Vec<f64> = (0..all_rows.len())
-                .map(|i| residual(&cols, &k, &y, i))
-                .collect();
+            let (k, fitted) = refit(&base, &w, &y, &train_idx);
+            let res: Vec<f64> = y.iter().zip(&fitted).map(|(a, b)| a - b).collect();
             // A mechanism that adds wear must keep a positive coefficient
             // once refitted without track scales; if it turns negative it was
             // fitting something else (a track-level effect, say): refused.
@@ -412,6 +398,20 @@ pub fn diagnose(
         candidates,
         steps,
     })
+}
+
+/// Coefficients of `y` on `cols` fitted on the training rows with the row
+/// weights `w` (relative scale for the physics law), and the fitted values
+/// on every row.
+fn refit(cols: &[Vec<f64>], w: &[f64], y: &[f64], train: &[usize]) -> (Vec<f64>, Vec<f64>) {
+    let refs: Vec<&[f64]> = cols.iter().map(|c| c.as_slice()).collect();
+    let scaled: Vec<Vec<f64>> = cols.iter().map(|c| weighted(c, w)).collect();
+    let scaled_refs: Vec<&[f64]> = scaled.iter().map(|c| c.as_slice()).collect();
+    let k = lstsq(&scaled_refs, &weighted(y, w), train);
+    let fitted = (0..y.len())
+        .map(|i| y[i] - residual(&refs, &k, y, i))
+        .collect();
+    (k, fitted)
 }
 
 /// Rows of a slice named as in step 1 (`A & B`, each `col = level` or `col in Qk [lo, hi]`).
