@@ -4,9 +4,10 @@
 //!
 //! Σ_bins E_bin (MJ) · value(expression at that bin, θ)
 //!
-//! over the (surface × inner-liner temperature) map, or over the (sliding
+//! over the (surface × inner-liner temperature) map, over the (sliding
 //! speed × surface temperature) map when the expression reads
-//! `sliding_speed`. Bin variables are the bin mid-points; a comparison counts
+//! `sliding_speed`, or over the lateral energy's (surface × inner-liner)
+//! map with `energy = "lateral"`. Bin variables are the bin mid-points; a comparison counts
 //! as 1 when true and 0 when false. Format: docs/gap.md.
 
 use super::candidates::{Candidate, Feature};
@@ -39,6 +40,9 @@ struct EffectEntry {
     /// Only positive coefficients count (default true: a mechanism adds wear).
     #[serde(default = "yes")]
     adds_wear: bool,
+    /// "total" (default) or "lateral": which friction energy the bins hold.
+    #[serde(default)]
+    energy: Option<String>,
 }
 
 fn yes() -> bool {
@@ -56,6 +60,8 @@ pub struct UserEffect {
     variables: Vec<String>,
     /// Reads `sliding_speed` (the speed × surface map) rather than `t_inner`.
     speed_map: bool,
+    /// Sums over the lateral energy map (`energy = "lateral"`).
+    lateral: bool,
 }
 
 /// A context with the few variables an expression reads, looked up by position.
@@ -146,7 +152,18 @@ impl UserEffect {
             node,
             variables,
             speed_map,
+            lateral: false,
         })
+    }
+
+    /// Sums the expression over the lateral friction energy's (surface ×
+    /// inner-liner) map instead of the total energy's.
+    pub fn on_lateral_energy(mut self) -> Result<UserEffect, String> {
+        if self.speed_map {
+            return Err("energy = \"lateral\" has no sliding-speed map: drop sliding_speed".into());
+        }
+        self.lateral = true;
+        Ok(self)
     }
 
     fn value(&self, vars: &Vars) -> f64 {
@@ -186,7 +203,13 @@ impl UserEffect {
             }
             self.value(&vars)
         };
-        let s = if self.speed_map {
+        let s = if self.lateral {
+            // Maps written before the lateral map: no term, not a zero one.
+            if !m.has_lateral() {
+                return f64::NAN;
+            }
+            m.weighted_lateral_surface_inner(|t, i| at([(ts, t), (ti, i)]))
+        } else if self.speed_map {
             m.weighted_speed_surface(|v, t| at([(vs, v), (ts, t)]))
         } else {
             m.weighted_surface_inner(|t, i| at([(ts, t), (ti, i)]))
@@ -218,6 +241,11 @@ pub fn load(path: &Path) -> Result<Vec<Candidate>, GapError> {
                 message,
             };
             let user = UserEffect::compile(&e.name, &e.expression, e.adds_wear).map_err(err)?;
+            let user = match e.energy.as_deref() {
+                None | Some("total") => user,
+                Some("lateral") => user.on_lateral_energy().map_err(err)?,
+                Some(other) => return Err(err(format!("energy '{other}' (total or lateral)"))),
+            };
             let axle = match e.axle.as_deref() {
                 None | Some("both") => None,
                 Some("front") => Some("front"),
@@ -292,6 +320,33 @@ mod tests {
         }
         // By hand: 1 MJ at 87.5 °C and 0.5 MJ at 97.5 °C lie above 85 °C.
         assert!((hot.feature(&r, Some(&m), 85.0) - 1.5).abs() < 1e-12);
+        // On the lateral map, graining's expression is the built-in term;
+        // without a lateral map there is no term.
+        let lateral = UserEffect::compile("lat", "0.5 * (t_surface + t_inner) < theta", true)
+            .unwrap()
+            .on_lateral_energy()
+            .unwrap();
+        assert!(lateral.feature(&r, Some(&m), 80.0).is_nan());
+        let mut ml = m.clone();
+        ml.add_lateral(62.0, 92.0, 0.8e6); // bulk 77.5 °C
+        ml.add_lateral(88.0, 101.0, 0.3e6); // bulk 95 °C
+        for theta in [70.0, 80.0, 100.0] {
+            let want = feature(
+                Feature::ColdTreadLateralEnergy,
+                &r,
+                Some(&ml),
+                theta,
+                (0.0, 1.0),
+            );
+            assert!((lateral.feature(&r, Some(&ml), theta) - want).abs() < 1e-12);
+        }
+        assert!((lateral.feature(&r, Some(&ml), 80.0) - 0.8).abs() < 1e-12);
+        assert!(
+            UserEffect::compile("x", "sliding_speed > theta", true)
+                .unwrap()
+                .on_lateral_energy()
+                .is_err()
+        );
     }
 
     #[test]
@@ -334,6 +389,15 @@ mod tests {
         assert!(e.contains("cannot parse"), "{e}");
         let e = msg("[[effect]]\nname = \"f\"\nexpression = \"1\"\naxle = \"left\"\n");
         assert!(e.contains("axle 'left'"), "{e}");
+        let e = msg("[[effect]]\nname = \"h\"\nexpression = \"1\"\nenergy = \"sideways\"\n");
+        assert!(
+            e.contains("effect 1 ('h')") && e.contains("energy 'sideways'"),
+            "{e}"
+        );
+        let e = msg(
+            "[[effect]]\nname = \"i\"\nexpression = \"sliding_speed > 2\"\nenergy = \"lateral\"\n",
+        );
+        assert!(e.contains("no sliding-speed map"), "{e}");
         // A good one: a rear-axle candidate that is zero on the fronts.
         let c = load(&write(
             "[[effect]]\nname = \"g\"\nexpression = \"t_inner > theta\"\nthresholds = [100, 120]\naxle = \"rear\"\n",
