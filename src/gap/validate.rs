@@ -15,6 +15,7 @@
 use super::error::GapError;
 use super::report::{Baseline, Diagnosis, GapSettings, diagnose};
 use crate::kpi::KpiRow;
+use crate::model::metrics::median;
 use crate::sim::{Effect, EffectKind};
 use std::collections::BTreeMap;
 use std::fmt::Write;
@@ -360,20 +361,6 @@ pub fn validate(s: &ValidateSettings) -> Vec<Case> {
     }
     pb.finish_and_clear();
     out
-}
-
-fn median(mut v: Vec<f64>) -> f64 {
-    v.retain(|x| x.is_finite());
-    if v.is_empty() {
-        return f64::NAN;
-    }
-    v.sort_by(f64::total_cmp);
-    let n = v.len();
-    if n % 2 == 1 {
-        v[n / 2]
-    } else {
-        0.5 * (v[n / 2 - 1] + v[n / 2])
-    }
 }
 
 /// The summary table (per effect and magnitude) and the clean seasons' false discoveries.

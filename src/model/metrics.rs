@@ -18,6 +18,22 @@ pub struct Metrics {
     pub mae: f64,
 }
 
+/// Median of the finite values of `v` (mean of the middle two for an even
+/// count); NaN when there are none.
+pub fn median(mut v: Vec<f64>) -> f64 {
+    v.retain(|x| x.is_finite());
+    if v.is_empty() {
+        return f64::NAN;
+    }
+    v.sort_by(f64::total_cmp);
+    let n = v.len();
+    if n % 2 == 1 {
+        v[n / 2]
+    } else {
+        0.5 * (v[n / 2 - 1] + v[n / 2])
+    }
+}
+
 /// Indicators of `predicted` against `observed` for a model with `k` regressors.
 pub fn metrics(observed: &[f64], predicted: &[f64], k: usize) -> Result<Metrics, ModelError> {
     let n = observed.len();

@@ -4,7 +4,7 @@
 //! the residuals of the pooled energy–temperature law against road skewness,
 //! and OLS on the six inputs of table 10. Definitions: docs/models.md.
 
-use super::{ModelError, data::correlation, ols::OlsFit};
+use super::{ModelError, data::correlation, metrics::median, ols::OlsFit};
 use crate::kpi::KpiRow;
 
 /// Table 10: skewness Sk, kurtosis Ku, T_Surf Avg, FP_TOT, CP_Area, tan δ(T*).
@@ -61,16 +61,6 @@ fn line(x: &[f64], y: &[f64]) -> (f64, f64) {
     let sxx: f64 = x.iter().map(|a| (a - mx).powi(2)).sum();
     let b = if sxx > 0.0 { sxy / sxx } else { 0.0 };
     (my - b * mx, b)
-}
-
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    let n = v.len();
-    if n % 2 == 1 {
-        v[n / 2]
-    } else {
-        0.5 * (v[n / 2 - 1] + v[n / 2])
-    }
 }
 
 /// Weighted Pearson correlation.
