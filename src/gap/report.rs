@@ -124,7 +124,7 @@ pub fn diagnose(
     settings: &GapSettings,
 ) -> Result<Diagnosis, ModelError> {
     let fdr = settings.fdr;
-    // A tire with readings at zero depth was worn through: its measured wear
+    // A tire with readings at the worn-through depth (5 % of new): its measured wear
     // is a lower bound, which no law can be calibrated on.
     let (rows, censored): (Vec<KpiRow>, Vec<KpiRow>) = rows
         .iter()
@@ -137,7 +137,7 @@ pub fn diagnose(
     if !censored.is_empty() {
         tracing::warn!(
             tires = censored.len(),
-            "left out: tread worn through (readings at zero depth), wear censored"
+            "left out: tread worn through (readings at ≤ 5 % of the new depth), wear censored"
         );
     }
     let rows = rows.as_slice();

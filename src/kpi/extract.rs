@@ -197,7 +197,7 @@ fn run_rows(
     run: &Run,
     compounds: &HashMap<String, Compound>,
     roads: &HashMap<String, RoadIndices>,
-    // (mean wear %, readings at zero depth) per tire.
+    // (mean wear %, worn-through readings) per tire.
     wear: &BTreeMap<(String, Wheel), (f64, f64)>,
     engine: &dyn ReduceEngine,
 ) -> Result<RunOutput, String> {

@@ -55,12 +55,20 @@ pub fn mean_wear(readings: &[WearReading]) -> BTreeMap<(String, Wheel), f64> {
         .collect()
 }
 
-/// Readings at zero depth per (run, wheel): the tread worn through at that
-/// spot, so the tire's mean wear is only a lower bound (censored).
+/// Depth, as a fraction of the new depth, at or below which a reading counts
+/// as worn through. A gauge on a tread that is gone reads the last fraction of
+/// a millimetre of rubber or the belt, not zero: 5 % of a 4 mm tread is
+/// 0.2 mm, five gauge standard deviations (0.04 mm) above 0.
+pub const WORN_THROUGH_FRACTION: f64 = 0.05;
+
+/// Readings at or below [`WORN_THROUGH_FRACTION`] of the new depth per (run,
+/// wheel): the tread worn through at that spot, so the tire's mean wear is
+/// only a lower bound (censored).
 pub fn worn_through_readings(readings: &[WearReading]) -> BTreeMap<(String, Wheel), f64> {
     let mut out: BTreeMap<(String, Wheel), f64> = BTreeMap::new();
     for r in readings {
-        *out.entry((r.run.clone(), r.wheel)).or_default() += (r.depth_mm <= 0.0) as u8 as f64;
+        let worn = r.depth_mm <= WORN_THROUGH_FRACTION * r.new_depth_mm;
+        *out.entry((r.run.clone(), r.wheel)).or_default() += worn as u8 as f64;
     }
     out
 }
@@ -92,10 +100,11 @@ mod tests {
         ];
         let w = mean_wear(&rows);
         assert!((w[&("R".to_string(), Wheel::FL)] - 37.5).abs() < 1e-9);
-        // Two of four readings at zero depth: worn through there.
+        // Readings at 0 and at 0.2 mm (5 % of 4 mm) are worn through, 0.21 mm is not.
         let mut worn = rows.clone();
         worn.push(row(2, 80.0, 2, 0.0));
-        worn[0].depth_mm = 0.0;
+        worn.push(row(2, 80.0, 3, 0.21));
+        worn[0].depth_mm = 0.2;
         assert_eq!(
             worn_through_readings(&worn)[&("R".to_string(), Wheel::FL)],
             2.0

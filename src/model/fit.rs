@@ -49,7 +49,7 @@ fn usable<'a>(rows: &[&'a KpiRow], inputs: &[String]) -> (Vec<&'a KpiRow>, Vec<S
             .filter(|c| !r.number(c).is_some_and(f64::is_finite))
             .collect();
         if r.worn_through_readings > 0.0 {
-            // A reading at zero depth: the tread is gone there, and the
+            // A reading at the worn-through depth: the tread is gone there, and the
             // tire's wear is only a lower bound.
             dropped.push(format!(
                 "run {} wheel {}: tread worn through at {} readings, the wear is censored",
