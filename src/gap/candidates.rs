@@ -24,8 +24,11 @@ pub enum Feature {
     HotSurfaceEnergy,
     /// Friction energy at sliding speeds above θ m/s (MJ).
     FastSlidingEnergy,
-    /// Road abrasion: friction energy scaled by the road's micro-texture
-    /// above θ, E·max(0, Ra_micro − θ)/(0.01 mm) (MJ per 0.01 mm).
+    /// Road abrasion: the law's energy scaled by the road's micro-texture
+    /// above θ, E_law·max(0, Ra_micro − θ)/(0.01 mm) (MJ per 0.01 mm), with
+    /// E_law the baseline law's temperature-weighted energy (a rough road
+    /// raises the abrasion per joule the law already counts; see
+    /// [`candidate_feature`]).
     RoughRoadEnergy,
     /// Camber: friction energy scaled by the run's mean camber magnitude
     /// beyond θ, E·max(0, |γ_c| − θ) (MJ·°): a tilted contact patch
@@ -74,7 +77,7 @@ impl Feature {
         !matches!(self, Feature::Kpi(_))
     }
 
-    /// A term that is the row's energy times a value of its track (road
+    /// A term that is the row's law energy times a value of its track (road
     /// candidates): it can only be told apart from the other track-level
     /// causes by comparing tracks, so it is tested across tracks.
     pub fn track_level(&self) -> bool {
@@ -345,7 +348,8 @@ pub fn feature(
         Feature::FastSlidingEnergy => maps.map_or(f64::NAN, |m| {
             m.weighted_speed_surface(|v, _| (v > theta) as u8 as f64) * mj
         }),
-        Feature::RoughRoadEnergy => r.friction_energy_j * mj * road_excess(r.ra_micro_mm, theta),
+        // Track-level: `candidate_feature` scales the law's energy.
+        Feature::RoughRoadEnergy => f64::NAN,
         Feature::CamberEnergy => {
             r.friction_energy_j * mj * (r.camber_avg_deg.abs() - theta).max(0.0)
         }
@@ -369,17 +373,26 @@ pub fn feature(
     }
 }
 
-/// A candidate's term for a row: zero on the other axle.
+/// A candidate's term for a row: zero on the other axle. A road (track-level)
+/// term is `law_energy_mj` times its track's value: the baseline law's
+/// temperature-weighted energy Σ_b E_b·φ(T_b)·exp(s·Sk) under the physics
+/// baseline (a rough road scales the abrasion the law counts, so the term
+/// is a fixed share of the law's wear at each track, which is what the
+/// tracks' severities test), the friction energy under a statistical one.
 pub fn candidate_feature(
     c: &Candidate,
     r: &KpiRow,
     maps: Option<&EnergyMaps>,
     theta: f64,
     kpi_scale: (f64, f64),
+    law_energy_mj: f64,
 ) -> f64 {
     match (c.axle, &c.user) {
         (Some(a), _) if r.axle != a => 0.0,
         (_, Some(u)) => u.feature(r, maps, theta),
+        _ if c.feature.track_level() => {
+            row_factor(c, r, law_energy_mj) * track_value(c, r, theta, kpi_scale)
+        }
         _ => feature(c.feature, r, maps, theta, kpi_scale),
     }
 }
@@ -397,11 +410,11 @@ pub fn kpi_scale(c: &Candidate, rows: &[&KpiRow]) -> (f64, f64) {
 }
 
 /// A track-level term factored as `row_factor · track_value`: the row's
-/// energy (MJ, zero off the candidate's axle) and its track's value at θ.
-pub fn row_factor(c: &Candidate, r: &KpiRow) -> f64 {
+/// law energy (MJ, zero off the candidate's axle) and its track's value at θ.
+pub fn row_factor(c: &Candidate, r: &KpiRow, law_energy_mj: f64) -> f64 {
     match c.axle {
         Some(a) if r.axle != a => 0.0,
-        _ => r.friction_energy_j * 1e-6,
+        _ => law_energy_mj,
     }
 }
 
@@ -423,7 +436,9 @@ mod tests {
     use super::*;
 
     #[test]
-    fn track_level_terms_factor_into_row_and_track() {
+    fn road_terms_scale_the_law_energy() {
+        // A front tire with law energy 2.5 MJ (its raw friction energy, 3 MJ,
+        // does not enter) on a road with Ra_micro 0.02 mm and kurtosis 3.5.
         let r = KpiRow {
             axle: "front".into(),
             friction_energy_j: 3e6,
@@ -432,18 +447,25 @@ mod tests {
             ..Default::default()
         };
         let rows = vec![&r];
-        for c in library(&rows).iter().filter(|c| c.feature.track_level()) {
-            let scale = (3.0, 0.25);
-            for &t in &c.thresholds {
-                let whole = candidate_feature(c, &r, None, t, scale);
-                let parts = row_factor(c, &r) * track_value(c, &r, t, scale);
-                assert!(
-                    (whole - parts).abs() < 1e-12,
-                    "{}: {whole} vs {parts}",
-                    c.name
-                );
-            }
-        }
+        let lib = library(&rows);
+        let named = |name: &str| lib.iter().find(|c| c.name == name).expect(name);
+        let value = |c: &Candidate, t: f64, scale| candidate_feature(c, &r, None, t, scale, 2.5);
+        // 2.5 MJ × (0.02 − 0.005)/0.01 = 3.75; nothing on the other axle.
+        let both = named("road abrasion (energy on micro-rough roads)");
+        assert!((value(both, 0.005, (0.0, 1.0)) - 3.75).abs() < 1e-12);
+        let rear = named("road abrasion (energy on micro-rough roads), rear axle");
+        assert_eq!(value(rear, 0.005, (0.0, 1.0)), 0.0);
+        // A road index: 2.5 MJ × (3.5 − 3.0)/0.25 = 5.
+        let kurtosis = lib
+            .iter()
+            .find(|c| c.feature == Feature::Kpi("kurtosis") && c.axle.is_none())
+            .expect("kurtosis is a road index");
+        assert!(kurtosis.feature.track_level());
+        assert!((value(kurtosis, f64::NAN, (3.0, 0.25)) - 5.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn graining_uses_the_cold_tread_lateral_energy() {
         // Graining: lateral share × energy of the map bins with a cold tread bulk.
         let mut m = EnergyMaps::new();
         m.add(62.0, 92.0, 1.0, 2e6); // bulk (62.5 + 92.5)/2 = 77.5 °C

@@ -201,6 +201,16 @@ pub fn diagnose(
     };
     // The physics law's last column (its skewness derivative) is constant
     // within tracks; so are road terms once selected.
+    // The energy a road term scales: the law's temperature-weighted energy
+    // (a rough road raises the abrasion the law counts).
+    let law_energy: Vec<f64> = all_rows
+        .iter()
+        .zip(&row_maps)
+        .map(|(r, m)| match &physics {
+            Some(p) => p.energy_term(r, *m),
+            None => r.friction_energy_j * 1e-6,
+        })
+        .collect();
     let mut track_level: Vec<bool> = (0..base.len())
         .map(|j| physics.is_some() && j + 1 == base.len())
         .collect();
@@ -257,6 +267,7 @@ pub fn diagnose(
                 y: &y[..n_train],
                 base: base.iter().map(|c| c[..n_train].to_vec()).collect(),
                 track_level: track_level.clone(),
+                law_energy_mj: &law_energy[..n_train],
                 relative: physics.is_some(),
             };
             let ranked = rank(&problem, &lib, &settings.scoring);
@@ -284,6 +295,7 @@ pub fn diagnose(
                                 row_maps[i],
                                 c.threshold,
                                 c.kpi_scale,
+                                law_energy[i],
                             )
                         })
                         .collect();
@@ -354,6 +366,7 @@ pub fn diagnose(
                         row_maps[i],
                         best.threshold,
                         best.kpi_scale,
+                        law_energy[i],
                     )
                 })
                 .collect();

@@ -57,6 +57,10 @@ pub struct Problem<'a> {
     /// skewness derivative, road terms already selected): the track-level
     /// test takes them as the tracks' null (`track_test`).
     pub track_level: Vec<bool>,
+    /// The energy a road term scales, per row (MJ): the physics law's
+    /// temperature-weighted energy, or the friction energy
+    /// ([`candidate_feature`]).
+    pub law_energy_mj: &'a [f64],
     /// Work on the relative scale (rows divided by the baseline's
     /// prediction): right for the multiplicative physics law; a statistical
     /// model's errors are additive, so its rows keep their weight.
@@ -84,7 +88,7 @@ pub struct Score {
     pub p: f64,
     /// Benjamini–Hochberg over the candidates.
     pub p_adjusted: f64,
-    /// Share of the fitted term's wear on the front axle (0..1).
+    /// Share of the fitted term's wear (%, on the rows scored) on the front axle (0..1).
     pub front_share: f64,
     /// (mean, sd) standardising a KPI candidate.
     #[serde(skip)]
@@ -446,7 +450,10 @@ pub fn rank(problem: &Problem, library: &[Candidate], settings: &ScoringSettings
                 .iter()
                 .map(|&t| {
                     (0..n)
-                        .map(|i| w[i] * candidate_feature(c, rows[i], problem.maps[i], t, scale))
+                        .map(|i| {
+                            let law = problem.law_energy_mj[i];
+                            w[i] * candidate_feature(c, rows[i], problem.maps[i], t, scale, law)
+                        })
                         .collect()
                 })
                 .collect();
@@ -467,12 +474,12 @@ pub fn rank(problem: &Problem, library: &[Candidate], settings: &ScoringSettings
             let fit = best_threshold(&cols, &x, y, &all, positive);
             let (threshold, coefficient, front_share) = match &fit {
                 Some((t, k)) => {
+                    // The term's wear (%) is x/w: the share in wear, not on
+                    // the relative scale (which weights the lightly worn rows up).
                     let c1 = k[k.len() - 1];
-                    let total: f64 = x[*t].iter().map(|v| c1 * v).sum();
-                    let front: f64 = (0..n)
-                        .filter(|&i| rows[i].axle == "front")
-                        .map(|i| c1 * x[*t][i])
-                        .sum();
+                    let wear = |i: usize| c1 * x[*t][i] / w[i];
+                    let total: f64 = (0..n).map(wear).sum();
+                    let front: f64 = (0..n).filter(|&i| rows[i].axle == "front").map(wear).sum();
                     (c.thresholds[*t], c1, front / total)
                 }
                 None => (f64::NAN, 0.0, f64::NAN),
@@ -577,13 +584,15 @@ mod tests {
         let refs: Vec<&KpiRow> = rows.iter().collect();
         let mref: Vec<Option<&EnergyMaps>> = maps.iter().map(Some).collect();
         let y: Vec<f64> = rows.iter().map(|r| r.wear_mean_pct).collect();
-        let base = vec![rows.iter().map(|r| r.friction_energy_j / 1e6).collect()];
+        let energy: Vec<f64> = rows.iter().map(|r| r.friction_energy_j / 1e6).collect();
+        let base = vec![energy.clone()];
         let lib: Vec<Candidate> = library(&refs).into_iter().take(15).collect();
         let problem = Problem {
             rows: &refs,
             maps: &mref,
             y: &y,
             base,
+            law_energy_mj: &energy,
             track_level: vec![false],
             relative: true,
         };

@@ -361,7 +361,7 @@ mod tests {
         };
         // Σ E·v·p/1e5 by hand: (2·0.75 + 1·2.25 + 0.5·4.25) MJ·m/s × 2.
         let want = (2.0 * 0.75 + 2.25 + 0.5 * 4.25) * 2.0;
-        let got = candidate_feature(&c[2], &r, Some(&map()), f64::NAN, (0.0, 1.0));
+        let got = candidate_feature(&c[2], &r, Some(&map()), f64::NAN, (0.0, 1.0), f64::NAN);
         assert!((got - want).abs() < 1e-12, "{got} vs {want}");
     }
 
@@ -412,7 +412,7 @@ mod tests {
             ..Default::default()
         };
         assert_eq!(
-            candidate_feature(&c[0], &front, Some(&map()), 100.0, (0.0, 1.0)),
+            candidate_feature(&c[0], &front, Some(&map()), 100.0, (0.0, 1.0), f64::NAN),
             0.0
         );
     }

@@ -48,7 +48,8 @@ pub struct Case {
     /// Planted effect (`None` for a clean season).
     pub effect: Option<Effect>,
     pub seed: u64,
-    /// Variance of the planted contribution over the variance of measured wear (truth).
+    /// Variance of the planted contribution over the variance of measured
+    /// wear (truth), over the tires that are not worn through.
     pub variance_share: f64,
     /// Truth: share of the planted wear on the front axle.
     pub truth_front_share: f64,
@@ -187,7 +188,14 @@ pub fn score_case(
             .unwrap_or(0.0)
     };
     let p: Vec<f64> = rows.iter().map(planted_of).collect();
-    let w: Vec<f64> = rows.iter().map(|r| r.wear_mean_pct).collect();
+    // The variance share over the tires the diagnosis keeps: a worn-through
+    // tire's measured wear is capped while its planted wear is not.
+    let (p_kept, w_kept): (Vec<f64>, Vec<f64>) = rows
+        .iter()
+        .zip(&p)
+        .filter(|(r, _)| r.worn_through_readings <= 0.0)
+        .map(|(r, v)| (*v, r.wear_mean_pct))
+        .unzip();
     let total: f64 = p.iter().sum();
     let front: f64 = rows
         .iter()
@@ -230,7 +238,7 @@ pub fn score_case(
         effect: effect.cloned(),
         seed,
         variance_share: if effect.is_some() {
-            variance(&p) / variance(&w)
+            variance(&p_kept) / variance(&w_kept)
         } else {
             0.0
         },
