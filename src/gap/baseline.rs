@@ -183,6 +183,14 @@ impl PhysicsBaseline {
             * (self.skewness_coefficient * r.skewness).exp()
     }
 
+    /// The law's abrasion per joule of a row at the reference temperature,
+    /// k_{c,a}·exp(s·Sk) (% per MJ); NaN for a group not seen in calibration.
+    pub fn abrasion(&self, r: &KpiRow) -> f64 {
+        self.k_pct_per_mj.get(&group(r)).map_or(f64::NAN, |k| {
+            k * (self.skewness_coefficient * r.skewness).exp()
+        })
+    }
+
     /// Predicted mean wear (%); NaN for a compound and axle not seen in calibration.
     pub fn predict(&self, r: &KpiRow, maps: Option<&EnergyMaps>) -> f64 {
         self.k_pct_per_mj

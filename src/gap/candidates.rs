@@ -24,11 +24,9 @@ pub enum Feature {
     HotSurfaceEnergy,
     /// Friction energy at sliding speeds above θ m/s (MJ).
     FastSlidingEnergy,
-    /// Road abrasion: the law's energy scaled by the road's micro-texture
-    /// above θ, E_law·max(0, Ra_micro − θ)/(0.01 mm) (MJ per 0.01 mm), with
-    /// E_law the baseline law's temperature-weighted energy (a rough road
-    /// raises the abrasion per joule the law already counts; see
-    /// [`candidate_feature`]).
+    /// Road abrasion: the law's wear scaled by the road's micro-texture above
+    /// θ, max(0, Ra_micro − θ)/(0.01 mm) (a rough road raises the abrasion
+    /// per joule the law already counts; see [`candidate_feature`]).
     RoughRoadEnergy,
     /// Camber: friction energy scaled by the run's mean camber magnitude
     /// beyond θ, E·max(0, |γ_c| − θ) (MJ·°): a tilted contact patch
@@ -373,25 +371,58 @@ pub fn feature(
     }
 }
 
-/// A candidate's term for a row: zero on the other axle. A road (track-level)
-/// term is `law_energy_mj` times its track's value: the baseline law's
-/// temperature-weighted energy Σ_b E_b·φ(T_b)·exp(s·Sk) under the physics
-/// baseline (a rough road scales the abrasion the law counts, so the term
-/// is a fixed share of the law's wear at each track, which is what the
-/// tracks' severities test), the friction energy under a statistical one.
+/// What the baseline's law says about one row; the mechanisms' terms are
+/// expressed in it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LawRow {
+    /// The law's abrasion per joule of this tire at the reference
+    /// temperature, k_{c,a}·exp(s·Sk) (% per MJ) under the physics baseline;
+    /// 1 under a statistical one.
+    pub abrasion: f64,
+    /// The law's energy term Σ_b E_b·φ(T_b)·exp(s·Sk) (MJ): its wear
+    /// without the compound-and-axle k; the friction energy under a
+    /// statistical baseline.
+    pub energy_mj: f64,
+}
+
+impl LawRow {
+    /// A statistical baseline's row: no law, the raw friction energy.
+    pub fn raw(r: &KpiRow) -> LawRow {
+        LawRow {
+            abrasion: 1.0,
+            energy_mj: r.friction_energy_j * 1e-6,
+        }
+    }
+}
+
+/// A candidate's term for a row: zero on the other axle.
+///
+/// Under the physics baseline a built-in mechanism's energy is charged at
+/// the law's own abrasion per joule for that tire (its compound, axle and
+/// road): a wear mechanism abrades the same rubber on the same road, so its
+/// coefficient is how many times the law's abrasion per joule it adds. A
+/// road (track-level) term is the law's energy term times its track's
+/// value: a rough road raises the abrasion the law counts, so the term is a
+/// fixed share of the law's wear at each track (up to k), which is what the
+/// tracks' severities test. Not times k: the fronts' k also carries their
+/// irregular wear, which the road does not scale (docs/gap.md). A user
+/// hypothesis that adds wear is charged like a built-in mechanism; generic
+/// KPI terms and two-sided hypotheses stay on the raw friction energy.
 pub fn candidate_feature(
     c: &Candidate,
     r: &KpiRow,
     maps: Option<&EnergyMaps>,
     theta: f64,
     kpi_scale: (f64, f64),
-    law_energy_mj: f64,
+    law: LawRow,
 ) -> f64 {
     match (c.axle, &c.user) {
         (Some(a), _) if r.axle != a => 0.0,
+        (_, Some(u)) if u.adds_wear => law.abrasion * u.feature(r, maps, theta),
         (_, Some(u)) => u.feature(r, maps, theta),
-        _ if c.feature.track_level() => {
-            row_factor(c, r, law_energy_mj) * track_value(c, r, theta, kpi_scale)
+        _ if c.feature.track_level() => row_factor(c, r, law) * track_value(c, r, theta, kpi_scale),
+        _ if c.feature.adds_wear_only() => {
+            law.abrasion * feature(c.feature, r, maps, theta, kpi_scale)
         }
         _ => feature(c.feature, r, maps, theta, kpi_scale),
     }
@@ -409,12 +440,13 @@ pub fn kpi_scale(c: &Candidate, rows: &[&KpiRow]) -> (f64, f64) {
     (m, if sd.is_finite() { sd } else { 0.0 })
 }
 
-/// A track-level term factored as `row_factor · track_value`: the row's
-/// law energy (MJ, zero off the candidate's axle) and its track's value at θ.
-pub fn row_factor(c: &Candidate, r: &KpiRow, law_energy_mj: f64) -> f64 {
+/// A track-level term factored as `row_factor · track_value`: the law's
+/// energy term of the row (zero off the candidate's axle) and its track's
+/// value at θ.
+pub fn row_factor(c: &Candidate, r: &KpiRow, law: LawRow) -> f64 {
     match c.axle {
         Some(a) if r.axle != a => 0.0,
-        _ => law_energy_mj,
+        _ => law.energy_mj,
     }
 }
 
@@ -436,32 +468,48 @@ mod tests {
     use super::*;
 
     #[test]
-    fn road_terms_scale_the_law_energy() {
-        // A front tire with law energy 2.5 MJ (its raw friction energy, 3 MJ,
-        // does not enter) on a road with Ra_micro 0.02 mm and kurtosis 3.5.
+    fn terms_are_charged_at_the_law_abrasion() {
+        // A front tire whose law abrades 0.4 %/MJ over an energy term of
+        // 2.5 MJ (its raw friction energy is 3 MJ), on a road with Ra_micro
+        // 0.02 mm and kurtosis 3.5, in 40 °C air.
         let r = KpiRow {
             axle: "front".into(),
             friction_energy_j: 3e6,
             ra_micro_mm: 0.02,
             kurtosis: 3.5,
+            t_air_avg_c: 40.0,
             ..Default::default()
+        };
+        let law = LawRow {
+            abrasion: 0.4,
+            energy_mj: 2.5,
         };
         let rows = vec![&r];
         let lib = library(&rows);
         let named = |name: &str| lib.iter().find(|c| c.name == name).expect(name);
-        let value = |c: &Candidate, t: f64, scale| candidate_feature(c, &r, None, t, scale, 2.5);
-        // 2.5 MJ × (0.02 − 0.005)/0.01 = 3.75; nothing on the other axle.
+        let kpi = |col: &'static str| {
+            lib.iter()
+                .find(|c| c.feature == Feature::Kpi(col))
+                .expect(col)
+        };
+        let mut m = EnergyMaps::new();
+        m.add(92.0, 100.0, 1.0, 2e6); // surface bin 90–95 °C
+        m.add(72.0, 100.0, 1.0, 1e6); // surface bin 70–75 °C
+        let value =
+            |c: &Candidate, t: f64, scale| candidate_feature(c, &r, Some(&m), t, scale, law);
+        // Road: 2.5 MJ × (0.02 − 0.005)/0.01 = 3.75; nothing on the other axle.
         let both = named("road abrasion (energy on micro-rough roads)");
         assert!((value(both, 0.005, (0.0, 1.0)) - 3.75).abs() < 1e-12);
         let rear = named("road abrasion (energy on micro-rough roads), rear axle");
         assert_eq!(value(rear, 0.005, (0.0, 1.0)), 0.0);
         // A road index: 2.5 MJ × (3.5 − 3.0)/0.25 = 5.
-        let kurtosis = lib
-            .iter()
-            .find(|c| c.feature == Feature::Kpi("kurtosis") && c.axle.is_none())
-            .expect("kurtosis is a road index");
-        assert!(kurtosis.feature.track_level());
-        assert!((value(kurtosis, f64::NAN, (3.0, 0.25)) - 5.0).abs() < 1e-12);
+        assert!(kpi("kurtosis").feature.track_level());
+        assert!((value(kpi("kurtosis"), f64::NAN, (3.0, 0.25)) - 5.0).abs() < 1e-12);
+        // A mechanism: 0.4 %/MJ × the 2 MJ with the surface above 80 °C = 0.8.
+        let hot = named("thermal degradation (energy with a hot surface)");
+        assert!((value(hot, 80.0, (0.0, 1.0)) - 0.8).abs() < 1e-12);
+        // A generic KPI stays on the raw energy: 3 MJ × (40 − 30)/5 = 6.
+        assert!((value(kpi("t_air_avg_c"), f64::NAN, (30.0, 5.0)) - 6.0).abs() < 1e-12);
     }
 
     #[test]

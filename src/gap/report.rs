@@ -5,7 +5,7 @@
 
 use super::acts::acts_in;
 use super::baseline::PhysicsBaseline;
-use super::candidates::{Candidate, candidate_feature, library, significant};
+use super::candidates::{Candidate, LawRow, candidate_feature, library, significant};
 use super::linear::{lstsq, residual, weighted};
 use super::scoring::{Problem, Score, ScoringSettings, rank, relative_weights};
 use super::slices::{Slice, slice_residuals};
@@ -201,14 +201,17 @@ pub fn diagnose(
     };
     // The physics law's last column (its skewness derivative) is constant
     // within tracks; so are road terms once selected.
-    // The energy a road term scales: the law's temperature-weighted energy
-    // (a rough road raises the abrasion the law counts).
-    let law_energy: Vec<f64> = all_rows
+    // What the law says about each row: the mechanisms' terms are charged
+    // at its abrasion per joule (`candidate_feature`).
+    let law: Vec<LawRow> = all_rows
         .iter()
         .zip(&row_maps)
         .map(|(r, m)| match &physics {
-            Some(p) => p.energy_term(r, *m),
-            None => r.friction_energy_j * 1e-6,
+            Some(p) => LawRow {
+                abrasion: p.abrasion(r),
+                energy_mj: p.energy_term(r, *m),
+            },
+            None => LawRow::raw(r),
         })
         .collect();
     let mut track_level: Vec<bool> = (0..base.len())
@@ -267,7 +270,7 @@ pub fn diagnose(
                 y: &y[..n_train],
                 base: base.iter().map(|c| c[..n_train].to_vec()).collect(),
                 track_level: track_level.clone(),
-                law_energy_mj: &law_energy[..n_train],
+                law: &law[..n_train],
                 relative: physics.is_some(),
             };
             let ranked = rank(&problem, &lib, &settings.scoring);
@@ -295,7 +298,7 @@ pub fn diagnose(
                                 row_maps[i],
                                 c.threshold,
                                 c.kpi_scale,
-                                law_energy[i],
+                                law[i],
                             )
                         })
                         .collect();
@@ -366,7 +369,7 @@ pub fn diagnose(
                         row_maps[i],
                         best.threshold,
                         best.kpi_scale,
-                        law_energy[i],
+                        law[i],
                     )
                 })
                 .collect();
@@ -556,7 +559,7 @@ pub fn render_markdown(d: &Diagnosis, max_slices: usize) -> String {
     if !d.candidates.is_empty() {
         let _ = writeln!(
             s,
-            "\n## Which unmodelled effect\n\nEach candidate term is refitted with the baseline's per-group energy terms on the training events, on the relative scale (rows divided by the baseline). CV gain: 1 − held-out SSE / held-out SSE of the baseline alone, whole tracks left out in turn, the threshold scanned on the training folds only. p: Freedman–Lane permutation test of the nested models (residuals permuted within track and axle), max F over the threshold grid; road terms: F test of the tracks' severities on their road value, max F over the grid against Monte Carlo draws, Benjamini–Hochberg over {} candidates. Front share: the part of the term's wear on the front axle. Acts in: the flagged slices of step 1 whose gap the fitted term follows most, with the part of the slice's mean residual it accounts for. Definitions: docs/gap.md.\n\n| candidate | threshold | coefficient | CV gain | p adj. | front share | acts in (part of the slice's mean gap) |\n|---|---|---|---|---|---|---|",
+            "\n## Which unmodelled effect\n\nEach candidate term is refitted with the baseline's per-group energy terms on the training events, on the relative scale (rows divided by the baseline). CV gain: 1 − held-out SSE / held-out SSE of the baseline alone, whole tracks left out in turn, the threshold scanned on the training folds only. p: Freedman–Lane permutation test of the nested models (residuals permuted within track and axle), max F over the threshold grid; road terms: F test of the tracks' severities on their road value, max F over the grid against Monte Carlo draws, Benjamini–Hochberg over {} candidates. Coefficient (physics baseline): how many times the law's abrasion per joule a mechanism adds; for a road term, % per MJ of the law's energy term per unit of its road value; for a generic KPI, % per MJ and sd. Front share: the part of the term's wear on the front axle. Acts in: the flagged slices of step 1 whose gap the fitted term follows most, with the part of the slice's mean residual it accounts for. Definitions: docs/gap.md.\n\n| candidate | threshold | coefficient | CV gain | p adj. | front share | acts in (part of the slice's mean gap) |\n|---|---|---|---|---|---|---|",
             d.candidates.len()
         );
         for c in d.candidates.iter().take(max_slices.min(10)) {

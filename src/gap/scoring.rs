@@ -18,7 +18,7 @@
 //!   coefficients count. Details and measured behaviour: docs/gap.md.
 
 use super::acts::ActsIn;
-use super::candidates::{Candidate, Feature, candidate_feature, kpi_scale};
+use super::candidates::{Candidate, Feature, LawRow, candidate_feature, kpi_scale};
 use super::linear::{dot, lstsq, orthonormal_basis, project_out, residual, weighted};
 use super::stats::{benjamini_hochberg, levels};
 use super::track_test::Severities;
@@ -57,10 +57,9 @@ pub struct Problem<'a> {
     /// skewness derivative, road terms already selected): the track-level
     /// test takes them as the tracks' null (`track_test`).
     pub track_level: Vec<bool>,
-    /// The energy a road term scales, per row (MJ): the physics law's
-    /// temperature-weighted energy, or the friction energy
-    /// ([`candidate_feature`]).
-    pub law_energy_mj: &'a [f64],
+    /// What the baseline's law says about each row: the mechanisms' terms
+    /// are charged at its abrasion per joule ([`candidate_feature`]).
+    pub law: &'a [LawRow],
     /// Work on the relative scale (rows divided by the baseline's
     /// prediction): right for the multiplicative physics law; a statistical
     /// model's errors are additive, so its rows keep their weight.
@@ -76,7 +75,11 @@ pub struct Score {
     /// Threshold chosen on all rows scored (NaN for KPI candidates, or when
     /// no threshold gives a positive coefficient).
     pub threshold: f64,
-    /// Coefficient of the term (% of tread per MJ; for a KPI, per MJ and per sd).
+    /// Coefficient of the term. Under the physics baseline a mechanism's is
+    /// the multiple of the law's abrasion per joule it adds (a road term's:
+    /// % per MJ of the law's energy term per unit of its road value); a generic
+    /// KPI's, % of tread per MJ and per sd. Under a statistical baseline,
+    /// % per MJ (per MJ and sd for a KPI).
     pub coefficient: f64,
     /// 1 − held-out SSE(baseline + term) / held-out SSE(baseline), groups left out in turn.
     pub cv_gain: f64,
@@ -451,7 +454,7 @@ pub fn rank(problem: &Problem, library: &[Candidate], settings: &ScoringSettings
                 .map(|&t| {
                     (0..n)
                         .map(|i| {
-                            let law = problem.law_energy_mj[i];
+                            let law = problem.law[i];
                             w[i] * candidate_feature(c, rows[i], problem.maps[i], t, scale, law)
                         })
                         .collect()
@@ -584,15 +587,15 @@ mod tests {
         let refs: Vec<&KpiRow> = rows.iter().collect();
         let mref: Vec<Option<&EnergyMaps>> = maps.iter().map(Some).collect();
         let y: Vec<f64> = rows.iter().map(|r| r.wear_mean_pct).collect();
-        let energy: Vec<f64> = rows.iter().map(|r| r.friction_energy_j / 1e6).collect();
-        let base = vec![energy.clone()];
+        let base = vec![rows.iter().map(|r| r.friction_energy_j / 1e6).collect()];
+        let law: Vec<LawRow> = rows.iter().map(LawRow::raw).collect();
         let lib: Vec<Candidate> = library(&refs).into_iter().take(15).collect();
         let problem = Problem {
             rows: &refs,
             maps: &mref,
             y: &y,
             base,
-            law_energy_mj: &energy,
+            law: &law,
             track_level: vec![false],
             relative: true,
         };

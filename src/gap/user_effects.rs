@@ -276,7 +276,7 @@ pub fn load(path: &Path) -> Result<Vec<Candidate>, GapError> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::gap::candidates::{candidate_feature, feature};
+    use crate::gap::candidates::{LawRow, candidate_feature, feature};
 
     fn map() -> EnergyMaps {
         let mut m = EnergyMaps::new();
@@ -361,7 +361,14 @@ mod tests {
         };
         // Σ E·v·p/1e5 by hand: (2·0.75 + 1·2.25 + 0.5·4.25) MJ·m/s × 2.
         let want = (2.0 * 0.75 + 2.25 + 0.5 * 4.25) * 2.0;
-        let got = candidate_feature(&c[2], &r, Some(&map()), f64::NAN, (0.0, 1.0), f64::NAN);
+        let got = candidate_feature(
+            &c[2],
+            &r,
+            Some(&map()),
+            f64::NAN,
+            (0.0, 1.0),
+            LawRow::raw(&r),
+        );
         assert!((got - want).abs() < 1e-12, "{got} vs {want}");
     }
 
@@ -412,7 +419,14 @@ mod tests {
             ..Default::default()
         };
         assert_eq!(
-            candidate_feature(&c[0], &front, Some(&map()), 100.0, (0.0, 1.0), f64::NAN),
+            candidate_feature(
+                &c[0],
+                &front,
+                Some(&map()),
+                100.0,
+                (0.0, 1.0),
+                LawRow::raw(&front)
+            ),
             0.0
         );
     }
