@@ -28,6 +28,11 @@ pub enum Feature {
     /// θ, max(0, Ra_micro − θ)/(0.01 mm) (a rough road raises the abrasion
     /// per joule the law already counts; see [`candidate_feature`]).
     RoughRoadEnergy,
+    /// Road abrasion growing with the square of the micro-texture above θ,
+    /// (max(0, Ra_micro − θ)/(0.01 mm))²: hysteresis losses on a rough road
+    /// grow with its mean-square slope, so the abrasion can rise faster
+    /// than linearly, and a hinge would extrapolate it short.
+    RoughRoadEnergySquared,
     /// Camber: friction energy scaled by the run's mean camber magnitude
     /// beyond θ, E·max(0, |γ_c| − θ) (MJ·°): a tilted contact patch
     /// concentrates the sliding on one shoulder.
@@ -55,7 +60,7 @@ impl Feature {
             Feature::ColdTreadLateralEnergy => Some("graining"),
             Feature::HotInnerEnergy => Some("blistering"),
             Feature::HotSurfaceEnergy => Some("thermal"),
-            Feature::RoughRoadEnergy => Some("road-abrasion"),
+            Feature::RoughRoadEnergy | Feature::RoughRoadEnergySquared => Some("road-abrasion"),
             // Energy scaled by a road-texture index is road abrasion too:
             // with a season's handful of tracks, which index carries it
             // cannot be told apart (docs/gap.md).
@@ -80,7 +85,7 @@ impl Feature {
     /// causes by comparing tracks, so it is tested across tracks.
     pub fn track_level(&self) -> bool {
         match self {
-            Feature::RoughRoadEnergy => true,
+            Feature::RoughRoadEnergy | Feature::RoughRoadEnergySquared => true,
             Feature::Kpi(c) => ROAD_KPIS.contains(c),
             _ => false,
         }
@@ -93,7 +98,7 @@ impl Feature {
             | Feature::HotInnerEnergy
             | Feature::HotSurfaceEnergy => "°C",
             Feature::FastSlidingEnergy => "m/s",
-            Feature::RoughRoadEnergy => "mm",
+            Feature::RoughRoadEnergy | Feature::RoughRoadEnergySquared => "mm",
             Feature::CamberEnergy => "°",
             Feature::PressureEnergy => "Pa",
             Feature::SmallPatchEnergy => "mm²",
@@ -170,10 +175,10 @@ pub const BASELINE_KPIS: [&str; 4] = [
     "ra_micro_mm",
 ];
 
-/// The library: five wear mechanisms, each on both axles and on each axle
-/// alone; three set-up mechanisms (camber, pressure, contact patch) on both
-/// axles; every KPI the physics baseline does not use (road-texture indexes
-/// as road abrasion).
+/// The library: six wear mechanisms (road abrasion in two forms), each on
+/// both axles and on each axle alone; three set-up mechanisms (camber,
+/// pressure, contact patch) on both axles; every KPI the physics baseline
+/// does not use (road-texture indexes as road abrasion).
 pub fn library(rows: &[&KpiRow]) -> Vec<Candidate> {
     let steps = |lo: f64, hi: f64, step: f64| -> Vec<f64> {
         (0..)
@@ -217,6 +222,11 @@ pub fn library(rows: &[&KpiRow]) -> Vec<Candidate> {
         (
             "road abrasion (energy on micro-rough roads)",
             Feature::RoughRoadEnergy,
+            micro.clone(),
+        ),
+        (
+            "road abrasion (energy × squared micro-roughness)",
+            Feature::RoughRoadEnergySquared,
             micro,
         ),
     ];
@@ -347,7 +357,7 @@ pub fn feature(
             m.weighted_speed_surface(|v, _| (v > theta) as u8 as f64) * mj
         }),
         // Track-level: `candidate_feature` scales the law's energy.
-        Feature::RoughRoadEnergy => f64::NAN,
+        Feature::RoughRoadEnergy | Feature::RoughRoadEnergySquared => f64::NAN,
         Feature::CamberEnergy => {
             r.friction_energy_j * mj * (r.camber_avg_deg.abs() - theta).max(0.0)
         }
@@ -454,6 +464,7 @@ pub fn row_factor(c: &Candidate, r: &KpiRow, law: LawRow) -> f64 {
 pub fn track_value(c: &Candidate, track_row: &KpiRow, theta: f64, kpi_scale: (f64, f64)) -> f64 {
     match c.feature {
         Feature::RoughRoadEnergy => road_excess(track_row.ra_micro_mm, theta),
+        Feature::RoughRoadEnergySquared => road_excess(track_row.ra_micro_mm, theta).powi(2),
         Feature::Kpi(col) => {
             let (m, sd) = kpi_scale;
             let x = track_row.number(col).unwrap_or(f64::NAN);
@@ -502,6 +513,9 @@ mod tests {
         assert!((value(both, 0.005, (0.0, 1.0)) - 3.75).abs() < 1e-12);
         let rear = named("road abrasion (energy on micro-rough roads), rear axle");
         assert_eq!(value(rear, 0.005, (0.0, 1.0)), 0.0);
+        // Squared: 2.5 MJ × 1.5² = 5.625.
+        let squared = named("road abrasion (energy × squared micro-roughness)");
+        assert!((value(squared, 0.005, (0.0, 1.0)) - 5.625).abs() < 1e-12);
         // A road index: 2.5 MJ × (3.5 − 3.0)/0.25 = 5.
         assert!(kpi("kurtosis").feature.track_level());
         assert!((value(kpi("kurtosis"), f64::NAN, (3.0, 0.25)) - 5.0).abs() < 1e-12);
