@@ -91,7 +91,9 @@ pub struct Score {
     pub p: f64,
     /// Benjamini–Hochberg over the candidates.
     pub p_adjusted: f64,
-    /// Share of the fitted term's wear (%, on the rows scored) on the front axle (0..1).
+    /// Share of the fitted term's wear (%, on the rows scored) on the front
+    /// axle (0..1); NaN for a term that may change sign (generic KPI, two-sided
+    /// hypothesis).
     pub front_share: f64,
     /// (mean, sd) standardising a KPI candidate.
     #[serde(skip)]
@@ -483,7 +485,10 @@ pub fn rank(problem: &Problem, library: &[Candidate], settings: &ScoringSettings
                     let wear = |i: usize| c1 * x[*t][i] / w[i];
                     let total: f64 = (0..n).map(wear).sum();
                     let front: f64 = (0..n).filter(|&i| rows[i].axle == "front").map(wear).sum();
-                    (c.thresholds[*t], c1, front / total)
+                    // A term that changes sign across rows (a generic KPI,
+                    // a two-sided hypothesis) has no share to speak of.
+                    let share = if positive { front / total } else { f64::NAN };
+                    (c.thresholds[*t], c1, share)
                 }
                 None => (f64::NAN, 0.0, f64::NAN),
             };
