@@ -47,7 +47,9 @@ pub enum Feature {
     /// smaller patch means higher contact pressure.
     SmallPatchEnergy,
     /// Generic: friction energy × the KPI standardised over the rows scored,
-    /// E·(x − mean)/sd (MJ): wear per joule that varies with the KPI.
+    /// E·(x − mean)/sd (MJ): wear per joule that varies with the KPI. A road
+    /// index is a track-level term on the law's energy instead
+    /// ([`candidate_feature`]).
     Kpi(&'static str),
     /// A user hypothesis from `effects.toml` (`Candidate::user`).
     User,
@@ -317,8 +319,10 @@ fn road_excess(ra_micro_mm: f64, theta: f64) -> f64 {
     (ra_micro_mm - theta).max(0.0) / 0.01
 }
 
-/// The term of one row at threshold θ (MJ); `kpi_scale` = (mean, sd) of a
-/// generic KPI over the rows scored.
+/// The energy of one row's term at threshold θ (MJ), before
+/// [`candidate_feature`] charges it; `kpi_scale` = (mean, sd) of a generic
+/// KPI over the rows scored. NaN for the road-abrasion forms, which only
+/// exist as track-level terms.
 pub fn feature(
     f: Feature,
     r: &KpiRow,
