@@ -24,9 +24,10 @@ pub enum Feature {
     HotSurfaceEnergy,
     /// Friction energy at sliding speeds above θ m/s (MJ).
     FastSlidingEnergy,
-    /// Road abrasion: the law's wear scaled by the road's micro-texture above
-    /// θ, max(0, Ra_micro − θ)/(0.01 mm) (a rough road raises the abrasion
-    /// per joule the law already counts; see [`candidate_feature`]).
+    /// Road abrasion: the law's energy term scaled by the road's
+    /// micro-texture above θ, max(0, Ra_micro − θ)/(0.01 mm) (a rough road
+    /// raises the abrasion per joule the law already counts; see
+    /// [`candidate_feature`]).
     RoughRoadEnergy,
     /// Road abrasion growing with the square of the micro-texture above θ,
     /// (max(0, Ra_micro − θ)/(0.01 mm))²: hysteresis losses on a rough road
