@@ -80,24 +80,25 @@ fn demo_season_extracts_to_complete_rows() {
     assert_eq!(maps.len(), rows.len());
     for r in &rows {
         let m = &maps[&(r.run.clone(), r.wheel.clone())];
-        let speed: f64 = m.speed_surface.iter().sum();
-        for total in [m.total(), speed] {
+        let close = |what: &str, got: f64, want: f64| {
             assert!(
-                (total - r.friction_energy_j).abs() <= 1e-9 * r.friction_energy_j.abs(),
-                "{} {}: {total} vs {}",
+                (got - want).abs() <= 1e-9 * want.abs(),
+                "{} {}: {what} {got} vs {want}",
                 r.run,
-                r.wheel,
-                r.friction_energy_j
+                r.wheel
             );
-        }
+        };
+        close("total", m.total(), r.friction_energy_j);
+        close(
+            "speed map",
+            m.speed_surface.iter().sum(),
+            r.friction_energy_j,
+        );
         // The lateral map holds the lateral part, friction_energy_y_j.
-        let lateral: f64 = m.lateral_surface_inner.iter().sum();
-        assert!(
-            (lateral - r.friction_energy_y_j).abs() <= 1e-9 * r.friction_energy_y_j.abs(),
-            "{} {}: lateral {lateral} vs {}",
-            r.run,
-            r.wheel,
-            r.friction_energy_y_j
+        close(
+            "lateral",
+            m.lateral_surface_inner.iter().sum(),
+            r.friction_energy_y_j,
         );
     }
     // The extracted wear target tracks the simulator's truth (readings noise and

@@ -46,6 +46,14 @@ fn statistics_equal_statsmodels_and_scipy() {
     }
 }
 
+/// An effect at `magnitude` with its threshold moved off the default.
+fn planted(kind: EffectKind, magnitude: f64, threshold: f64) -> Effect {
+    Effect {
+        threshold,
+        ..Effect::with_defaults(kind, magnitude)
+    }
+}
+
 fn settings(work: &std::path::Path) -> ValidateSettings {
     ValidateSettings {
         effects: vec![],
@@ -76,8 +84,7 @@ fn settings(work: &std::path::Path) -> ValidateSettings {
 fn planted_graining_is_found_on_the_front_axle() {
     let dir = tempfile::tempdir().unwrap();
     let s = settings(dir.path());
-    let mut e = Effect::with_defaults(EffectKind::Graining, 1.0);
-    e.threshold = 81.0;
+    let e = planted(EffectKind::Graining, 1.0, 81.0);
     let (case, d) = run_case(Some(&e), 1, &s).unwrap();
     assert!(case.hit, "{case:?}\n{:?}", d.candidates.first());
     assert!(
@@ -98,8 +105,7 @@ fn planted_graining_is_found_on_the_front_axle() {
 #[test]
 fn planted_blistering_is_found() {
     let dir = tempfile::tempdir().unwrap();
-    let mut e = Effect::with_defaults(EffectKind::Blistering, 1.0);
-    e.threshold = 125.0;
+    let e = planted(EffectKind::Blistering, 1.0, 125.0);
     let (case, d) = run_case(Some(&e), 3, &settings(dir.path())).unwrap();
     assert!(
         case.hit && case.hit_axle,
@@ -151,8 +157,7 @@ fn season_settings(work: &std::path::Path) -> ValidateSettings {
 #[test]
 fn planted_road_abrasion_is_found_across_tracks() {
     let dir = tempfile::tempdir().unwrap();
-    let mut e = Effect::with_defaults(EffectKind::RoadAbrasion, 2.0);
-    e.threshold = 0.035;
+    let e = planted(EffectKind::RoadAbrasion, 2.0, 0.035);
     let (case, d) = run_case(Some(&e), 3, &season_settings(dir.path())).unwrap();
     let added: Vec<&str> = d.steps.iter().map(|s| s.added.as_str()).collect();
     assert!(case.hit && case.hit_axle, "{case:?}\n{added:?}");
