@@ -10,6 +10,7 @@ pub mod baseline;
 pub mod candidates;
 pub mod error;
 pub mod linear;
+pub mod recalibrate;
 pub mod report;
 pub mod scoring;
 pub mod slices;

@@ -1,0 +1,260 @@
+//! Step 3's refit of the physics law around the terms it selected.
+//!
+//! Scoring (step 2) needs the law as linear columns, so it linearises it
+//! around its calibration: ∂/∂γ and ∂/∂s columns. That is exact enough for
+//! ranking, not for predicting new events once a strong effect is in: the
+//! calibration without the effect pulls γ and s far from where they belong
+//! (planted blistering at magnitude 4 moved s from about 0 to −0.375), and
+//! the tangent columns extrapolate badly to the testing tracks. So after a
+//! term enters, the law is calibrated again, exactly as the baseline was
+//! (γ and s on their grids, k in closed form), on the measured wear minus
+//! the terms' wear; the terms are recomputed with that law (their charge is
+//! the law's abrasion per joule) and refitted with its columns; and so on
+//! until the calibration settles (backfitting). Measured on that season:
+//! testing RMSE 4.61 % with the tangent columns, 2.86 % refitted (and one
+//! term fewer), 2.0 % ideal.
+
+use super::baseline::PhysicsBaseline;
+use super::candidates::{Candidate, LawRow, candidate_feature};
+use super::linear::{lstsq, residual, weighted};
+use super::scoring::relative_weights;
+use crate::ingest::compound::Wlf;
+use crate::kpi::KpiRow;
+use crate::kpi::energy_map::EnergyMaps;
+use std::collections::BTreeMap;
+
+/// Most rounds of backfitting (the planted law of the unit test settles in
+/// five).
+const MAX_ROUNDS: usize = 10;
+
+/// A term selected by step 3, at its threshold.
+#[derive(Debug, Clone)]
+pub struct Term {
+    pub candidate: Candidate,
+    pub threshold: f64,
+    /// (mean, sd) standardising a generic KPI term.
+    pub kpi_scale: (f64, f64),
+}
+
+/// The rows of a diagnosis: training rows first, then testing rows.
+pub struct Rows<'a> {
+    pub rows: &'a [&'a KpiRow],
+    pub maps: &'a [Option<&'a EnergyMaps>],
+    /// Measured mean wear (%).
+    pub y: &'a [f64],
+    pub n_train: usize,
+}
+
+/// The law and the terms fitted together.
+#[derive(Debug, Clone)]
+pub struct Refitted {
+    /// The law recalibrated around the terms.
+    pub law: PhysicsBaseline,
+    /// What that law says about each row (the terms' charges).
+    pub law_rows: Vec<LawRow>,
+    /// The law's columns (`PhysicsBaseline::columns`), then one per term.
+    pub columns: Vec<Vec<f64>>,
+    /// Relative-scale row weights of the training rows.
+    pub weights: Vec<f64>,
+    /// Coefficients of `columns`, fitted on the training rows.
+    pub coefficients: Vec<f64>,
+    /// Fitted wear (%) of every row.
+    pub fitted: Vec<f64>,
+    /// SSE (%²) on the training rows: the law's own calibration criterion.
+    sse: f64,
+}
+
+/// What `law` says about each row.
+pub fn law_rows(law: &PhysicsBaseline, d: &Rows) -> Vec<LawRow> {
+    d.rows
+        .iter()
+        .zip(d.maps)
+        .map(|(r, m)| LawRow {
+            abrasion: law.abrasion(r),
+            energy_mj: law.energy_term(r, *m),
+        })
+        .collect()
+}
+
+/// The terms and `law`'s columns fitted on the training rows, on the
+/// relative scale (weights from the law's columns and the terms).
+fn fit_terms(law: PhysicsBaseline, terms: &[Term], d: &Rows) -> Refitted {
+    let law_rows = law_rows(&law, d);
+    let mut columns = law.columns(d.rows, d.maps);
+    for t in terms {
+        columns.push(
+            (0..d.rows.len())
+                .map(|i| {
+                    candidate_feature(
+                        &t.candidate,
+                        d.rows[i],
+                        d.maps[i],
+                        t.threshold,
+                        t.kpi_scale,
+                        law_rows[i],
+                    )
+                })
+                .collect(),
+        );
+    }
+    let train: Vec<usize> = (0..d.n_train).collect();
+    let weights = relative_weights(
+        &columns
+            .iter()
+            .map(|c| c[..d.n_train].to_vec())
+            .collect::<Vec<_>>(),
+        &d.y[..d.n_train],
+    );
+    let refs: Vec<&[f64]> = columns.iter().map(|c| c.as_slice()).collect();
+    let scaled: Vec<Vec<f64>> = columns.iter().map(|c| weighted(c, &weights)).collect();
+    let scaled_refs: Vec<&[f64]> = scaled.iter().map(|c| c.as_slice()).collect();
+    let wy = weighted(d.y, &weights);
+    let coefficients = lstsq(&scaled_refs, &wy, &train);
+    let fitted: Vec<f64> = (0..d.y.len())
+        .map(|i| d.y[i] - residual(&refs, &coefficients, d.y, i))
+        .collect();
+    let sse = train.iter().map(|&i| (d.y[i] - fitted[i]).powi(2)).sum();
+    Refitted {
+        law,
+        law_rows,
+        columns,
+        weights,
+        coefficients,
+        fitted,
+        sse,
+    }
+}
+
+/// Same γ (or β) and s, and every k within a relative 1e-6: the terms'
+/// charges (k·exp(s·Sk)) would not move.
+fn settled(a: &PhysicsBaseline, b: &PhysicsBaseline) -> bool {
+    a.temperature_factor == b.temperature_factor
+        && a.skewness_coefficient == b.skewness_coefficient
+        && a.k_pct_per_mj.iter().all(|(g, k)| {
+            b.k_pct_per_mj
+                .get(g)
+                .is_some_and(|kb| (k - kb).abs() <= 1e-6 * k.abs())
+        })
+}
+
+/// Backfitting from `start`: calibrate the law on the wear minus the
+/// terms' wear, refit the terms with it, until the calibration settles.
+/// The round with the smallest training SSE is kept (a law that hops
+/// between two neighbouring grid points does not settle).
+pub fn refit_law(
+    start: &PhysicsBaseline,
+    terms: &[Term],
+    d: &Rows,
+    wlf: &BTreeMap<String, Wlf>,
+) -> Refitted {
+    let mut current = fit_terms(start.clone(), terms, d);
+    let mut best = current.clone();
+    let n_law = current.columns.len() - terms.len();
+    for _ in 0..MAX_ROUNDS {
+        let cleaned: Vec<KpiRow> = (0..d.n_train)
+            .map(|i| {
+                let terms_wear: f64 = (n_law..current.columns.len())
+                    .map(|j| current.coefficients[j] * current.columns[j][i])
+                    .sum();
+                KpiRow {
+                    wear_mean_pct: d.y[i] - terms_wear,
+                    ..d.rows[i].clone()
+                }
+            })
+            .collect();
+        let refs: Vec<&KpiRow> = cleaned.iter().collect();
+        let law = PhysicsBaseline::fit(&refs, &d.maps[..d.n_train], wlf);
+        if settled(&law, &current.law) {
+            break;
+        }
+        current = fit_terms(law, terms, d);
+        if current.sse < best.sse {
+            best = current.clone();
+        }
+    }
+    best
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::gap::baseline::TemperatureFactor;
+    use crate::gap::candidates::library;
+
+    #[test]
+    fn recovers_a_planted_law_and_term_from_a_wrong_calibration() {
+        // wear = k·exp(s·Sk)·[Σ_b E_b·exp(β(T_b − 60)) + c·E_hot] with
+        // β = 0.03 /K, s = 0.2, c = 0.5, k = 1.5 (soft front) and 0.8 (hard
+        // rear); E_hot is the energy with the surface above 80 °C. The law
+        // calibrated without the term is off; backfitting returns to the
+        // planted law and c exactly (β and s on their grids).
+        let (beta, s, c) = (0.03, 0.2, 0.5);
+        let mut rows = Vec::new();
+        let mut maps = Vec::new();
+        for i in 0..48 {
+            let (compound, axle, k) = if i % 2 == 0 {
+                ("soft", "front", 1.5)
+            } else {
+                ("hard", "rear", 0.8)
+            };
+            let cool_mj = 4.0 + (i % 5) as f64;
+            let warm_mj = 1.0 + (i % 4) as f64;
+            let hot_mj = 0.5 * (i % 7) as f64;
+            let sk = -1.0 + 0.1 * (i % 9) as f64;
+            let mut m = EnergyMaps::new();
+            m.add(61.0, 90.0, 1.0, cool_mj * 1e6); // surface bin 60–65 °C
+            m.add(76.0, 100.0, 1.0, warm_mj * 1e6); // surface bin 75–80 °C
+            m.add(91.0, 110.0, 1.0, hot_mj * 1e6); // surface bin 90–95 °C
+            let phi = |t: f64| (beta * (t - 60.0)).exp();
+            let law = cool_mj * phi(62.5) + warm_mj * phi(77.5) + hot_mj * phi(92.5);
+            rows.push(KpiRow {
+                compound: compound.into(),
+                axle: axle.into(),
+                track: format!("t{}", i % 6),
+                friction_energy_j: (cool_mj + warm_mj + hot_mj) * 1e6,
+                t_surface_avg_c: 70.0,
+                skewness: sk,
+                wear_mean_pct: k * (s * sk).exp() * (law + c * hot_mj),
+                ..Default::default()
+            });
+            maps.push(m);
+        }
+        let refs: Vec<&KpiRow> = rows.iter().collect();
+        let map_refs: Vec<Option<&EnergyMaps>> = maps.iter().map(Some).collect();
+        let y: Vec<f64> = rows.iter().map(|r| r.wear_mean_pct).collect();
+        let no_wlf = BTreeMap::new();
+        let start = PhysicsBaseline::fit(&refs, &map_refs, &no_wlf);
+        assert_ne!(
+            start.temperature_factor,
+            TemperatureFactor::Exponential { beta_per_k: beta }
+        );
+        let thermal = library(&refs)
+            .into_iter()
+            .find(|c| c.name == "thermal degradation (energy with a hot surface)")
+            .expect("thermal candidate");
+        let terms = [Term {
+            candidate: thermal,
+            threshold: 80.0,
+            kpi_scale: (0.0, 1.0),
+        }];
+        let d = Rows {
+            rows: &refs,
+            maps: &map_refs,
+            y: &y,
+            n_train: refs.len(),
+        };
+        let r = refit_law(&start, &terms, &d, &no_wlf);
+        assert_eq!(
+            r.law.temperature_factor,
+            TemperatureFactor::Exponential { beta_per_k: beta }
+        );
+        assert!((r.law.skewness_coefficient - s).abs() < 1e-9);
+        assert!((r.law.k_pct_per_mj["soft/front"] - 1.5).abs() < 1e-6);
+        let term_c = r.coefficients[r.coefficients.len() - 1];
+        assert!((term_c - c).abs() < 1e-6, "{term_c}");
+        let worst = (0..y.len())
+            .map(|i| (y[i] - r.fitted[i]).abs())
+            .fold(0.0, f64::max);
+        assert!(worst < 1e-6, "{worst}");
+    }
+}
