@@ -321,7 +321,7 @@ fn road_excess(ra_micro_mm: f64, theta: f64) -> f64 {
 }
 
 /// The energy of one row's term at threshold θ (MJ), before
-/// [`candidate_feature`] charges it; `kpi_scale` = (mean, sd) of a generic
+/// [`candidate_feature`] charges it; `kpi_scale` standardises a generic
 /// KPI over the rows scored. NaN for the road-abrasion forms, which only
 /// exist as track-level terms.
 pub fn feature(
@@ -329,7 +329,7 @@ pub fn feature(
     r: &KpiRow,
     maps: Option<&EnergyMaps>,
     theta: f64,
-    kpi_scale: (f64, f64),
+    kpi_scale: KpiScale,
 ) -> f64 {
     let mj = 1e-6;
     let sum_surface_inner = |keep: &dyn Fn(f64, f64) -> bool| -> f64 {
@@ -373,13 +373,7 @@ pub fn feature(
             r.friction_energy_j * mj * (theta - r.contact_patch_mm2).max(0.0) / 1e3
         }
         Feature::Kpi(c) => {
-            let (m, sd) = kpi_scale;
-            let x = r.number(c).unwrap_or(f64::NAN);
-            if sd > 0.0 {
-                r.friction_energy_j * mj * (x - m) / sd
-            } else {
-                0.0
-            }
+            r.friction_energy_j * mj * kpi_scale.standardised(r.number(c).unwrap_or(f64::NAN))
         }
         // Needs the candidate's expression: see `candidate_feature`.
         Feature::User => f64::NAN,
@@ -428,7 +422,7 @@ pub fn candidate_feature(
     r: &KpiRow,
     maps: Option<&EnergyMaps>,
     theta: f64,
-    kpi_scale: (f64, f64),
+    kpi_scale: KpiScale,
     law: LawRow,
 ) -> f64 {
     match (c.axle, &c.user) {
@@ -443,16 +437,56 @@ pub fn candidate_feature(
     }
 }
 
-/// (mean, sd) of a generic KPI candidate's column over `rows`; (0, 1) otherwise.
-pub fn kpi_scale(c: &Candidate, rows: &[&KpiRow]) -> (f64, f64) {
+/// How a generic KPI enters its term: standardised over the rows scored,
+/// and held within the range seen there. A generic term is a straight line
+/// in the KPI with no physics behind it, so it is not extended beyond the
+/// training data, and new events can lie far outside it (on a season-preset
+/// season the two coldest tracks, both testing events, have 1.6 times the
+/// longest training track's sliding distance).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct KpiScale {
+    pub mean: f64,
+    pub sd: f64,
+    /// The range of the rows scored.
+    pub min: f64,
+    pub max: f64,
+}
+
+impl KpiScale {
+    /// No standardising: for every candidate but a generic KPI.
+    pub const NONE: KpiScale = KpiScale {
+        mean: 0.0,
+        sd: 1.0,
+        min: f64::NEG_INFINITY,
+        max: f64::INFINITY,
+    };
+
+    /// (clamp(x, min, max) − mean)/sd; 0 for a constant column.
+    pub fn standardised(&self, x: f64) -> f64 {
+        if self.sd > 0.0 {
+            (x.clamp(self.min, self.max) - self.mean) / self.sd
+        } else {
+            0.0
+        }
+    }
+}
+
+/// The [`KpiScale`] of a generic KPI candidate's column over `rows`;
+/// [`KpiScale::NONE`] otherwise.
+pub fn kpi_scale(c: &Candidate, rows: &[&KpiRow]) -> KpiScale {
     let Feature::Kpi(col) = c.feature else {
-        return (0.0, 1.0);
+        return KpiScale::NONE;
     };
     let v: Vec<f64> = rows.iter().filter_map(|r| r.number(col)).collect();
     let n = v.len() as f64;
-    let m = v.iter().sum::<f64>() / n;
-    let sd = (v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();
-    (m, if sd.is_finite() { sd } else { 0.0 })
+    let mean = v.iter().sum::<f64>() / n;
+    let sd = (v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();
+    KpiScale {
+        mean,
+        sd: if sd.is_finite() { sd } else { 0.0 },
+        min: v.iter().copied().fold(f64::INFINITY, f64::min),
+        max: v.iter().copied().fold(f64::NEG_INFINITY, f64::max),
+    }
 }
 
 /// A track-level term factored as `row_factor · track_value`: the law's
@@ -466,15 +500,11 @@ pub fn row_factor(c: &Candidate, r: &KpiRow, law: LawRow) -> f64 {
 }
 
 /// The track's value of a track-level candidate at θ (see [`row_factor`]).
-pub fn track_value(c: &Candidate, track_row: &KpiRow, theta: f64, kpi_scale: (f64, f64)) -> f64 {
+pub fn track_value(c: &Candidate, track_row: &KpiRow, theta: f64, kpi_scale: KpiScale) -> f64 {
     match c.feature {
         Feature::RoughRoadEnergy => road_excess(track_row.ra_micro_mm, theta),
         Feature::RoughRoadEnergySquared => road_excess(track_row.ra_micro_mm, theta).powi(2),
-        Feature::Kpi(col) => {
-            let (m, sd) = kpi_scale;
-            let x = track_row.number(col).unwrap_or(f64::NAN);
-            if sd > 0.0 { (x - m) / sd } else { 0.0 }
-        }
+        Feature::Kpi(col) => kpi_scale.standardised(track_row.number(col).unwrap_or(f64::NAN)),
         _ => f64::NAN,
     }
 }
@@ -515,20 +545,33 @@ mod tests {
             |c: &Candidate, t: f64, scale| candidate_feature(c, &r, Some(&m), t, scale, law);
         // Road: 2.5 MJ × (0.02 − 0.005)/0.01 = 3.75; nothing on the other axle.
         let both = named("road abrasion (energy on micro-rough roads)");
-        assert!((value(both, 0.005, (0.0, 1.0)) - 3.75).abs() < 1e-12);
+        assert!((value(both, 0.005, KpiScale::NONE) - 3.75).abs() < 1e-12);
         let rear = named("road abrasion (energy on micro-rough roads), rear axle");
-        assert_eq!(value(rear, 0.005, (0.0, 1.0)), 0.0);
+        assert_eq!(value(rear, 0.005, KpiScale::NONE), 0.0);
         // Squared: 2.5 MJ × 1.5² = 5.625.
         let squared = named("road abrasion (energy × squared micro-roughness)");
-        assert!((value(squared, 0.005, (0.0, 1.0)) - 5.625).abs() < 1e-12);
+        assert!((value(squared, 0.005, KpiScale::NONE) - 5.625).abs() < 1e-12);
         // A road index: 2.5 MJ × (3.5 − 3.0)/0.25 = 5.
         assert!(kpi("kurtosis").feature.track_level());
-        assert!((value(kpi("kurtosis"), f64::NAN, (3.0, 0.25)) - 5.0).abs() < 1e-12);
+        let scale = |mean, sd| KpiScale {
+            mean,
+            sd,
+            ..KpiScale::NONE
+        };
+        assert!((value(kpi("kurtosis"), f64::NAN, scale(3.0, 0.25)) - 5.0).abs() < 1e-12);
         // A mechanism: 0.4 %/MJ × the 2 MJ with the surface above 80 °C = 0.8.
         let hot = named("thermal degradation (energy with a hot surface)");
-        assert!((value(hot, 80.0, (0.0, 1.0)) - 0.8).abs() < 1e-12);
+        assert!((value(hot, 80.0, KpiScale::NONE) - 0.8).abs() < 1e-12);
         // A generic KPI stays on the raw energy: 3 MJ × (40 − 30)/5 = 6.
-        assert!((value(kpi("t_air_avg_c"), f64::NAN, (30.0, 5.0)) - 6.0).abs() < 1e-12);
+        assert!((value(kpi("t_air_avg_c"), f64::NAN, scale(30.0, 5.0)) - 6.0).abs() < 1e-12);
+        // Held within the range scored: 40 °C air against rows of 20–35 °C
+        // counts as 35 °C, 3 MJ × (35 − 30)/5 = 3.
+        let seen = KpiScale {
+            min: 20.0,
+            max: 35.0,
+            ..scale(30.0, 5.0)
+        };
+        assert!((value(kpi("t_air_avg_c"), f64::NAN, seen) - 3.0).abs() < 1e-12);
     }
 
     #[test]
@@ -547,7 +590,7 @@ mod tests {
             &g,
             Some(&m),
             80.0,
-            (0.0, 1.0),
+            KpiScale::NONE,
         );
         assert!((f - 0.5 * 2.0).abs() < 1e-12, "{f}");
     }

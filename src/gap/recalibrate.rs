@@ -15,7 +15,7 @@
 //! term fewer), 2.0 % ideal.
 
 use super::baseline::PhysicsBaseline;
-use super::candidates::{Candidate, LawRow, candidate_feature};
+use super::candidates::{Candidate, KpiScale, LawRow, candidate_feature};
 use super::linear::{lstsq, residual, weighted};
 use super::scoring::relative_weights;
 use crate::ingest::compound::Wlf;
@@ -33,7 +33,7 @@ pub struct Term {
     pub candidate: Candidate,
     pub threshold: f64,
     /// (mean, sd) standardising a generic KPI term.
-    pub kpi_scale: (f64, f64),
+    pub kpi_scale: KpiScale,
 }
 
 /// The rows of a diagnosis: training rows first, then testing rows.
@@ -235,7 +235,7 @@ mod tests {
         let terms = [Term {
             candidate: thermal,
             threshold: 80.0,
-            kpi_scale: (0.0, 1.0),
+            kpi_scale: KpiScale::NONE,
         }];
         let d = Rows {
             rows: &refs,

@@ -18,7 +18,7 @@
 //!   coefficients count. Details and measured behaviour: docs/gap.md.
 
 use super::acts::ActsIn;
-use super::candidates::{Candidate, Feature, LawRow, candidate_feature, kpi_scale};
+use super::candidates::{Candidate, Feature, KpiScale, LawRow, candidate_feature, kpi_scale};
 use super::linear::{dot, lstsq, orthonormal_basis, project_out, residual, weighted};
 use super::stats::{benjamini_hochberg, levels};
 use super::track_test::Severities;
@@ -97,7 +97,7 @@ pub struct Score {
     pub front_share: f64,
     /// (mean, sd) standardising a KPI candidate.
     #[serde(skip)]
-    pub kpi_scale: (f64, f64),
+    pub kpi_scale: KpiScale,
     /// The step-1 slices where the fitted term acts (filled by the report).
     pub acts_in: Vec<ActsIn>,
 }

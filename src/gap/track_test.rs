@@ -26,7 +26,7 @@
 //! is simulated exactly (Monte Carlo draws of normal severities). The
 //! p-value resolves to 1/(draws + 1) whatever the number of tracks.
 
-use super::candidates::{Candidate, track_value};
+use super::candidates::{Candidate, KpiScale, track_value};
 use super::linear::{lstsq, orthonormal_basis};
 use super::scoring::{max_f, projected, track_cells};
 use super::stats::levels;
@@ -142,7 +142,7 @@ impl<'a> Severities<'a> {
     /// thresholds against `draws` Monte Carlo draws; 1 when fewer than
     /// [`MIN_TRACKS`] tracks (or too few beyond the null's columns) carry
     /// rows on its axle.
-    pub fn p_value(&self, c: &Candidate, kpi_scale: (f64, f64), draws: usize, seed: u64) -> f64 {
+    pub fn p_value(&self, c: &Candidate, kpi_scale: KpiScale, draws: usize, seed: u64) -> f64 {
         let slot = match c.axle {
             None => 0,
             Some("front") => 1,
@@ -221,7 +221,7 @@ mod tests {
             axle: None,
             user: None,
         };
-        s.p_value(&road, (0.0, 1.0), draws, seed)
+        s.p_value(&road, KpiScale::NONE, draws, seed)
     }
 
     #[test]

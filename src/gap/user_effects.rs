@@ -10,6 +10,8 @@
 //! map with `energy = "lateral"`. Bin variables are the bin mid-points; a comparison counts
 //! as 1 when true and 0 when false. Format: docs/gap.md.
 
+#[cfg(test)]
+use super::candidates::KpiScale;
 use super::candidates::{Candidate, Feature};
 use super::error::GapError;
 use crate::kpi::KpiRow;
@@ -303,19 +305,31 @@ mod tests {
         .unwrap();
         let fast = UserEffect::compile("fast", "sliding_speed > theta", true).unwrap();
         for theta in [70.0, 85.0, 95.0, 100.0] {
-            let want = feature(Feature::HotSurfaceEnergy, &r, Some(&m), theta, (0.0, 1.0));
+            let want = feature(
+                Feature::HotSurfaceEnergy,
+                &r,
+                Some(&m),
+                theta,
+                KpiScale::NONE,
+            );
             assert!((hot.feature(&r, Some(&m), theta) - want).abs() < 1e-12);
             let want = feature(
                 Feature::ColdTreadLateralEnergy,
                 &r,
                 Some(&m),
                 theta,
-                (0.0, 1.0),
+                KpiScale::NONE,
             );
             assert!((cold.feature(&r, Some(&m), theta) - want).abs() < 1e-12);
         }
         for theta in [0.5, 2.0, 4.0] {
-            let want = feature(Feature::FastSlidingEnergy, &r, Some(&m), theta, (0.0, 1.0));
+            let want = feature(
+                Feature::FastSlidingEnergy,
+                &r,
+                Some(&m),
+                theta,
+                KpiScale::NONE,
+            );
             assert!((fast.feature(&r, Some(&m), theta) - want).abs() < 1e-12);
         }
         // By hand: 1 MJ at 87.5 °C and 0.5 MJ at 97.5 °C lie above 85 °C.
@@ -336,7 +350,7 @@ mod tests {
                 &r,
                 Some(&ml),
                 theta,
-                (0.0, 1.0),
+                KpiScale::NONE,
             );
             assert!((lateral.feature(&r, Some(&ml), theta) - want).abs() < 1e-12);
         }
@@ -366,7 +380,7 @@ mod tests {
             &r,
             Some(&map()),
             f64::NAN,
-            (0.0, 1.0),
+            KpiScale::NONE,
             LawRow::raw(&r),
         );
         assert!((got - want).abs() < 1e-12, "{got} vs {want}");
@@ -424,7 +438,7 @@ mod tests {
                 &front,
                 Some(&map()),
                 100.0,
-                (0.0, 1.0),
+                KpiScale::NONE,
                 LawRow::raw(&front)
             ),
             0.0
