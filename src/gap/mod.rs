@@ -13,6 +13,7 @@ pub mod linear;
 pub mod recalibrate;
 pub mod report;
 pub mod scoring;
+pub mod selection;
 pub mod slices;
 pub mod stats;
 pub mod track_test;

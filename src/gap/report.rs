@@ -5,10 +5,11 @@
 
 use super::acts::acts_in;
 use super::baseline::PhysicsBaseline;
-use super::candidates::{Candidate, Feature, LawRow, candidate_feature, library, significant};
+use super::candidates::{Candidate, LawRow, candidate_feature, library, significant};
 use super::linear::{lstsq, residual, weighted};
 use super::recalibrate::{Rows, Term, refit_law};
 use super::scoring::{Problem, Score, ScoringSettings, rank, relative_weights};
+use super::selection::next_term;
 use super::slices::{Slice, slice_residuals};
 use crate::ingest::compound::Wlf;
 use crate::kpi::KpiRow;
@@ -331,65 +332,8 @@ pub fn diagnose(
                     c.acts_in = acts_in(&change, &all_res, &named, 3);
                 }
             }
-            // A term enters only if it was significant on its own in step 2
-            // and still is given the terms already added: a candidate that
-            // only turns significant after another entered is fitting that
-            // term's misfit, and does not carry to new events. Except the
-            // mechanism already found, on another axle or at another
-            // threshold: that refines the found effect's form (a strong
-            // front-axle graining hides the rears' fifth of it in step 2,
-            // and cold testing tracks then lack the rears' graining).
-            //
-            // A road term rests on a handful of track means, which any
-            // unmodelled within-track effect also moves (a thermal effect is
-            // strongest at the hot tracks), and its CV gain includes the
-            // tracks' severities that a within-track term's held-out
-            // calibration removes. So the best of each kind is taken by its
-            // own gain, and the two compare on the common footing: held-out
-            // gain against the baseline without track scales.
-            //
-            // And a term must improve the held-out tracks of the model this
-            // step builds, which has no track scales (`cv_gain_across` > 0):
-            // a within-track gain alone can come from the held-out track's
-            // calibration (on a planted-graining season "KPI
-            // sliding_distance_m" entered second with a within-track gain of
-            // 0.050, −0.003 across, and the testing RMSE rose 1.83 → 1.98 %).
-            //
-            // Once a mechanism is in, generic KPI terms no longer enter:
-            // they are straight lines in a KPI with no physics behind them,
-            // and after a mechanism they fit the misfit of its form (a hard
-            // threshold against a smooth onset) rather than a new effect.
-            // On a planted-graining season (magnitude 4, seed 5) the
-            // graining terms took the testing RMSE to 1.64 % (ideal 1.27),
-            // then "KPI sliding_distance_m", significant and with a positive
-            // held-out gain on the training tracks, took it to 2.72 %.
-            let mechanism_in = terms
-                .iter()
-                .any(|t| t.candidate.feature.mechanism().is_some());
-            let significant = |s: &Score| s.p_adjusted <= fdr && s.cv_gain > 0.0;
-            let eligible = |s: &&Score| {
-                significant(s)
-                    && s.cv_gain_across > 0.0
-                    && !(mechanism_in && generic_kpi(s.feature))
-                    && !used.contains(&s.name)
-                    && (candidates
-                        .iter()
-                        .any(|c| c.name == s.name && significant(c))
-                        || found_before(s, &terms))
-            };
-            let within = ranked
-                .iter()
-                .filter(eligible)
-                .find(|s| !s.feature.track_level());
-            let road = ranked
-                .iter()
-                .filter(eligible)
-                .find(|s| s.feature.track_level());
-            let best = match (within, road) {
-                (Some(w), Some(r)) if r.cv_gain_across > w.cv_gain_across => r,
-                (Some(w), _) => w,
-                (None, Some(r)) => r,
-                (None, None) => break,
+            let Some(best) = next_term(&ranked, &candidates, &terms, &used, fdr) else {
+                break;
             };
             tracing::debug!(
                 round,
@@ -713,21 +657,6 @@ pub fn render_markdown(d: &Diagnosis, max_slices: usize) -> String {
         }
     }
     s
-}
-
-/// A generic KPI candidate (not a road index, which is road abrasion).
-fn generic_kpi(f: Feature) -> bool {
-    matches!(f, Feature::Kpi(_)) && f.mechanism().is_none()
-}
-
-/// `s` is a built-in mechanism (not a generic KPI or a user hypothesis) of
-/// which a term already entered.
-fn found_before(s: &Score, terms: &[Term]) -> bool {
-    !matches!(s.feature, Feature::Kpi(_) | Feature::User)
-        && s.feature.mechanism().is_some()
-        && terms
-            .iter()
-            .any(|t| t.candidate.feature.mechanism() == s.feature.mechanism())
 }
 
 /// The physics law's calibrated constants in words.
