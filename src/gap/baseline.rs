@@ -90,6 +90,11 @@ pub struct PhysicsBaseline {
     pub skewness_coefficient: f64,
 }
 
+/// A row the law can be calibrated on: finite energy, temperature and skewness.
+fn usable(r: &KpiRow) -> bool {
+    r.friction_energy_j.is_finite() && r.t_surface_avg_c.is_finite() && r.skewness.is_finite()
+}
+
 /// The calibration group of a row: `compound/axle`.
 pub fn group(r: &KpiRow) -> String {
     format!("{}/{}", r.compound, r.axle)
@@ -108,25 +113,25 @@ fn weighted_by(r: &KpiRow, maps: Option<&EnergyMaps>, f: &dyn Fn(f64) -> f64) ->
     }
 }
 
-impl PhysicsBaseline {
-    /// Calibrates on rows with finite wear, energy, temperature and skewness;
-    /// `maps[i]` belongs to `rows[i]`. With WLF constants for every compound
-    /// the factor is the WLF one, else the exponential.
-    pub fn fit(
+/// The law's temperature-weighted energies Σ E_b·φ(T_b) of a set of rows
+/// for every temperature factor of the calibration grid: they depend on the
+/// rows and their maps, not on the wear, so a calibration repeated on other
+/// wear (step 3's backfitting) reuses them.
+pub struct LawGrid {
+    laws: Vec<TemperatureFactor>,
+    /// `energy_mj[law][row]`.
+    energy_mj: Vec<Vec<f64>>,
+}
+
+impl LawGrid {
+    /// The grid for `rows` (`maps[i]` belongs to `rows[i]`): WLF factors when
+    /// `wlf` has every compound of the rows, else the exponential.
+    pub fn new(
         rows: &[&KpiRow],
         maps: &[Option<&EnergyMaps>],
         wlf: &BTreeMap<String, Wlf>,
-    ) -> PhysicsBaseline {
-        let ok: Vec<usize> = (0..rows.len())
-            .filter(|&i| {
-                let r = rows[i];
-                r.wear_mean_pct.is_finite()
-                    && r.friction_energy_j.is_finite()
-                    && r.t_surface_avg_c.is_finite()
-                    && r.skewness.is_finite()
-            })
-            .collect();
-        let use_wlf = !wlf.is_empty() && ok.iter().all(|&i| wlf.contains_key(&rows[i].compound));
+    ) -> LawGrid {
+        let use_wlf = !wlf.is_empty() && rows.iter().all(|r| wlf.contains_key(&r.compound));
         let laws: Vec<TemperatureFactor> = if use_wlf {
             (0..GAMMA_GRID.2)
                 .map(|i| TemperatureFactor::Wlf {
@@ -141,39 +146,86 @@ impl PhysicsBaseline {
                 })
                 .collect()
         };
-        let groups: Vec<String> = ok.iter().map(|&i| group(rows[i])).collect();
-        let mut best = (f64::INFINITY, BTreeMap::new(), 0, 0.0);
-        for (li, law) in laws.iter().enumerate() {
-            let w: Vec<f64> = ok
-                .iter()
-                .map(|&i| weighted_energy_mj(rows[i], maps[i], law))
-                .collect();
-            for si in 0..SKEW_GRID.2 {
+        let energy_mj = laws
+            .iter()
+            .map(|law| {
+                rows.iter()
+                    .zip(maps)
+                    .map(|(r, m)| weighted_energy_mj(r, *m, law))
+                    .collect()
+            })
+            .collect();
+        LawGrid { laws, energy_mj }
+    }
+}
+
+impl PhysicsBaseline {
+    /// Calibrates on rows with finite wear, energy, temperature and skewness;
+    /// `maps[i]` belongs to `rows[i]`. With WLF constants for every compound
+    /// the factor is the WLF one, else the exponential.
+    pub fn fit(
+        rows: &[&KpiRow],
+        maps: &[Option<&EnergyMaps>],
+        wlf: &BTreeMap<String, Wlf>,
+    ) -> PhysicsBaseline {
+        let ok: Vec<usize> = (0..rows.len())
+            .filter(|&i| rows[i].wear_mean_pct.is_finite() && usable(rows[i]))
+            .collect();
+        let ok_rows: Vec<&KpiRow> = ok.iter().map(|&i| rows[i]).collect();
+        let ok_maps: Vec<Option<&EnergyMaps>> = ok.iter().map(|&i| maps[i]).collect();
+        let grid = LawGrid::new(&ok_rows, &ok_maps, wlf);
+        let y: Vec<f64> = ok_rows.iter().map(|r| r.wear_mean_pct).collect();
+        PhysicsBaseline::fit_grid(&grid, &ok_rows, &y)
+    }
+
+    /// Calibrates on `y` (% per row) with the precomputed [`LawGrid`] of the
+    /// same `rows`: γ (or β) and s on their grids, the k per group in closed
+    /// form. Rows with a non-finite wear, energy, temperature or skewness are
+    /// left out.
+    pub fn fit_grid(grid: &LawGrid, rows: &[&KpiRow], y: &[f64]) -> PhysicsBaseline {
+        let ok: Vec<usize> = (0..rows.len())
+            .filter(|&i| y[i].is_finite() && usable(rows[i]))
+            .collect();
+        let names: Vec<String> = ok.iter().map(|&i| group(rows[i])).collect();
+        let mut levels = names.clone();
+        levels.sort();
+        levels.dedup();
+        let of: Vec<usize> = names
+            .iter()
+            .map(|g| levels.binary_search(g).expect("listed"))
+            .collect();
+        // exp(s·Sk) of each row for each s of the grid.
+        let road: Vec<Vec<f64>> = (0..SKEW_GRID.2)
+            .map(|si| {
                 let s = SKEW_GRID.0 + SKEW_GRID.1 * si as f64;
-                let mut sums: BTreeMap<&str, (f64, f64, f64)> = BTreeMap::new();
-                for ((&i, w), g) in ok.iter().zip(&w).zip(&groups) {
-                    let x = w * (s * rows[i].skewness).exp();
-                    let y = rows[i].wear_mean_pct;
-                    let e = sums.entry(g.as_str()).or_default();
-                    e.0 += x * y;
+                ok.iter().map(|&i| (s * rows[i].skewness).exp()).collect()
+            })
+            .collect();
+        // (SSE, k per group, law index, s index)
+        let mut best = (f64::INFINITY, Vec::new(), 0, 0);
+        let mut sums = vec![(0.0, 0.0, 0.0); levels.len()];
+        for (li, energy) in grid.energy_mj.iter().enumerate() {
+            for (si, road) in road.iter().enumerate() {
+                sums.fill((0.0, 0.0, 0.0));
+                for ((&i, &g), f) in ok.iter().zip(&of).zip(road) {
+                    let x = energy[i] * f;
+                    let e = &mut sums[g];
+                    e.0 += x * y[i];
                     e.1 += x * x;
-                    e.2 += y * y;
+                    e.2 += y[i] * y[i];
                 }
                 // SSE of the closed-form k per group: Σy² − (Σxy)²/Σx².
-                let sse: f64 = sums.values().map(|(xy, xx, yy)| yy - xy * xy / xx).sum();
+                let sse: f64 = sums.iter().map(|(xy, xx, yy)| yy - xy * xy / xx).sum();
                 if sse < best.0 {
-                    let k = sums
-                        .iter()
-                        .map(|(g, (xy, xx, _))| (g.to_string(), xy / xx))
-                        .collect();
-                    best = (sse, k, li, s);
+                    let k = sums.iter().map(|(xy, xx, _)| xy / xx).collect();
+                    best = (sse, k, li, si);
                 }
             }
         }
         PhysicsBaseline {
-            k_pct_per_mj: best.1,
-            temperature_factor: laws[best.2].clone(),
-            skewness_coefficient: best.3,
+            k_pct_per_mj: levels.into_iter().zip(best.1).collect(),
+            temperature_factor: grid.laws[best.2].clone(),
+            skewness_coefficient: SKEW_GRID.0 + SKEW_GRID.1 * best.3 as f64,
         }
     }
 

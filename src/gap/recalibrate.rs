@@ -14,7 +14,7 @@
 //! testing RMSE 4.61 % with the tangent columns, 2.86 % refitted (and one
 //! term fewer), 2.0 % ideal.
 
-use super::baseline::PhysicsBaseline;
+use super::baseline::{LawGrid, PhysicsBaseline};
 use super::candidates::{Candidate, KpiScale, LawRow, candidate_feature};
 use super::linear::{lstsq, residual, weighted};
 use super::scoring::relative_weights;
@@ -150,20 +150,18 @@ pub fn refit_law(
     let mut current = fit_terms(start.clone(), terms, d);
     let mut best = current.clone();
     let n_law = current.columns.len() - terms.len();
+    let train = &d.rows[..d.n_train];
+    let grid = LawGrid::new(train, &d.maps[..d.n_train], wlf);
     for _ in 0..MAX_ROUNDS {
-        let cleaned: Vec<KpiRow> = (0..d.n_train)
+        let wear_less_terms: Vec<f64> = (0..d.n_train)
             .map(|i| {
                 let terms_wear: f64 = (n_law..current.columns.len())
                     .map(|j| current.coefficients[j] * current.columns[j][i])
                     .sum();
-                KpiRow {
-                    wear_mean_pct: d.y[i] - terms_wear,
-                    ..d.rows[i].clone()
-                }
+                d.y[i] - terms_wear
             })
             .collect();
-        let refs: Vec<&KpiRow> = cleaned.iter().collect();
-        let law = PhysicsBaseline::fit(&refs, &d.maps[..d.n_train], wlf);
+        let law = PhysicsBaseline::fit_grid(&grid, train, &wear_less_terms);
         if settled(&law, &current.law) {
             break;
         }
