@@ -116,14 +116,22 @@ enum Command {
         #[arg(long, default_value = "bench.json")]
         out: PathBuf,
     },
-    /// Try tirewear: simulate the demo season, extract its KPI database and
-    /// fit the three wear models.
+    /// Try tirewear: simulate the demo season, extract its KPI database, fit
+    /// the three wear models and diagnose the gap between the physics law and
+    /// the measured wear. The default season has no planted effect; plant one
+    /// (`--effect graining=1`) to see the diagnosis find it without reading
+    /// the truth, then compare with demo-season/truth/wear_truth.csv.
     Demo {
         /// Where to write the demo season.
         #[arg(long, default_value = "demo-season")]
         out: PathBuf,
         #[arg(long, default_value_t = 7)]
         seed: u64,
+        /// Planted effect, repeatable, as for `tirewear simulate --effect`:
+        /// NAME[=MAGNITUDE][,threshold=T][,width=W], NAME one of graining,
+        /// blistering, thermal, road-abrasion.
+        #[arg(long = "effect", value_name = "SPEC")]
+        effects: Vec<String>,
     },
 }
 
@@ -726,12 +734,12 @@ fn main() -> Result<()> {
                 .with_context(|| format!("writing {}", out.display()))?;
             println!("wrote {}", out.display());
         }
-        Command::Demo { out, seed } => {
+        Command::Demo { out, seed, effects } => {
             let opts = SimOptions {
                 preset: Preset::Demo,
                 scale: 1.0,
                 seed,
-                effects: Vec::new(),
+                effects: parse_effects(&effects)?,
                 encoding: Encoding::Block,
                 rate_hz: None,
                 out: out.clone(),

@@ -610,7 +610,7 @@ pub fn render_markdown(d: &Diagnosis, max_slices: usize) -> String {
         }
         let _ = writeln!(
             s,
-            "\n## How far the gap shrinks\n\nEach step adds the best significant candidate (one that was significant on its own in step 2); the physics law is then calibrated again on the training events around the terms, which are refitted with it, until the calibration settles (a model baseline is refitted with the terms). Slices: the top flagged slices of step 1, in order{}.\n\n| step | training bias / RMSE (%) | testing bias / RMSE (%) | bias / RMSE in slices 1… (%) |\n|---|---|---|---|",
+            "\n## How far the gap shrinks\n\nEach step adds the best significant candidate that improves the held-out tracks (significant on its own in step 2, or the mechanism already found on another axle or threshold; no generic KPI once a mechanism is in: docs/gap.md); the physics law is then calibrated again on the training events around the terms, which are refitted with it, until the calibration settles (a model baseline is refitted with the terms). Slices: the top flagged slices of step 1, in order{}.\n\n| step | training bias / RMSE (%) | testing bias / RMSE (%) | bias / RMSE in slices 1… (%) |\n|---|---|---|---|",
             d.slices
                 .iter()
                 .take(5)
