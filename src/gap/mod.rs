@@ -11,6 +11,7 @@ pub mod candidates;
 pub mod error;
 pub mod linear;
 pub mod recalibrate;
+pub mod render;
 pub mod report;
 pub mod scoring;
 pub mod selection;

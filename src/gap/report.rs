@@ -5,9 +5,10 @@
 
 use super::acts::acts_in;
 use super::baseline::PhysicsBaseline;
-use super::candidates::{Candidate, LawRow, candidate_feature, library, significant};
+use super::candidates::{Candidate, LawRow, candidate_feature, library};
 use super::linear::{lstsq, residual, weighted};
 use super::recalibrate::{Rows, Term, refit_law};
+pub use super::render::render_markdown;
 use super::scoring::{Problem, Score, ScoringSettings, rank, relative_weights};
 use super::selection::next_term;
 use super::slices::{Slice, slice_residuals};
@@ -18,7 +19,6 @@ use crate::model::ModelError;
 use crate::model::fit::split;
 use crate::model::saved::SavedModel;
 use std::collections::BTreeMap;
-use std::fmt::Write;
 
 /// The simulation side of the gap.
 pub enum Baseline {
@@ -484,192 +484,4 @@ fn slice_members(name: &str, rows: &[&KpiRow]) -> Vec<bool> {
     rows.iter()
         .map(|r| name.split(" & ").all(|p| part(p, r)))
         .collect()
-}
-
-/// The diagnosis as Markdown (also what `tirewear gap` prints).
-pub fn render_markdown(d: &Diagnosis, max_slices: usize) -> String {
-    let mut s = String::from("# Sim-to-real gap\n\n");
-    let _ = writeln!(s, "Baseline: {}", d.baseline);
-    if let Some(p) = &d.physics {
-        let _ = writeln!(s, "Calibrated on the training events: {}", describe_law(p));
-    }
-    if !d.censored.is_empty() {
-        let _ = writeln!(
-            s,
-            "\n{} tires left out: tread worn through (depth readings at ≤ 5 % of the new depth), so their wear is only a lower bound: {}{}",
-            d.censored.len(),
-            d.censored
-                .iter()
-                .take(10)
-                .cloned()
-                .collect::<Vec<_>>()
-                .join(", "),
-            if d.censored.len() > 10 { ", …" } else { "" }
-        );
-    }
-    let _ = writeln!(
-        s,
-        "\n| events | n | bias (%) | RMSE (%) |\n|---|---|---|---|"
-    );
-    let _ = writeln!(
-        s,
-        "| training | {} | {:+.3} | {:.3} |",
-        d.training.n, d.training.bias_pct, d.training.rmse_pct
-    );
-    if let Some(t) = &d.testing {
-        let _ = writeln!(
-            s,
-            "| testing ({}) | {} | {:+.3} | {:.3} |",
-            d.testing_events.join(", "),
-            t.n,
-            t.bias_pct,
-            t.rmse_pct
-        );
-    }
-    let _ = writeln!(
-        s,
-        "\n## Where the gap lies\n\n{} distinct slices tested (singly and in pairs, against the rest, t-test allowing for the residuals' correlation within events); {} survive Benjamini–Hochberg at FDR {}. Ranked by the part of the squared gap their offset accounts for (n·mean²/Σr²).\n",
-        d.slices_tested,
-        d.slices.len(),
-        d.fdr
-    );
-    if !d.slices.is_empty() {
-        let _ = writeln!(
-            s,
-            "| slice | n | mean residual (%) | vs rest (95 % CI) | effect size | p adj. | gap² accounted for | gap² held |\n|---|---|---|---|---|---|---|---|"
-        );
-        for t in d.slices.iter().take(max_slices) {
-            let _ = writeln!(
-                s,
-                "| {}{} | {} | {:+.2} | {:+.2} [{:+.2}, {:+.2}] | {:+.2} | {:.1e} | {:.1} % | {:.1} % |",
-                t.name,
-                if t.aliases.is_empty() {
-                    String::new()
-                } else {
-                    format!(" (same rows as {} more)", t.aliases.len())
-                },
-                t.n,
-                t.mean_residual_pct,
-                t.difference_pct,
-                t.ci_pct.0,
-                t.ci_pct.1,
-                t.effect_size,
-                t.p_adjusted,
-                100.0 * t.explained_share,
-                100.0 * t.share_of_squared_gap
-            );
-        }
-        if d.slices.len() > max_slices {
-            let _ = writeln!(
-                s,
-                "\n… and {} more (gap.json has them all).",
-                d.slices.len() - max_slices
-            );
-        }
-    }
-    if !d.candidates.is_empty() {
-        let _ = writeln!(
-            s,
-            "\n## Which unmodelled effect\n\nEach candidate term is refitted with the baseline's per-group energy terms on the training events, on the relative scale (rows divided by the baseline). CV gain: 1 − held-out SSE / held-out SSE of the baseline alone, whole tracks left out in turn, the threshold scanned on the training folds only. p: Freedman–Lane permutation test of the nested models (residuals permuted within track and axle), max F over the threshold grid; road terms: F test of the tracks' severities on their road value, max F over the grid against Monte Carlo draws, Benjamini–Hochberg over {} candidates. Coefficient (physics baseline): how many times the law's abrasion per joule a mechanism adds; for a road term, % per MJ of the law's energy term per unit of its road value; for a generic KPI, % per MJ and sd. Front share: the part of the term's wear on the front axle. Acts in: the flagged slices of step 1 whose gap the fitted term follows most, with the part of the slice's mean residual it accounts for. Definitions: docs/gap.md.\n\n| candidate | threshold | coefficient | CV gain | p adj. | front share | acts in (part of the slice's mean gap) |\n|---|---|---|---|---|---|---|",
-            d.candidates.len()
-        );
-        for c in d.candidates.iter().take(max_slices.min(10)) {
-            let th = if c.threshold.is_finite() {
-                c.feature.format_threshold(c.threshold)
-            } else {
-                "–".into()
-            };
-            let _ = writeln!(
-                s,
-                "| {}{} | {th} | {:+.4} | {:+.3} | {:.1e} | {} | {} |",
-                c.name,
-                if c.p_adjusted <= d.fdr && c.cv_gain > 0.0 {
-                    " **(significant)**"
-                } else {
-                    ""
-                },
-                c.coefficient,
-                c.cv_gain,
-                c.p_adjusted,
-                // A generic KPI term changes sign across rows: no share.
-                if (0.0..=1.0).contains(&c.front_share) {
-                    format!("{:.0} %", 100.0 * c.front_share)
-                } else {
-                    "–".to_string()
-                },
-                if c.acts_in.is_empty() {
-                    "–".to_string()
-                } else {
-                    c.acts_in
-                        .iter()
-                        .map(|a| format!("{} ({:.0} %)", a.slice, 100.0 * a.share_of_offset))
-                        .collect::<Vec<_>>()
-                        .join("; ")
-                }
-            );
-        }
-        let _ = writeln!(
-            s,
-            "\n## How far the gap shrinks\n\nEach step adds the best significant candidate that improves the held-out tracks (significant on its own in step 2, or the mechanism already found on another axle or threshold; no generic KPI once a mechanism is in: docs/gap.md); the physics law is then calibrated again on the training events around the terms, which are refitted with it, until the calibration settles (a model baseline is refitted with the terms). Slices: the top flagged slices of step 1, in order{}.\n\n| step | training bias / RMSE (%) | testing bias / RMSE (%) | bias / RMSE in slices 1… (%) |\n|---|---|---|---|",
-            d.slices
-                .iter()
-                .take(5)
-                .enumerate()
-                .map(|(i, sl)| format!("; {} = {}", i + 1, sl.name))
-                .collect::<String>()
-        );
-        for st in &d.steps {
-            let te = st.testing.map_or("–".to_string(), |t| {
-                format!("{:+.3} / {:.3}", t.bias_pct, t.rmse_pct)
-            });
-            let sl: Vec<String> = st
-                .slices
-                .iter()
-                .take(5)
-                .map(|g| format!("{:+.2} / {:.2}", g.bias_pct, g.rmse_pct))
-                .collect();
-            let _ = writeln!(
-                s,
-                "| {} | {:+.3} / {:.3} | {te} | {} |",
-                if st.added == "baseline" {
-                    st.added.clone()
-                } else if st.threshold.is_finite() {
-                    format!(
-                        "+ {} (θ = {}, c = {:+.4})",
-                        st.added,
-                        significant(st.threshold),
-                        st.coefficient
-                    )
-                } else {
-                    format!("+ {} (c = {:+.4})", st.added, st.coefficient)
-                },
-                st.training.bias_pct,
-                st.training.rmse_pct,
-                sl.join(", ")
-            );
-        }
-        if let Some(p) = &d.physics_with_terms {
-            let _ = writeln!(
-                s,
-                "\nThe law calibrated again around the terms: {}",
-                describe_law(p)
-            );
-        }
-    }
-    s
-}
-
-/// The physics law's calibrated constants in words.
-fn describe_law(p: &PhysicsBaseline) -> String {
-    let ks: Vec<String> = p
-        .k_pct_per_mj
-        .iter()
-        .map(|(c, k)| format!("{c} {k:.4}"))
-        .collect();
-    format!(
-        "k (%/MJ) {}; {}; s = {:.3}",
-        ks.join(", "),
-        p.temperature_factor.describe(),
-        p.skewness_coefficient
-    )
 }
