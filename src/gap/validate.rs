@@ -12,6 +12,7 @@
 //!   contribution, which is then added back);
 //! - false discovery: a clean season with any significant term.
 
+use super::candidates::significant;
 use super::error::GapError;
 use super::report::{Baseline, Diagnosis, GapSettings, diagnose};
 use crate::kpi::KpiRow;
@@ -435,6 +436,37 @@ pub fn render(cases: &[Case]) -> String {
             );
         }
     }
+    // Where it stops working, season by season: those at ≥ 10 % of the
+    // variance that miss a target.
+    let misses: Vec<&Case> = cases
+        .iter()
+        .filter(|c| c.error.is_none() && c.effect.is_some() && c.variance_share >= 0.1)
+        .filter(|c| !c.hit_axle || (c.shrinkage_ratio - 1.0).abs() > 0.2)
+        .collect();
+    if !misses.is_empty() {
+        s.push_str(
+            "\nSeasons at ≥ 10 % of the variance that miss a target (testing RMSE in %):\n\n| effect (magnitude, threshold) | seed | variance share | first term | front share (truth) | RMSE baseline / diagnosed / ideal | shrinkage / ideal |\n|---|---|---|---|---|---|---|\n",
+        );
+        for c in misses {
+            let e = c.effect.as_ref().expect("planted");
+            let _ = writeln!(
+                s,
+                "| {} ({}, {}) | {} | {:.1} % | {} | {:.2} ({:.2}) | {:.3} / {:.3} / {:.3} | {:.3} |",
+                e.kind.name(),
+                e.magnitude,
+                significant(e.threshold),
+                c.seed,
+                100.0 * c.variance_share,
+                c.first_term.as_deref().unwrap_or("none"),
+                c.first_front_share,
+                c.truth_front_share,
+                c.rmse_baseline_pct,
+                c.rmse_diagnosed_pct,
+                c.rmse_ideal_pct,
+                c.shrinkage_ratio,
+            );
+        }
+    }
     let clean: Vec<&Case> = cases.iter().filter(|c| c.effect.is_none()).collect();
     if !clean.is_empty() {
         let fd = clean.iter().filter(|c| c.significant_terms > 0).count();
@@ -464,4 +496,48 @@ pub fn render(cases: &[Case]) -> String {
         );
     }
     s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn case(kind: EffectKind, seed: u64, share: f64, shrinkage: f64) -> Case {
+        Case {
+            effect: Some(Effect::with_defaults(kind, 2.0)),
+            seed,
+            variance_share: share,
+            truth_front_share: 0.32,
+            first_term: Some("road abrasion (energy × squared micro-roughness)".into()),
+            first_mechanism: Some(kind.name().into()),
+            first_front_share: 0.35,
+            significant_terms: 1,
+            hit: true,
+            hit_axle: true,
+            rmse_baseline_pct: 9.0,
+            rmse_diagnosed_pct: 9.0 - shrinkage * 7.0,
+            rmse_ideal_pct: 2.0,
+            shrinkage_ratio: shrinkage,
+            error: None,
+        }
+    }
+
+    #[test]
+    fn the_seasons_that_miss_a_target_are_listed() {
+        let cases = [
+            case(EffectKind::RoadAbrasion, 1, 0.184, 0.799),
+            case(EffectKind::RoadAbrasion, 2, 0.254, 0.95),
+            // Under 10 % of the variance: no target, not listed.
+            case(EffectKind::RoadAbrasion, 3, 0.05, 0.3),
+        ];
+        let md = render(&cases);
+        assert!(
+            md.contains("| road-abrasion (2, 0.03000) | 1 | 18.4 % |"),
+            "{md}"
+        );
+        assert!(md.contains("| 9.000 / 3.407 / 2.000 | 0.799 |"), "{md}");
+        assert!(!md.contains("| road-abrasion (2, 0.03000) | 2 |"), "{md}");
+        assert!(!md.contains("| road-abrasion (2, 0.03000) | 3 |"), "{md}");
+        assert!(md.contains("| road-abrasion | 2 | 2/2 (100 %) | 2/2 (100 %) | 1/2 (50 %) |"));
+    }
 }
