@@ -66,7 +66,8 @@ enum Command {
     /// explains it: candidate mechanisms (graining, blistering, thermal
     /// degradation, fast sliding, road abrasion, every unused KPI) scored by
     /// track-grouped cross-validation and a permutation test; (3) how far it
-    /// shrinks as significant terms are added in turn. Writes OUT/gap.json
+    /// shrinks as significant terms are added in turn, the physics law
+    /// calibrated again around them. Writes OUT/gap.json
     /// and OUT/gap.md. `tirewear gap validate` proves it on seasons with
     /// planted effects.
     #[command(args_conflicts_with_subcommands = true, subcommand_negates_reqs = true)]
