@@ -3,10 +3,10 @@
 //! withheld effects: a planted effect is found where the truth put it, and a
 //! clean season reports nothing.
 
-use tirewear::gap::report::GapSettings;
+use tirewear::gap::report::{Diagnosis, GapSettings};
 use tirewear::gap::scoring::ScoringSettings;
 use tirewear::gap::stats::{VarianceComponents, benjamini_hochberg, clustered_difference};
-use tirewear::gap::validate::{ValidateSettings, run_case};
+use tirewear::gap::validate::{Case, ValidateSettings, run_case};
 use tirewear::sim::{Effect, EffectKind};
 
 #[derive(serde::Deserialize)]
@@ -147,6 +147,18 @@ fn season_settings(work: &std::path::Path) -> ValidateSettings {
     s
 }
 
+/// One season-preset season (`effect` planted, or clean) simulated,
+/// extracted, diagnosed and scored in a temporary folder.
+fn season_case(effect: Option<&Effect>, seed: u64) -> (Case, Diagnosis) {
+    let dir = tempfile::tempdir().unwrap();
+    run_case(effect, seed, &season_settings(dir.path())).unwrap()
+}
+
+/// The names of the terms step 3 added, the baseline first.
+fn added(d: &Diagnosis) -> Vec<&str> {
+    d.steps.iter().map(|s| s.added.as_str()).collect()
+}
+
 /// Road abrasion planted at magnitude 2 with its threshold at 0.035 mm
 /// (extra wear 2·softplus((micro-texture rms − 0.035 mm)/0.01 mm) times the
 /// base wear, a factor per track, about 10 % of the wear variance). Only the
@@ -156,10 +168,9 @@ fn season_settings(work: &std::path::Path) -> ValidateSettings {
 /// fronts), and the testing-event gap shrinks.
 #[test]
 fn planted_road_abrasion_is_found_across_tracks() {
-    let dir = tempfile::tempdir().unwrap();
     let e = planted(EffectKind::RoadAbrasion, 2.0, 0.035);
-    let (case, d) = run_case(Some(&e), 3, &season_settings(dir.path())).unwrap();
-    let added: Vec<&str> = d.steps.iter().map(|s| s.added.as_str()).collect();
+    let (case, d) = season_case(Some(&e), 3);
+    let added = added(&d);
     assert!(case.hit && case.hit_axle, "{case:?}\n{added:?}");
     assert!(
         (case.truth_front_share - 0.32).abs() < 0.05,
@@ -190,13 +201,12 @@ fn planted_road_abrasion_is_found_across_tracks() {
 /// the tread was gone, they made 8 of 10 clean seasons report a term.
 #[test]
 fn clean_season_preset_reports_no_effect() {
-    let dir = tempfile::tempdir().unwrap();
-    let (case, d) = run_case(None, 4, &season_settings(dir.path())).unwrap();
+    let (case, d) = season_case(None, 4);
     assert!(
         !d.censored.is_empty(),
         "long stints wear some tires through"
     );
-    let added: Vec<&str> = d.steps.iter().map(|s| s.added.as_str()).collect();
+    let added = added(&d);
     assert_eq!(case.significant_terms, 0, "{added:?}");
 }
 
@@ -208,10 +218,9 @@ fn clean_season_preset_reports_no_effect() {
 /// only moved along its tangent it was 0.78 of the ideal.
 #[test]
 fn strong_blistering_shrinks_the_gap_within_20_percent_of_the_ideal() {
-    let dir = tempfile::tempdir().unwrap();
     let e = planted(EffectKind::Blistering, 4.0, 119.0);
-    let (case, d) = run_case(Some(&e), 2, &season_settings(dir.path())).unwrap();
-    let added: Vec<&str> = d.steps.iter().map(|s| s.added.as_str()).collect();
+    let (case, d) = season_case(Some(&e), 2);
+    let added = added(&d);
     assert!(case.hit && case.hit_axle, "{case:?}\n{added:?}");
     assert!(case.variance_share > 0.25, "{case:?}");
     assert!(
@@ -237,10 +246,9 @@ fn strong_blistering_shrinks_the_gap_within_20_percent_of_the_ideal() {
 /// of the ideal (0.59 of it before both rules).
 #[test]
 fn strong_graining_takes_its_rear_axle_term_and_no_generic_kpi() {
-    let dir = tempfile::tempdir().unwrap();
     let e = planted(EffectKind::Graining, 4.0, 84.0);
-    let (case, d) = run_case(Some(&e), 5, &season_settings(dir.path())).unwrap();
-    let added: Vec<&str> = d.steps.iter().map(|s| s.added.as_str()).collect();
+    let (case, d) = season_case(Some(&e), 5);
+    let added = added(&d);
     assert!(case.hit && case.hit_axle, "{case:?}\n{added:?}");
     assert!(
         added.contains(&"graining (lateral energy with a cold tread), rear axle"),

@@ -119,6 +119,25 @@ pub fn dot(a: &[f64], b: &[f64]) -> f64 {
     a.iter().zip(b).map(|(x, y)| x * y).sum()
 }
 
+/// Coefficients of `y` on `cols` fitted on the rows `train` with the row
+/// weights `w` (the relative scale for the physics law), and the fitted
+/// values on every row (unweighted).
+pub fn weighted_fit(
+    cols: &[Vec<f64>],
+    w: &[f64],
+    y: &[f64],
+    train: &[usize],
+) -> (Vec<f64>, Vec<f64>) {
+    let refs: Vec<&[f64]> = cols.iter().map(|c| c.as_slice()).collect();
+    let scaled: Vec<Vec<f64>> = cols.iter().map(|c| weighted(c, w)).collect();
+    let scaled_refs: Vec<&[f64]> = scaled.iter().map(|c| c.as_slice()).collect();
+    let k = lstsq(&scaled_refs, &weighted(y, w), train);
+    let fitted = (0..y.len())
+        .map(|i| y[i] - residual(&refs, &k, y, i))
+        .collect();
+    (k, fitted)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -16,7 +16,7 @@
 
 use super::baseline::{LawGrid, PhysicsBaseline};
 use super::candidates::{Candidate, KpiScale, LawRow, candidate_feature};
-use super::linear::{lstsq, residual, weighted};
+use super::linear::weighted_fit;
 use super::scoring::relative_weights;
 use crate::ingest::compound::Wlf;
 use crate::kpi::KpiRow;
@@ -34,6 +34,30 @@ pub struct Term {
     pub threshold: f64,
     /// (mean, sd) standardising a generic KPI term.
     pub kpi_scale: KpiScale,
+}
+
+impl Term {
+    /// The term's column over `rows` (`maps[i]`, `law[i]` belong to
+    /// `rows[i]`): zero on the rows of the other axle.
+    pub fn column(
+        &self,
+        rows: &[&KpiRow],
+        maps: &[Option<&EnergyMaps>],
+        law: &[LawRow],
+    ) -> Vec<f64> {
+        (0..rows.len())
+            .map(|i| {
+                candidate_feature(
+                    &self.candidate,
+                    rows[i],
+                    maps[i],
+                    self.threshold,
+                    self.kpi_scale,
+                    law[i],
+                )
+            })
+            .collect()
+    }
 }
 
 /// The rows of a diagnosis: training rows first, then testing rows.
@@ -82,20 +106,7 @@ fn fit_terms(law: PhysicsBaseline, terms: &[Term], d: &Rows) -> Refitted {
     let law_rows = law_rows(&law, d);
     let mut columns = law.columns(d.rows, d.maps);
     for t in terms {
-        columns.push(
-            (0..d.rows.len())
-                .map(|i| {
-                    candidate_feature(
-                        &t.candidate,
-                        d.rows[i],
-                        d.maps[i],
-                        t.threshold,
-                        t.kpi_scale,
-                        law_rows[i],
-                    )
-                })
-                .collect(),
-        );
+        columns.push(t.column(d.rows, d.maps, &law_rows));
     }
     let train: Vec<usize> = (0..d.n_train).collect();
     let weights = relative_weights(
@@ -105,14 +116,7 @@ fn fit_terms(law: PhysicsBaseline, terms: &[Term], d: &Rows) -> Refitted {
             .collect::<Vec<_>>(),
         &d.y[..d.n_train],
     );
-    let refs: Vec<&[f64]> = columns.iter().map(|c| c.as_slice()).collect();
-    let scaled: Vec<Vec<f64>> = columns.iter().map(|c| weighted(c, &weights)).collect();
-    let scaled_refs: Vec<&[f64]> = scaled.iter().map(|c| c.as_slice()).collect();
-    let wy = weighted(d.y, &weights);
-    let coefficients = lstsq(&scaled_refs, &wy, &train);
-    let fitted: Vec<f64> = (0..d.y.len())
-        .map(|i| d.y[i] - residual(&refs, &coefficients, d.y, i))
-        .collect();
+    let (coefficients, fitted) = weighted_fit(&columns, &weights, d.y, &train);
     let sse = train.iter().map(|&i| (d.y[i] - fitted[i]).powi(2)).sum();
     Refitted {
         law,

@@ -5,8 +5,8 @@
 
 use super::acts::acts_in;
 use super::baseline::PhysicsBaseline;
-use super::candidates::{Candidate, LawRow, candidate_feature, library};
-use super::linear::{lstsq, residual, weighted};
+use super::candidates::{Candidate, LawRow, library};
+use super::linear::weighted_fit;
 use super::recalibrate::{Rows, Term, refit_law};
 pub use super::render::render_markdown;
 use super::scoring::{Problem, Score, ScoringSettings, rank, relative_weights};
@@ -295,7 +295,7 @@ pub fn diagnose(
                     .zip(&members)
                     .map(|(s, m)| (s.name.as_str(), m.clone()))
                     .collect();
-                let before = refit(&base, &w, &y, &train_idx).1;
+                let before = weighted_fit(&base, &w, &y, &train_idx).1;
                 for c in candidates.iter_mut().take(ACTS_FOR) {
                     let Some(cand) = lib.iter().find(|l| l.name == c.name) else {
                         continue;
@@ -303,18 +303,12 @@ pub fn diagnose(
                     if c.coefficient == 0.0 {
                         continue;
                     }
-                    let column: Vec<f64> = (0..all_rows.len())
-                        .map(|i| {
-                            candidate_feature(
-                                cand,
-                                all_rows[i],
-                                row_maps[i],
-                                c.threshold,
-                                c.kpi_scale,
-                                law[i],
-                            )
-                        })
-                        .collect();
+                    let column = Term {
+                        candidate: cand.clone(),
+                        threshold: c.threshold,
+                        kpi_scale: c.kpi_scale,
+                    }
+                    .column(&all_rows, &row_maps, &law);
                     if column.iter().any(|v| !v.is_finite()) {
                         continue;
                     }
@@ -323,7 +317,7 @@ pub fn diagnose(
                     // (the baseline gives back what the term takes over).
                     let mut with = base.clone();
                     with.push(column);
-                    let change: Vec<f64> = refit(&with, &w, &y, &train_idx)
+                    let change: Vec<f64> = weighted_fit(&with, &w, &y, &train_idx)
                         .1
                         .iter()
                         .zip(&before)
@@ -372,21 +366,9 @@ pub fn diagnose(
                     (r.coefficients.clone(), r.fitted.clone(), Some(r))
                 }
                 None => {
-                    let column: Vec<f64> = (0..all_rows.len())
-                        .map(|i| {
-                            candidate_feature(
-                                &cand,
-                                all_rows[i],
-                                row_maps[i],
-                                best.threshold,
-                                best.kpi_scale,
-                                law[i],
-                            )
-                        })
-                        .collect();
                     let mut with = base.clone();
-                    with.push(column);
-                    let (k, fitted) = refit(&with, &w, &y, &train_idx);
+                    with.push(term.column(&all_rows, &row_maps, &law));
+                    let (k, fitted) = weighted_fit(&with, &w, &y, &train_idx);
                     base = with;
                     (k, fitted, None)
                 }
@@ -436,20 +418,6 @@ pub fn diagnose(
         candidates,
         steps,
     })
-}
-
-/// Coefficients of `y` on `cols` fitted on the training rows with the row
-/// weights `w` (relative scale for the physics law), and the fitted values
-/// on every row.
-fn refit(cols: &[Vec<f64>], w: &[f64], y: &[f64], train: &[usize]) -> (Vec<f64>, Vec<f64>) {
-    let refs: Vec<&[f64]> = cols.iter().map(|c| c.as_slice()).collect();
-    let scaled: Vec<Vec<f64>> = cols.iter().map(|c| weighted(c, w)).collect();
-    let scaled_refs: Vec<&[f64]> = scaled.iter().map(|c| c.as_slice()).collect();
-    let k = lstsq(&scaled_refs, &weighted(y, w), train);
-    let fitted = (0..y.len())
-        .map(|i| y[i] - residual(&refs, &k, y, i))
-        .collect();
-    (k, fitted)
 }
 
 /// Rows of a slice named as in step 1 (`A & B`, each `col = level` or `col in Qk [lo, hi]`).
