@@ -9,7 +9,7 @@ use mcap::records::MessageHeader;
 use prost::Message as _;
 use std::collections::BTreeMap;
 use std::fs::File;
-use std::io::{BufReader, BufWriter};
+use std::io::BufWriter;
 use std::path::{Path, PathBuf};
 
 /// Generated protobuf types (`tirewear.v1`).
@@ -76,6 +76,16 @@ macro_rules! series {
                 })*
                 if n > 0 && b.sample_period_ns == 0 {
                     return Err("sample_period_ns is 0".into());
+                }
+                let last = (n as u64).checked_sub(1).map_or(Some(b.start_time_ns), |k| {
+                    k.checked_mul(b.sample_period_ns)
+                        .and_then(|d| d.checked_add(b.start_time_ns))
+                });
+                if last.is_none() {
+                    return Err(format!(
+                        "{n} samples of {} ns from {} ns run past the end of time (u64 ns)",
+                        b.sample_period_ns, b.start_time_ns
+                    ));
                 }
                 self.time_ns.extend((0..n as u64).map(|i| b.start_time_ns + i * b.sample_period_ns));
                 $(self.$ch.extend_from_slice(&b.$ch);)*
@@ -334,10 +344,65 @@ pub struct RunTelemetry {
 /// linearly. Damage (truncation, a bad length, a message that does not
 /// decode) is an error naming the file and the message.
 pub fn read_telemetry(path: &Path) -> Result<RunTelemetry> {
-    match read_indexed(path)? {
-        Some(run) => Ok(run),
-        None => read_telemetry_linear(path),
+    let run = match read_indexed(path)? {
+        Some(run) => run,
+        None => read_telemetry_linear(path)?,
+    };
+    check_spans(path, &run)?;
+    Ok(run)
+}
+
+/// How far the topics' time spans may disagree: 1 s, or 2 % of the run.
+const SPAN_TOLERANCE: (f64, f64) = (1.0, 0.02);
+
+/// The five topics of one run must cover the same time span (within
+/// [`SPAN_TOLERANCE`]): a block whose length field was damaged, or whose
+/// arrays were extended, stretches its topic far past the others.
+fn check_spans(path: &Path, run: &RunTelemetry) -> Result<()> {
+    let mut spans: Vec<(&str, u64, u64)> = Vec::new();
+    for w in Wheel::ALL {
+        let t = &run.wheels[w.index()].time_ns;
+        if let (Some(a), Some(b)) = (t.iter().min(), t.iter().max()) {
+            spans.push((w.topic(), *a, *b));
+        }
     }
+    let t = &run.vehicle.time_ns;
+    if let (Some(a), Some(b)) = (t.iter().min(), t.iter().max()) {
+        spans.push((VEHICLE_TOPIC, *a, *b));
+    }
+    let (Some(start), Some(end)) = (
+        spans.iter().map(|s| s.1).min(),
+        spans.iter().map(|s| s.2).max(),
+    ) else {
+        return Ok(());
+    };
+    let longest_s = (end - start) as f64 / 1e9;
+    let tol_s = SPAN_TOLERANCE.0.max(SPAN_TOLERANCE.1 * longest_s);
+    // The reference is the median topic, so that one damaged topic stands out.
+    let mut ends: Vec<u64> = spans.iter().map(|s| s.2).collect();
+    let mut starts: Vec<u64> = spans.iter().map(|s| s.1).collect();
+    ends.sort_unstable();
+    starts.sort_unstable();
+    let (mid_start, mid_end) = (starts[starts.len() / 2], ends[ends.len() / 2]);
+    for (topic, a, b) in spans {
+        let off_s = (b.abs_diff(mid_end).max(a.abs_diff(mid_start))) as f64 / 1e9;
+        if off_s > tol_s {
+            return Err(IngestError::invalid(
+                path,
+                format!("topic {topic}"),
+                format!(
+                    "spans {:.3}..{:.3} s while the other topics span {:.3}..{:.3} s \
+                     ({off_s:.1} s apart, more than the {tol_s:.1} s allowed): \
+                     a block is longer than its period and the run allow",
+                    a as f64 / 1e9,
+                    b as f64 / 1e9,
+                    mid_start as f64 / 1e9,
+                    mid_end as f64 / 1e9
+                ),
+            ));
+        }
+    }
+    Ok(())
 }
 
 /// Decodes one message into `run`.
@@ -478,8 +543,179 @@ fn check_header(path: &Path, bytes: &[u8]) -> Result<()> {
     Ok(())
 }
 
+/// MCAP opcodes and fixed sizes this module reads directly.
+const OP_CHUNK: u8 = 0x06;
+const OP_DATA_END: u8 = 0x0F;
+const OP_FOOTER: u8 = 0x02;
+/// Footer record: opcode, length, summary start, summary offset start, CRC.
+const FOOTER_LEN: usize = 1 + 8 + 8 + 8 + 4;
+/// DataEnd record: opcode, length, data-section CRC.
+const DATA_END_LEN: usize = 1 + 8 + 4;
+const MAGIC_LEN: usize = 8;
+
+fn le_u64(b: &[u8], at: usize) -> Option<u64> {
+    Some(u64::from_le_bytes(b.get(at..at + 8)?.try_into().ok()?))
+}
+
+fn le_u32(b: &[u8], at: usize) -> Option<u32> {
+    Some(u32::from_le_bytes(b.get(at..at + 4)?.try_into().ok()?))
+}
+
+/// Checks the summary-section and data-section CRCs the writer stored (a
+/// stored 0 means "not computed" and is skipped). Damage there would
+/// otherwise pass unseen: the indexed path reads neither section whole.
+/// A footer that does not parse is left to the summary reader.
+fn check_file_crcs(path: &Path, bytes: &[u8]) -> Result<()> {
+    let len = bytes.len();
+    let Some(footer) = len.checked_sub(MAGIC_LEN + FOOTER_LEN) else {
+        return Ok(());
+    };
+    if bytes[footer] != OP_FOOTER || le_u64(bytes, footer + 1) != Some(20) {
+        return Ok(());
+    }
+    let summary_start = le_u64(bytes, footer + 9).unwrap_or(0);
+    let summary_crc = le_u32(bytes, footer + 25).unwrap_or(0);
+    // The summary CRC starts right after DataEnd: at the summary, or at the
+    // footer when the summary is empty, and runs up to the CRC field itself.
+    let crc_start = if summary_start == 0 {
+        footer
+    } else {
+        summary_start as usize
+    };
+    if crc_start > footer {
+        return Err(IngestError::invalid(
+            path,
+            "footer",
+            format!("summary_start {summary_start} is past the footer at {footer}"),
+        ));
+    }
+    if summary_crc != 0 {
+        let got = crc32fast::hash(&bytes[crc_start..footer + 25]);
+        if got != summary_crc {
+            return Err(IngestError::invalid(
+                path,
+                format!("summary section at offset {crc_start}"),
+                format!(
+                    "CRC mismatch (stored {summary_crc:#010x}, computed {got:#010x}): the file is damaged"
+                ),
+            ));
+        }
+    }
+    let Some(data_end) = crc_start.checked_sub(DATA_END_LEN) else {
+        return Ok(());
+    };
+    if bytes[data_end] != OP_DATA_END || le_u64(bytes, data_end + 1) != Some(4) {
+        return Err(IngestError::invalid(
+            path,
+            format!("offset {data_end}"),
+            "no DataEnd record before the summary section: the file is damaged",
+        ));
+    }
+    let data_crc = le_u32(bytes, data_end + 9).unwrap_or(0);
+    if data_crc != 0 {
+        let got = crc32fast::hash(&bytes[..data_end]);
+        if got != data_crc {
+            return Err(IngestError::invalid(
+                path,
+                "data section",
+                format!(
+                    "CRC mismatch (stored {data_crc:#010x}, computed {got:#010x}): the file is damaged"
+                ),
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// One chunk's records, decompressed from the file and checked against the
+/// chunk's own header (sizes, compression) and its CRC of the uncompressed
+/// records. Sizes are bounded before any allocation.
+fn chunk_records(path: &Path, bytes: &[u8], ci: &mcap::records::ChunkIndex) -> Result<Vec<u8>> {
+    let rec = format!("chunk at offset {}", ci.chunk_start_offset);
+    let bad = |what: String| IngestError::invalid(path, rec.clone(), what);
+    let start = usize::try_from(ci.chunk_start_offset).unwrap_or(usize::MAX);
+    let header = bytes
+        .get(start..)
+        .filter(|b| b.len() >= 1 + 8 + 8 + 8 + 8 + 4 + 4)
+        .ok_or_else(|| {
+            bad(format!(
+                "starts past the end of the file ({} bytes)",
+                bytes.len()
+            ))
+        })?;
+    if header[0] != OP_CHUNK {
+        return Err(bad(format!("opcode {:#04x} is not a chunk", header[0])));
+    }
+    let uncompressed_size = le_u64(header, 25).unwrap_or(0);
+    let crc = le_u32(header, 33).unwrap_or(0);
+    let name_len = le_u32(header, 37).unwrap_or(0) as usize;
+    let name = header
+        .get(41..41 + name_len.min(64))
+        .filter(|_| name_len <= 64)
+        .and_then(|b| std::str::from_utf8(b).ok())
+        .ok_or_else(|| bad("compression name is damaged".into()))?;
+    let data_len = le_u64(header, 41 + name_len).unwrap_or(u64::MAX);
+    let data_at = 41 + name_len + 8;
+    if name != ci.compression
+        || uncompressed_size != ci.uncompressed_size
+        || data_len != ci.compressed_size
+    {
+        return Err(bad(format!(
+            "header (compression '{name}', {data_len} -> {uncompressed_size} bytes) disagrees \
+             with the chunk index ('{}', {} -> {} bytes)",
+            ci.compression, ci.compressed_size, ci.uncompressed_size
+        )));
+    }
+    let limit = RECORD_LENGTH_LIMIT as u64;
+    if uncompressed_size > limit || data_len > limit {
+        return Err(bad(format!(
+            "{data_len} -> {uncompressed_size} bytes is above the {limit}-byte record limit"
+        )));
+    }
+    let data = usize::try_from(data_len)
+        .ok()
+        .and_then(|n| header.get(data_at..data_at + n))
+        .ok_or_else(|| {
+            bad(format!(
+                "{data_len} bytes run past the end of the file ({} bytes)",
+                bytes.len()
+            ))
+        })?;
+    let size = uncompressed_size as usize;
+    let out = match name {
+        "" => data.to_vec(),
+        "zstd" => zstd::bulk::decompress(data, size).map_err(|e| bad(format!("zstd: {e}")))?,
+        "lz4" => {
+            use std::io::Read;
+            let mut out = Vec::with_capacity(size);
+            lz4::Decoder::new(data)
+                .and_then(|d| d.take(size as u64 + 1).read_to_end(&mut out))
+                .map_err(|e| bad(format!("lz4: {e}")))?;
+            out
+        }
+        other => return Err(bad(format!("unsupported compression '{other}'"))),
+    };
+    if out.len() != size {
+        return Err(bad(format!(
+            "decompresses to {} bytes, the header says {size}",
+            out.len()
+        )));
+    }
+    if crc != 0 {
+        let got = crc32fast::hash(&out);
+        if got != crc {
+            return Err(bad(format!(
+                "CRC of the uncompressed records does not match (stored {crc:#010x}, \
+                 computed {got:#010x}): the chunk is damaged"
+            )));
+        }
+    }
+    Ok(out)
+}
+
 /// Parallel path: every chunk through its own indexed reader over the memory map.
 /// `None` when the file has no usable summary or chunk index (read it linearly).
+/// The file's and every chunk's CRCs are checked (where the writer stored them).
 fn read_indexed(path: &Path) -> Result<Option<RunTelemetry>> {
     use rayon::prelude::*;
     let file = File::open(path).map_err(|e| IngestError::io(path, e))?;
@@ -488,6 +724,9 @@ fn read_indexed(path: &Path) -> Result<Option<RunTelemetry>> {
     let map = unsafe { memmap2::Mmap::map(&file) }.map_err(|e| IngestError::io(path, e))?;
     let bytes: &[u8] = &map;
     check_header(path, bytes)?;
+    // Before any record is parsed: the mcap crate sizes strings from their
+    // length prefix (up to 4 GiB) before checking them against the record.
+    check_file_crcs(path, bytes)?;
     let Some(summary) = read_summary(path, bytes).ok().flatten() else {
         return Ok(None);
     };
@@ -503,32 +742,31 @@ fn read_indexed(path: &Path) -> Result<Option<RunTelemetry>> {
                 path: path.to_path_buf(),
                 source,
             };
+            let records = chunk_records(path, bytes, ci)?;
+            // The reader gets the checked records as an uncompressed chunk.
+            let mut plain = ci.clone();
+            plain.compression = String::new();
+            plain.compressed_size = records.len() as u64;
+            let offset = plain.compressed_data_offset().map_err(mc)?;
             let mut one = summary.clone();
-            one.chunk_indexes = vec![ci.clone()];
+            one.chunk_indexes = vec![plain];
             let opts = mcap::sans_io::IndexedReaderOptions::new()
                 .with_record_length_limit(RECORD_LENGTH_LIMIT);
             let mut reader =
                 mcap::sans_io::IndexedReader::new_with_options(&one, opts).map_err(mc)?;
             let mut part = RunTelemetry::default();
+            let mut records = Some(records);
             while let Some(event) = reader.next_event() {
                 match event.map_err(mc)? {
-                    mcap::sans_io::IndexedReadEvent::ReadChunkRequest { offset, length } => {
-                        let end = (offset as usize)
-                            .checked_add(length)
-                            .filter(|&e| e <= bytes.len());
-                        let Some(end) = end else {
+                    mcap::sans_io::IndexedReadEvent::ReadChunkRequest { .. } => {
+                        let Some(r) = records.take() else {
                             return Err(IngestError::invalid(
                                 path,
-                                format!("chunk at offset {offset}"),
-                                format!(
-                                    "{length} bytes run past the end of the file ({} bytes)",
-                                    bytes.len()
-                                ),
+                                format!("chunk at offset {}", ci.chunk_start_offset),
+                                "the reader asked for the chunk twice",
                             ));
                         };
-                        reader
-                            .insert_chunk_record_data(offset, &bytes[offset as usize..end])
-                            .map_err(mc)?;
+                        reader.insert_chunk_record_data(offset, &r).map_err(mc)?;
                     }
                     mcap::sans_io::IndexedReadEvent::Message { header, data } => {
                         let channel = one.channels.get(&header.channel_id).ok_or_else(|| {
@@ -575,14 +813,100 @@ fn read_indexed(path: &Path) -> Result<Option<RunTelemetry>> {
     Ok(Some(run))
 }
 
+/// Walks the top-level records from the header to `DataEnd`, each length
+/// checked against the file; returns DataEnd's offset. Records with strings
+/// are checked too (their length prefixes must fit in the record) where no
+/// data-section CRC vouches for them.
+fn data_section_end(path: &Path, bytes: &[u8]) -> Result<usize> {
+    let mut at = MAGIC_LEN;
+    let mut unverified = Vec::new();
+    loop {
+        let len = le_u64(bytes, at + 1)
+            .filter(|&l| l <= (bytes.len() - at - 9) as u64)
+            .ok_or_else(|| {
+                IngestError::invalid(
+                    path,
+                    format!("record at offset {at}"),
+                    "its length runs past the end of the file (truncated or damaged), \
+                     and there is no intact summary to read around it",
+                )
+            })? as usize;
+        let op = bytes[at];
+        if op == OP_DATA_END {
+            let crc = le_u32(bytes, at + 9).unwrap_or(0);
+            if crc != 0 {
+                let got = crc32fast::hash(&bytes[..at]);
+                if got != crc {
+                    return Err(IngestError::invalid(
+                        path,
+                        "data section",
+                        format!(
+                            "CRC mismatch (stored {crc:#010x}, computed {got:#010x}): the file is damaged"
+                        ),
+                    ));
+                }
+            } else {
+                for (op, rec_at, rec_len) in unverified {
+                    check_strings(path, op, rec_at, &bytes[rec_at + 9..rec_at + 9 + rec_len])?;
+                }
+            }
+            return Ok(at);
+        }
+        unverified.push((op, at, len));
+        at += 9 + len;
+    }
+}
+
+/// The string, byte-array and map fields of a header, schema, channel or
+/// metadata record must fit inside the record.
+fn check_strings(path: &Path, op: u8, at: usize, body: &[u8]) -> Result<()> {
+    // Field layout after any fixed-size prefix: each entry is a u32-prefixed field.
+    let (skip, fields) = match op {
+        0x01 => (0, 2), // header: profile, library
+        0x03 => (2, 3), // schema: id; name, encoding, data
+        0x04 => (4, 3), // channel: id, schema id; topic, encoding, metadata map
+        0x0C => (0, 2), // metadata: name, map
+        _ => return Ok(()),
+    };
+    let mut pos = skip;
+    for _ in 0..fields {
+        let n = le_u32(body, pos).map(|n| n as usize);
+        match n.and_then(|n| (pos + 4).checked_add(n)) {
+            Some(end) if end <= body.len() => pos = end,
+            _ => {
+                return Err(IngestError::invalid(
+                    path,
+                    format!("record at offset {at} (opcode {op:#04x})"),
+                    "a string or map length runs past the record: the file is damaged",
+                ));
+            }
+        }
+    }
+    Ok(())
+}
+
 /// Linear path: every record in file order, one thread (unchunked files,
-/// files without a summary). Public so tests and benches can compare paths.
+/// files without a usable summary). Public so tests and benches can compare
+/// paths. The data section is walked and checked first (its CRC, or the
+/// string lengths where it has none); the summary is not read at all, so a
+/// damaged one cannot derail the reader.
 pub fn read_telemetry_linear(path: &Path) -> Result<RunTelemetry> {
     let file = File::open(path).map_err(|e| IngestError::io(path, e))?;
-    let opts =
-        mcap::sans_io::LinearReaderOptions::default().with_record_length_limit(RECORD_LENGTH_LIMIT);
-    let reader =
-        mcap::io::MessageReader::new_with_options(BufReader::with_capacity(1 << 20, file), opts);
+    // SAFETY: as in `read_indexed`.
+    let map = unsafe { memmap2::Mmap::map(&file) }.map_err(|e| IngestError::io(path, e))?;
+    let bytes: &[u8] = &map;
+    check_header(path, bytes)?;
+    let data_end = data_section_end(path, bytes)?;
+    // The data section and DataEnd, closed by an empty footer and the magic.
+    let mut tail = [0u8; FOOTER_LEN + MAGIC_LEN];
+    tail[0] = OP_FOOTER;
+    tail[1..9].copy_from_slice(&20u64.to_le_bytes());
+    tail[FOOTER_LEN..].copy_from_slice(b"\x89MCAP0\r\n");
+    let input = std::io::Read::chain(&bytes[..data_end + DATA_END_LEN], &tail[..]);
+    let opts = mcap::sans_io::LinearReaderOptions::default()
+        .with_record_length_limit(RECORD_LENGTH_LIMIT)
+        .with_prevalidate_chunk_crcs(true);
+    let reader = mcap::io::MessageReader::new_with_options(input, opts);
     let mut run = RunTelemetry::default();
     for msg in reader {
         let msg = msg.map_err(|source| IngestError::Mcap {
