@@ -78,6 +78,7 @@ fn bench_extract(c: &mut Criterion) {
         csv: None,
         engine: tirewear::kpi::Engine::Cpu,
         progress: false,
+        allow_external_paths: false,
     };
     let mut g = c.benchmark_group("extract_season");
     g.sample_size(10);

@@ -1,10 +1,21 @@
 //! Atomic output files: write to a temporary file in the destination folder,
 //! then rename over the destination. A crash or an error leaves either the
 //! old file or the new one, never half of one.
+//!
+//! [`OutputSet`] does the same for several files that belong together (the
+//! KPI table and its side tables): all are written first, then a journal
+//! naming them is written, then they are renamed into place. A process killed
+//! during the renames leaves the journal, and the next writer of that set
+//! finishes them ([`recover`]). Temporary files carry their writer's process
+//! id, so the next writer removes those of dead processes ([`remove_orphans`]).
 
 use std::fs::File;
 use std::io::{self, BufWriter, Write};
 use std::path::{Path, PathBuf};
+
+/// Temporary files are named `.tirewear-<pid>-<random>.tmp`.
+const TMP_PREFIX: &str = ".tirewear-";
+const TMP_SUFFIX: &str = ".tmp";
 
 /// A file being written; it appears under its final name only on [`AtomicFile::commit`].
 /// Dropping it without committing removes the temporary file.
@@ -22,7 +33,8 @@ impl AtomicFile {
         };
         std::fs::create_dir_all(parent)?;
         let mut builder = tempfile::Builder::new();
-        builder.prefix(".tirewear-").suffix(".tmp");
+        let prefix = format!("{TMP_PREFIX}{}-", std::process::id());
+        builder.prefix(&prefix).suffix(TMP_SUFFIX);
         // Temporary files are private (0600); the finished file gets ordinary permissions.
         #[cfg(unix)]
         builder.permissions(std::os::unix::fs::PermissionsExt::from_mode(0o644));
@@ -60,20 +72,150 @@ pub fn write_with(
     out.commit()
 }
 
+/// Writes a whole file atomically through the open file itself (for writers
+/// that need to seek, such as Parquet's).
+pub fn write_file(dest: &Path, body: impl FnOnce(&mut File) -> io::Result<()>) -> io::Result<()> {
+    let mut out = AtomicFile::create(dest)?;
+    body(out.file())?;
+    out.commit()
+}
+
+/// Rows as CSV (header from the field names) into a writer.
+pub fn csv_to<T: serde::Serialize>(w: impl Write, rows: &[T]) -> io::Result<()> {
+    let mut c = csv::Writer::from_writer(w);
+    for r in rows {
+        c.serialize(r)?;
+    }
+    c.flush()
+}
+
 /// Writes serialisable rows as CSV (header from the field names), atomically.
 pub fn write_csv<T: serde::Serialize>(dest: &Path, rows: &[T]) -> io::Result<()> {
-    write_with(dest, |w| {
-        let mut c = csv::Writer::from_writer(w);
-        for r in rows {
-            c.serialize(r)?;
-        }
-        c.flush()
-    })
+    write_with(dest, |w| csv_to(w, rows))
 }
 
 /// Writes bytes to `dest` atomically.
 pub fn write_bytes(dest: &Path, bytes: &[u8]) -> io::Result<()> {
     write_with(dest, |w| w.write_all(bytes))
+}
+
+/// Files that become visible together: each is written to a temporary file
+/// by [`OutputSet::add`]; [`OutputSet::commit`] renames them all into place
+/// behind a journal. Dropped without commit, the temporary files are removed
+/// and the destinations keep their old contents.
+pub struct OutputSet {
+    journal: PathBuf,
+    /// (temporary path, destination), written and synced.
+    files: Vec<(tempfile::TempPath, PathBuf)>,
+}
+
+impl OutputSet {
+    /// A set whose journal is `journal`; an earlier set's interrupted commit
+    /// is finished first and dead writers' temporary files are removed.
+    pub fn new(journal: &Path) -> io::Result<Self> {
+        recover(journal)?;
+        if let Some(dir) = journal.parent().filter(|p| !p.as_os_str().is_empty()) {
+            remove_orphans(dir)?;
+        }
+        Ok(Self {
+            journal: journal.to_path_buf(),
+            files: Vec::new(),
+        })
+    }
+
+    /// Writes `dest`'s new contents to a temporary file beside it.
+    pub fn add(
+        &mut self,
+        dest: &Path,
+        body: impl FnOnce(&mut File) -> io::Result<()>,
+    ) -> io::Result<()> {
+        let mut f = AtomicFile::create(dest)?;
+        body(f.file())?;
+        f.file().sync_all()?;
+        self.files
+            .push((f.tmp.into_temp_path(), dest.to_path_buf()));
+        Ok(())
+    }
+
+    /// Renames every file into place: the journal first, so a kill at any
+    /// moment leaves either the old set (no journal) or a journal that the
+    /// next writer completes.
+    pub fn commit(self) -> io::Result<()> {
+        let pairs: Vec<(PathBuf, PathBuf)> = self
+            .files
+            .iter()
+            .map(|(t, d)| (t.to_path_buf(), d.clone()))
+            .collect();
+        let text = serde_json::to_vec(&pairs).map_err(io::Error::other)?;
+        write_bytes(&self.journal, &text)?;
+        for (tmp, dest) in self.files {
+            tmp.persist(&dest).map_err(|e| e.error)?;
+        }
+        std::fs::remove_file(&self.journal)
+    }
+}
+
+/// Finishes a commit that a killed process left half done: every temporary
+/// file its journal names that still exists is renamed into place.
+pub fn recover(journal: &Path) -> io::Result<()> {
+    let text = match std::fs::read(journal) {
+        Ok(t) => t,
+        Err(e) if e.kind() == io::ErrorKind::NotFound => return Ok(()),
+        Err(e) => return Err(e),
+    };
+    let pairs: Vec<(PathBuf, PathBuf)> = serde_json::from_slice(&text).map_err(|e| {
+        io::Error::new(
+            io::ErrorKind::InvalidData,
+            format!("{}: damaged commit journal: {e}", journal.display()),
+        )
+    })?;
+    for (tmp, dest) in pairs {
+        if tmp.exists() {
+            std::fs::rename(&tmp, &dest)?;
+        }
+    }
+    tracing::info!("{}: finished an interrupted commit", journal.display());
+    std::fs::remove_file(journal)
+}
+
+/// Removes this module's temporary files in `dir` whose writer process is
+/// gone (Linux: no `/proc/<pid>`); returns how many. Elsewhere nothing is
+/// removed, since a live writer cannot be told apart.
+pub fn remove_orphans(dir: &Path) -> io::Result<usize> {
+    if !Path::new("/proc/self").exists() {
+        return Ok(0);
+    }
+    let mut removed = 0;
+    let entries = match std::fs::read_dir(dir) {
+        Ok(e) => e,
+        Err(e) if e.kind() == io::ErrorKind::NotFound => return Ok(0),
+        Err(e) => return Err(e),
+    };
+    for entry in entries {
+        let entry = entry?;
+        let name = entry.file_name();
+        let Some(rest) = name
+            .to_str()
+            .and_then(|n| n.strip_prefix(TMP_PREFIX))
+            .filter(|n| n.ends_with(TMP_SUFFIX))
+        else {
+            continue;
+        };
+        let pid = rest.split('-').next().and_then(|p| p.parse::<u32>().ok());
+        // Files from before the pid was part of the name: no writer can claim them.
+        let alive = pid.is_some_and(|p| Path::new(&format!("/proc/{p}")).exists());
+        if !alive {
+            std::fs::remove_file(entry.path())?;
+            removed += 1;
+        }
+    }
+    if removed > 0 {
+        tracing::info!(
+            "{}: removed {removed} temporary files left by killed runs",
+            dir.display()
+        );
+    }
+    Ok(removed)
 }
 
 #[cfg(test)]
@@ -105,5 +247,60 @@ mod tests {
         });
         assert!(r.is_err());
         assert_eq!(std::fs::read(&dest).unwrap(), b"old");
+    }
+
+    #[test]
+    fn output_set_appears_together_and_recovers_after_a_kill() {
+        let dir = tempfile::tempdir().unwrap();
+        let (a, b) = (dir.path().join("a.txt"), dir.path().join("b.txt"));
+        let journal = dir.path().join(".set.commit.json");
+        write_bytes(&a, b"old a").unwrap();
+        write_bytes(&b, b"old b").unwrap();
+        // Dropped before commit: nothing changes, nothing is left.
+        {
+            let mut set = OutputSet::new(&journal).unwrap();
+            set.add(&a, |f| f.write_all(b"new a")).unwrap();
+        }
+        assert_eq!(std::fs::read(&a).unwrap(), b"old a");
+        assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 2);
+        // A kill after the first rename: the journal names the second file's
+        // temporary, and the next set finishes the commit.
+        let mut set = OutputSet::new(&journal).unwrap();
+        set.add(&a, |f| f.write_all(b"new a")).unwrap();
+        set.add(&b, |f| f.write_all(b"new b")).unwrap();
+        let pairs: Vec<(PathBuf, PathBuf)> = set
+            .files
+            .iter()
+            .map(|(t, d)| (t.to_path_buf(), d.clone()))
+            .collect();
+        write_bytes(&journal, &serde_json::to_vec(&pairs).unwrap()).unwrap();
+        std::fs::rename(&pairs[0].0, &pairs[0].1).unwrap();
+        for (t, _) in set.files {
+            t.keep().unwrap();
+        }
+        assert_eq!(std::fs::read(&a).unwrap(), b"new a");
+        assert_eq!(std::fs::read(&b).unwrap(), b"old b");
+        drop(OutputSet::new(&journal).unwrap());
+        assert_eq!(std::fs::read(&b).unwrap(), b"new b");
+        assert!(!journal.exists());
+        assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 2);
+    }
+
+    #[test]
+    fn orphans_of_dead_writers_are_removed_and_live_ones_kept() {
+        let dir = tempfile::tempdir().unwrap();
+        // pid 0 is never a user process; our own pid is alive.
+        let dead = dir.path().join(".tirewear-0-abc.tmp");
+        let live = dir
+            .path()
+            .join(format!(".tirewear-{}-abc.tmp", std::process::id()));
+        let other = dir.path().join("kpis.parquet");
+        for p in [&dead, &live, &other] {
+            std::fs::write(p, b"x").unwrap();
+        }
+        if Path::new("/proc/self").exists() {
+            assert_eq!(remove_orphans(dir.path()).unwrap(), 1);
+            assert!(!dead.exists() && live.exists() && other.exists());
+        }
     }
 }

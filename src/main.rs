@@ -16,7 +16,16 @@ use tirewear::sim::{self, Effect, Preset, SimOptions};
 /// road texture profiles, compound master curves and tread-depth readings
 /// (see docs/formats.md). `tirewear simulate` writes one with known physics.
 #[derive(Parser)]
-#[command(name = "tirewear", version, about, long_about)]
+#[command(
+    name = "tirewear",
+    version,
+    about,
+    long_about,
+    after_help = "Exit codes: 0 done; 1 an error stopped the command (it names the file, \
+record and what was wrong); 2 bad command line; 3 extract wrote its outputs but skipped \
+some runs (listed, and in NAME.report.json); 101 internal error (a bug, please report). \
+See docs/reliability.md."
+)]
 struct Cli {
     /// Log filter (e.g. `info`, `debug`, `tirewear=trace`); RUST_LOG works too.
     #[arg(long, global = true, default_value = "info")]
@@ -153,6 +162,11 @@ struct ExtractArgs {
     /// Worker threads (default: all cores).
     #[arg(long)]
     jobs: Option<usize>,
+    /// Accept manifest paths outside the archive folder (absolute, or with
+    /// '..'). Off by default, so an archive from elsewhere cannot make
+    /// tirewear read arbitrary files.
+    #[arg(long)]
+    allow_external_paths: bool,
 }
 
 #[derive(clap::Args)]
@@ -466,13 +480,16 @@ fn run_predict(
         axle: &'a str,
         compound: &'a str,
         measured_wear_pct: f64,
+        /// NaN when the row has no prediction; `note` says why.
         predicted_wear_pct: f64,
+        note: String,
     }
     let mut out_rows = Vec::with_capacity(rows.len());
     for r in &rows {
-        let p = m
-            .predict_row(r)
-            .with_context(|| format!("{}", kpis.display()))?;
+        let (p, note) = match m.predict_row(r) {
+            Ok(p) => (p, String::new()),
+            Err(e) => (f64::NAN, e.to_string()),
+        };
         out_rows.push(Prediction {
             event: &r.event,
             track: &r.track,
@@ -483,12 +500,29 @@ fn run_predict(
             compound: &r.compound,
             measured_wear_pct: r.wear_mean_pct,
             predicted_wear_pct: p,
+            note,
         });
+    }
+    let missing = out_rows.iter().filter(|p| !p.note.is_empty()).count();
+    if missing > 0 {
+        let first = out_rows
+            .iter()
+            .find(|p| !p.note.is_empty())
+            .expect("counted");
+        println!(
+            "{missing} rows have no prediction (NaN, reason in the note column), e.g. {}",
+            first.note
+        );
     }
     tirewear::atomic::write_csv(out, &out_rows)
         .with_context(|| format!("writing {}", out.display()))?;
-    let observed: Vec<f64> = out_rows.iter().map(|p| p.measured_wear_pct).collect();
-    let predicted: Vec<f64> = out_rows.iter().map(|p| p.predicted_wear_pct).collect();
+    // Indicators over the rows with both a measurement and a prediction.
+    let both: Vec<&Prediction> = out_rows
+        .iter()
+        .filter(|p| p.measured_wear_pct.is_finite() && p.predicted_wear_pct.is_finite())
+        .collect();
+    let observed: Vec<f64> = both.iter().map(|p| p.measured_wear_pct).collect();
+    let predicted: Vec<f64> = both.iter().map(|p| p.predicted_wear_pct).collect();
     match tirewear::model::metrics::metrics(&observed, &predicted, m.features.len()) {
         Ok(x) => println!(
             "wrote {}: {} predictions ({} model); against the measured wear R² {:.4}, RMSE {:.4} %",
@@ -560,6 +594,7 @@ fn run_gap(
     let stem = kpis.file_stem().and_then(|s| s.to_str()).unwrap_or("kpis");
     let maps_path = kpis.with_file_name(format!("{stem}.energy_maps.parquet"));
     let maps = if maps_path.exists() {
+        tirewear::kpi::table::check_same_extraction(kpis, &maps_path)?;
         tirewear::kpi::energy_map::read_energy_maps(&maps_path)?
     } else {
         tracing::warn!(
@@ -588,7 +623,23 @@ fn run_gap(
     Ok(())
 }
 
-fn main() -> Result<()> {
+/// Exit codes (docs/reliability.md): 0 done; 1 an error stopped the command
+/// (the message names the file, record and what was wrong); 2 the command
+/// line is wrong (clap); 3 `extract` wrote its outputs but skipped some runs
+/// (listed, and in the report); 101 an internal error (a bug: please report).
+const EXIT_RUNS_SKIPPED: u8 = 3;
+
+fn main() -> std::process::ExitCode {
+    match run() {
+        Ok(code) => code,
+        Err(e) => {
+            eprintln!("Error: {e:?}");
+            std::process::ExitCode::FAILURE
+        }
+    }
+}
+
+fn run() -> Result<std::process::ExitCode> {
     let cli = Cli::parse();
     let filter = tracing_subscriber::EnvFilter::try_from_default_env()
         .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(&cli.log));
@@ -618,13 +669,17 @@ fn main() -> Result<()> {
                     .num_threads(j.max(1))
                     .build_global()?;
             }
-            run_extract(&tirewear::kpi::ExtractOptions {
+            let s = run_extract(&tirewear::kpi::ExtractOptions {
                 season: a.season,
                 out: a.out,
                 csv: a.csv,
                 engine: a.engine,
                 progress,
+                allow_external_paths: a.allow_external_paths,
             })?;
+            if !s.skipped.is_empty() {
+                return Ok(std::process::ExitCode::from(EXIT_RUNS_SKIPPED));
+            }
         }
         Command::Fit(a) => {
             let methods = match a.method {
@@ -768,6 +823,7 @@ fn main() -> Result<()> {
                 csv: Some(out.join("kpis.csv")),
                 engine: tirewear::kpi::Engine::Auto,
                 progress,
+                allow_external_paths: false,
             })?;
             println!();
             run_fit(
@@ -789,5 +845,5 @@ fn main() -> Result<()> {
             )?;
         }
     }
-    Ok(())
+    Ok(std::process::ExitCode::SUCCESS)
 }

@@ -293,6 +293,7 @@ pub fn run_case(
         csv: None,
         engine: crate::kpi::Engine::Cpu,
         progress: false,
+        allow_external_paths: false,
     })?;
     let rows = crate::kpi::table::read_parquet(&kpis)?;
     let maps = crate::kpi::energy_map::read_energy_maps(&dir.join("kpis.energy_maps.parquet"))?;

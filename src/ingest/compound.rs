@@ -38,6 +38,15 @@ pub struct MasterCurve {
     pub loss_factor: Vec<f64>,
 }
 
+/// Largest accepted WLF C1 (typical rubber: 8-20).
+pub const MAX_WLF_C1: f64 = 1000.0;
+/// Largest accepted WLF C2 in K (typical rubber: 50-200 K).
+pub const MAX_WLF_C2_K: f64 = 10_000.0;
+/// Accepted range of the WLF reference temperature (degC).
+pub const T_REF_RANGE_C: (f64, f64) = (-150.0, 250.0);
+/// Largest accepted master-curve reference frequency (Hz).
+pub const MAX_REFERENCE_FREQUENCY_HZ: f64 = 1e12;
+
 impl Wlf {
     /// log10 of the shift factor a_T at temperature `t_c` (paper eq. 30).
     pub fn log10_shift(&self, t_c: f64) -> f64 {
@@ -57,6 +66,21 @@ impl Compound {
         let c: Compound = read_toml(path)?;
         c.validate(path)?;
         Ok(c)
+    }
+
+    /// The file must describe the compound the manifest names it for.
+    pub fn check_id(&self, manifest_id: &str, path: &Path) -> Result<()> {
+        if self.id != manifest_id {
+            return Err(IngestError::invalid(
+                path,
+                "id",
+                format!(
+                    "is '{}' but the manifest lists this file as compound '{manifest_id}'",
+                    self.id
+                ),
+            ));
+        }
+        Ok(())
     }
 
     pub fn write(&self, path: &Path) -> Result<()> {
@@ -112,14 +136,49 @@ impl Compound {
                 format!("must be > 0, got {}", self.reference_frequency_hz),
             ));
         }
-        if !(positive(self.wlf.c1) && positive(self.wlf.c2_k)) {
+        if self.reference_frequency_hz > MAX_REFERENCE_FREQUENCY_HZ {
             return Err(bad(
-                "wlf",
+                "reference_frequency_hz",
                 format!(
-                    "c1 and c2_k must be > 0, got {} and {}",
-                    self.wlf.c1, self.wlf.c2_k
+                    "{} Hz is above {MAX_REFERENCE_FREQUENCY_HZ:e} Hz",
+                    self.reference_frequency_hz
                 ),
             ));
+        }
+        self.validate_wlf(path)
+    }
+
+    /// WLF constants in physical ranges, and the equation defined (C2 + T −
+    /// T_ref > 0) over the whole master curve: a NaN or absurd constant would
+    /// otherwise reach the master-curve lookups as a NaN temperature.
+    fn validate_wlf(&self, path: &Path) -> Result<()> {
+        let w = &self.wlf;
+        let bad = |what: String| IngestError::invalid(path, "wlf", what);
+        if !(positive(w.c1) && w.c1 <= MAX_WLF_C1) {
+            return Err(bad(format!(
+                "c1 must be in (0, {MAX_WLF_C1}], got {}",
+                w.c1
+            )));
+        }
+        if !(positive(w.c2_k) && w.c2_k <= MAX_WLF_C2_K) {
+            return Err(bad(format!(
+                "c2_k must be in (0, {MAX_WLF_C2_K}] K, got {}",
+                w.c2_k
+            )));
+        }
+        if !(T_REF_RANGE_C.0..=T_REF_RANGE_C.1).contains(&w.t_ref_c) {
+            return Err(bad(format!(
+                "t_ref_c must be a temperature in {}..{} degC, got {}",
+                T_REF_RANGE_C.0, T_REF_RANGE_C.1, w.t_ref_c
+            )));
+        }
+        let t_min = self.master_curve.temperature_c[0];
+        if w.c2_k + t_min - w.t_ref_c <= 0.0 {
+            return Err(bad(format!(
+                "C2 + T - T_ref = {} K at the master curve's lowest temperature {t_min} degC: \
+                 the WLF equation is undefined there (it needs C2 + T - T_ref > 0)",
+                w.c2_k + t_min - w.t_ref_c
+            )));
         }
         Ok(())
     }
@@ -144,9 +203,13 @@ impl Compound {
     }
 }
 
-/// Piecewise-linear interpolation of `map(ys)` at `x`, clamped to the ends.
+/// Piecewise-linear interpolation of `map(ys)` at `x`, clamped to the ends;
+/// NaN for a NaN `x` (no grid point to clamp to).
 fn interp(xs: &[f64], ys: &[f64], x: f64, map: impl Fn(f64) -> f64) -> f64 {
     let n = xs.len();
+    if x.is_nan() {
+        return f64::NAN;
+    }
     if x <= xs[0] {
         return map(ys[0]);
     }
@@ -196,5 +259,47 @@ mod tests {
         assert!((c.storage_modulus_mpa(5.0) - 10f64.powf(1.5)).abs() < 1e-9);
         assert!((c.loss_factor(2.5) - 0.25).abs() < 1e-12);
         assert_eq!(c.storage_modulus_mpa(-50.0), 100.0);
+        assert!(c.storage_modulus_mpa(f64::NAN).is_nan());
+        assert!(c.loss_factor(f64::NAN).is_nan());
+    }
+
+    #[test]
+    fn absurd_wlf_constants_are_refused_by_name() {
+        let good = Compound {
+            id: "x".into(),
+            name: "x".into(),
+            reference_frequency_hz: 10.0,
+            wlf: Wlf {
+                c1: 8.86,
+                c2_k: 101.6,
+                t_ref_c: 30.0,
+            },
+            master_curve: MasterCurve {
+                temperature_c: vec![-20.0, 140.0],
+                storage_modulus_mpa: vec![100.0, 10.0],
+                loss_factor: vec![0.2, 0.4],
+            },
+        };
+        let p = Path::new("c.toml");
+        good.validate(p).unwrap();
+        type Change = fn(&mut Wlf);
+        let cases: [(Change, &str); 6] = [
+            (|w| w.t_ref_c = f64::NAN, "t_ref_c"),
+            (|w| w.t_ref_c = f64::INFINITY, "t_ref_c"),
+            (|w| w.t_ref_c = -500.0, "t_ref_c"),
+            (|w| w.c1 = 1e308, "c1"),
+            (|w| w.c2_k = f64::NAN, "c2_k"),
+            // 101.6 - 20 - 90 < 0: the equation flips sign inside the curve.
+            (|w| w.t_ref_c = 90.0, "C2 + T - T_ref"),
+        ];
+        for (change, says) in cases {
+            let mut c = good.clone();
+            change(&mut c.wlf);
+            let err = c.validate(p).unwrap_err().to_string();
+            assert!(
+                err.starts_with("c.toml: wlf: ") && err.contains(says),
+                "{err}"
+            );
+        }
     }
 }

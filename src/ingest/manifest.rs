@@ -126,8 +126,16 @@ pub struct Season {
 }
 
 impl Season {
-    /// Reads and validates `DIR/season.toml` (or a manifest path given directly).
+    /// Reads and validates `DIR/season.toml` (or a manifest path given
+    /// directly). Every path in it must stay inside the archive folder.
     pub fn open(path: &Path) -> Result<Season> {
+        Self::open_with(path, false)
+    }
+
+    /// As [`Season::open`]; `allow_external_paths` accepts absolute paths and
+    /// paths that leave the archive folder (`..`), which an archive copied
+    /// from elsewhere should not be able to point at by itself.
+    pub fn open_with(path: &Path, allow_external_paths: bool) -> Result<Season> {
         let manifest_path = if path.is_dir() {
             path.join("season.toml")
         } else {
@@ -135,6 +143,9 @@ impl Season {
         };
         let manifest: Manifest = read_toml(&manifest_path)?;
         manifest.validate(&manifest_path)?;
+        if !allow_external_paths {
+            manifest.check_paths_inside(&manifest_path)?;
+        }
         let root = manifest_path
             .parent()
             .map(Path::to_path_buf)
@@ -161,6 +172,51 @@ impl Season {
 }
 
 impl Manifest {
+    /// Every file path, with the record that holds it.
+    fn paths(&self) -> Vec<(String, &str)> {
+        let mut out: Vec<(String, &str)> = Vec::new();
+        for (i, f) in self.wear_readings.iter().enumerate() {
+            out.push((format!("wear_readings[{i}]"), f));
+        }
+        if let Some(f) = &self.road_profiles {
+            out.push(("road_profiles".into(), f));
+        }
+        for (i, c) in self.compounds.iter().enumerate() {
+            out.push((format!("compounds[{i}] id={}", c.id), &c.file));
+        }
+        for (i, t) in self.tracks.iter().enumerate() {
+            for (j, p) in t.profiles.iter().enumerate() {
+                out.push((format!("tracks[{i}] id={} profiles[{j}]", t.id), &p.file));
+            }
+        }
+        for (i, r) in self.runs.iter().enumerate() {
+            out.push((format!("runs[{i}] id={}", r.id), &r.telemetry));
+        }
+        out
+    }
+
+    /// Paths must be relative and stay inside the archive folder (no `..`,
+    /// no root, no drive prefix).
+    pub fn check_paths_inside(&self, path: &Path) -> Result<()> {
+        use std::path::Component;
+        for (record, p) in self.paths() {
+            let outside = Path::new(p)
+                .components()
+                .any(|c| !matches!(c, Component::Normal(_) | Component::CurDir));
+            if outside {
+                return Err(IngestError::invalid(
+                    path,
+                    record,
+                    format!(
+                        "path '{p}' leaves the archive folder (absolute or '..'); \
+                         --allow-external-paths accepts it"
+                    ),
+                ));
+            }
+        }
+        Ok(())
+    }
+
     /// Writes the manifest atomically.
     pub fn write(&self, path: &Path) -> Result<()> {
         write_toml(path, self)
@@ -274,16 +330,66 @@ impl Manifest {
             if r.telemetry.is_empty() {
                 return Err(bad(rec, "telemetry path is empty".into()));
             }
+            let same = |o: &Run| Path::new(&o.telemetry) == Path::new(&r.telemetry);
+            if let Some(o) = self.runs[..i].iter().find(|o| same(o)) {
+                return Err(bad(
+                    rec,
+                    format!(
+                        "telemetry '{}' is also run {}'s: each run needs its own file",
+                        r.telemetry, o.id
+                    ),
+                ));
+            }
         }
         Ok(())
     }
 }
 
+/// A calendar date `YYYY-MM-DD` (Gregorian, leap years included).
 fn valid_date(s: &str) -> bool {
     let b = s.as_bytes();
     if b.len() != 10 || b[4] != b'-' || b[7] != b'-' {
         return false;
     }
-    let num = |r: std::ops::Range<usize>| s[r].parse::<u32>().ok();
-    matches!((num(0..4), num(5..7), num(8..10)), (Some(_), Some(m), Some(d)) if (1..=12).contains(&m) && (1..=31).contains(&d))
+    let num = |r: std::ops::Range<usize>| {
+        s.get(r)
+            .filter(|d| d.bytes().all(|c| c.is_ascii_digit()))
+            .and_then(|d| d.parse::<u32>().ok())
+    };
+    let (Some(y), Some(m), Some(d)) = (num(0..4), num(5..7), num(8..10)) else {
+        return false;
+    };
+    let leap = (y % 4 == 0 && y % 100 != 0) || y % 400 == 0;
+    let days = match m {
+        1 | 3 | 5 | 7 | 8 | 10 | 12 => 31,
+        4 | 6 | 9 | 11 => 30,
+        2 if leap => 29,
+        2 => 28,
+        _ => return false,
+    };
+    (1..=days).contains(&d)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn dates_follow_the_calendar() {
+        for ok in ["2026-02-28", "2024-02-29", "2000-02-29", "2026-12-31"] {
+            assert!(valid_date(ok), "{ok}");
+        }
+        for bad in [
+            "2026-02-31",
+            "2026-02-29",
+            "1900-02-29",
+            "2026-04-31",
+            "2026-13-01",
+            "2026-00-10",
+            "2026-1-010",
+            "+026-01-01",
+        ] {
+            assert!(!valid_date(bad), "{bad}");
+        }
+    }
 }

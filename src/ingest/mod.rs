@@ -17,9 +17,40 @@ pub(crate) fn positive(x: f64) -> bool {
     x > 0.0 && x.is_finite()
 }
 
+/// Largest TOML file read (manifests, compounds): far above any real one.
+const MAX_TOML_BYTES: u64 = 64 << 20;
+
+/// Opens a regular file of at most `limit` bytes for reading: a device
+/// (`/dev/zero`), a FIFO or an oversized file is an error before any byte is
+/// buffered, and the reader stops at `limit` should the file grow meanwhile.
+pub(crate) fn open_bounded(path: &Path, limit: u64) -> Result<std::io::Take<std::fs::File>> {
+    use std::io::Read;
+    let file = std::fs::File::open(path).map_err(|e| IngestError::io(path, e))?;
+    let meta = file.metadata().map_err(|e| IngestError::io(path, e))?;
+    if !meta.is_file() {
+        return Err(IngestError::invalid(
+            path,
+            "file",
+            "is not a regular file (a device, FIFO or folder)",
+        ));
+    }
+    if meta.len() > limit {
+        return Err(IngestError::invalid(
+            path,
+            "file",
+            format!("is {} bytes, more than the {limit} read", meta.len()),
+        ));
+    }
+    Ok(file.take(limit))
+}
+
 /// Reads a TOML file into `T`, naming the file in any error.
 pub(crate) fn read_toml<T: serde::de::DeserializeOwned>(path: &Path) -> Result<T> {
-    let text = std::fs::read_to_string(path).map_err(|e| IngestError::io(path, e))?;
+    use std::io::Read;
+    let mut text = String::new();
+    open_bounded(path, MAX_TOML_BYTES)?
+        .read_to_string(&mut text)
+        .map_err(|e| IngestError::io(path, e))?;
     toml::from_str(&text).map_err(|e| IngestError::Toml {
         path: path.to_path_buf(),
         source: Box::new(e),

@@ -11,6 +11,18 @@ use std::sync::Arc;
 /// Relative tolerance on the spacing of x: profiles must be equally spaced.
 const SPACING_RTOL: f64 = 1e-6;
 
+/// Accepted sample spacing Δx (mm): 0.1 µm (a lab profilometer) to 5 mm.
+/// Checked before anything is sized from it (the macro/micro filter's
+/// kernel has about 0.4 mm / Δx taps).
+pub const DX_RANGE_MM: (f64, f64) = (1e-4, 5.0);
+/// Accepted profile length (mm): from 4× the macro/micro cut-off (0.5 mm), so
+/// that the split means something, to 100 m.
+pub const LENGTH_RANGE_MM: (f64, f64) = (2.0, 1e5);
+/// Most samples in one profile (256 MiB of heights).
+pub const MAX_PROFILE_SAMPLES: usize = 1 << 25;
+/// Largest accepted |z| (mm): road texture is millimetres; 1 m is a unit error.
+pub const MAX_ABS_Z_MM: f64 = 1000.0;
+
 /// One measured profile.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Profile {
@@ -38,16 +50,32 @@ impl Profile {
         path: &Path,
     ) -> Result<Profile> {
         let rec = format!("profile {track}/{location}");
+        let bad = |what: String| Err(IngestError::invalid(path, rec.clone(), what));
         if x.len() < 16 {
-            return Err(IngestError::invalid(
-                path,
-                rec,
-                format!("has {} samples, at least 16 are needed", x.len()),
+            return bad(format!("has {} samples, at least 16 are needed", x.len()));
+        }
+        if x.len() > MAX_PROFILE_SAMPLES {
+            return bad(format!(
+                "has {} samples, at most {MAX_PROFILE_SAMPLES} are read",
+                x.len()
             ));
         }
         let dx = (x[x.len() - 1] - x[0]) / (x.len() - 1) as f64;
         if !positive(dx) {
-            return Err(IngestError::invalid(path, rec, "x_mm must increase"));
+            return bad("x_mm must increase".into());
+        }
+        if !(DX_RANGE_MM.0..=DX_RANGE_MM.1).contains(&dx) {
+            return bad(format!(
+                "sample spacing {dx:e} mm is outside {:e}..{} mm (is x in mm?)",
+                DX_RANGE_MM.0, DX_RANGE_MM.1
+            ));
+        }
+        let len = dx * x.len() as f64;
+        if !(LENGTH_RANGE_MM.0..=LENGTH_RANGE_MM.1).contains(&len) {
+            return bad(format!(
+                "length {len} mm is outside {}..{} mm (is x in mm?)",
+                LENGTH_RANGE_MM.0, LENGTH_RANGE_MM.1
+            ));
         }
         for i in 0..x.len() {
             let expect = x[0] + dx * i as f64;
@@ -61,13 +89,19 @@ impl Profile {
                     ),
                 ));
             }
-            if !z[i].is_finite() {
+            if !(z[i].is_finite() && z[i].abs() <= MAX_ABS_Z_MM) {
                 return Err(IngestError::invalid(
                     path,
                     format!("{rec} sample {i}"),
-                    format!("z_mm = {} is not a finite number", z[i]),
+                    format!("z_mm = {} is not a height within ±{MAX_ABS_Z_MM} mm", z[i]),
                 ));
             }
+        }
+        if z.iter().all(|&v| v == z[0]) {
+            return bad(format!(
+                "every z_mm is {}: a flat profile has no texture to measure",
+                z[0]
+            ));
         }
         Ok(Profile {
             track: track.into(),
@@ -85,16 +119,27 @@ struct CsvRow {
     z_mm: f64,
 }
 
+/// Largest profile CSV read (bytes).
+const MAX_CSV_BYTES: u64 = 2 << 30;
+
 /// Reads one profile from a CSV file with header `x_mm,z_mm`.
 pub fn read_profile_csv(path: &Path, track: &str, location: &str) -> Result<Profile> {
     let csv_err = |source| IngestError::Csv {
         path: path.to_path_buf(),
         source,
     };
-    let mut rdr = csv::Reader::from_path(path).map_err(csv_err)?;
+    let file = super::open_bounded(path, MAX_CSV_BYTES)?;
+    let mut rdr = csv::Reader::from_reader(file);
     let (mut x, mut z) = (Vec::new(), Vec::new());
-    for row in rdr.deserialize::<CsvRow>() {
+    for (i, row) in rdr.deserialize::<CsvRow>().enumerate() {
         let row = row.map_err(csv_err)?;
+        if i >= MAX_PROFILE_SAMPLES {
+            return Err(IngestError::invalid(
+                path,
+                format!("line {}", i + 2),
+                format!("more than {MAX_PROFILE_SAMPLES} samples"),
+            ));
+        }
         x.push(row.x_mm);
         z.push(row.z_mm);
     }
@@ -160,8 +205,22 @@ pub fn write_profiles_parquet(path: &Path, profiles: &[Profile]) -> Result<()> {
 }
 
 /// Reads every profile of a long-format Parquet file. Rows of one profile
-/// must be contiguous and in increasing x.
+/// must be contiguous and in increasing x. The first profile that fails its
+/// checks is the error.
 pub fn read_profiles_parquet(path: &Path) -> Result<Vec<Profile>> {
+    read_profiles_parquet_each(path)?
+        .into_iter()
+        .map(|p| p.map_err(|(_, e)| e))
+        .collect()
+}
+
+/// A profile, or its track and why it failed its checks.
+pub type ProfileResult = std::result::Result<Profile, (String, IngestError)>;
+
+/// Like [`read_profiles_parquet`], but a profile that fails its checks is
+/// returned as an error of its own (with its track) and the others are kept;
+/// the whole call fails only when the file cannot be read as a profile table.
+pub fn read_profiles_parquet_each(path: &Path) -> Result<Vec<ProfileResult>> {
     let pq = |source| IngestError::Parquet {
         path: path.to_path_buf(),
         source,
@@ -176,13 +235,15 @@ pub fn read_profiles_parquet(path: &Path) -> Result<Vec<Profile>> {
         x: Vec<f64>,
         z: Vec<f64>,
     }
-    let mut done: Vec<Profile> = Vec::new();
+    let mut done: Vec<ProfileResult> = Vec::new();
     let mut cur: Option<Acc> = None;
     let mut seen = std::collections::HashSet::new();
-    let finish = |acc: Acc, done: &mut Vec<Profile>| -> Result<()> {
-        done.push(Profile::from_columns(
-            &acc.key.0, &acc.key.1, &acc.x, acc.z, path,
-        )?);
+    let finish = |acc: Acc, done: &mut Vec<ProfileResult>| -> Result<()> {
+        let track = acc.key.0.clone();
+        done.push(
+            Profile::from_columns(&acc.key.0, &acc.key.1, &acc.x, acc.z, path)
+                .map_err(|e| (track, e)),
+        );
         Ok(())
     };
     for batch in reader {
@@ -253,6 +314,13 @@ pub fn read_profiles_parquet(path: &Path) -> Result<Vec<Profile>> {
                 });
             }
             let acc = cur.as_mut().expect("set above");
+            if acc.x.len() >= MAX_PROFILE_SAMPLES {
+                return Err(IngestError::invalid(
+                    path,
+                    format!("profile {t}/{l}"),
+                    format!("more than {MAX_PROFILE_SAMPLES} samples"),
+                ));
+            }
             acc.x.push(x.value(i));
             acc.z.push(z.value(i));
         }
@@ -272,7 +340,7 @@ mod tests {
             track: track.into(),
             location: loc.into(),
             x0_mm: 0.0,
-            dx_mm: 0.01,
+            dx_mm: 0.05,
             z_mm: (0..n).map(|i| (i as f64 * 0.3).sin()).collect(),
         }
     }
@@ -285,7 +353,7 @@ mod tests {
         write_profile_csv(&dir.path().join("a.csv"), &a).unwrap();
         let back = read_profile_csv(&dir.path().join("a.csv"), "monza", "L1").unwrap();
         assert_eq!(back.z_mm.len(), 64);
-        assert!((back.dx_mm - 0.01).abs() < 1e-12);
+        assert!((back.dx_mm - 0.05).abs() < 1e-12);
         let pq = dir.path().join("p.parquet");
         write_profiles_parquet(&pq, &[a.clone(), b.clone()]).unwrap();
         let all = read_profiles_parquet(&pq).unwrap();
@@ -300,11 +368,38 @@ mod tests {
         let path = dir.path().join("bad.csv");
         let mut text = String::from("x_mm,z_mm\n");
         for i in 0..20 {
-            let x = if i == 7 { 0.075 } else { i as f64 * 0.01 };
-            text += &format!("{x},0.1\n");
+            let x = if i == 7 { 0.9 } else { i as f64 * 0.125 };
+            text += &format!("{x},{}\n", 0.1 * (i % 3) as f64);
         }
         std::fs::write(&path, text).unwrap();
         let err = read_profile_csv(&path, "t", "L1").unwrap_err().to_string();
         assert!(err.contains("bad.csv") && err.contains("sample 7"), "{err}");
+    }
+
+    /// The cases that panicked, aborted or gave NaN before the checks.
+    #[test]
+    fn absurd_profiles_are_refused_before_anything_is_sized_from_them() {
+        let p = Path::new("road.csv");
+        let x = |n: usize, dx: f64| (0..n).map(|i| i as f64 * dx).collect::<Vec<_>>();
+        let z = |n: usize| (0..n).map(|i| (i as f64 * 0.7).sin()).collect::<Vec<_>>();
+        let err = |x: &[f64], z: Vec<f64>| {
+            Profile::from_columns("t", "L1", x, z, p)
+                .unwrap_err()
+                .to_string()
+        };
+        // 1e-300 mm and 1e-9 mm spacing: capacity overflow / a 600 GB filter before.
+        assert!(err(&x(100, 1e-300), z(100)).contains("spacing"));
+        assert!(err(&x(100_000, 1e-9), z(100_000)).contains("spacing"));
+        // x in metres: 0.01 mm written as 1e-5.
+        assert!(err(&x(4000, 1e-5), z(4000)).contains("is x in mm?"));
+        // 16 points at 0.01 mm: 0.16 mm, too short for any texture index.
+        assert!(err(&x(16, 0.01), z(16)).contains("length"));
+        // Flat, and heights of ±3e300 mm.
+        assert!(err(&x(400, 0.01), vec![0.0; 400]).contains("flat"));
+        let mut huge = z(400);
+        huge[3] = 3e300;
+        assert!(err(&x(400, 0.01), huge).contains("sample 3"));
+        // A real one passes.
+        Profile::from_columns("t", "L1", &x(400, 0.01), z(400), p).unwrap();
     }
 }

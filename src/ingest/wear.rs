@@ -28,13 +28,20 @@ pub struct WearReading {
     pub new_depth_mm: f64,
 }
 
+/// Largest wear-reading CSV read (bytes): about ten million readings.
+const MAX_WEAR_CSV_BYTES: u64 = 1 << 30;
+/// Largest accepted new-tire tread depth (mm); race tires have 2-8 mm.
+pub const MAX_NEW_DEPTH_MM: f64 = 100.0;
+/// Largest accepted tread width (mm).
+pub const MAX_TREAD_WIDTH_MM: f64 = 2000.0;
+
 /// Reads and checks a wear-reading CSV. Errors name the file and the line.
 pub fn read_wear_csv(path: &Path) -> Result<Vec<WearReading>> {
     let csv_err = |source| IngestError::Csv {
         path: path.to_path_buf(),
         source,
     };
-    let mut rdr = csv::Reader::from_path(path).map_err(csv_err)?;
+    let mut rdr = csv::Reader::from_reader(super::open_bounded(path, MAX_WEAR_CSV_BYTES)?);
     let mut out = Vec::new();
     for (i, row) in rdr.deserialize::<WearReading>().enumerate() {
         let r = row.map_err(csv_err)?;
@@ -46,10 +53,22 @@ pub fn read_wear_csv(path: &Path) -> Result<Vec<WearReading>> {
             r.spot
         );
         let bad = |what: String| IngestError::invalid(path, rec.clone(), what);
-        if !positive(r.new_depth_mm) {
+        if !(positive(r.new_depth_mm) && r.new_depth_mm <= MAX_NEW_DEPTH_MM) {
             return Err(bad(format!(
-                "new_depth_mm must be > 0, got {}",
+                "new_depth_mm must be in (0, {MAX_NEW_DEPTH_MM}] mm, got {}",
                 r.new_depth_mm
+            )));
+        }
+        if r.spot == 0 || r.reading == 0 {
+            return Err(bad(format!(
+                "spot and reading are numbered from 1, got spot {} reading {}",
+                r.spot, r.reading
+            )));
+        }
+        if !(positive(r.tread_width_mm) && r.tread_width_mm <= MAX_TREAD_WIDTH_MM) {
+            return Err(bad(format!(
+                "tread_width_mm must be in (0, {MAX_TREAD_WIDTH_MM}] mm, got {}",
+                r.tread_width_mm
             )));
         }
         if !r.depth_mm.is_finite() || r.depth_mm < 0.0 || r.depth_mm > 1.5 * r.new_depth_mm {
@@ -67,6 +86,80 @@ pub fn read_wear_csv(path: &Path) -> Result<Vec<WearReading>> {
         out.push(r);
     }
     Ok(out)
+}
+
+/// A disagreement between wear readings and the manifest.
+#[derive(Debug, Clone, PartialEq)]
+pub struct WearProblem {
+    /// The manifest run it costs (None: the readings name no run of the manifest).
+    pub run: Option<String>,
+    /// What was wrong, naming the file and line.
+    pub what: String,
+}
+
+/// Checks readings against the manifest: the run exists, the tire set is
+/// the one the manifest mounts on that wheel, and one tire has one tread
+/// width. The first problem of each run is returned (lines counted from the
+/// header as line 1, as [`read_wear_csv`] reads them).
+pub fn check_against_manifest(
+    path: &Path,
+    readings: &[WearReading],
+    manifest: &super::manifest::Manifest,
+) -> Vec<WearProblem> {
+    use std::collections::{BTreeMap, BTreeSet};
+    let runs: BTreeMap<&str, &super::manifest::Run> =
+        manifest.runs.iter().map(|r| (r.id.as_str(), r)).collect();
+    let mut width: BTreeMap<(&str, Wheel), (f64, usize)> = BTreeMap::new();
+    let mut unknown: BTreeMap<&str, usize> = BTreeMap::new();
+    let mut reported: BTreeSet<&str> = BTreeSet::new();
+    let mut out = Vec::new();
+    for (i, r) in readings.iter().enumerate() {
+        let line = i + 2;
+        let Some(run) = runs.get(r.run.as_str()) else {
+            unknown.entry(&r.run).or_insert(line);
+            continue;
+        };
+        let mut problem = None;
+        let mounted = run.tire_sets.get(r.wheel);
+        if mounted != r.tire_set {
+            problem = Some(format!(
+                "tire_set '{}' but the manifest mounts '{mounted}' on {}",
+                r.tire_set, r.wheel
+            ));
+        }
+        let (w, first) = *width
+            .entry((&r.run, r.wheel))
+            .or_insert((r.tread_width_mm, line));
+        if problem.is_none() && w != r.tread_width_mm {
+            problem = Some(format!(
+                "tread_width_mm {} differs from {w} on line {first} for the same tire",
+                r.tread_width_mm
+            ));
+        }
+        if let Some(what) = problem
+            && reported.insert(&run.id)
+        {
+            out.push(WearProblem {
+                run: Some(run.id.clone()),
+                what: format!(
+                    "{}: line {line} (run {}, wheel {}): {what}",
+                    path.display(),
+                    r.run,
+                    r.wheel
+                ),
+            });
+        }
+    }
+    for (run, line) in unknown {
+        out.push(WearProblem {
+            run: None,
+            what: format!(
+                "{}: line {line}: run '{run}' is not in the manifest; its readings are not used",
+                path.display()
+            ),
+        });
+    }
+    out
 }
 
 /// Writes wear readings as CSV, atomically.

@@ -161,7 +161,16 @@ pub fn read_energy_maps(
             let c = batch.column_by_name(name).ok_or_else(|| {
                 IngestError::invalid(path, "schema", format!("missing column '{name}'"))
             })?;
-            arrow_cast::cast(c, ty).map_err(|e| perr(e.into()))
+            let cast = arrow_cast::cast(c, ty).map_err(|e| perr(e.into()))?;
+            // A null, or a value that does not convert, must not read as 0.
+            if let Some(k) = (0..cast.len()).find(|&k| cast.is_null(k)) {
+                return Err(IngestError::invalid(
+                    path,
+                    format!("record {}", record + k + 1),
+                    format!("column '{name}' is empty or not a {ty}"),
+                ));
+            }
+            Ok(cast)
         };
         let (run, wheel, map) = (
             col("run", &DataType::Utf8)?,
@@ -223,6 +232,13 @@ pub fn read_energy_maps(
                         "bin ({bi}, {bj}) outside the {ni}×{nj} grid of map '{}'",
                         map.value(k)
                     ),
+                ));
+            }
+            if !e.value(k).is_finite() {
+                return Err(IngestError::invalid(
+                    path,
+                    format!("record {record}"),
+                    format!("energy_j = {} is not finite", e.value(k)),
                 ));
             }
             data[bi * nj + bj] += e.value(k);

@@ -10,19 +10,19 @@ use super::energy_map::{EnergyMaps, SLIDING_SPEED_BINS, T_INNER_BINS, T_SURFACE_
 use super::energy_map_kernel::merge_maps;
 use super::road::{RoadCurves, RoadIndices, mean_indices, profile_indices, profile_indices_from};
 use super::roughness_batch::{FFT_N, Spectral, batches};
-use super::table::{KpiRow, write_batch, write_csv, write_parquet};
+use super::table::{KpiRow, kpi_batch, quality, with_extraction_id, write_batch_to};
 use super::telemetry::{CleaningReport, finish_wheel, prepare_wheel, vehicle_indices};
 use super::telemetry_reduce::{ReduceBatch, merge};
-use super::viscoelastic::viscoelastic_indices;
+use super::viscoelastic::{ViscoelasticIndices, viscoelastic_indices};
 use super::wear::{mean_wear, worn_through_readings};
 use crate::Wheel;
 use crate::engine::{CpuEngine, GpuEngine, ReduceEngine};
 use crate::ingest::IngestError;
 use crate::ingest::compound::Compound;
 use crate::ingest::manifest::{Run, Season};
-use crate::ingest::road::{Profile, read_profile_csv, read_profiles_parquet};
+use crate::ingest::road::{Profile, read_profile_csv, read_profiles_parquet_each};
 use crate::ingest::telemetry::read_telemetry;
-use crate::ingest::wear::read_wear_csv;
+use crate::ingest::wear::{check_against_manifest, read_wear_csv};
 use arrow_array::{Float64Array, RecordBatch, StringArray, UInt32Array};
 use arrow_schema::{DataType, Field, Schema};
 use rayon::prelude::*;
@@ -48,6 +48,8 @@ pub struct ExtractOptions {
     pub csv: Option<PathBuf>,
     pub engine: Engine,
     pub progress: bool,
+    /// Accept manifest paths outside the archive folder (absolute or `..`).
+    pub allow_external_paths: bool,
 }
 
 /// A run that produced no rows, and why.
@@ -60,6 +62,9 @@ pub struct Skipped {
 
 #[derive(Debug, Clone, serde::Serialize)]
 pub struct ExtractSummary {
+    /// Ties this report to the Parquet files written with it (their schema
+    /// metadata `tirewear.extraction_id`).
+    pub extraction_id: String,
     pub engine: Engine,
     /// The device that ran the reductions.
     pub device: String,
@@ -90,8 +95,39 @@ fn side_path(out: &Path, suffix: &str) -> PathBuf {
     out.with_file_name(format!("{stem}.{suffix}"))
 }
 
-/// Mean road indices by track id.
-type TrackRoads = HashMap<String, RoadIndices>;
+/// Road indices of every track (mean over its usable profiles) and, for a
+/// track whose indices are missing or incomplete, why.
+#[derive(Default)]
+struct TrackRoads {
+    means: HashMap<String, RoadIndices>,
+    notes: HashMap<String, String>,
+}
+
+/// Reads every road profile. A profile that fails its checks is reported
+/// (warning) and left out: it costs its track's road KPIs, not the season.
+fn read_profiles(season: &Season, warnings: &mut Vec<String>) -> Result<Vec<Profile>, IngestError> {
+    let mut profiles: Vec<Profile> = Vec::new();
+    let mut bad = |track: &str, e: IngestError| {
+        warnings.push(format!("track {track}: road profile left out: {e}"));
+    };
+    if let Some(bulk) = &season.manifest.road_profiles {
+        for p in read_profiles_parquet_each(&season.path(bulk))? {
+            match p {
+                Ok(p) => profiles.push(p),
+                Err((track, e)) => bad(&track, e),
+            }
+        }
+    }
+    for t in &season.manifest.tracks {
+        for p in &t.profiles {
+            match read_profile_csv(&season.path(&p.file), &t.id, &p.location) {
+                Ok(p) => profiles.push(p),
+                Err(e) => bad(&t.id, e),
+            }
+        }
+    }
+    Ok(profiles)
+}
 
 /// Road indices of every track (mean over locations) and the curves of every profile.
 fn road_kpis(
@@ -99,15 +135,7 @@ fn road_kpis(
     warnings: &mut Vec<String>,
     engine: &dyn ReduceEngine,
 ) -> Result<(TrackRoads, Vec<(Profile, RoadCurves)>), IngestError> {
-    let mut profiles: Vec<Profile> = Vec::new();
-    if let Some(bulk) = &season.manifest.road_profiles {
-        profiles.extend(read_profiles_parquet(&season.path(bulk))?);
-    }
-    for t in &season.manifest.tracks {
-        for p in &t.profiles {
-            profiles.push(read_profile_csv(&season.path(&p.file), &t.id, &p.location)?);
-        }
-    }
+    let profiles = read_profiles(season, warnings)?;
     let results = if engine.name() == "gpu" {
         road_on_engine(profiles, engine).map_err(|e| {
             IngestError::invalid(&season.root, "road profiles", format!("GPU engine: {e}"))
@@ -125,19 +153,29 @@ fn road_kpis(
     for (p, i, _) in &results {
         by_track.entry(p.track.clone()).or_default().push(*i);
     }
-    let mut means = HashMap::new();
+    let mut roads = TrackRoads::default();
     for t in &season.manifest.tracks {
-        match by_track.get(&t.id) {
+        let note = match by_track.get(&t.id) {
             Some(v) => {
-                means.insert(t.id.clone(), mean_indices(v));
+                let mean = mean_indices(v);
+                roads.means.insert(t.id.clone(), mean);
+                let undefined = mean.undefined();
+                (!undefined.is_empty()).then(|| {
+                    format!(
+                        "road indices {} undefined: the profiles are too short or too coarse \
+                         for them (docs/kpis.md)",
+                        undefined.join(", ")
+                    )
+                })
             }
-            None => warnings.push(format!(
-                "track {}: no road profiles, its road KPIs are NaN",
-                t.id
-            )),
+            None => Some("no usable road profile, its road KPIs are NaN".to_string()),
+        };
+        if let Some(note) = note {
+            warnings.push(format!("track {}: {note}", t.id));
+            roads.notes.insert(t.id.clone(), note);
         }
     }
-    Ok((means, results.into_iter().map(|(p, _, c)| (p, c)).collect()))
+    Ok((roads, results.into_iter().map(|(p, _, c)| (p, c)).collect()))
 }
 
 /// Road indices with the engine's roughness kernels for profiles of at least
@@ -195,33 +233,27 @@ struct RunOutput {
 fn run_rows(
     season: &Season,
     run: &Run,
-    compounds: &HashMap<String, Compound>,
-    roads: &HashMap<String, RoadIndices>,
+    compounds: &HashMap<String, Result<Compound, String>>,
+    roads: &TrackRoads,
     // (mean wear %, worn-through readings) per tire.
     wear: &BTreeMap<(String, Wheel), (f64, f64)>,
     engine: &dyn ReduceEngine,
 ) -> Result<RunOutput, String> {
     let path = season.path(&run.telemetry);
+    let compound = compounds[&run.compound]
+        .as_ref()
+        .map_err(|e| format!("compound {}: {e}", run.compound))?;
     let t0 = Instant::now();
     let tel = read_telemetry(&path).map_err(|e| e.to_string())?;
     let decode_s = t0.elapsed().as_secs_f64();
     let t1 = Instant::now();
     let event = season.event(&run.event).expect("validated manifest");
     let vehicle = vehicle_indices(&tel.vehicle).map_err(|e| format!("{}: {e}", path.display()))?;
-    let compound = &compounds[&run.compound];
-    let road = roads.get(&event.track).copied().unwrap_or(RoadIndices {
-        macro_wavelength_mm: f64::NAN,
-        micro_wavelength_mm: f64::NAN,
-        hurst: f64::NAN,
-        hurst_hdc: f64::NAN,
-        ra_macro_mm: f64::NAN,
-        ra_micro_mm: f64::NAN,
-        peakyness_mm: f64::NAN,
-        skewness: f64::NAN,
-        kurtosis: f64::NAN,
-        rq_mm: f64::NAN,
-        ra_mm: f64::NAN,
-    });
+    let road = roads
+        .means
+        .get(&event.track)
+        .copied()
+        .unwrap_or(RoadIndices::UNDEFINED);
     let mut out = RunOutput {
         rows: vec![],
         maps: vec![],
@@ -263,13 +295,25 @@ fn run_rows(
         let k = finish_wheel(&sums[i], &batch.refs[i])
             .map_err(|e| format!("{}: topic {}: {e}", path.display(), w.topic()))?;
         let sliding_speed = k.sliding_distance_m / k.duration_s;
+        let mut reasons = Vec::new();
+        if let Some(note) = roads.notes.get(&event.track) {
+            reasons.push(format!("track {}: {note}", event.track));
+        }
         let ve = viscoelastic_indices(
             compound,
             sliding_speed,
             road.macro_wavelength_mm,
             k.t_surface_avg_c,
-        );
-        let row = KpiRow {
+        )
+        .unwrap_or_else(|e| {
+            reasons.push(format!("viscoelastic: {e}"));
+            ViscoelasticIndices::UNDEFINED
+        });
+        let wear_of_tire = wear.get(&(run.id.clone(), w));
+        if wear_of_tire.is_none() {
+            reasons.push("no wear readings".into());
+        }
+        let mut row = KpiRow {
             event: run.event.clone(),
             track: event.track.clone(),
             car: run.car.clone(),
@@ -278,6 +322,7 @@ fn run_rows(
             axle: w.axle().to_string(),
             compound: run.compound.clone(),
             tire_set: run.tire_sets.get(w).into(),
+            quality: String::new(),
             t_surface_avg_c: k.t_surface_avg_c,
             t_surface_std_c: k.t_surface_std_c,
             t_inner_avg_c: k.t_inner_avg_c,
@@ -317,12 +362,13 @@ fn run_rows(
             shifted_temperature_c: ve.shifted_temperature_c,
             storage_modulus_mpa: ve.storage_modulus_mpa,
             loss_factor: ve.loss_factor,
-            wear_mean_pct: wear.get(&(run.id.clone(), w)).map_or(f64::NAN, |t| t.0),
+            wear_mean_pct: wear_of_tire.map_or(f64::NAN, |t| t.0),
             telemetry_duration_s: k.duration_s,
             dropout_time_s: rep.dropout_time_s,
             invalid_samples: (rep.samples - rep.kept) as f64,
-            worn_through_readings: wear.get(&(run.id.clone(), w)).map_or(0.0, |t| t.1),
+            worn_through_readings: wear_of_tire.map_or(0.0, |t| t.1),
         };
+        row.quality = quality(&row, &reasons);
         out.rows.push(row);
         out.maps.push((w, maps));
         out.cleaning.push((format!("{}/{}", run.id, w), rep));
@@ -372,17 +418,38 @@ pub fn extract(opts: &ExtractOptions) -> Result<ExtractSummary, IngestError> {
         Some(g) => g,
         None => &CpuEngine,
     };
-    let season = Season::open(&opts.season)?;
+    let season = Season::open_with(&opts.season, opts.allow_external_paths)?;
     let m = &season.manifest;
     let mut warnings = Vec::new();
-    let mut compounds = HashMap::new();
-    for c in &m.compounds {
-        compounds.insert(c.id.clone(), Compound::load(&season.path(&c.file))?);
-    }
+    // A bad compound file fails the runs on that compound, not the season.
+    let compounds: HashMap<String, Result<Compound, String>> = m
+        .compounds
+        .iter()
+        .map(|c| {
+            let loaded = Compound::load(&season.path(&c.file))
+                .and_then(|k| k.check_id(&c.id, &season.path(&c.file)).map(|_| k))
+                .map_err(|e| e.to_string());
+            if let Err(e) = &loaded {
+                warnings.push(format!("compound {}: {e}", c.id));
+            }
+            (c.id.clone(), loaded)
+        })
+        .collect();
     let (roads, curves) = road_kpis(&season, &mut warnings, reducer)?;
+    let mut wear_problems: HashMap<String, String> = HashMap::new();
     let mut readings = Vec::new();
     for f in &m.wear_readings {
-        readings.extend(read_wear_csv(&season.path(f))?);
+        let path = season.path(f);
+        let file_readings = read_wear_csv(&path)?;
+        for p in check_against_manifest(&path, &file_readings, m) {
+            match p.run {
+                Some(run) => {
+                    wear_problems.entry(run).or_insert(p.what);
+                }
+                None => warnings.push(p.what),
+            }
+        }
+        readings.extend(file_readings);
     }
     let worn = worn_through_readings(&readings);
     let wear: BTreeMap<(String, Wheel), (f64, f64)> = mean_wear(&readings)
@@ -410,7 +477,10 @@ pub fn extract(opts: &ExtractOptions) -> Result<ExtractSummary, IngestError> {
         .runs
         .par_iter()
         .map(|run| {
-            let r = run_rows(&season, run, &compounds, &roads, &wear, reducer);
+            let r = match wear_problems.get(&run.id) {
+                Some(p) => Err(p.clone()),
+                None => guarded(|| run_rows(&season, run, &compounds, &roads, &wear, reducer)),
+            };
             pb.inc(1);
             (run, r)
         })
@@ -451,13 +521,9 @@ pub fn extract(opts: &ExtractOptions) -> Result<ExtractSummary, IngestError> {
             }
         }
     }
-    write_parquet(&opts.out, &rows)?;
-    if let Some(csv) = &opts.csv {
-        write_csv(csv, &rows)?;
-    }
-    write_road_curves(&side_path(&opts.out, "road.parquet"), &curves)?;
-    write_energy_maps(&side_path(&opts.out, "energy_maps.parquet"), &maps)?;
+    let extraction_id = new_extraction_id();
     let summary = ExtractSummary {
+        extraction_id: extraction_id.clone(),
         engine,
         device: reducer.device(),
         gpu_timings: reducer_gpu.map(GpuEngine::timings),
@@ -472,16 +538,81 @@ pub fn extract(opts: &ExtractOptions) -> Result<ExtractSummary, IngestError> {
         reduce_seconds: reduce_s,
         cleaning,
     };
-    let report = side_path(&opts.out, "report.json");
-    let text = serde_json::to_string_pretty(&summary)
-        .map_err(|e| IngestError::invalid(&report, "report", e.to_string()))?;
-    crate::atomic::write_bytes(&report, text.as_bytes())
-        .map_err(|e| IngestError::io(&report, e))?;
+    write_outputs(opts, &extraction_id, &rows, &curves, &maps, &summary)?;
     Ok(summary)
 }
 
+/// Runs `f`, turning a panic into an error: a bug met by one run's data
+/// skips that run (with the panic's message) instead of ending the season.
+fn guarded<T>(f: impl FnOnce() -> Result<T, String>) -> Result<T, String> {
+    std::panic::catch_unwind(std::panic::AssertUnwindSafe(f)).unwrap_or_else(|p| {
+        let msg = p
+            .downcast_ref::<&str>()
+            .map(|s| s.to_string())
+            .or_else(|| p.downcast_ref::<String>().cloned())
+            .unwrap_or_else(|| "unknown panic".into());
+        Err(format!(
+            "internal error while extracting this run ({msg}); please report it"
+        ))
+    })
+}
+
+/// A fresh id for one extraction's outputs (time and process, hex).
+fn new_extraction_id() -> String {
+    let nanos = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_nanos());
+    format!("{nanos:x}-{:x}", std::process::id())
+}
+
+/// Writes every output of one extraction as one set: all become visible
+/// together, each Parquet file and the report carrying `extraction_id`.
+fn write_outputs(
+    opts: &ExtractOptions,
+    extraction_id: &str,
+    rows: &[KpiRow],
+    curves: &[(Profile, RoadCurves)],
+    maps: &[(String, Wheel, EnergyMaps)],
+    summary: &ExtractSummary,
+) -> Result<(), IngestError> {
+    let stem = opts
+        .out
+        .file_stem()
+        .and_then(|s| s.to_str())
+        .unwrap_or("kpis");
+    let journal = opts.out.with_file_name(format!(".{stem}.commit.json"));
+    let io = |p: &Path| {
+        let p = p.to_path_buf();
+        move |e| IngestError::io(p, e)
+    };
+    let mut set = crate::atomic::OutputSet::new(&journal).map_err(io(&journal))?;
+    let tagged = |b: RecordBatch| with_extraction_id(b, extraction_id);
+    set.add(&opts.out, |f| write_batch_to(f, &tagged(kpi_batch(rows))))
+        .map_err(io(&opts.out))?;
+    if let Some(csv) = &opts.csv {
+        set.add(csv, |f| {
+            crate::atomic::csv_to(std::io::BufWriter::new(f), rows)
+        })
+        .map_err(io(csv))?;
+    }
+    let road = side_path(&opts.out, "road.parquet");
+    let batch = tagged(road_curves_batch(curves));
+    set.add(&road, |f| write_batch_to(f, &batch))
+        .map_err(io(&road))?;
+    let energy = side_path(&opts.out, "energy_maps.parquet");
+    let batch = tagged(energy_maps_batch(maps));
+    set.add(&energy, |f| write_batch_to(f, &batch))
+        .map_err(io(&energy))?;
+    let report = side_path(&opts.out, "report.json");
+    let text = serde_json::to_string_pretty(summary)
+        .map_err(|e| IngestError::invalid(&report, "report", e.to_string()))?;
+    set.add(&report, |f| std::io::Write::write_all(f, text.as_bytes()))
+        .map_err(io(&report))?;
+    set.commit().map_err(io(&journal))
+}
+
 /// Side table of road curves: track, location, curve ("psd" or "hdc"), x, y.
-fn write_road_curves(path: &Path, curves: &[(Profile, RoadCurves)]) -> Result<(), IngestError> {
+fn road_curves_batch(curves: &[(Profile, RoadCurves)]) -> RecordBatch {
     let (mut t, mut l, mut k, mut x, mut y) = (vec![], vec![], vec![], vec![], vec![]);
     for (p, c) in curves {
         for (kind, xs, ys) in [
@@ -504,7 +635,7 @@ fn write_road_curves(path: &Path, curves: &[(Profile, RoadCurves)]) -> Result<()
         Field::new("x", DataType::Float64, false),
         Field::new("y", DataType::Float64, false),
     ]));
-    let batch = RecordBatch::try_new(
+    RecordBatch::try_new(
         schema,
         vec![
             Arc::new(StringArray::from(t)),
@@ -514,11 +645,7 @@ fn write_road_curves(path: &Path, curves: &[(Profile, RoadCurves)]) -> Result<()
             Arc::new(Float64Array::from(y)),
         ],
     )
-    .map_err(|e| IngestError::Parquet {
-        path: path.to_path_buf(),
-        source: e.into(),
-    })?;
-    write_batch(path, &batch)
+    .expect("columns match the schema")
 }
 
 /// Columns of the energy-map side table.
@@ -535,7 +662,7 @@ struct MapRows {
 }
 
 /// Side table of energy maps: run, wheel, map, i, j, x_lo, y_lo, energy_j (non-empty bins).
-fn write_energy_maps(path: &Path, maps: &[(String, Wheel, EnergyMaps)]) -> Result<(), IngestError> {
+fn energy_maps_batch(maps: &[(String, Wheel, EnergyMaps)]) -> RecordBatch {
     let mut c = MapRows::default();
     for (run, w, m) in maps {
         for (name, data, xb, yb) in [
@@ -584,7 +711,7 @@ fn write_energy_maps(path: &Path, maps: &[(String, Wheel, EnergyMaps)]) -> Resul
         Field::new("y_lo", DataType::Float64, false),
         Field::new("energy_j", DataType::Float64, false),
     ]));
-    let batch = RecordBatch::try_new(
+    RecordBatch::try_new(
         schema,
         vec![
             Arc::new(StringArray::from(c.run)),
@@ -597,9 +724,5 @@ fn write_energy_maps(path: &Path, maps: &[(String, Wheel, EnergyMaps)]) -> Resul
             Arc::new(Float64Array::from(c.energy_j)),
         ],
     )
-    .map_err(|e| IngestError::Parquet {
-        path: path.to_path_buf(),
-        source: e.into(),
-    })?;
-    write_batch(path, &batch)
+    .expect("columns match the schema")
 }

@@ -219,6 +219,44 @@ pub struct RoadIndices {
     pub ra_mm: f64,
 }
 
+impl RoadIndices {
+    /// Every index undefined (NaN): a track without a usable profile.
+    pub const UNDEFINED: RoadIndices = RoadIndices {
+        macro_wavelength_mm: f64::NAN,
+        micro_wavelength_mm: f64::NAN,
+        hurst: f64::NAN,
+        hurst_hdc: f64::NAN,
+        ra_macro_mm: f64::NAN,
+        ra_micro_mm: f64::NAN,
+        peakyness_mm: f64::NAN,
+        skewness: f64::NAN,
+        kurtosis: f64::NAN,
+        rq_mm: f64::NAN,
+        ra_mm: f64::NAN,
+    };
+
+    /// Names (KPI columns) of the indices that are not finite.
+    pub fn undefined(&self) -> Vec<&'static str> {
+        [
+            ("macro_wavelength_mm", self.macro_wavelength_mm),
+            ("micro_wavelength_mm", self.micro_wavelength_mm),
+            ("hurst", self.hurst),
+            ("hurst_hdc", self.hurst_hdc),
+            ("ra_macro_mm", self.ra_macro_mm),
+            ("ra_micro_mm", self.ra_micro_mm),
+            ("peakyness_mm", self.peakyness_mm),
+            ("skewness", self.skewness),
+            ("kurtosis", self.kurtosis),
+            ("rq_mm", self.rq_mm),
+            ("ra_mm", self.ra_mm),
+        ]
+        .into_iter()
+        .filter(|(_, v)| !v.is_finite())
+        .map(|(n, _)| n)
+        .collect()
+    }
+}
+
 /// Curves kept for plots and the CPU/GPU comparison.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct RoadCurves {

@@ -56,7 +56,7 @@ macro_rules! kpi_table {
 }
 
 kpi_table!(
-    text: [event, track, car, run, wheel, axle, compound, tire_set],
+    text: [event, track, car, run, wheel, axle, compound, tire_set, quality],
     numbers: [
         // Table 4: telemetry
         t_surface_avg_c, t_surface_std_c, t_inner_avg_c, t_inner_std_c, t_track_avg_c, t_air_avg_c,
@@ -140,24 +140,71 @@ fn parquet_err(path: &Path, e: impl Into<parquet::errors::ParquetError>) -> Inge
     }
 }
 
-/// Writes a record batch to a zstd Parquet file, atomically.
-pub fn write_batch(path: &Path, batch: &RecordBatch) -> Result<(), IngestError> {
-    let mut out = crate::atomic::AtomicFile::create(path).map_err(|e| IngestError::io(path, e))?;
+/// Schema metadata key that ties the outputs of one extraction together
+/// (the KPI table, its side tables and its report carry the same value).
+pub const EXTRACTION_ID_KEY: &str = "tirewear.extraction_id";
+
+/// `batch` with `extraction_id` in its schema metadata.
+pub fn with_extraction_id(batch: RecordBatch, extraction_id: &str) -> RecordBatch {
+    let mut meta = batch.schema().metadata().clone();
+    meta.insert(EXTRACTION_ID_KEY.to_string(), extraction_id.to_string());
+    let schema = Arc::new(batch.schema().as_ref().clone().with_metadata(meta));
+    batch.with_schema(schema).expect("only metadata changed")
+}
+
+/// The extraction id a Parquet file was written with (None for files from
+/// before ids, or from another tool).
+pub fn read_extraction_id(path: &Path) -> Result<Option<String>, IngestError> {
+    let file = std::fs::File::open(path).map_err(|e| IngestError::io(path, e))?;
+    let builder = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file)
+        .map_err(|e| parquet_err(path, e))?;
+    Ok(builder.schema().metadata().get(EXTRACTION_ID_KEY).cloned())
+}
+
+/// Refuses to pair a KPI table with a side table from another extraction
+/// (a set mixed by a killed run, or files copied together by hand). Files
+/// without an id (older than ids) pass.
+pub fn check_same_extraction(kpis: &Path, side: &Path) -> Result<(), IngestError> {
+    match (read_extraction_id(kpis)?, read_extraction_id(side)?) {
+        (Some(a), Some(b)) if a != b => Err(IngestError::invalid(
+            side,
+            EXTRACTION_ID_KEY,
+            format!(
+                "is {b}, but {} comes from extraction {a}: the two files are from \
+                 different extractions (run extract again)",
+                kpis.display()
+            ),
+        )),
+        _ => Ok(()),
+    }
+}
+
+/// Writes a record batch as zstd Parquet into an open file.
+pub fn write_batch_to(file: &mut std::fs::File, batch: &RecordBatch) -> std::io::Result<()> {
     let props = parquet::file::properties::WriterProperties::builder()
         .set_compression(parquet::basic::Compression::ZSTD(Default::default()))
         .build();
-    let mut w = parquet::arrow::ArrowWriter::try_new(out.file(), batch.schema(), Some(props))
-        .map_err(|e| parquet_err(path, e))?;
-    w.write(batch).map_err(|e| parquet_err(path, e))?;
-    w.close().map_err(|e| parquet_err(path, e))?;
-    out.commit().map_err(|e| IngestError::io(path, e))
+    let mut w = parquet::arrow::ArrowWriter::try_new(file, batch.schema(), Some(props))
+        .map_err(std::io::Error::other)?;
+    w.write(batch).map_err(std::io::Error::other)?;
+    w.close().map_err(std::io::Error::other)?;
+    Ok(())
+}
+
+/// Writes a record batch to a zstd Parquet file, atomically.
+pub fn write_batch(path: &Path, batch: &RecordBatch) -> Result<(), IngestError> {
+    crate::atomic::write_file(path, |f| write_batch_to(f, batch))
+        .map_err(|e| IngestError::io(path, e))
+}
+
+/// The KPI rows as one record batch (the Parquet table's schema).
+pub fn kpi_batch(rows: &[KpiRow]) -> RecordBatch {
+    RecordBatch::try_new(schema(), KpiRow::arrays(rows)).expect("columns match the schema")
 }
 
 /// Writes the KPI rows as Parquet.
 pub fn write_parquet(path: &Path, rows: &[KpiRow]) -> Result<(), IngestError> {
-    let batch =
-        RecordBatch::try_new(schema(), KpiRow::arrays(rows)).map_err(|e| parquet_err(path, e))?;
-    write_batch(path, &batch)
+    write_batch(path, &kpi_batch(rows))
 }
 
 /// Writes the KPI rows as CSV (same columns).
@@ -169,21 +216,97 @@ pub fn write_csv(path: &Path, rows: &[KpiRow]) -> Result<(), IngestError> {
 /// file without them reads them as 0.
 pub const LATER_COLUMNS: [&str; 1] = ["worn_through_readings"];
 
-/// Reads a KPI Parquet file back (for `fit`, `gap` and tests).
+/// Text columns added later: an older file without them reads them as "".
+pub const LATER_TEXT_COLUMNS: [&str; 1] = ["quality"];
+
+/// `quality` of a row whose every number is finite.
+pub const QUALITY_OK: &str = "ok";
+
+/// The `quality` column: [`QUALITY_OK`] when every numeric column is finite,
+/// else the known reasons and the non-finite columns, `; `-separated
+/// (docs/kpis.md, "Data quality").
+pub fn quality(row: &KpiRow, reasons: &[String]) -> String {
+    let bad: Vec<&str> = KpiRow::NUMBER_COLUMNS
+        .iter()
+        .copied()
+        .filter(|n| !row.number(n).is_some_and(f64::is_finite))
+        .collect();
+    if bad.is_empty() {
+        return QUALITY_OK.to_string();
+    }
+    let mut parts: Vec<String> = reasons.to_vec();
+    parts.push(format!("not finite: {}", bad.join(", ")));
+    parts.join("; ")
+}
+
+/// Casts a column to `to`, refusing nulls and values that do not convert
+/// (a text cell "abc" in a numeric column): the error names the column and
+/// the row (0-based over the file), instead of reading them as 0.
+fn strict_cast(
+    path: &Path,
+    name: &str,
+    col: &ArrayRef,
+    to: &DataType,
+    first_row: usize,
+) -> Result<ArrayRef, IngestError> {
+    let bad = |row: usize, what: String| {
+        IngestError::invalid(path, format!("column '{name}', row {row}"), what)
+    };
+    if let Some(i) = (0..col.len()).find(|&i| col.is_null(i)) {
+        return Err(bad(first_row + i, "is empty (null)".into()));
+    }
+    let lenient = arrow_cast::cast(col, to).map_err(|e| parquet_err(path, e))?;
+    if let Some(i) = (0..lenient.len()).find(|&i| lenient.is_null(i)) {
+        let cell = arrow_cast::display::ArrayFormatter::try_new(col.as_ref(), &Default::default())
+            .map(|f| f.value(i).to_string())
+            .unwrap_or_default();
+        return Err(bad(first_row + i, format!("'{cell}' is not a {to}")));
+    }
+    Ok(lenient)
+}
+
+/// Checks each numeric column's `unit` metadata, where the file states one,
+/// against the unit this build expects: a table in other units is refused
+/// rather than read as numbers in ours.
+fn check_units(path: &Path, schema: &Schema) -> Result<(), IngestError> {
+    for f in schema.fields() {
+        let name = f.name();
+        if !KpiRow::NUMBER_COLUMNS.contains(&name.as_str()) {
+            continue;
+        }
+        if let Some(u) = f.metadata().get("unit")
+            && u != unit(name)
+        {
+            return Err(IngestError::invalid(
+                path,
+                format!("column '{name}'"),
+                format!("unit is '{u}', tirewear expects '{}'", unit(name)),
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// Reads a KPI Parquet file back (for `fit`, `predict`, `gap` and tests).
+/// Nulls, cells of the wrong type and columns in other units are errors
+/// naming the column (and row).
 pub fn read_parquet(path: &Path) -> Result<Vec<KpiRow>, IngestError> {
     let file = std::fs::File::open(path).map_err(|e| IngestError::io(path, e))?;
-    let reader = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file)
-        .map_err(|e| parquet_err(path, e))?
-        .build()
+    let builder = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file)
         .map_err(|e| parquet_err(path, e))?;
+    check_units(path, builder.schema())?;
+    let reader = builder.build().map_err(|e| parquet_err(path, e))?;
     let mut rows = Vec::new();
     for batch in reader {
         let batch = batch.map_err(|e| parquet_err(path, e))?;
-        let text = |name: &str| -> Result<StringArray, IngestError> {
-            let col = batch.column_by_name(name).ok_or_else(|| {
+        let first_row = rows.len();
+        let column = |name: &str| {
+            batch.column_by_name(name).ok_or_else(|| {
                 IngestError::invalid(path, "schema", format!("missing column '{name}'"))
-            })?;
-            let cast = arrow_cast::cast(col, &DataType::Utf8).map_err(|e| parquet_err(path, e))?;
+            })
+        };
+        let text = |name: &str| -> Result<StringArray, IngestError> {
+            let cast = strict_cast(path, name, column(name)?, &DataType::Utf8, first_row)?;
             Ok(cast
                 .as_any()
                 .downcast_ref::<StringArray>()
@@ -191,22 +314,23 @@ pub fn read_parquet(path: &Path) -> Result<Vec<KpiRow>, IngestError> {
                 .clone())
         };
         let num = |name: &str| -> Result<Float64Array, IngestError> {
-            let col = batch.column_by_name(name).ok_or_else(|| {
-                IngestError::invalid(path, "schema", format!("missing column '{name}'"))
-            })?;
-            let cast =
-                arrow_cast::cast(col, &DataType::Float64).map_err(|e| parquet_err(path, e))?;
+            let cast = strict_cast(path, name, column(name)?, &DataType::Float64, first_row)?;
             Ok(cast
                 .as_any()
                 .downcast_ref::<Float64Array>()
                 .expect("cast")
                 .clone())
         };
+        // Columns added after the first files were written read as a default when absent.
         let texts = KpiRow::TEXT_COLUMNS
             .iter()
-            .map(|n| text(n))
+            .map(|n| match text(n) {
+                Err(_) if LATER_TEXT_COLUMNS.contains(n) && batch.column_by_name(n).is_none() => {
+                    Ok(StringArray::from(vec![""; batch.num_rows()]))
+                }
+                other => other,
+            })
             .collect::<Result<Vec<_>, _>>()?;
-        // Columns added after the first files were written read as 0 when absent.
         let nums = KpiRow::NUMBER_COLUMNS
             .iter()
             .map(|n| match num(n) {

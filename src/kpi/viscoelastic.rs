@@ -18,25 +18,58 @@ pub struct ViscoelasticIndices {
     pub loss_factor: f64,
 }
 
+impl ViscoelasticIndices {
+    /// Every index undefined (NaN), for a row whose inputs do not allow them.
+    pub const UNDEFINED: ViscoelasticIndices = ViscoelasticIndices {
+        solicitation_frequency_hz: f64::NAN,
+        shifted_temperature_c: f64::NAN,
+        storage_modulus_mpa: f64::NAN,
+        loss_factor: f64::NAN,
+    };
+}
+
 /// `sliding_speed_mps`: mean |v_s| of the run; `macro_wavelength_mm`: the
-/// track's λ_Macro; `surface_c`: mean surface temperature.
+/// track's λ_Macro; `surface_c`: mean surface temperature. An error says why
+/// the indices are undefined (no road wavelength, a temperature where the WLF
+/// equation does not hold); the caller keeps the row with NaN and the reason.
 pub fn viscoelastic_indices(
     compound: &Compound,
     sliding_speed_mps: f64,
     macro_wavelength_mm: f64,
     surface_c: f64,
-) -> ViscoelasticIndices {
+) -> Result<ViscoelasticIndices, String> {
     let f = sliding_speed_mps / (macro_wavelength_mm / 1000.0);
-    // Shifting frequency f to the reference is a shift of log10(f/f_ref) decades:
-    // log a_T(T*) = log a_T(T) + log10(f/f_ref), then eq. 31.
-    let x = compound.wlf.log10_shift(surface_c) + (f / compound.reference_frequency_hz).log10();
-    let t_star = compound.wlf.temperature_for_shift(x);
-    ViscoelasticIndices {
+    if !(f.is_finite() && f > 0.0) {
+        return Err(format!(
+            "solicitation frequency undefined (sliding speed {sliding_speed_mps} m/s, \
+             macro wavelength {macro_wavelength_mm} mm)"
+        ));
+    }
+    let w = &compound.wlf;
+    let margin_k = w.c2_k + surface_c - w.t_ref_c;
+    if margin_k.is_nan() || margin_k <= 0.0 {
+        return Err(format!(
+            "WLF undefined at the mean surface temperature {surface_c} degC \
+             (C2 + T - T_ref = {margin_k} K <= 0)"
+        ));
+    }
+    let x = w.log10_shift(surface_c) + (f / compound.reference_frequency_hz).log10();
+    // Eq. 31 needs C1 + log10 a_T > 0: beyond it no temperature has that shift.
+    if (w.c1 + x).is_nan() || w.c1 + x <= 0.0 {
+        return Err(format!(
+            "no WLF temperature has the shift log10 a_T = {x:.3} (C1 + log10 a_T <= 0)"
+        ));
+    }
+    let t_star = w.temperature_for_shift(x);
+    if !t_star.is_finite() {
+        return Err(format!("shifted temperature is {t_star}"));
+    }
+    Ok(ViscoelasticIndices {
         solicitation_frequency_hz: f,
         shifted_temperature_c: t_star,
         storage_modulus_mpa: compound.storage_modulus_mpa(t_star),
         loss_factor: compound.loss_factor(t_star),
-    }
+    })
 }
 
 #[cfg(test)]
@@ -64,7 +97,7 @@ mod tests {
         // v_s = 2 m/s over λ = 4 mm: f = 500 Hz.
         // At T = 60 °C: log a_T = −8.86·20/121.6 = −1.457237; + log10(500/10) = 1.698970 -> x = 0.241733.
         // T* = 40 − 101.6·0.241733/(8.86 + 0.241733) = 37.30160 °C.
-        let v = viscoelastic_indices(&c, 2.0, 4.0, 60.0);
+        let v = viscoelastic_indices(&c, 2.0, 4.0, 60.0).unwrap();
         assert!((v.solicitation_frequency_hz - 500.0).abs() < 1e-9);
         let x = -8.86 * 20.0 / 121.6 + 50f64.log10();
         let t_star = 40.0 - 101.6 * x / (8.86 + x);
@@ -74,5 +107,33 @@ mod tests {
         let e = 10f64.powf(400f64.log10() + (100f64.log10() - 400f64.log10()) * t_star / 40.0);
         assert!((v.storage_modulus_mpa - e).abs() < 1e-9);
         assert!((v.loss_factor - (0.6 - 0.2 * t_star / 40.0)).abs() < 1e-12);
+    }
+
+    #[test]
+    fn undefined_inputs_give_a_reason_not_a_panic() {
+        let c = Compound {
+            id: "c".into(),
+            name: "c".into(),
+            reference_frequency_hz: 10.0,
+            wlf: Wlf {
+                c1: 8.86,
+                c2_k: 101.6,
+                t_ref_c: 40.0,
+            },
+            master_curve: MasterCurve {
+                temperature_c: vec![0.0, 80.0],
+                storage_modulus_mpa: vec![400.0, 40.0],
+                loss_factor: vec![0.6, 0.25],
+            },
+        };
+        // A track without road profiles: λ_Macro is NaN.
+        let e = viscoelastic_indices(&c, 2.0, f64::NAN, 60.0).unwrap_err();
+        assert!(e.contains("solicitation frequency"), "{e}");
+        // 101.6 + (-70) - 40 < 0: below the WLF pole.
+        let e = viscoelastic_indices(&c, 2.0, 4.0, -70.0).unwrap_err();
+        assert!(e.contains("C2 + T - T_ref"), "{e}");
+        // x = -8.86*100/201.6 + log10(1e-9/10) = -14.4 < -C1.
+        let e = viscoelastic_indices(&c, 1e-9, 1000.0, 140.0).unwrap_err();
+        assert!(e.contains("C1 + log10 a_T"), "{e}");
     }
 }

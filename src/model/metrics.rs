@@ -47,9 +47,18 @@ pub fn metrics(observed: &[f64], predicted: &[f64], k: usize) -> Result<Metrics,
             got: n,
         });
     }
+    if let Some(i) = (0..n).find(|&i| !(observed[i].is_finite() && predicted[i].is_finite())) {
+        return Err(ModelError::Invalid(format!(
+            "metrics: row {i} is not finite (observed {}, predicted {})",
+            observed[i], predicted[i]
+        )));
+    }
     let mean = observed.iter().sum::<f64>() / n as f64;
     let sst: f64 = observed.iter().map(|y| (y - mean).powi(2)).sum();
-    if sst == 0.0 {
+    // Identical values leave rounding residue in SST (1e-28 for twelve equal
+    // rows): anything below a relative 1e-12 spread is a constant target.
+    let scale = observed.iter().fold(0.0f64, |m, y| m.max(y.abs()));
+    if sst <= n as f64 * (1e-12 * scale).powi(2) {
         return Err(ModelError::ConstantTarget("metrics".into()));
     }
     let sse: f64 = observed
@@ -89,5 +98,20 @@ mod tests {
         assert!((m.mae - 0.4).abs() < 1e-12);
         assert!(metrics(&[1.0, 1.0, 1.0], &[1.0, 1.0, 1.0], 0).is_err());
         assert!(metrics(&[1.0, 2.0], &[1.0, 2.0], 1).is_err());
+    }
+
+    #[test]
+    fn identical_rows_are_a_constant_target_not_a_huge_negative_r2() {
+        // 0.1 + 0.2 style residue: the mean of equal values is not exact.
+        let y = vec![12.3; 12];
+        let p: Vec<f64> = (0..12).map(|i| 12.0 + 0.05 * i as f64).collect();
+        assert!(matches!(
+            metrics(&y, &p, 1),
+            Err(ModelError::ConstantTarget(_))
+        ));
+        let mut bad = p.clone();
+        bad[3] = f64::INFINITY;
+        let e = metrics(&p, &bad, 1).unwrap_err().to_string();
+        assert!(e.contains("row 3"), "{e}");
     }
 }

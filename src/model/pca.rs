@@ -41,7 +41,14 @@ impl PcaFit {
                     .sqrt()
             })
             .collect();
-        if let Some(j) = stds.iter().position(|s| !(s.is_finite() && *s > 0.0)) {
+        if let Some(j) = stds.iter().position(|s| !s.is_finite()) {
+            return Err(ModelError::Invalid(format!(
+                "PCA: input '{}' overflows (values beyond ±1e150, or not finite): \
+                 its spread is {}",
+                inputs[j], stds[j]
+            )));
+        }
+        if let Some(j) = stds.iter().position(|s| *s <= 0.0) {
             return Err(ModelError::Invalid(format!(
                 "PCA: input '{}' is constant",
                 inputs[j]

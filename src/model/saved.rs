@@ -95,7 +95,13 @@ impl SavedModel {
                     .ok_or_else(|| ModelError::Invalid(format!("no KPI column '{}'", f.name)))
             })
             .collect::<Result<_, _>>()?;
-        Ok(match &self.model {
+        if let Some((f, v)) = self.features.iter().zip(&x).find(|(_, v)| !v.is_finite()) {
+            return Err(ModelError::Invalid(format!(
+                "run {} wheel {}: input '{}' is {v}",
+                r.run, r.wheel, f.name
+            )));
+        }
+        let p = match &self.model {
             ModelBody::Ffnn { network, .. } => network.net.predict_one(&x),
             ModelBody::Pca {
                 pca, regression, ..
@@ -110,7 +116,14 @@ impl SavedModel {
                     )));
                 }
             },
-        })
+        };
+        if !p.is_finite() {
+            return Err(ModelError::Invalid(format!(
+                "run {} wheel {}: the prediction is {p} (inputs far outside the training range)",
+                r.run, r.wheel
+            )));
+        }
+        Ok(p)
     }
 
     pub fn to_json(&self) -> String {
