@@ -214,6 +214,7 @@ fn extract_on_gpu_equals_extract_on_cpu() {
                 csv: None,
                 engine,
                 progress: false,
+                allow_external_paths: false,
             })
             .unwrap();
             assert_eq!(s.engine, engine);

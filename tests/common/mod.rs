@@ -30,6 +30,7 @@ pub fn demo_kpis(dir: &Path) -> Vec<KpiRow> {
         csv: None,
         engine: tirewear::kpi::Engine::Cpu,
         progress: false,
+        allow_external_paths: false,
     })
     .unwrap();
     tirewear::kpi::table::read_parquet(&dir.join("kpis.parquet")).unwrap()
