@@ -13,6 +13,14 @@ use std::fs::File;
 use std::io::{self, BufWriter, Write};
 use std::path::{Path, PathBuf};
 
+/// The folder a path lies in ("." for a bare file name).
+fn folder_of(path: &Path) -> &Path {
+    match path.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p,
+        _ => Path::new("."),
+    }
+}
+
 /// Temporary files are named `.tirewear-<pid>-<random>.tmp`.
 const TMP_PREFIX: &str = ".tirewear-";
 const TMP_SUFFIX: &str = ".tmp";
@@ -27,10 +35,7 @@ pub struct AtomicFile {
 impl AtomicFile {
     /// Starts writing `dest`, creating its parent folder if needed.
     pub fn create(dest: &Path) -> io::Result<Self> {
-        let parent = match dest.parent() {
-            Some(p) if !p.as_os_str().is_empty() => p,
-            _ => Path::new("."),
-        };
+        let parent = folder_of(dest);
         std::fs::create_dir_all(parent)?;
         let mut builder = tempfile::Builder::new();
         let prefix = format!("{TMP_PREFIX}{}-", std::process::id());
@@ -114,9 +119,7 @@ impl OutputSet {
     /// is finished first and dead writers' temporary files are removed.
     pub fn new(journal: &Path) -> io::Result<Self> {
         recover(journal)?;
-        if let Some(dir) = journal.parent().filter(|p| !p.as_os_str().is_empty()) {
-            remove_orphans(dir)?;
-        }
+        remove_orphans(folder_of(journal))?;
         Ok(Self {
             journal: journal.to_path_buf(),
             files: Vec::new(),

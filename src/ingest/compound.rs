@@ -140,7 +140,7 @@ impl Compound {
             return Err(bad(
                 "reference_frequency_hz",
                 format!(
-                    "{} Hz is above {MAX_REFERENCE_FREQUENCY_HZ:e} Hz",
+                    "{:?} Hz is above {MAX_REFERENCE_FREQUENCY_HZ:e} Hz",
                     self.reference_frequency_hz
                 ),
             ));
@@ -156,19 +156,19 @@ impl Compound {
         let bad = |what: String| IngestError::invalid(path, "wlf", what);
         if !(positive(w.c1) && w.c1 <= MAX_WLF_C1) {
             return Err(bad(format!(
-                "c1 must be in (0, {MAX_WLF_C1}], got {}",
+                "c1 must be in (0, {MAX_WLF_C1}], got {:?}",
                 w.c1
             )));
         }
         if !(positive(w.c2_k) && w.c2_k <= MAX_WLF_C2_K) {
             return Err(bad(format!(
-                "c2_k must be in (0, {MAX_WLF_C2_K}] K, got {}",
+                "c2_k must be in (0, {MAX_WLF_C2_K}] K, got {:?}",
                 w.c2_k
             )));
         }
         if !(T_REF_RANGE_C.0..=T_REF_RANGE_C.1).contains(&w.t_ref_c) {
             return Err(bad(format!(
-                "t_ref_c must be a temperature in {}..{} degC, got {}",
+                "t_ref_c must be a temperature in {}..{} degC, got {:?}",
                 T_REF_RANGE_C.0, T_REF_RANGE_C.1, w.t_ref_c
             )));
         }

@@ -286,7 +286,10 @@ impl Manifest {
                 return Err(bad(rec, format!("unknown track '{}'", e.track)));
             }
             if !valid_date(&e.date) {
-                return Err(bad(rec, format!("date '{}' is not YYYY-MM-DD", e.date)));
+                return Err(bad(
+                    rec,
+                    format!("date '{}' is not a calendar date YYYY-MM-DD", e.date),
+                ));
             }
             for (name, v) in [
                 ("air_temp_c", e.air_temp_c),

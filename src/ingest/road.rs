@@ -93,7 +93,10 @@ impl Profile {
                 return Err(IngestError::invalid(
                     path,
                     format!("{rec} sample {i}"),
-                    format!("z_mm = {} is not a height within ±{MAX_ABS_Z_MM} mm", z[i]),
+                    format!(
+                        "z_mm = {:?} is not a height within ±{MAX_ABS_Z_MM} mm",
+                        z[i]
+                    ),
                 ));
             }
         }

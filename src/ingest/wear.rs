@@ -55,7 +55,7 @@ pub fn read_wear_csv(path: &Path) -> Result<Vec<WearReading>> {
         let bad = |what: String| IngestError::invalid(path, rec.clone(), what);
         if !(positive(r.new_depth_mm) && r.new_depth_mm <= MAX_NEW_DEPTH_MM) {
             return Err(bad(format!(
-                "new_depth_mm must be in (0, {MAX_NEW_DEPTH_MM}] mm, got {}",
+                "new_depth_mm must be in (0, {MAX_NEW_DEPTH_MM}] mm, got {:?}",
                 r.new_depth_mm
             )));
         }
@@ -67,19 +67,19 @@ pub fn read_wear_csv(path: &Path) -> Result<Vec<WearReading>> {
         }
         if !(positive(r.tread_width_mm) && r.tread_width_mm <= MAX_TREAD_WIDTH_MM) {
             return Err(bad(format!(
-                "tread_width_mm must be in (0, {MAX_TREAD_WIDTH_MM}] mm, got {}",
+                "tread_width_mm must be in (0, {MAX_TREAD_WIDTH_MM}] mm, got {:?}",
                 r.tread_width_mm
             )));
         }
         if !r.depth_mm.is_finite() || r.depth_mm < 0.0 || r.depth_mm > 1.5 * r.new_depth_mm {
             return Err(bad(format!(
-                "depth_mm = {} is outside 0..1.5 x new depth ({} mm)",
+                "depth_mm = {:?} is outside 0..1.5 x new depth ({:?} mm)",
                 r.depth_mm, r.new_depth_mm
             )));
         }
         if !positive(r.tread_width_mm) || !(0.0..=r.tread_width_mm).contains(&r.position_mm) {
             return Err(bad(format!(
-                "position_mm = {} is outside the tread width 0..{} mm",
+                "position_mm = {:?} is outside the tread width 0..{:?} mm",
                 r.position_mm, r.tread_width_mm
             )));
         }

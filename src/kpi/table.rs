@@ -412,4 +412,76 @@ mod tests {
         assert!(schema().fields().iter().all(|f| f.data_type() == &DataType::Utf8
             || f.metadata()["unit"] == unit(f.name())));
     }
+
+    /// Replaces column `name` of the table of `rows` by `col` (with `field`).
+    fn with_column(rows: &[KpiRow], name: &str, field: Field, col: ArrayRef) -> RecordBatch {
+        let full = kpi_batch(rows);
+        let i = full.schema().index_of(name).unwrap();
+        let mut fields: Vec<Field> = full
+            .schema()
+            .fields()
+            .iter()
+            .map(|f| f.as_ref().clone())
+            .collect();
+        let mut cols = full.columns().to_vec();
+        fields[i] = field;
+        cols[i] = col;
+        RecordBatch::try_new(Arc::new(Schema::new(fields)), cols).unwrap()
+    }
+
+    #[test]
+    fn nulls_text_in_numbers_and_other_units_are_named_not_read_as_zero() {
+        let rows = vec![
+            KpiRow {
+                run: "R1".into(),
+                friction_energy_j: 5.0,
+                ..Default::default()
+            };
+            3
+        ];
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("k.parquet");
+        let text = Field::new("friction_energy_j", DataType::Utf8, true);
+        let cases: [(ArrayRef, Field, &str); 3] = [
+            (
+                Arc::new(StringArray::from(vec!["1.5", "abc", "2"])),
+                text.clone(),
+                "row 1",
+            ),
+            (
+                Arc::new(Float64Array::from(vec![Some(1.0), Some(2.0), None])),
+                Field::new("friction_energy_j", DataType::Float64, true),
+                "row 2",
+            ),
+            (
+                Arc::new(Float64Array::from(vec![1.0, 2.0, 3.0])),
+                Field::new("friction_energy_j", DataType::Float64, false).with_metadata(
+                    std::collections::HashMap::from([("unit".to_string(), "kJ".to_string())]),
+                ),
+                "unit is 'kJ'",
+            ),
+        ];
+        for (col, field, says) in cases {
+            write_batch(&path, &with_column(&rows, "friction_energy_j", field, col)).unwrap();
+            let err = read_parquet(&path).unwrap_err().to_string();
+            assert!(
+                err.contains("k.parquet")
+                    && err.contains("friction_energy_j")
+                    && err.contains(says),
+                "{err}"
+            );
+        }
+        // Text that converts is read as its number.
+        write_batch(
+            &path,
+            &with_column(
+                &rows,
+                "friction_energy_j",
+                text,
+                Arc::new(StringArray::from(vec!["1.5", "7", "2"])),
+            ),
+        )
+        .unwrap();
+        assert_eq!(read_parquet(&path).unwrap()[1].friction_energy_j, 7.0);
+    }
 }
