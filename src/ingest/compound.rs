@@ -62,6 +62,27 @@ impl Wlf {
 }
 
 impl Compound {
+    /// A compound with the common WLF constants (C1 = 8.86, C2 = 101.6 K),
+    /// 10 Hz reference frequency and the given master curve: for tests.
+    #[cfg(test)]
+    pub(crate) fn for_tests(t_ref_c: f64, curve: &[(f64, f64, f64)]) -> Compound {
+        Compound {
+            id: "c".into(),
+            name: "c".into(),
+            reference_frequency_hz: 10.0,
+            wlf: Wlf {
+                c1: 8.86,
+                c2_k: 101.6,
+                t_ref_c,
+            },
+            master_curve: MasterCurve {
+                temperature_c: curve.iter().map(|p| p.0).collect(),
+                storage_modulus_mpa: curve.iter().map(|p| p.1).collect(),
+                loss_factor: curve.iter().map(|p| p.2).collect(),
+            },
+        }
+    }
+
     pub fn load(path: &Path) -> Result<Compound> {
         let c: Compound = read_toml(path)?;
         c.validate(path)?;
@@ -241,21 +262,7 @@ mod tests {
 
     #[test]
     fn interpolation_is_log_linear_for_modulus() {
-        let c = Compound {
-            id: "x".into(),
-            name: "x".into(),
-            reference_frequency_hz: 10.0,
-            wlf: Wlf {
-                c1: 8.86,
-                c2_k: 101.6,
-                t_ref_c: 30.0,
-            },
-            master_curve: MasterCurve {
-                temperature_c: vec![0.0, 10.0],
-                storage_modulus_mpa: vec![100.0, 10.0],
-                loss_factor: vec![0.2, 0.4],
-            },
-        };
+        let c = Compound::for_tests(30.0, &[(0.0, 100.0, 0.2), (10.0, 10.0, 0.4)]);
         assert!((c.storage_modulus_mpa(5.0) - 10f64.powf(1.5)).abs() < 1e-9);
         assert!((c.loss_factor(2.5) - 0.25).abs() < 1e-12);
         assert_eq!(c.storage_modulus_mpa(-50.0), 100.0);
@@ -265,21 +272,7 @@ mod tests {
 
     #[test]
     fn absurd_wlf_constants_are_refused_by_name() {
-        let good = Compound {
-            id: "x".into(),
-            name: "x".into(),
-            reference_frequency_hz: 10.0,
-            wlf: Wlf {
-                c1: 8.86,
-                c2_k: 101.6,
-                t_ref_c: 30.0,
-            },
-            master_curve: MasterCurve {
-                temperature_c: vec![-20.0, 140.0],
-                storage_modulus_mpa: vec![100.0, 10.0],
-                loss_factor: vec![0.2, 0.4],
-            },
-        };
+        let good = Compound::for_tests(30.0, &[(-20.0, 100.0, 0.2), (140.0, 10.0, 0.4)]);
         let p = Path::new("c.toml");
         good.validate(p).unwrap();
         type Change = fn(&mut Wlf);

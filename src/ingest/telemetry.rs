@@ -611,20 +611,27 @@ fn check_file_crcs(path: &Path, bytes: &[u8]) -> Result<()> {
             "no DataEnd record before the summary section: the file is damaged",
         ));
     }
-    let data_crc = le_u32(bytes, data_end + 9).unwrap_or(0);
-    if data_crc != 0 {
-        let got = crc32fast::hash(&bytes[..data_end]);
-        if got != data_crc {
-            return Err(IngestError::invalid(
-                path,
-                "data section",
-                format!(
-                    "CRC mismatch (stored {data_crc:#010x}, computed {got:#010x}): the file is damaged"
-                ),
-            ));
-        }
+    check_data_crc(path, bytes, data_end).map(|_| ())
+}
+
+/// Checks the data-section CRC stored in the DataEnd record at `data_end`;
+/// returns whether there was one to check (0 means "not computed").
+fn check_data_crc(path: &Path, bytes: &[u8], data_end: usize) -> Result<bool> {
+    let stored = le_u32(bytes, data_end + 9).unwrap_or(0);
+    if stored == 0 {
+        return Ok(false);
     }
-    Ok(())
+    let got = crc32fast::hash(&bytes[..data_end]);
+    if got != stored {
+        return Err(IngestError::invalid(
+            path,
+            "data section",
+            format!(
+                "CRC mismatch (stored {stored:#010x}, computed {got:#010x}): the file is damaged"
+            ),
+        ));
+    }
+    Ok(true)
 }
 
 /// One chunk's records, decompressed from the file and checked against the
@@ -833,19 +840,7 @@ fn data_section_end(path: &Path, bytes: &[u8]) -> Result<usize> {
             })? as usize;
         let op = bytes[at];
         if op == OP_DATA_END {
-            let crc = le_u32(bytes, at + 9).unwrap_or(0);
-            if crc != 0 {
-                let got = crc32fast::hash(&bytes[..at]);
-                if got != crc {
-                    return Err(IngestError::invalid(
-                        path,
-                        "data section",
-                        format!(
-                            "CRC mismatch (stored {crc:#010x}, computed {got:#010x}): the file is damaged"
-                        ),
-                    ));
-                }
-            } else {
+            if !check_data_crc(path, bytes, at)? {
                 for (op, rec_at, rec_len) in unverified {
                     check_strings(path, op, rec_at, &bytes[rec_at + 9..rec_at + 9 + rec_len])?;
                 }

@@ -75,25 +75,13 @@ pub fn viscoelastic_indices(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::ingest::compound::{MasterCurve, Wlf};
 
     #[test]
     fn wlf_shift_by_hand() {
-        let c = Compound {
-            id: "c".into(),
-            name: "c".into(),
-            reference_frequency_hz: 10.0,
-            wlf: Wlf {
-                c1: 8.86,
-                c2_k: 101.6,
-                t_ref_c: 40.0,
-            },
-            master_curve: MasterCurve {
-                temperature_c: vec![0.0, 40.0, 80.0],
-                storage_modulus_mpa: vec![400.0, 100.0, 40.0],
-                loss_factor: vec![0.6, 0.4, 0.25],
-            },
-        };
+        let c = Compound::for_tests(
+            40.0,
+            &[(0.0, 400.0, 0.6), (40.0, 100.0, 0.4), (80.0, 40.0, 0.25)],
+        );
         // v_s = 2 m/s over λ = 4 mm: f = 500 Hz.
         // At T = 60 °C: log a_T = −8.86·20/121.6 = −1.457237; + log10(500/10) = 1.698970 -> x = 0.241733.
         // T* = 40 − 101.6·0.241733/(8.86 + 0.241733) = 37.30160 °C.
@@ -111,21 +99,7 @@ mod tests {
 
     #[test]
     fn undefined_inputs_give_a_reason_not_a_panic() {
-        let c = Compound {
-            id: "c".into(),
-            name: "c".into(),
-            reference_frequency_hz: 10.0,
-            wlf: Wlf {
-                c1: 8.86,
-                c2_k: 101.6,
-                t_ref_c: 40.0,
-            },
-            master_curve: MasterCurve {
-                temperature_c: vec![0.0, 80.0],
-                storage_modulus_mpa: vec![400.0, 40.0],
-                loss_factor: vec![0.6, 0.25],
-            },
-        };
+        let c = Compound::for_tests(40.0, &[(0.0, 400.0, 0.6), (80.0, 40.0, 0.25)]);
         // A track without road profiles: λ_Macro is NaN.
         let e = viscoelastic_indices(&c, 2.0, f64::NAN, 60.0).unwrap_err();
         assert!(e.contains("solicitation frequency"), "{e}");
