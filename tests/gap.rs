@@ -260,3 +260,88 @@ fn strong_graining_takes_its_rear_axle_term_and_no_generic_kpi() {
         "{case:?}\n{added:?}"
     );
 }
+
+/// A set-up effect no KPI shows: one car's rear tires wear 1.3 times what
+/// their telemetry gives (toe, say), planted in the measured wear of a clean
+/// season-preset season (wear is linear in the readings, so scaling
+/// `wear_mean_pct` is scaling every reading's wear). The diagnosis adds the
+/// set-up term of that car's rear axle first, with a factor near 1.3, and the
+/// testing-event gap shrinks; the same season unplanted adds no set-up term.
+#[test]
+fn a_planted_set_up_effect_is_named_by_its_car_and_axle() {
+    use tirewear::gap::report::{Baseline, diagnose};
+    let dir = tempfile::tempdir().unwrap();
+    let mut s = season_settings(dir.path());
+    s.keep = true;
+    let (_, clean) = run_case(None, 9, &s).unwrap();
+    assert!(
+        !added(&clean).iter().any(|a| a.starts_with("set-up")),
+        "{:?}",
+        added(&clean)
+    );
+    let season = dir.path().join("clean-s9");
+    let mut rows = tirewear::kpi::table::read_parquet(&season.join("kpis.parquet")).unwrap();
+    let maps =
+        tirewear::kpi::energy_map::read_energy_maps(&season.join("kpis.energy_maps.parquet"))
+            .unwrap();
+    let mut cars: Vec<String> = rows.iter().map(|r| r.car.clone()).collect();
+    cars.sort();
+    cars.dedup();
+    let car = cars[cars.len() / 2].clone();
+    for r in rows.iter_mut().filter(|r| r.car == car && r.axle == "rear") {
+        r.wear_mean_pct *= 1.3;
+    }
+    let gap = GapSettings {
+        wlf: tirewear::gap::validate::read_wlf(&season.join("compounds")).unwrap(),
+        ..s.gap.clone()
+    };
+    let d = diagnose(&rows, &maps, &Baseline::Physics, &gap).unwrap();
+    let want = format!("set-up: {car}, rear axle");
+    assert_eq!(
+        added(&d).get(1).copied(),
+        Some(want.as_str()),
+        "{:?}",
+        added(&d)
+    );
+    let factor = 1.0 + d.steps[1].coefficient;
+    assert!((factor - 1.3).abs() < 0.1, "factor {factor}");
+    let rmse = |i: usize| d.steps[i].testing.as_ref().unwrap().rmse_pct;
+    println!(
+        "set-up {car} rear × 1.3: terms {:?}, factor {factor:.3}, testing RMSE {:.3} -> {:.3} %",
+        added(&d),
+        rmse(0),
+        rmse(1)
+    );
+    assert!(rmse(1) < 0.8 * rmse(0), "{} -> {}", rmse(0), rmse(1));
+    assert!(
+        tirewear::gap::report::render_markdown(&d, 12)
+            .contains(&format!("Set-up effect: {car}, rear axle wears"))
+    );
+    // Without the effect the season's testing RMSE is the ideal.
+    let ideal = clean.steps[0].testing.as_ref().unwrap().rmse_pct;
+    let shrink = (rmse(0) - rmse(1)) / (rmse(0) - ideal);
+    println!("ideal {ideal:.3} %: shrinkage {shrink:.2} of the ideal");
+    assert!(shrink > 0.8, "{shrink}");
+
+    // Another group and direction on the same season: one wheel of another
+    // car wearing less (0.75×).
+    let mut rows = tirewear::kpi::table::read_parquet(&season.join("kpis.parquet")).unwrap();
+    for r in rows
+        .iter_mut()
+        .filter(|r| r.car == cars[0] && r.wheel == "FR")
+    {
+        r.wear_mean_pct *= 0.75;
+    }
+    let d = diagnose(&rows, &maps, &Baseline::Physics, &gap).unwrap();
+    println!(
+        "set-up {} FR × 0.75: terms {:?}, factor {:.3}",
+        cars[0],
+        added(&d),
+        1.0 + d.steps.get(1).map_or(f64::NAN, |s| s.coefficient)
+    );
+    assert_eq!(
+        added(&d).get(1).copied(),
+        Some(format!("set-up: {}, FR", cars[0]).as_str())
+    );
+    assert!((d.steps[1].coefficient + 0.25).abs() < 0.1);
+}

@@ -16,6 +16,7 @@
 //! squares: γ (or β) and s on a grid, the k in closed form for each pair.
 //! Without an energy map the factor uses the run's mean surface temperature.
 
+use super::candidates::LawRow;
 use crate::ingest::compound::Wlf;
 use crate::kpi::KpiRow;
 use crate::kpi::energy_map::EnergyMaps;
@@ -241,6 +242,21 @@ impl PhysicsBaseline {
         self.k_pct_per_mj.get(&group(r)).map_or(f64::NAN, |k| {
             k * (self.skewness_coefficient * r.skewness).exp()
         })
+    }
+
+    /// What the law says about one row, each part computed once.
+    pub fn law_row(&self, r: &KpiRow, maps: Option<&EnergyMaps>) -> LawRow {
+        let energy_mj = self.energy_term(r, maps);
+        let k = self
+            .k_pct_per_mj
+            .get(&group(r))
+            .copied()
+            .unwrap_or(f64::NAN);
+        LawRow {
+            abrasion: k * (self.skewness_coefficient * r.skewness).exp(),
+            energy_mj,
+            wear_pct: k * energy_mj,
+        }
     }
 
     /// Predicted mean wear (%); NaN for a compound and axle not seen in calibration.

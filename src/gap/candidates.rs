@@ -54,6 +54,13 @@ pub enum Feature {
     Kpi(&'static str),
     /// A user hypothesis from `effects.toml` (`Candidate::user`).
     User,
+    /// Set-up: the law's own wear of the tires of one group (a car, a car's
+    /// axle or wheel, a wheel position over every car; `Candidate::group`),
+    /// zero elsewhere: wear per joule that differs for that group by a
+    /// factor the telemetry does not explain (alignment, toe, a suspension
+    /// setting, a tire batch). The coefficient c reads as "the group wears
+    /// (1 + c) times the law".
+    Group,
 }
 
 impl Feature {
@@ -73,14 +80,15 @@ impl Feature {
             | Feature::PressureEnergy
             | Feature::SmallPatchEnergy
             | Feature::Kpi(_)
-            | Feature::User => None,
+            | Feature::User
+            | Feature::Group => None,
         }
     }
 
     /// A physical mechanism only adds wear: its coefficient must be positive.
     /// A generic KPI may act either way.
     pub fn adds_wear_only(&self) -> bool {
-        !matches!(self, Feature::Kpi(_))
+        !matches!(self, Feature::Kpi(_) | Feature::Group)
     }
 
     /// A term that is the row's law energy times a value of its track (road
@@ -105,7 +113,7 @@ impl Feature {
             Feature::CamberEnergy => "°",
             Feature::PressureEnergy => "Pa",
             Feature::SmallPatchEnergy => "mm²",
-            Feature::Kpi(_) | Feature::User => "",
+            Feature::Kpi(_) | Feature::User | Feature::Group => "",
         }
     }
 }
@@ -141,6 +149,33 @@ pub struct Candidate {
     /// The compiled expression of a user hypothesis.
     #[serde(skip)]
     pub user: Option<Arc<UserEffect>>,
+    /// The tires of a set-up candidate ([`Feature::Group`]).
+    pub group: Option<Group>,
+}
+
+/// A group of tires for a set-up candidate: every field that is set must
+/// match (the candidate's `axle` restricts it further).
+#[derive(Debug, Clone, PartialEq, Eq, serde::Serialize)]
+pub struct Group {
+    pub car: Option<String>,
+    pub wheel: Option<String>,
+}
+
+impl Group {
+    pub fn contains(&self, r: &KpiRow) -> bool {
+        self.car.as_ref().is_none_or(|c| *c == r.car)
+            && self.wheel.as_ref().is_none_or(|w| *w == r.wheel)
+    }
+
+    /// "car2", "car2, FL", "FL on every car".
+    pub fn describe(&self) -> String {
+        match (&self.car, &self.wheel) {
+            (Some(c), Some(w)) => format!("{c}, {w}"),
+            (Some(c), None) => c.clone(),
+            (None, Some(w)) => format!("{w} on every car"),
+            (None, None) => "every tire".into(),
+        }
+    }
 }
 
 impl Candidate {
@@ -245,6 +280,7 @@ pub fn library(rows: &[&KpiRow]) -> Vec<Candidate> {
                 thresholds: thresholds.clone(),
                 axle,
                 user: None,
+                group: None,
             });
         }
     }
@@ -294,9 +330,11 @@ pub fn library(rows: &[&KpiRow]) -> Vec<Candidate> {
                 thresholds,
                 axle: None,
                 user: None,
+                group: None,
             });
         }
     }
+    out.extend(setup_candidates(rows));
     for c in candidate_inputs() {
         if !BASELINE_KPIS.contains(&c) {
             out.push(Candidate {
@@ -309,10 +347,83 @@ pub fn library(rows: &[&KpiRow]) -> Vec<Candidate> {
                 thresholds: vec![f64::NAN],
                 axle: None,
                 user: None,
+                group: None,
             });
         }
     }
     out
+}
+
+/// Events a set-up group must appear at: its factor is then tested on whole
+/// tracks or events left out, not on the days of one.
+pub const SETUP_MIN_EVENTS: usize = 3;
+
+/// Set-up candidates: each car, each car's axle and wheel, each wheel
+/// position over every car — those seen at [`SETUP_MIN_EVENTS`] events or
+/// more that are not every tire their axle scope holds (that is the law's
+/// own compound-and-axle k).
+fn setup_candidates(rows: &[&KpiRow]) -> Vec<Candidate> {
+    let mut cars: Vec<&str> = rows.iter().map(|r| r.car.as_str()).collect();
+    cars.sort();
+    cars.dedup();
+    let wheels = ["FL", "FR", "RL", "RR"];
+    let mut groups: Vec<(Group, Option<&'static str>)> = Vec::new();
+    for car in &cars {
+        let car = Some(car.to_string());
+        for axle in [None, Some("front"), Some("rear")] {
+            groups.push((
+                Group {
+                    car: car.clone(),
+                    wheel: None,
+                },
+                axle,
+            ));
+        }
+        for w in wheels {
+            groups.push((
+                Group {
+                    car: car.clone(),
+                    wheel: Some(w.into()),
+                },
+                None,
+            ));
+        }
+    }
+    for w in wheels {
+        groups.push((
+            Group {
+                car: None,
+                wheel: Some(w.into()),
+            },
+            None,
+        ));
+    }
+    groups
+        .into_iter()
+        .filter(|(g, axle)| {
+            let in_scope = |r: &&&KpiRow| axle.is_none_or(|a| r.axle == a);
+            let members: Vec<&&KpiRow> = rows
+                .iter()
+                .filter(in_scope)
+                .filter(|r| g.contains(r))
+                .collect();
+            let mut events: Vec<&str> = members.iter().map(|r| r.event.as_str()).collect();
+            events.sort();
+            events.dedup();
+            events.len() >= SETUP_MIN_EVENTS && members.len() < rows.iter().filter(in_scope).count()
+        })
+        .map(|(g, axle)| Candidate {
+            name: match axle {
+                None => format!("set-up: {}", g.describe()),
+                Some(a) => format!("set-up: {}, {a} axle", g.describe()),
+            },
+            feature: Feature::Group,
+            thresholds: vec![f64::NAN],
+            axle,
+            user: None,
+            group: Some(g),
+        })
+        .collect()
 }
 
 /// Micro-texture above θ, in units of 0.01 mm.
@@ -375,8 +486,8 @@ pub fn feature(
         Feature::Kpi(c) => {
             r.friction_energy_j * mj * kpi_scale.standardised(r.number(c).unwrap_or(f64::NAN))
         }
-        // Needs the candidate's expression: see `candidate_feature`.
-        Feature::User => f64::NAN,
+        // Needs the candidate's expression or group: see `candidate_feature`.
+        Feature::User | Feature::Group => f64::NAN,
     }
 }
 
@@ -392,6 +503,9 @@ pub struct LawRow {
     /// without the compound-and-axle k; the friction energy under a
     /// statistical baseline.
     pub energy_mj: f64,
+    /// The law's wear k_{c,a}·energy term (%); the friction energy (MJ)
+    /// under a statistical baseline. A set-up term is this, in its group.
+    pub wear_pct: f64,
 }
 
 impl LawRow {
@@ -400,6 +514,7 @@ impl LawRow {
         LawRow {
             abrasion: 1.0,
             energy_mj: r.friction_energy_j * 1e-6,
+            wear_pct: r.friction_energy_j * 1e-6,
         }
     }
 }
@@ -414,7 +529,8 @@ impl LawRow {
 /// value: a rough road raises the abrasion the law counts, so the term is a
 /// fixed share of the law's wear at each track (up to k), which is what the
 /// tracks' severities test. Not times k: the fronts' k also carries their
-/// irregular wear, which the road does not scale (docs/gap.md). A user
+/// irregular wear, which the road does not scale (docs/gap.md). A set-up
+/// term is the law's whole wear in its group (a factor on the law). A user
 /// hypothesis that adds wear is charged like a built-in mechanism; generic
 /// KPI terms and two-sided hypotheses stay on the raw friction energy.
 pub fn candidate_feature(
@@ -427,6 +543,10 @@ pub fn candidate_feature(
 ) -> f64 {
     match (c.axle, &c.user) {
         (Some(a), _) if r.axle != a => 0.0,
+        _ if c.feature == Feature::Group => match &c.group {
+            Some(g) if g.contains(r) => law.wear_pct,
+            _ => 0.0,
+        },
         (_, Some(u)) if u.adds_wear => law.abrasion * u.feature(r, maps, theta),
         (_, Some(u)) => u.feature(r, maps, theta),
         _ if c.feature.track_level() => row_factor(c, r, law) * track_value(c, r, theta, kpi_scale),
@@ -529,6 +649,7 @@ mod tests {
         let law = LawRow {
             abrasion: 0.4,
             energy_mj: 2.5,
+            wear_pct: 1.3,
         };
         let rows = vec![&r];
         let lib = library(&rows);

@@ -93,10 +93,7 @@ pub fn law_rows(law: &PhysicsBaseline, d: &Rows) -> Vec<LawRow> {
     d.rows
         .iter()
         .zip(d.maps)
-        .map(|(r, m)| LawRow {
-            abrasion: law.abrasion(r),
-            energy_mj: law.energy_term(r, *m),
-        })
+        .map(|(r, m)| law.law_row(r, *m))
         .collect()
 }
 

@@ -2,7 +2,7 @@
 //! gap.md (the JSON is the `Diagnosis` itself).
 
 use super::baseline::PhysicsBaseline;
-use super::candidates::significant;
+use super::candidates::{Feature, significant};
 use super::report::Diagnosis;
 use std::fmt::Write;
 
@@ -166,6 +166,20 @@ pub fn render_markdown(d: &Diagnosis, max_slices: usize) -> String {
                 st.training.bias_pct,
                 st.training.rmse_pct,
                 sl.join(", ")
+            );
+        }
+        for st in d
+            .steps
+            .iter()
+            .filter(|st| st.feature == Some(Feature::Group))
+        {
+            let what = st.added.trim_start_matches("set-up: ");
+            let _ = writeln!(
+                s,
+                "\nSet-up effect: {what} wears {:.2} times what the law predicts from its \
+                 telemetry. The telemetry does not show why: look at the alignment (toe, \
+                 camber settings), a suspension setting or the tire batch of that group.",
+                1.0 + st.coefficient
             );
         }
         if let Some(p) = &d.physics_with_terms {

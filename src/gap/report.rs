@@ -5,7 +5,7 @@
 
 use super::acts::acts_in;
 use super::baseline::PhysicsBaseline;
-use super::candidates::{Candidate, LawRow, library};
+use super::candidates::{Candidate, Feature, LawRow, library};
 use super::linear::weighted_fit;
 use super::recalibrate::{Rows, Term, refit_law};
 pub use super::render::render_markdown;
@@ -45,6 +45,8 @@ pub struct GapSize {
 pub struct Step {
     /// The term added ("baseline" for the starting point).
     pub added: String,
+    /// The kind of term added (None for the baseline).
+    pub feature: Option<Feature>,
     pub threshold: f64,
     pub coefficient: f64,
     /// The term's held-out gain and adjusted p-value when it was added.
@@ -212,10 +214,7 @@ pub fn diagnose(
         .iter()
         .zip(&row_maps)
         .map(|(r, m)| match &physics {
-            Some(p) => LawRow {
-                abrasion: p.abrasion(r),
-                energy_mj: p.energy_term(r, *m),
-            },
+            Some(p) => p.law_row(r, *m),
             None => LawRow::raw(r),
         })
         .collect();
@@ -228,6 +227,7 @@ pub fn diagnose(
         .collect();
     let step_of = |added: String, score: Option<&Score>, res: &[f64]| Step {
         added,
+        feature: score.map(|s| s.feature),
         threshold: score.map_or(f64::NAN, |s| s.threshold),
         coefficient: score.map_or(f64::NAN, |s| s.coefficient),
         cv_gain: score.map_or(f64::NAN, |s| s.cv_gain),

@@ -112,6 +112,7 @@ impl Score {
             thresholds: vec![self.threshold],
             axle: self.axle,
             user: None,
+            group: None,
         }
     }
 }

@@ -112,6 +112,7 @@ mod tests {
                 thresholds: vec![s.threshold],
                 axle: s.axle,
                 user: None,
+                group: None,
             },
             threshold: s.threshold,
             kpi_scale: KpiScale::NONE,

@@ -220,6 +220,7 @@ mod tests {
             thresholds: vec![0.0, 0.008, 0.012],
             axle: None,
             user: None,
+            group: None,
         };
         s.p_value(&road, KpiScale::NONE, draws, seed)
     }

@@ -267,6 +267,7 @@ pub fn load(path: &Path) -> Result<Vec<Candidate>, GapError> {
             Ok(Candidate {
                 name: format!("user: {}", e.name),
                 feature: Feature::User,
+                group: None,
                 thresholds,
                 axle,
                 user: Some(Arc::new(user)),
