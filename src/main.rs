@@ -87,7 +87,10 @@ enum Command {
         /// energy maps are read from NAME.energy_maps.parquet beside it.
         #[arg(required = true)]
         kpis: Option<PathBuf>,
-        /// `physics`, or a model file written by `tirewear fit`.
+        /// `physics`, a model file written by `tirewear fit`, or a CSV of
+        /// predicted wear from any simulation (columns `run`, `wheel`,
+        /// `predicted_wear_pct`; `tirewear predict` writes one): the "sim"
+        /// side of the gap can be the team's own tool.
         #[arg(long, default_value = "physics")]
         baseline: String,
         /// Testing events (comma-separated); default every third event.
@@ -585,6 +588,19 @@ fn run_gap(
     let rows = tirewear::kpi::table::read_parquet(kpis)?;
     let base = if baseline == "physics" {
         Baseline::Physics
+    } else if baseline.ends_with(".csv") {
+        let p = tirewear::gap::report::Predictions::read(std::path::Path::new(baseline))?;
+        let missing = rows
+            .iter()
+            .filter(|r| !p.wear_pct.contains_key(&(r.run.clone(), r.wheel.clone())))
+            .count();
+        if missing > 0 {
+            tracing::warn!(
+                "{baseline}: no prediction for {missing} of {} tires; they are left out",
+                rows.len()
+            );
+        }
+        Baseline::Predictions(p)
     } else {
         let m = SavedModel::load(std::path::Path::new(baseline))?;
         m.check_columns(&tirewear::kpi::table::read_units(kpis)?)

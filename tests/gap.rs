@@ -345,3 +345,63 @@ fn a_planted_set_up_effect_is_named_by_its_car_and_axle() {
     );
     assert!((d.steps[1].coefficient + 0.25).abs() < 0.1);
 }
+
+/// `--baseline predictions.csv`: the "sim" side from any tool. Predictions of
+/// a fitted model written to CSV give the same diagnosis as the model itself
+/// (two routes to the same baseline); a malformed file is named by line.
+#[test]
+fn a_predictions_file_is_a_baseline_like_the_model_it_came_from() {
+    use tirewear::gap::report::{Baseline, Predictions, diagnose};
+    use tirewear::model::fit::{FitSettings, Method, fit_method, split};
+    let dir = tempfile::tempdir().unwrap();
+    let mut s = settings(dir.path());
+    s.keep = true;
+    s.gap.scoring.permutations = 199;
+    run_case(None, 4, &s).unwrap();
+    let season = dir.path().join("clean-s4");
+    let rows = tirewear::kpi::table::read_parquet(&season.join("kpis.parquet")).unwrap();
+    let maps =
+        tirewear::kpi::energy_map::read_energy_maps(&season.join("kpis.energy_maps.parquet"))
+            .unwrap();
+    let sp = split(&rows, None).unwrap();
+    let (model, _) = fit_method(Method::Physical, &sp, &FitSettings::default()).unwrap();
+    let csv = season.join("predictions.csv");
+    let mut text = String::from("run,wheel,predicted_wear_pct\n");
+    for r in &rows {
+        let p = model
+            .predict_row(r)
+            .map_or(String::new(), |p| p.to_string());
+        text += &format!("{},{},{p}\n", r.run, r.wheel);
+    }
+    std::fs::write(&csv, &text).unwrap();
+    let from_model = diagnose(&rows, &maps, &Baseline::Model(Box::new(model)), &s.gap).unwrap();
+    let from_csv = diagnose(
+        &rows,
+        &maps,
+        &Baseline::Predictions(Predictions::read(&csv).unwrap()),
+        &s.gap,
+    )
+    .unwrap();
+    assert_eq!(added(&from_model), added(&from_csv));
+    for (a, b) in from_model.steps.iter().zip(&from_csv.steps) {
+        assert_eq!(a.training.rmse_pct, b.training.rmse_pct);
+        assert_eq!(
+            a.testing.as_ref().map(|t| t.rmse_pct),
+            b.testing.as_ref().map(|t| t.rmse_pct)
+        );
+    }
+    assert!(from_csv.baseline.contains("predictions.csv"));
+
+    std::fs::write(&csv, "run,wheel,predicted_wear_pct\nR1,FL,3.0\nR1,XX,2.0\n").unwrap();
+    let err = Predictions::read(&csv).unwrap_err().to_string();
+    assert!(
+        err.contains("predictions.csv") && err.contains("line 3"),
+        "{err}"
+    );
+    std::fs::write(&csv, "run,wheel,predicted_wear_pct\nR1,FL,3.0\nR1,FL,2.0\n").unwrap();
+    let err = Predictions::read(&csv).unwrap_err().to_string();
+    assert!(
+        err.contains("line 3") && err.contains("second prediction"),
+        "{err}"
+    );
+}

@@ -26,6 +26,70 @@ pub enum Baseline {
     Physics,
     /// A model saved by `tirewear fit`.
     Model(Box<SavedModel>),
+    /// Predicted wear per run and wheel from any simulation or model (the
+    /// team's own tool): `--baseline predictions.csv`.
+    Predictions(Predictions),
+}
+
+/// Predicted mean wear (%) by (run, wheel), read from a CSV file with
+/// columns `run`, `wheel`, `predicted_wear_pct` (others are ignored, so
+/// `tirewear predict`'s output is one).
+#[derive(Debug, Clone, Default)]
+pub struct Predictions {
+    pub source: String,
+    pub wear_pct: BTreeMap<(String, String), f64>,
+}
+
+impl Predictions {
+    /// Reads and checks a predictions CSV: each row's wheel is FL/FR/RL/RR,
+    /// the prediction finite (an empty cell or NaN is a row without a
+    /// prediction, left out), one row per run and wheel. Errors name the
+    /// file and line.
+    pub fn read(path: &std::path::Path) -> Result<Predictions, crate::ingest::IngestError> {
+        use crate::ingest::IngestError;
+        #[derive(serde::Deserialize)]
+        struct Row {
+            run: String,
+            wheel: String,
+            predicted_wear_pct: Option<f64>,
+        }
+        let file = crate::ingest::open_bounded(path, 1 << 30)?;
+        let mut out = Predictions {
+            source: path.display().to_string(),
+            ..Default::default()
+        };
+        for (i, row) in csv::Reader::from_reader(file)
+            .deserialize::<Row>()
+            .enumerate()
+        {
+            let line = i + 2;
+            let r = row.map_err(|source| IngestError::Csv {
+                path: path.to_path_buf(),
+                source,
+            })?;
+            let bad = |what: String| IngestError::invalid(path, format!("line {line}"), what);
+            if r.wheel.parse::<crate::Wheel>().is_err() {
+                return Err(bad(format!("wheel '{}' is not FL, FR, RL or RR", r.wheel)));
+            }
+            let Some(p) = r.predicted_wear_pct.filter(|p| p.is_finite()) else {
+                continue;
+            };
+            if out
+                .wear_pct
+                .insert((r.run.clone(), r.wheel.clone()), p)
+                .is_some()
+            {
+                return Err(bad(format!(
+                    "a second prediction for run {} wheel {}",
+                    r.run, r.wheel
+                )));
+            }
+        }
+        if out.wear_pct.is_empty() {
+            return Err(IngestError::invalid(path, "rows", "no finite prediction"));
+        }
+        Ok(out)
+    }
 }
 
 /// Candidates (the leading ones by CV gain) whose slices are listed.
@@ -160,10 +224,16 @@ pub fn diagnose(
             )
         }
         Baseline::Model(m) => (format!("{} model", m.method()), None),
+        Baseline::Predictions(p) => (format!("predictions from {}", p.source), None),
     };
     let predict = |r: &KpiRow| -> f64 {
         match (baseline, &physics) {
             (Baseline::Model(m), _) => m.predict_row(r).unwrap_or(f64::NAN),
+            (Baseline::Predictions(p), _) => p
+                .wear_pct
+                .get(&(r.run.clone(), r.wheel.clone()))
+                .copied()
+                .unwrap_or(f64::NAN),
             (_, Some(p)) => p.predict(r, map_of(r)),
             _ => f64::NAN,
         }
