@@ -7,7 +7,7 @@
 // CPU twin: src/kpi/energy_map_kernel.rs; chunks and samples are those of
 // telemetry_reduce; partial maps are merged per wheel in f64 on the CPU.
 
-// Keep in sync with src/kpi/energy_map_kernel.rs and src/kpi/energy_map.rs (bin edges).
+// Must match src/kpi/energy_map_kernel.rs and src/kpi/energy_map.rs (bin edges) (checked by tests/shader_contract.rs).
 const WG_SIZE: u32 = 128u;
 const ITEMS: u32 = 8u;
 const CHUNK: u32 = 1024u;
@@ -25,7 +25,7 @@ const LATERAL_BINS_AT: u32 = 1056u; // SURFACE_INNER_BINS + SPEED_N * T_SURFACE_
 const BINS: u32 = 1632u; // + SURFACE_INNER_BINS (lateral map)
 const OWNED: u32 = 13u; // ceil(BINS / WG_SIZE)
 
-// Keep in sync with ReduceSample (src/kpi/telemetry_reduce.rs).
+// Must match ReduceSample (src/kpi/telemetry_reduce.rs) (checked by tests/shader_contract.rs).
 struct Sample {
     vx: f32,
     vy: f32,
@@ -42,7 +42,7 @@ struct Sample {
     dt_lo: f32,
 }
 
-// Keep in sync with ReduceChunk.
+// Must match ReduceChunk (checked by tests/shader_contract.rs).
 struct Chunk {
     start: u32,
     count: u32,

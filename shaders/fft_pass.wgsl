@@ -4,7 +4,7 @@
 // workgroup's memory, so each pass is a dispatch over global memory.
 // CPU twin: src/kpi/fft_pass.rs.
 
-// Keep in sync with src/kpi/roughness_batch.rs (FFT_N).
+// Must match src/kpi/roughness_batch.rs (FFT_N) (checked by tests/shader_contract.rs).
 const N: u32 = 4096u;
 const WG_SIZE: u32 = 256u;
 

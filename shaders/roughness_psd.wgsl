@@ -2,7 +2,7 @@
 // and frequency k ≤ N/2, C_k = Δx²/L · mean over segments of |X_k|²
 // (L = N·Δx). One thread per (profile, k). CPU twin: src/kpi/roughness_psd.rs.
 
-// Keep in sync with src/kpi/roughness_batch.rs (FFT_N, PsdProfile).
+// Must match src/kpi/roughness_batch.rs (FFT_N, PsdProfile) (checked by tests/shader_contract.rs).
 const N: u32 = 4096u;
 const BINS: u32 = 2049u; // N / 2 + 1
 const WG_SIZE: u32 = 256u;

@@ -3,7 +3,7 @@
 // numbers for fft_pass. One workgroup per segment. CPU twin:
 // src/kpi/roughness_window.rs.
 
-// Keep in sync with src/kpi/roughness_batch.rs (FFT_N, Segment) and HANN_RMS.
+// Must match src/kpi/roughness_batch.rs (FFT_N, Segment) and HANN_RMS (checked by tests/shader_contract.rs).
 const N: u32 = 4096u;
 const WG_SIZE: u32 = 256u;
 const ITEMS: u32 = 16u; // N / WG_SIZE

@@ -3,13 +3,13 @@
 // CPU twin: src/kpi/telemetry_reduce.rs (same workgroup size, items per
 // thread, sum order and tree); partials are merged per wheel in f64 on the CPU.
 
-// Keep in sync with src/kpi/telemetry_reduce.rs: WG_SIZE, ITEMS, SUMS, CARCASS_PRESSURE_PA.
+// Must match src/kpi/telemetry_reduce.rs: WG_SIZE, ITEMS, SUMS, CARCASS_PRESSURE_PA (checked by tests/shader_contract.rs).
 const WG_SIZE: u32 = 128u;
 const ITEMS: u32 = 8u;
 const SUMS: u32 = 22u;
 const CARCASS_PRESSURE_PA: f32 = 40000.0;
 
-// Keep in sync with ReduceSample.
+// Must match ReduceSample (checked by tests/shader_contract.rs).
 struct Sample {
     vx: f32,
     vy: f32,
@@ -26,7 +26,7 @@ struct Sample {
     dt_lo: f32, // f64 remainder of dt, used by the CPU twin only
 }
 
-// Keep in sync with ReduceChunk.
+// Must match ReduceChunk (checked by tests/shader_contract.rs).
 struct Chunk {
     start: u32,
     count: u32,
@@ -34,7 +34,7 @@ struct Chunk {
     pad: u32,
 }
 
-// Keep in sync with ReduceRef.
+// Must match ReduceRef (checked by tests/shader_contract.rs).
 struct Reference {
     v: array<f32, 8>,
 }

@@ -10,11 +10,11 @@ use super::energy_map::{EnergyMaps, SLIDING_SPEED_BINS, T_INNER_BINS, T_SURFACE_
 use super::telemetry_reduce::{CHUNK, ITEMS, ReduceBatch, ReduceChunk, WG_SIZE};
 use rayon::prelude::*;
 
-/// Bins of the (surface × inner) map. Keep in sync with `SURFACE_INNER_BINS` in the shader.
+/// Bins of the (surface × inner) map. Must match `SURFACE_INNER_BINS` in the shader (checked by tests/shader_contract.rs).
 pub const SURFACE_INNER_BINS: usize = 576;
-/// First bin of the lateral map. Keep in sync with `LATERAL_BINS_AT` in the shader.
+/// First bin of the lateral map. Must match `LATERAL_BINS_AT` in the shader (checked by tests/shader_contract.rs).
 pub const LATERAL_BINS_AT: usize = 1056;
-/// Bins of the three maps. Keep in sync with `BINS` in the shader.
+/// Bins of the three maps. Must match `BINS` in the shader (checked by tests/shader_contract.rs).
 pub const BINS: usize = 1632;
 
 const _: () = assert!(SURFACE_INNER_BINS == T_SURFACE_BINS.n * T_INNER_BINS.n);

@@ -11,7 +11,7 @@ use super::road::{HDC_LAGS, WELCH_SEGMENT, hdc_lags};
 use super::telemetry_reduce::CHUNK;
 use bytemuck::{Pod, Zeroable};
 
-/// FFT length of the GPU PSD. Keep in sync with `N` in the roughness shaders.
+/// FFT length of the GPU PSD. Must match `N` in the roughness shaders (checked by tests/shader_contract.rs).
 pub const FFT_N: usize = WELCH_SEGMENT;
 /// Segments per batch: 4096 × 4096 complex f32 = 128 MiB, WebGPU's default
 /// (and guaranteed) largest storage binding.
@@ -19,7 +19,7 @@ pub const MAX_BATCH_SEGMENTS: usize = 4096;
 /// Sums per moments chunk: Σd, Σ|d|, Σd², Σd³, Σd⁴ with d = z − ref.
 pub const MOMENT_SUMS: usize = 5;
 
-/// A chunk of one profile. Keep in sync with `Chunk` in roughness_moments.wgsl
+/// A chunk of one profile. Must match `Chunk` in roughness_moments.wgsl (checked by tests/shader_contract.rs).
 /// and roughness_hdc.wgsl. `lag` is 0 for moments, the HDC lag in samples otherwise.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Default, PartialEq, Pod, Zeroable)]
@@ -30,7 +30,7 @@ pub struct RoughChunk {
     pub lag: u32,
 }
 
-/// A Welch segment. Keep in sync with `Segment` in roughness_window.wgsl.
+/// A Welch segment. Must match `Segment` in roughness_window.wgsl (checked by tests/shader_contract.rs).
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Default, PartialEq, Pod, Zeroable)]
 pub struct Segment {
@@ -38,7 +38,7 @@ pub struct Segment {
     pub profile: u32,
 }
 
-/// Per-profile PSD parameters. Keep in sync with `PsdProfile` in roughness_psd.wgsl.
+/// Per-profile PSD parameters. Must match `PsdProfile` in roughness_psd.wgsl (checked by tests/shader_contract.rs).
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Default, PartialEq, Pod, Zeroable)]
 pub struct PsdProfile {

@@ -10,13 +10,13 @@
 use bytemuck::{Pod, Zeroable};
 use rayon::prelude::*;
 
-/// Threads per workgroup. Keep in sync with `WG_SIZE` in shaders/telemetry_reduce.wgsl.
+/// Threads per workgroup. Must match `WG_SIZE` in shaders/telemetry_reduce.wgsl (checked by tests/shader_contract.rs).
 pub const WG_SIZE: usize = 128;
-/// Samples per thread. Keep in sync with `ITEMS` in the shader.
+/// Samples per thread. Must match `ITEMS` in the shader (checked by tests/shader_contract.rs).
 pub const ITEMS: usize = 8;
 /// Samples per chunk (one workgroup).
 pub const CHUNK: usize = WG_SIZE * ITEMS;
-/// Sums per chunk. Keep in sync with `SUMS` in the shader; order in [`Sum`].
+/// Sums per chunk. Must match `SUMS` in the shader (checked by tests/shader_contract.rs); the order is [`Sum`]'s (the engine parity tests catch a mismatch).
 pub const SUMS: usize = 22;
 
 /// What each sum is (index into a chunk's partials).
@@ -41,7 +41,7 @@ impl Sum {
     pub const COUNT: usize = 21;
 }
 
-/// One kept sample, as uploaded. Keep in sync with `Sample` in the shader.
+/// One kept sample, as uploaded. Must match `Sample` in the shader (checked by tests/shader_contract.rs).
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Default, PartialEq, Pod, Zeroable)]
 pub struct ReduceSample {
@@ -71,7 +71,7 @@ impl ReduceSample {
     }
 }
 
-/// One workgroup's slice of the samples. Keep in sync with `Chunk` in the shader.
+/// One workgroup's slice of the samples. Must match `Chunk` in the shader (checked by tests/shader_contract.rs).
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Default, PartialEq, Pod, Zeroable)]
 pub struct ReduceChunk {
@@ -82,7 +82,7 @@ pub struct ReduceChunk {
 }
 
 /// Per-wheel shift of the seven moment quantities (first kept sample), so
-/// that f32 sums of squares do not cancel. Keep in sync with `Reference`.
+/// that f32 sums of squares do not cancel. Must match `Reference` (checked by tests/shader_contract.rs).
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Default, PartialEq, Pod, Zeroable)]
 pub struct ReduceRef {
