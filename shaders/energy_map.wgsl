@@ -1,11 +1,22 @@
 // Friction-energy maps: each sample's friction energy binned over
 // (surface temperature × inner-liner temperature) and (sliding speed ×
 // surface temperature), and its lateral part over (surface × inner-liner
-// temperature), one partial map per chunk of one wheel. No float
-// atomics in WGSL: every thread owns the bins b with b % WG_SIZE == lid and
-// adds the chunk's samples in order, so each bin's sum is deterministic.
+// temperature), accumulated into one map per wheel.
+//
+// WGSL has no float atomics, so energies are added as fixed-point integers
+// (ENERGY_QUANTA_PER_J quanta per joule, rounded per sample) into 64-bit
+// two's-complement sums kept as (lo, hi) u32 pairs: a carry out of `lo` is
+// detected from the value atomicAdd returns. Integer addition is exact and
+// associative, so the sums do not depend on the order in which threads or
+// workgroups add: the result is deterministic, and equal to the CPU twin's
+// wherever the per-sample energies round to the same quantum.
+//
+// Each workgroup bins one chunk of one wheel into a private histogram in
+// workgroup memory (phase 1), then adds its non-zero bins to the wheel's
+// map in the output buffer (phase 2): one global atomic per touched bin and
+// chunk instead of one partial map per chunk.
 // CPU twin: src/kpi/energy_map_kernel.rs; chunks and samples are those of
-// telemetry_reduce; partial maps are merged per wheel in f64 on the CPU.
+// telemetry_reduce.
 
 // Must match src/kpi/energy_map_kernel.rs and src/kpi/energy_map.rs (bin edges) (checked by tests/shader_contract.rs).
 const WG_SIZE: u32 = 128u;
@@ -23,7 +34,7 @@ const SPEED_N: u32 = 20u;
 const SURFACE_INNER_BINS: u32 = 576u; // T_SURFACE_N * T_INNER_N
 const LATERAL_BINS_AT: u32 = 1056u; // SURFACE_INNER_BINS + SPEED_N * T_SURFACE_N
 const BINS: u32 = 1632u; // + SURFACE_INNER_BINS (lateral map)
-const OWNED: u32 = 13u; // ceil(BINS / WG_SIZE)
+const ENERGY_QUANTA_PER_J: f32 = 16777216.0; // 2^24: a quantum of 6e-8 J, sums up to 5.5e11 J
 
 // Must match ReduceSample (src/kpi/telemetry_reduce.rs) (checked by tests/shader_contract.rs).
 struct Sample {
@@ -52,12 +63,11 @@ struct Chunk {
 
 @group(0) @binding(0) var<storage, read> samples: array<Sample>;
 @group(0) @binding(1) var<storage, read> chunks: array<Chunk>;
-@group(0) @binding(2) var<storage, read_write> partials: array<f32>;
+// Per wheel, BINS (lo, hi) pairs: maps[2 * (wheel * BINS + bin) + {0, 1}].
+@group(0) @binding(2) var<storage, read_write> maps: array<atomic<u32>>;
 
-var<workgroup> bin_a: array<u32, CHUNK>;
-var<workgroup> bin_b: array<u32, CHUNK>;
-var<workgroup> energy: array<f32, CHUNK>;
-var<workgroup> energy_y: array<f32, CHUNK>; // 16 KiB of workgroup memory in all
+var<workgroup> bin_lo: array<atomic<u32>, BINS>;
+var<workgroup> bin_hi: array<atomic<u32>, BINS>; // 13 KiB of workgroup memory in all
 
 // Equal-width bins clamped at both ends; NaN goes to bin 0 (as Bins::index).
 fn bin_index(x: f32, lo: f32, width: f32, n: u32) -> u32 {
@@ -66,6 +76,35 @@ fn bin_index(x: f32, lo: f32, width: f32, n: u32) -> u32 {
         return 0u;
     }
     return min(u32(i), n - 1u);
+}
+
+// round(e · ENERGY_QUANTA_PER_J) as a 64-bit two's-complement (lo, hi).
+fn to_quanta(e: f32) -> vec2<u32> {
+    let m = round(abs(e) * ENERGY_QUANTA_PER_J);
+    let h = floor(m / 4294967296.0);
+    var lo = u32(m - h * 4294967296.0);
+    var hi = u32(h);
+    if e < 0.0 {
+        lo = ~lo + 1u;
+        hi = ~hi + select(0u, 1u, lo == 0u);
+    }
+    return vec2<u32>(lo, hi);
+}
+
+fn add_to_workgroup(bin: u32, q: vec2<u32>) {
+    let old = atomicAdd(&bin_lo[bin], q.x);
+    let hi = q.y + select(0u, 1u, old + q.x < old);
+    if hi != 0u {
+        atomicAdd(&bin_hi[bin], hi);
+    }
+}
+
+fn add_to_map(slot: u32, lo: u32, hi: u32) {
+    let old = atomicAdd(&maps[2u * slot], lo);
+    let h = hi + select(0u, 1u, old + lo < old);
+    if h != 0u {
+        atomicAdd(&maps[2u * slot + 1u], h);
+    }
 }
 
 @compute @workgroup_size(WG_SIZE)
@@ -78,10 +117,18 @@ fn main(
     let in_range = c_index < arrayLength(&chunks);
     var count = 0u;
     var start = 0u;
+    var wheel = 0u;
     if in_range {
         count = chunks[c_index].count;
         start = chunks[c_index].start;
+        wheel = chunks[c_index].wheel;
     }
+    // Phase 0: clear the workgroup's histogram.
+    for (var b = lid; b < BINS; b += WG_SIZE) {
+        atomicStore(&bin_lo[b], 0u);
+        atomicStore(&bin_hi[b], 0u);
+    }
+    workgroupBarrier();
     // Phase 1: each thread bins ITEMS samples (coalesced).
     for (var k = 0u; k < ITEMS; k++) {
         let j = lid + k * WG_SIZE;
@@ -93,34 +140,21 @@ fn main(
             let s = bin_index(p.t_surface, T_SURFACE_LO, T_SURFACE_WIDTH, T_SURFACE_N);
             let i = bin_index(p.t_inner, T_INNER_LO, T_INNER_WIDTH, T_INNER_N);
             let v = bin_index(sqrt(v_sx * v_sx + v_sy * v_sy), SPEED_LO, SPEED_WIDTH, SPEED_N);
-            bin_a[j] = s * T_INNER_N + i;
-            bin_b[j] = SURFACE_INNER_BINS + v * T_SURFACE_N + s;
-            energy[j] = power * p.dt;
-            energy_y[j] = -p.fy * v_sy * p.dt; // eq. 24
+            let a = s * T_INNER_N + i;
+            let q = to_quanta(power * p.dt);
+            add_to_workgroup(a, q);
+            add_to_workgroup(SURFACE_INNER_BINS + v * T_SURFACE_N + s, q);
+            add_to_workgroup(LATERAL_BINS_AT + a, to_quanta(-p.fy * v_sy * p.dt)); // eq. 24
         }
     }
     workgroupBarrier();
-    // Phase 2: each thread sums the samples of the bins it owns, in sample order.
-    var acc: array<f32, OWNED>;
-    for (var j = 0u; j < count; j++) {
-        let a = bin_a[j];
-        if a % WG_SIZE == lid {
-            acc[a / WG_SIZE] += energy[j];
-        }
-        let b = bin_b[j];
-        if b % WG_SIZE == lid {
-            acc[b / WG_SIZE] += energy[j];
-        }
-        let c = LATERAL_BINS_AT + a;
-        if c % WG_SIZE == lid {
-            acc[c / WG_SIZE] += energy_y[j];
-        }
-    }
+    // Phase 2: each thread adds the bins b ≡ lid (mod WG_SIZE) to the wheel's map.
     if in_range {
-        for (var o = 0u; o < OWNED; o++) {
-            let bin = o * WG_SIZE + lid;
-            if bin < BINS {
-                partials[c_index * BINS + bin] = acc[o];
+        for (var b = lid; b < BINS; b += WG_SIZE) {
+            let lo = atomicLoad(&bin_lo[b]);
+            let hi = atomicLoad(&bin_hi[b]);
+            if lo != 0u || hi != 0u {
+                add_to_map(wheel * BINS + b, lo, hi);
             }
         }
     }

@@ -3,7 +3,8 @@
 //! (wgpu). Tests are written once against the trait and run for both.
 
 use crate::gpu::{GpuContext, GpuError, GpuTimings};
-use crate::kpi::energy_map_kernel::{energy_map, merge_maps};
+use crate::kpi::energy_map::EnergyMaps;
+use crate::kpi::energy_map_kernel::{energy_map, maps_from_quanta};
 use crate::kpi::roughness_batch::{RoughnessBatch, Spectral, cpu_twins};
 use crate::kpi::telemetry::finish_wheel;
 use crate::kpi::telemetry_reduce::{ReduceBatch, SUMS, merge, telemetry_reduce};
@@ -18,9 +19,8 @@ pub trait ReduceEngine: Send + Sync {
     /// Every chunk's partial sums of the telemetry reduction
     /// (`shaders/telemetry_reduce.wgsl`); merge with `telemetry_reduce::merge`.
     fn telemetry_reduce(&self, batch: &ReduceBatch) -> Result<Vec<[f64; SUMS]>, GpuError>;
-    /// Every chunk's partial energy map (`shaders/energy_map.wgsl`); merge
-    /// with `energy_map_kernel::merge_maps`.
-    fn energy_map(&self, batch: &ReduceBatch) -> Result<Vec<Vec<f64>>, GpuError>;
+    /// Every wheel's friction-energy maps (`shaders/energy_map.wgsl`).
+    fn energy_map(&self, batch: &ReduceBatch) -> Result<Vec<EnergyMaps>, GpuError>;
     /// Height moments, HDC and Welch PSD of every profile (the roughness
     /// kernels); finish with `road::profile_indices_from`.
     fn roughness(&self, batch: &RoughnessBatch) -> Result<Vec<Spectral>, GpuError>;
@@ -39,8 +39,8 @@ impl ReduceEngine for CpuEngine {
     fn telemetry_reduce(&self, batch: &ReduceBatch) -> Result<Vec<[f64; SUMS]>, GpuError> {
         Ok(telemetry_reduce(batch))
     }
-    fn energy_map(&self, batch: &ReduceBatch) -> Result<Vec<Vec<f64>>, GpuError> {
-        Ok(energy_map(batch))
+    fn energy_map(&self, batch: &ReduceBatch) -> Result<Vec<EnergyMaps>, GpuError> {
+        Ok(maps_from_quanta(&energy_map(batch)))
     }
     fn roughness(&self, batch: &RoughnessBatch) -> Result<Vec<Spectral>, GpuError> {
         Ok(cpu_twins(batch))
@@ -83,7 +83,7 @@ impl ReduceEngine for GpuEngine {
         self.timings.lock().expect("timings lock").add(&t);
         Ok(p)
     }
-    fn energy_map(&self, batch: &ReduceBatch) -> Result<Vec<Vec<f64>>, GpuError> {
+    fn energy_map(&self, batch: &ReduceBatch) -> Result<Vec<EnergyMaps>, GpuError> {
         let (p, t) = self.ctx.energy_map(batch)?;
         self.timings.lock().expect("timings lock").add(&t);
         Ok(p)
@@ -194,11 +194,12 @@ pub fn compare_telemetry(
 }
 
 /// Tolerance of the GPU energy maps against the CPU's, per wheel: the summed
-/// |difference| over all bins at most 1e-4 of the summed |energy|. Why: bin
-/// sums are f32 over ≤ 1024 samples in sample order (≈ 1e-6), and a sample
-/// whose sliding speed or temperature lies within f32 rounding (~1e-6) of a
-/// bin edge may fall in the neighbouring bin on one side only; such samples
-/// are rare, each moves one sample's energy.
+/// |difference| over all bins at most 1e-4 of the summed |energy|. Why: both
+/// engines sum exact fixed-point quanta, so only each sample's energy differs
+/// (f32 against f64, ≈ 1e-7 relative, rounded to 6e-8 J), and a sample whose
+/// sliding speed or temperature lies within f32 rounding (~1e-6) of a bin
+/// edge may fall in the neighbouring bin on one side only; such samples are
+/// rare, each moves one sample's energy (3.5e-5 measured on a whole season).
 pub const ENERGY_MAP_TOLERANCE: f64 = 1e-4;
 
 /// Largest per-wheel L1 difference of the maps, relative to the wheel's summed |energy|.
@@ -207,11 +208,11 @@ pub fn compare_energy_maps(
     other: &dyn ReduceEngine,
     batch: &ReduceBatch,
 ) -> Result<f64, GpuError> {
-    let a = merge_maps(batch, &reference.energy_map(batch)?);
-    let b = merge_maps(batch, &other.energy_map(batch)?);
+    let a = reference.energy_map(batch)?;
+    let b = other.energy_map(batch)?;
     let mut worst = 0.0f64;
     for (x, y) in a.iter().zip(&b) {
-        let bins = |m: &crate::kpi::energy_map::EnergyMaps| -> Vec<f64> {
+        let bins = |m: &EnergyMaps| -> Vec<f64> {
             m.surface_inner
                 .iter()
                 .chain(&m.speed_surface)

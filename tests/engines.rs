@@ -13,7 +13,6 @@ use tirewear::engine::{
     CpuEngine, ENERGY_MAP_TOLERANCE, ROUGHNESS_TOLERANCE, ReduceEngine, TELEMETRY_TOLERANCE,
     compare_energy_maps, compare_roughness, compare_telemetry, gpu_for_tests,
 };
-use tirewear::kpi::energy_map_kernel::merge_maps;
 use tirewear::kpi::table::read_parquet;
 use tirewear::kpi::telemetry::finish_wheel;
 use tirewear::kpi::telemetry_reduce::{ReduceBatch, ReduceSample, merge};
@@ -136,9 +135,12 @@ fn full_length_run_matches_the_f64_reference() {
 
 #[test]
 fn energy_maps_by_hand_on_every_engine() {
-    // 1500 samples at T_s 82 °C, T_i 101 °C, v_s 0.5 m/s, P = 1000 W and
+    // 1500 samples at T_s 82 °C, T_i 101 °C, v_s 0.5 m/s, P = 1000 W;
     // 700 at T_s 19 (first bin), T_i 170 (last), v_s 12 m/s (last), P = 300 W
-    // all lateral; 10 ms each.
+    // all lateral; 300 at T_s 52, T_i 61, v_s 2 m/s with the force along the
+    // slip, P = −400 W (a negative sum: the maps keep signed energy);
+    // 10 ms each. Each sum passes 2^32 quanta (256 J), so the carry between
+    // the shader's lo and hi words is exercised in workgroup and global sums.
     let a = ReduceSample {
         vx: 50.5,
         omega: 100.0,
@@ -158,24 +160,66 @@ fn energy_maps_by_hand_on_every_engine() {
         t_inner: 170.0,
         ..a
     };
+    let c = ReduceSample {
+        vx: 52.0,
+        fx: 200.0,
+        t_surface: 52.0,
+        t_inner: 61.0,
+        ..a
+    };
     let mut wheel = vec![a; 1500];
     wheel.extend(vec![b; 700]);
+    wheel.extend(vec![c; 300]);
     let mut batch = ReduceBatch::default();
     batch.push_wheel(&wheel);
-    let (ea, eb) = (1000.0 * 0.01 * 1500.0, 300.0 * 0.01 * 700.0);
+    let (ea, eb, ec) = (
+        1000.0 * 0.01 * 1500.0,
+        300.0 * 0.01 * 700.0,
+        -400.0 * 0.01 * 300.0,
+    );
     for (e, tol) in engines("energy_maps_by_hand_on_every_engine") {
-        let m = &merge_maps(&batch, &e.energy_map(&batch).unwrap())[0];
-        let close = |got: f64, want: f64| (got - want).abs() <= tol * want;
+        let m = &e.energy_map(&batch).unwrap()[0];
+        let close = |got: f64, want: f64| (got - want).abs() <= tol * want.abs();
         assert!(close(m.surface_inner[12 * 24 + 12], ea), "{}", e.name());
         assert!(close(m.speed_surface[24 + 12], ea), "{}", e.name());
         assert!(close(m.surface_inner[23], eb), "{}", e.name());
         assert!(close(m.speed_surface[19 * 24], eb), "{}", e.name());
-        assert!(close(m.total(), ea + eb), "{}", e.name());
+        // c: T_s bin 6, T_i bin 4, v_s bin 4.
+        assert!(close(m.surface_inner[6 * 24 + 4], ec), "{}", e.name());
+        assert!(close(m.speed_surface[4 * 24 + 6], ec), "{}", e.name());
+        assert!(close(m.total(), ea + eb + ec), "{}", e.name());
         // Lateral map: only b slides sideways (−F_y·v_sy = 300 W).
         assert!(close(m.lateral_surface_inner[23], eb), "{}", e.name());
         let lateral: f64 = m.lateral_surface_inner.iter().sum();
         assert!(close(lateral, eb), "{}", e.name());
     }
+}
+
+#[test]
+fn energy_maps_do_not_depend_on_the_order_of_additions() {
+    // Integer sums are exact: the CPU engine gives the same bits on one
+    // thread or many and with its chunks reversed; the GPU engine gives the
+    // same bits on every call and however the batch is cut into dispatches.
+    let run = full_length_run();
+    let mut batch = ReduceBatch::default();
+    batch.push_wheel(&run[..40_000]);
+    batch.push_wheel(&run[150_000..190_000]);
+    let cpu = CpuEngine.energy_map(&batch).unwrap();
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .unwrap();
+    assert_eq!(cpu, pool.install(|| CpuEngine.energy_map(&batch).unwrap()));
+    let mut reversed = batch.clone();
+    reversed.chunks.reverse();
+    assert_eq!(cpu, CpuEngine.energy_map(&reversed).unwrap());
+    let Some(mut g) = gpu_for_tests("energy_maps_do_not_depend_on_the_order_of_additions") else {
+        return;
+    };
+    let gpu = g.energy_map(&batch).unwrap();
+    assert_eq!(gpu, g.energy_map(&batch).unwrap());
+    g.ctx.set_test_limits(5 * 1024, 3);
+    assert_eq!(gpu, g.energy_map(&batch).unwrap());
 }
 
 #[test]

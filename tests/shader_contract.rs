@@ -210,16 +210,27 @@ fn energy_map_matches_its_cpu_twin() {
     );
     assert_eq!(constant(&m, "LATERAL_BINS_AT"), em::LATERAL_BINS_AT as f64);
     assert_eq!(constant(&m, "BINS"), em::BINS as f64);
-    assert_eq!(
-        constant(&m, "OWNED"),
-        em::BINS.div_ceil(WG_SIZE) as f64,
-        "OWNED = ceil(BINS / WG_SIZE)"
-    );
+    assert_eq!(constant(&m, "ENERGY_QUANTA_PER_J"), em::ENERGY_QUANTA_PER_J);
     // The same sample and chunk records as the telemetry reduction.
     let t = shader("telemetry_reduce.wgsl");
     assert_eq!(wgsl_struct(&m, "Sample"), wgsl_struct(&t, "Sample"));
     assert_eq!(wgsl_struct(&m, "Chunk"), wgsl_struct(&t, "Chunk"));
-    assert_eq!(names(&bindings(&m)), ["samples", "chunks", "partials"]);
+    assert_eq!(names(&bindings(&m)), ["samples", "chunks", "maps"]);
+    // The private histogram: BINS (lo, hi) u32 pairs, inside WebGPU's
+    // default 16 KiB of workgroup memory.
+    assert_eq!(workgroup_bytes(&m), 2 * 4 * em::BINS as u32);
+    assert!(workgroup_bytes(&m) <= 16384);
+}
+
+/// Bytes of workgroup memory a module declares.
+fn workgroup_bytes(m: &Module) -> u32 {
+    let mut layouter = Layouter::default();
+    layouter.update(m.to_ctx()).unwrap();
+    m.global_variables
+        .iter()
+        .filter(|(_, v)| v.space == naga::AddressSpace::WorkGroup)
+        .map(|(_, v)| layouter[v.ty].size)
+        .sum()
 }
 
 #[test]

@@ -1,11 +1,15 @@
 //! Host side of the chunk kernels (`shaders/telemetry_reduce.wgsl`,
-//! `shaders/energy_map.wgsl`): one workgroup per chunk of one wheel, one
-//! partial result of fixed length per chunk. Pipelines are built once,
-//! buffers grown on demand and reused, batches cut at chunk boundaries so no
-//! binding exceeds the device's limit, grids over 65 535 workgroups in 2-D.
+//! `shaders/energy_map.wgsl`): one workgroup per chunk of one wheel, writing
+//! either one partial result of fixed length per chunk (the reduction) or
+//! adding into one result per wheel (the maps, integer atomics). Pipelines
+//! are built once, buffers grown on demand and reused, batches cut at chunk
+//! boundaries so no binding exceeds the device's limit, grids over 65 535
+//! workgroups in 2-D.
 
 use super::{GpuContext, GpuError, GpuTimings};
+use crate::kpi::energy_map::EnergyMaps;
 use crate::kpi::energy_map_kernel::BINS;
+use crate::kpi::energy_map_kernel::maps_from_quanta;
 use crate::kpi::telemetry_reduce::{CHUNK, ReduceBatch, ReduceChunk, ReduceSample, SUMS};
 use std::sync::Mutex;
 use std::time::Instant;
@@ -18,10 +22,19 @@ struct Scratch {
     readback: wgpu::Buffer,
 }
 
+/// What a chunk kernel's last binding holds.
+#[derive(Clone, Copy)]
+pub(crate) enum Output {
+    /// This many f32 per chunk, read back after every dispatch.
+    PerChunk(usize),
+    /// This many u32 per wheel of the batch, zeroed once, added to by every
+    /// dispatch of the batch and read back at its end.
+    PerWheel(usize),
+}
+
 pub(crate) struct ChunkKernel {
     name: &'static str,
-    /// f32 values each workgroup writes.
-    outputs_per_chunk: usize,
+    output: Output,
     /// Whether binding 2 is the per-wheel reference buffer (then partials are binding 3).
     uses_refs: bool,
     pipeline: wgpu::ComputePipeline,
@@ -48,13 +61,13 @@ impl ChunkKernel {
         device: &wgpu::Device,
         name: &'static str,
         source: wgpu::ShaderModuleDescriptor,
-        outputs_per_chunk: usize,
+        output: Output,
         uses_refs: bool,
     ) -> Result<Self, GpuError> {
         let (pipeline, layout) = super::compute_pipeline(device, name, source)?;
         Ok(ChunkKernel {
             name,
-            outputs_per_chunk,
+            output,
             uses_refs,
             pipeline,
             layout,
@@ -84,28 +97,46 @@ impl GpuContext {
         let (flat, t) = self.run_chunks(&self.telemetry_reduce, batch)?;
         let sums = flat
             .chunks_exact(SUMS)
-            .map(|c| std::array::from_fn(|m| c[m] as f64))
+            .map(|c| std::array::from_fn(|m| f32::from_bits(c[m]) as f64))
             .collect();
         Ok((sums, t))
     }
 
-    /// Every chunk's partial energy map (`energy_map_kernel::BINS` values) and the time split.
-    pub fn energy_map(&self, batch: &ReduceBatch) -> Result<(Vec<Vec<f64>>, GpuTimings), GpuError> {
-        let (flat, t) = self.run_chunks(&self.energy_map, batch)?;
-        let maps = flat
-            .chunks_exact(BINS)
-            .map(|c| c.iter().map(|&v| v as f64).collect())
+    /// Every wheel's energy maps (exact sums of fixed-point quanta on the
+    /// device) and the time split.
+    pub fn energy_map(
+        &self,
+        batch: &ReduceBatch,
+    ) -> Result<(Vec<EnergyMaps>, GpuTimings), GpuError> {
+        let (words, t) = self.run_chunks(&self.energy_map, batch)?;
+        let quanta: Vec<u64> = words
+            .chunks_exact(2)
+            .map(|w| w[0] as u64 | (w[1] as u64) << 32)
             .collect();
-        Ok((maps, t))
+        debug_assert_eq!(quanta.len(), batch.wheels() * BINS);
+        Ok((maps_from_quanta(&quanta), t))
     }
 
+    /// The kernel over a whole batch: its output words (per chunk, or per
+    /// wheel) and the time split.
     fn run_chunks(
         &self,
         k: &ChunkKernel,
         batch: &ReduceBatch,
-    ) -> Result<(Vec<f32>, GpuTimings), GpuError> {
-        let mut out = Vec::with_capacity(batch.chunks.len() * k.outputs_per_chunk);
+    ) -> Result<(Vec<u32>, GpuTimings), GpuError> {
+        let mut out = Vec::new();
         let mut timings = GpuTimings::default();
+        // Per-wheel outputs: one zeroed buffer for the whole batch (wgpu
+        // zero-initialises new buffers).
+        let per_wheel = match k.output {
+            Output::PerWheel(n) => {
+                let bytes = (batch.wheels() * n * 4) as u64;
+                use wgpu::BufferUsages as U;
+                let b = storage(&self.device, "maps", bytes, U::STORAGE | U::COPY_SRC);
+                Some((b, bytes))
+            }
+            Output::PerChunk(_) => None,
+        };
         let refs = self
             .device
             .create_buffer_init(&wgpu::util::BufferInitDescriptor {
@@ -134,10 +165,26 @@ impl GpuContext {
                     ..*c
                 })
                 .collect();
-            let (p, t) = self.dispatch(k, &batch.samples[start..end], &chunks, &refs)?;
+            let shared = per_wheel.as_ref().map(|(b, n)| (b, *n));
+            let (p, t) = self.dispatch(k, &batch.samples[start..end], &chunks, &refs, shared)?;
             out.extend(p);
             timings.add(&t);
             first = last;
+        }
+        if let Some((maps, bytes)) = &per_wheel {
+            let t0 = Instant::now();
+            let readback = storage(
+                &self.device,
+                "maps readback",
+                *bytes,
+                wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            );
+            let mut enc = self.device.create_command_encoder(&Default::default());
+            enc.copy_buffer_to_buffer(maps, 0, &readback, 0, *bytes);
+            self.queue.submit([enc.finish()]);
+            let b = self.read_back(&readback, *bytes)?;
+            out = bytemuck::cast_slice::<u8, u32>(&b).to_vec();
+            timings.readback += t0.elapsed();
         }
         Ok((out, timings))
     }
@@ -148,10 +195,15 @@ impl GpuContext {
         samples: &[ReduceSample],
         chunks: &[ReduceChunk],
         refs: &wgpu::Buffer,
-    ) -> Result<(Vec<f32>, GpuTimings), GpuError> {
+        shared: Option<(&wgpu::Buffer, u64)>,
+    ) -> Result<(Vec<u32>, GpuTimings), GpuError> {
         let sample_bytes = size_of_val(samples) as u64;
         let chunk_bytes = size_of_val(chunks) as u64;
-        let partial_bytes = (chunks.len() * k.outputs_per_chunk * 4) as u64;
+        let per_chunk = match k.output {
+            Output::PerChunk(n) => n,
+            Output::PerWheel(_) => 0,
+        };
+        let partial_bytes = (chunks.len() * per_chunk * 4) as u64;
         let mut guard = k.scratch.lock().expect("scratch lock");
         let fits = matches!(&*guard, Some((s, c, _)) if *s >= sample_bytes && *c >= chunk_bytes);
         if !fits {
@@ -159,7 +211,7 @@ impl GpuContext {
                 sample_bytes.next_power_of_two(),
                 chunk_bytes.next_power_of_two(),
             );
-            let p = c / size_of::<ReduceChunk>() as u64 * k.outputs_per_chunk as u64 * 4;
+            let p = c / size_of::<ReduceChunk>() as u64 * per_chunk as u64 * 4;
             use wgpu::BufferUsages as U;
             *guard = Some((
                 s,
@@ -208,7 +260,10 @@ impl GpuContext {
         }
         entries.push(wgpu::BindGroupEntry {
             binding: entries.len() as u32,
-            resource: bind(&sc.partials, partial_bytes),
+            resource: match shared {
+                Some((b, bytes)) => bind(b, bytes),
+                None => bind(&sc.partials, partial_bytes),
+            },
         });
         let group = self.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some(k.name),
@@ -235,12 +290,15 @@ impl GpuContext {
         }
         t.compute = t0.elapsed();
 
+        if shared.is_some() {
+            return Ok((Vec::new(), t));
+        }
         let t0 = Instant::now();
         let mut enc = self.device.create_command_encoder(&Default::default());
         enc.copy_buffer_to_buffer(&sc.partials, 0, &sc.readback, 0, partial_bytes);
         self.queue.submit([enc.finish()]);
         let bytes = self.read_back(&sc.readback, partial_bytes)?;
-        let out = bytemuck::cast_slice::<u8, f32>(&bytes).to_vec();
+        let out = bytemuck::cast_slice::<u8, u32>(&bytes).to_vec();
         t.readback = t0.elapsed();
         Ok((out, t))
     }

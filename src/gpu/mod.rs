@@ -113,14 +113,14 @@ impl GpuContext {
             &device,
             "telemetry_reduce",
             wgpu::include_wgsl!("../../shaders/telemetry_reduce.wgsl"),
-            crate::kpi::telemetry_reduce::SUMS,
+            chunk_kernel::Output::PerChunk(crate::kpi::telemetry_reduce::SUMS),
             true,
         )?;
         let energy_map = chunk_kernel::ChunkKernel::new(
             &device,
             "energy_map",
             wgpu::include_wgsl!("../../shaders/energy_map.wgsl"),
-            crate::kpi::energy_map_kernel::BINS,
+            chunk_kernel::Output::PerWheel(2 * crate::kpi::energy_map_kernel::BINS),
             false,
         )?;
         let roughness = roughness::RoughnessKernels::new(&device)?;

@@ -1,13 +1,15 @@
 //! CPU twin of `shaders/energy_map.wgsl`: per chunk of one wheel, every
 //! sample's friction energy binned into both energy maps and its lateral
-//! part into the lateral map, as one partial map of `BINS` values; partials
-//! are merged per wheel in f64. Phase 1 is the shader's loop for loop;
-//! phase 2 adds each sample to its three bins in sample order, which is the
-//! order in which the shader's owner thread of that bin adds it, so the two
-//! differ only by f32 against f64.
+//! part into the lateral map, as fixed-point quanta in a private histogram
+//! (phase 1) whose non-zero bins are then added to the wheel's map
+//! (phase 2). The shader keeps each 64-bit sum as a (lo, hi) pair of u32
+//! with an explicit carry; here a wrapping `u64` is the same number modulo
+//! 2^64. Integer sums are exact in any order, so the two engines differ only
+//! where an f32 energy (GPU) and an f64 one (here) round to different quanta
+//! or land on different sides of a bin edge.
 
 use super::energy_map::{EnergyMaps, SLIDING_SPEED_BINS, T_INNER_BINS, T_SURFACE_BINS};
-use super::telemetry_reduce::{CHUNK, ITEMS, ReduceBatch, ReduceChunk, WG_SIZE};
+use super::telemetry_reduce::{ITEMS, ReduceBatch, ReduceChunk, WG_SIZE};
 use rayon::prelude::*;
 
 /// Bins of the (surface × inner) map. Must match `SURFACE_INNER_BINS` in the shader (checked by tests/shader_contract.rs).
@@ -16,16 +18,32 @@ pub const SURFACE_INNER_BINS: usize = 576;
 pub const LATERAL_BINS_AT: usize = 1056;
 /// Bins of the three maps. Must match `BINS` in the shader (checked by tests/shader_contract.rs).
 pub const BINS: usize = 1632;
+/// Fixed-point quanta per joule (2^24: a quantum is 6.0e-8 J; a bin holds up
+/// to 2^63 quanta, 5.5e11 J). Must match `ENERGY_QUANTA_PER_J` in the shader
+/// (checked by tests/shader_contract.rs).
+pub const ENERGY_QUANTA_PER_J: f64 = 16_777_216.0;
 
 const _: () = assert!(SURFACE_INNER_BINS == T_SURFACE_BINS.n * T_INNER_BINS.n);
 const _: () =
     assert!(LATERAL_BINS_AT == SURFACE_INNER_BINS + SLIDING_SPEED_BINS.n * T_SURFACE_BINS.n);
 const _: () = assert!(BINS == LATERAL_BINS_AT + SURFACE_INNER_BINS);
 
-fn workgroup(batch: &ReduceBatch, chunk: &ReduceChunk) -> Vec<f64> {
+/// round(e · ENERGY_QUANTA_PER_J) in 64-bit two's complement (the shader's
+/// `to_quanta`: ties to even, magnitude rounded then negated).
+pub fn to_quanta(e: f64) -> u64 {
+    let m = (e.abs() * ENERGY_QUANTA_PER_J).round_ties_even() as u64;
+    if e < 0.0 { m.wrapping_neg() } else { m }
+}
+
+/// A 64-bit two's-complement sum of quanta back in joules.
+pub fn from_quanta(q: u64) -> f64 {
+    q as i64 as f64 / ENERGY_QUANTA_PER_J
+}
+
+fn workgroup(batch: &ReduceBatch, chunk: &ReduceChunk, maps: &mut [u64]) {
     let count = chunk.count as usize;
-    let (mut bin_a, mut bin_b) = ([0usize; CHUNK], [0usize; CHUNK]);
-    let (mut energy, mut energy_y) = ([0.0f64; CHUNK], [0.0f64; CHUNK]);
+    // Phase 0.
+    let mut bins = [0u64; BINS];
     // Phase 1.
     for lid in 0..WG_SIZE {
         for k in 0..ITEMS {
@@ -33,68 +51,94 @@ fn workgroup(batch: &ReduceBatch, chunk: &ReduceChunk) -> Vec<f64> {
             if j < count {
                 let p = &batch.samples[chunk.start as usize + j];
                 let f = |x: f32| x as f64;
+                let dt = f(p.dt) + f(p.dt_lo);
                 let v_sx = f(p.vx) - f(p.omega) * f(p.radius); // eq. 21
                 let v_sy = f(p.vy); // eq. 22
                 let power = -f(p.fx) * v_sx - f(p.fy) * v_sy; // eqs. 23–25
                 let s = T_SURFACE_BINS.index(f(p.t_surface));
                 let i = T_INNER_BINS.index(f(p.t_inner));
                 let v = SLIDING_SPEED_BINS.index((v_sx * v_sx + v_sy * v_sy).sqrt());
-                bin_a[j] = s * T_INNER_BINS.n + i;
-                bin_b[j] = SURFACE_INNER_BINS + v * T_SURFACE_BINS.n + s;
-                energy[j] = power * (f(p.dt) + f(p.dt_lo));
-                energy_y[j] = -f(p.fy) * v_sy * (f(p.dt) + f(p.dt_lo)); // eq. 24
+                let a = s * T_INNER_BINS.n + i;
+                let q = to_quanta(power * dt);
+                bins[a] = bins[a].wrapping_add(q);
+                let b = SURFACE_INNER_BINS + v * T_SURFACE_BINS.n + s;
+                bins[b] = bins[b].wrapping_add(q);
+                let c = LATERAL_BINS_AT + a;
+                bins[c] = bins[c].wrapping_add(to_quanta(-f(p.fy) * v_sy * dt)); // eq. 24
             }
         }
     }
     // Phase 2.
-    let mut out = vec![0.0; BINS];
-    for j in 0..count {
-        out[bin_a[j]] += energy[j];
-        out[bin_b[j]] += energy[j];
-        out[LATERAL_BINS_AT + bin_a[j]] += energy_y[j];
+    let wheel = chunk.wheel as usize;
+    for (b, &q) in bins.iter().enumerate() {
+        if q != 0 {
+            let slot = &mut maps[wheel * BINS + b];
+            *slot = slot.wrapping_add(q);
+        }
     }
-    out
 }
 
-/// The CPU engine's kernel: every chunk's partial map (rayon over chunks).
-pub fn energy_map(batch: &ReduceBatch) -> Vec<Vec<f64>> {
+/// The CPU engine's kernel: every wheel's maps as `BINS` sums of quanta
+/// (rayon over chunks; exact, so the split does not change the result).
+pub fn energy_map(batch: &ReduceBatch) -> Vec<u64> {
+    let n = batch.wheels() * BINS;
     batch
         .chunks
         .par_iter()
-        .map(|c| workgroup(batch, c))
-        .collect()
+        .fold(
+            || vec![0u64; n],
+            |mut maps, c| {
+                workgroup(batch, c, &mut maps);
+                maps
+            },
+        )
+        .reduce(
+            || vec![0u64; n],
+            |mut a, b| {
+                for (x, y) in a.iter_mut().zip(b) {
+                    *x = x.wrapping_add(y);
+                }
+                a
+            },
+        )
 }
 
-/// Merges chunk partials into each wheel's maps (f64, chunk order).
-pub fn merge_maps(batch: &ReduceBatch, partials: &[Vec<f64>]) -> Vec<EnergyMaps> {
-    let mut out = vec![EnergyMaps::new(); batch.wheels()];
-    for (c, p) in batch.chunks.iter().zip(partials) {
-        let m = &mut out[c.wheel as usize];
-        for (d, s) in m.surface_inner.iter_mut().zip(&p[..SURFACE_INNER_BINS]) {
-            *d += s;
-        }
-        for (d, s) in m
-            .speed_surface
-            .iter_mut()
-            .zip(&p[SURFACE_INNER_BINS..LATERAL_BINS_AT])
-        {
-            *d += s;
-        }
-        for (d, s) in m
-            .lateral_surface_inner
-            .iter_mut()
-            .zip(&p[LATERAL_BINS_AT..])
-        {
-            *d += s;
-        }
-    }
-    out
+/// Each wheel's maps (J per bin) from its `BINS` sums of quanta.
+pub fn maps_from_quanta(quanta: &[u64]) -> Vec<EnergyMaps> {
+    quanta
+        .chunks_exact(BINS)
+        .map(|q| {
+            let j = |r: &[u64]| r.iter().map(|&v| from_quanta(v)).collect();
+            EnergyMaps {
+                surface_inner: j(&q[..SURFACE_INNER_BINS]),
+                speed_surface: j(&q[SURFACE_INNER_BINS..LATERAL_BINS_AT]),
+                lateral_surface_inner: j(&q[LATERAL_BINS_AT..]),
+            }
+        })
+        .collect()
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::kpi::telemetry_reduce::ReduceSample;
+
+    #[test]
+    fn quanta_by_hand() {
+        assert_eq!(to_quanta(1.0), 1 << 24);
+        assert_eq!(to_quanta(-1.0), (1u64 << 24).wrapping_neg());
+        assert_eq!(to_quanta(-1.0).wrapping_add(to_quanta(1.0)), 0);
+        // Ties to even, as WGSL's round().
+        assert_eq!(to_quanta(2.5 / ENERGY_QUANTA_PER_J), 2);
+        assert_eq!(to_quanta(3.5 / ENERGY_QUANTA_PER_J), 4);
+        assert_eq!(from_quanta(to_quanta(-1234.5)), -1234.5);
+        // Past 2^32 quanta (256 J) the high word carries.
+        assert_eq!(to_quanta(300.0), 300 << 24);
+        assert_eq!(
+            from_quanta(to_quanta(300.0).wrapping_add(to_quanta(-500.0))),
+            -200.0
+        );
+    }
 
     #[test]
     fn maps_by_hand_and_equal_to_per_sample_binning() {
@@ -129,7 +173,7 @@ mod tests {
         wheel.extend(vec![b; 700]);
         let mut batch = ReduceBatch::default();
         batch.push_wheel(&wheel);
-        let m = &merge_maps(&batch, &energy_map(&batch))[0];
+        let m = &maps_from_quanta(&energy_map(&batch))[0];
         let ea = 1000.0 * 0.01 * 1500.0;
         let eb = 300.0 * 0.01 * 700.0;
         assert!((m.surface_inner[12 * 24 + 12] - ea).abs() < 1e-9);

@@ -7,7 +7,6 @@
 //! - `kpis.report.json`: what was skipped and why, cleaning counts, timings.
 
 use super::energy_map::{EnergyMaps, SLIDING_SPEED_BINS, T_INNER_BINS, T_SURFACE_BINS};
-use super::energy_map_kernel::merge_maps;
 use super::road::{RoadCurves, RoadIndices, mean_indices, profile_indices, profile_indices_from};
 use super::roughness_batch::{FFT_N, Spectral, batches};
 use super::table::{KpiRow, kpi_batch, quality, with_extraction_id, write_batch_to};
@@ -289,7 +288,6 @@ fn run_rows(
     let maps = engine
         .energy_map(&batch)
         .map_err(|e| format!("{}: {} engine: {e}", path.display(), engine.name()))?;
-    let maps = merge_maps(&batch, &maps);
     for (i, ((w, p), maps)) in Wheel::ALL.into_iter().zip(prepared).zip(maps).enumerate() {
         let rep = p.report;
         let k = finish_wheel(&sums[i], &batch.refs[i])

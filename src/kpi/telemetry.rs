@@ -15,7 +15,7 @@
 //!   80 % of its samples are valid, or it lasts less than 10 s.
 
 use super::energy_map::EnergyMaps;
-use super::energy_map_kernel::{energy_map, merge_maps};
+use super::energy_map_kernel::{energy_map, maps_from_quanta};
 use super::telemetry_reduce::{
     ReduceBatch, ReduceRef, ReduceSample, SUMS, Sum, merge, moments, telemetry_reduce,
 };
@@ -290,7 +290,7 @@ pub fn wheel_indices(
     batch.push_wheel(&p.samples);
     let sums = merge(&batch, &telemetry_reduce(&batch));
     let k = finish_wheel(&sums[0], &batch.refs[0])?;
-    let maps = merge_maps(&batch, &energy_map(&batch)).remove(0);
+    let maps = maps_from_quanta(&energy_map(&batch)).remove(0);
     Ok((k, maps, p.report))
 }
 
