@@ -161,7 +161,6 @@ fn gpu_best(
 }
 
 /// Runs `f` on a 1-thread rayon pool.
-/// Runs `f` on a 1-thread rayon pool.
 pub fn one_thread<T: Send>(f: impl FnOnce() -> T + Send) -> T {
     rayon::ThreadPoolBuilder::new()
         .num_threads(1)
@@ -244,6 +243,28 @@ pub fn run_bench(o: &BenchOptions) -> BenchReport {
         })
     {
         report.lines.push(w.line("gpu", d, Some(split)));
+    }
+
+    // Both, as extraction calls them: the GPU uploads the samples once.
+    w.kernel = "reduce+maps";
+    let both = || {
+        (
+            CpuEngine.telemetry_reduce(&batch),
+            CpuEngine.energy_map(&batch),
+        )
+    };
+    let (d, _) = best(o.repeats, || one_thread(both));
+    report.lines.push(w.line("cpu, 1 thread", d, None));
+    let (d, _) = best(o.repeats, both);
+    report
+        .lines
+        .push(w.line(&format!("cpu, {threads} threads"), d, None));
+    if let Some(g) = &gpu
+        && let Some((d, split)) = gpu_best(o.repeats, &mut report.notes, || {
+            g.ctx.telemetry_and_maps(&batch).map(|r| r.1)
+        })
+    {
+        report.lines.push(w.line("gpu, one upload", d, Some(split)));
     }
 
     // Roughness: moments, Welch PSD and HDC per profile (the engines' part).

@@ -10,6 +10,9 @@ use crate::kpi::telemetry::finish_wheel;
 use crate::kpi::telemetry_reduce::{ReduceBatch, SUMS, merge, telemetry_reduce};
 use std::sync::Mutex;
 
+/// Every chunk's partial sums of the telemetry reduction and every wheel's energy maps.
+pub type TelemetryAndMaps = (Vec<[f64; SUMS]>, Vec<EnergyMaps>);
+
 /// A reduction engine.
 pub trait ReduceEngine: Send + Sync {
     /// "cpu" or "gpu".
@@ -21,6 +24,10 @@ pub trait ReduceEngine: Send + Sync {
     fn telemetry_reduce(&self, batch: &ReduceBatch) -> Result<Vec<[f64; SUMS]>, GpuError>;
     /// Every wheel's friction-energy maps (`shaders/energy_map.wgsl`).
     fn energy_map(&self, batch: &ReduceBatch) -> Result<Vec<EnergyMaps>, GpuError>;
+    /// Both of the above on one batch (the GPU uploads the samples once).
+    fn telemetry_and_maps(&self, batch: &ReduceBatch) -> Result<TelemetryAndMaps, GpuError> {
+        Ok((self.telemetry_reduce(batch)?, self.energy_map(batch)?))
+    }
     /// Height moments, HDC and Welch PSD of every profile (the roughness
     /// kernels); finish with `road::profile_indices_from`.
     fn roughness(&self, batch: &RoughnessBatch) -> Result<Vec<Spectral>, GpuError>;
@@ -85,6 +92,11 @@ impl ReduceEngine for GpuEngine {
     }
     fn energy_map(&self, batch: &ReduceBatch) -> Result<Vec<EnergyMaps>, GpuError> {
         let (p, t) = self.ctx.energy_map(batch)?;
+        self.timings.lock().expect("timings lock").add(&t);
+        Ok(p)
+    }
+    fn telemetry_and_maps(&self, batch: &ReduceBatch) -> Result<TelemetryAndMaps, GpuError> {
+        let (p, t) = self.ctx.telemetry_and_maps(batch)?;
         self.timings.lock().expect("timings lock").add(&t);
         Ok(p)
     }

@@ -239,6 +239,10 @@ fn gpu_splits_batches_and_spreads_grids_in_2d() {
     assert!(c.passes(), "{:?}", c.errors);
     let m = compare_energy_maps(&CpuEngine, &g as &dyn ReduceEngine, &batch).unwrap();
     assert!(m <= ENERGY_MAP_TOLERANCE, "{m}");
+    // One upload for both kernels gives what two calls give, bit for bit.
+    let (sums, maps) = g.telemetry_and_maps(&batch).unwrap();
+    assert_eq!(sums, g.telemetry_reduce(&batch).unwrap());
+    assert_eq!(maps, g.energy_map(&batch).unwrap());
 }
 
 #[test]

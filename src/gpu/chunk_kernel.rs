@@ -1,45 +1,47 @@
 //! Host side of the chunk kernels (`shaders/telemetry_reduce.wgsl`,
 //! `shaders/energy_map.wgsl`): one workgroup per chunk of one wheel, writing
 //! either one partial result of fixed length per chunk (the reduction) or
-//! adding into one result per wheel (the maps, integer atomics). Pipelines
-//! are built once, buffers grown on demand and reused, batches cut at chunk
-//! boundaries so no binding exceeds the device's limit, grids over 65 535
-//! workgroups in 2-D.
+//! adding into one result per wheel (the maps, integer atomics). The
+//! samples are uploaded once per batch piece and every kernel asked for runs
+//! on them. Pipelines are built once, buffers grown on demand and reused,
+//! batches cut at chunk boundaries so no binding exceeds the device's limit,
+//! grids over 65 535 workgroups in 2-D.
 
 use super::{GpuContext, GpuError, GpuTimings};
 use crate::kpi::energy_map::EnergyMaps;
-use crate::kpi::energy_map_kernel::BINS;
-use crate::kpi::energy_map_kernel::maps_from_quanta;
+use crate::kpi::energy_map_kernel::{BINS, maps_from_quanta};
 use crate::kpi::telemetry_reduce::{CHUNK, ReduceBatch, ReduceChunk, ReduceSample, SUMS};
 use std::sync::Mutex;
 use std::time::Instant;
 use wgpu::util::DeviceExt;
 
-struct Scratch {
-    samples: wgpu::Buffer,
-    chunks: wgpu::Buffer,
-    partials: wgpu::Buffer,
-    readback: wgpu::Buffer,
-}
-
 /// What a chunk kernel's last binding holds.
 #[derive(Clone, Copy)]
 pub(crate) enum Output {
-    /// This many f32 per chunk, read back after every dispatch.
+    /// This many u32 per chunk, read back after every dispatch.
     PerChunk(usize),
     /// This many u32 per wheel of the batch, zeroed once, added to by every
     /// dispatch of the batch and read back at its end.
     PerWheel(usize),
 }
 
+/// The kernels' shared inputs, grown on demand: (sample bytes, chunk bytes, buffers).
+pub(crate) type InputScratch = Mutex<Option<(u64, u64, Inputs)>>;
+
+pub(crate) struct Inputs {
+    samples: wgpu::Buffer,
+    chunks: wgpu::Buffer,
+}
+
 pub(crate) struct ChunkKernel {
     name: &'static str,
     output: Output,
-    /// Whether binding 2 is the per-wheel reference buffer (then partials are binding 3).
+    /// Whether binding 2 is the per-wheel reference buffer (then the output is binding 3).
     uses_refs: bool,
     pipeline: wgpu::ComputePipeline,
     layout: wgpu::BindGroupLayout,
-    scratch: Mutex<Option<(u64, u64, Scratch)>>,
+    /// Per-chunk outputs and their readback buffer: (bytes, partials, readback).
+    partials: Mutex<Option<(u64, wgpu::Buffer, wgpu::Buffer)>>,
 }
 
 fn storage(
@@ -53,6 +55,14 @@ fn storage(
         size: size.max(16),
         usage,
         mapped_at_creation: false,
+    })
+}
+
+fn bind(b: &wgpu::Buffer, size: u64) -> wgpu::BindingResource<'_> {
+    wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+        buffer: b,
+        offset: 0,
+        size: wgpu::BufferSize::new(size.max(4)),
     })
 }
 
@@ -71,9 +81,32 @@ impl ChunkKernel {
             uses_refs,
             pipeline,
             layout,
-            scratch: Mutex::new(None),
+            partials: Mutex::new(None),
         })
     }
+}
+
+/// Where one kernel writes during one batch.
+enum Target<'a> {
+    /// Its own per-chunk buffers (this many words a chunk), read back after
+    /// each dispatch into the vector.
+    PerChunk(Vec<u32>, usize),
+    /// The batch's per-wheel buffer (and its size in bytes).
+    PerWheel(&'a wgpu::Buffer, u64),
+}
+
+fn per_chunk_words(sums: &[u32]) -> Vec<[f64; SUMS]> {
+    sums.chunks_exact(SUMS)
+        .map(|c| std::array::from_fn(|m| f32::from_bits(c[m]) as f64))
+        .collect()
+}
+
+fn maps_from_words(words: &[u32]) -> Vec<EnergyMaps> {
+    let quanta: Vec<u64> = words
+        .chunks_exact(2)
+        .map(|w| w[0] as u64 | (w[1] as u64) << 32)
+        .collect();
+    maps_from_quanta(&quanta)
 }
 
 impl GpuContext {
@@ -94,12 +127,8 @@ impl GpuContext {
         &self,
         batch: &ReduceBatch,
     ) -> Result<(Vec<[f64; SUMS]>, GpuTimings), GpuError> {
-        let (flat, t) = self.run_chunks(&self.telemetry_reduce, batch)?;
-        let sums = flat
-            .chunks_exact(SUMS)
-            .map(|c| std::array::from_fn(|m| f32::from_bits(c[m]) as f64))
-            .collect();
-        Ok((sums, t))
+        let (out, t) = self.run_chunks(&[&self.telemetry_reduce], batch)?;
+        Ok((per_chunk_words(&out[0]), t))
     }
 
     /// Every wheel's energy maps (exact sums of fixed-point quanta on the
@@ -108,35 +137,28 @@ impl GpuContext {
         &self,
         batch: &ReduceBatch,
     ) -> Result<(Vec<EnergyMaps>, GpuTimings), GpuError> {
-        let (words, t) = self.run_chunks(&self.energy_map, batch)?;
-        let quanta: Vec<u64> = words
-            .chunks_exact(2)
-            .map(|w| w[0] as u64 | (w[1] as u64) << 32)
-            .collect();
-        debug_assert_eq!(quanta.len(), batch.wheels() * BINS);
-        Ok((maps_from_quanta(&quanta), t))
+        let (out, t) = self.run_chunks(&[&self.energy_map], batch)?;
+        debug_assert_eq!(out[0].len(), batch.wheels() * 2 * BINS);
+        Ok((maps_from_words(&out[0]), t))
     }
 
-    /// The kernel over a whole batch: its output words (per chunk, or per
-    /// wheel) and the time split.
+    /// Both: the samples cross the bus once for the two kernels.
+    pub fn telemetry_and_maps(
+        &self,
+        batch: &ReduceBatch,
+    ) -> Result<(crate::engine::TelemetryAndMaps, GpuTimings), GpuError> {
+        let (out, t) = self.run_chunks(&[&self.telemetry_reduce, &self.energy_map], batch)?;
+        Ok(((per_chunk_words(&out[0]), maps_from_words(&out[1])), t))
+    }
+
+    /// The kernels over a whole batch: each one's output words (per chunk,
+    /// or per wheel) and the time split.
     fn run_chunks(
         &self,
-        k: &ChunkKernel,
+        kernels: &[&ChunkKernel],
         batch: &ReduceBatch,
-    ) -> Result<(Vec<u32>, GpuTimings), GpuError> {
-        let mut out = Vec::new();
+    ) -> Result<(Vec<Vec<u32>>, GpuTimings), GpuError> {
         let mut timings = GpuTimings::default();
-        // Per-wheel outputs: one zeroed buffer for the whole batch (wgpu
-        // zero-initialises new buffers).
-        let per_wheel = match k.output {
-            Output::PerWheel(n) => {
-                let bytes = (batch.wheels() * n * 4) as u64;
-                use wgpu::BufferUsages as U;
-                let b = storage(&self.device, "maps", bytes, U::STORAGE | U::COPY_SRC);
-                Some((b, bytes))
-            }
-            Output::PerChunk(_) => None,
-        };
         let refs = self
             .device
             .create_buffer_init(&wgpu::util::BufferInitDescriptor {
@@ -144,6 +166,31 @@ impl GpuContext {
                 contents: bytemuck::cast_slice(&batch.refs),
                 usage: wgpu::BufferUsages::STORAGE,
             });
+        // Per-wheel outputs: one buffer per kernel for the whole batch (wgpu
+        // zero-initialises new buffers).
+        let per_wheel: Vec<Option<(wgpu::Buffer, u64)>> = kernels
+            .iter()
+            .map(|k| match k.output {
+                Output::PerWheel(n) => {
+                    let bytes = (batch.wheels() * n * 4) as u64;
+                    use wgpu::BufferUsages as U;
+                    let b = storage(&self.device, "maps", bytes, U::STORAGE | U::COPY_SRC);
+                    Some((b, bytes))
+                }
+                Output::PerChunk(_) => None,
+            })
+            .collect();
+        let mut targets: Vec<Target> = per_wheel
+            .iter()
+            .zip(kernels)
+            .map(|(p, k)| match (p, k.output) {
+                (Some((b, n)), _) => Target::PerWheel(b, *n),
+                (None, Output::PerChunk(n)) | (None, Output::PerWheel(n)) => {
+                    Target::PerChunk(Vec::new(), n)
+                }
+            })
+            .collect();
+        let mut inputs = self.chunk_inputs.lock().expect("inputs lock");
         // Cut the batch at chunk boundaries so the sample binding stays in limits.
         let max = self.max_samples_per_dispatch();
         let mut first = 0;
@@ -165,91 +212,114 @@ impl GpuContext {
                     ..*c
                 })
                 .collect();
-            let shared = per_wheel.as_ref().map(|(b, n)| (b, *n));
-            let (p, t) = self.dispatch(k, &batch.samples[start..end], &chunks, &refs, shared)?;
-            out.extend(p);
-            timings.add(&t);
+            let samples = &batch.samples[start..end];
+            let t0 = Instant::now();
+            let input = self.upload(&mut inputs, samples, &chunks)?;
+            timings.upload += t0.elapsed();
+            for (k, target) in kernels.iter().zip(&mut targets) {
+                let t = self.dispatch(k, input, samples, &chunks, &refs, target)?;
+                timings.add(&t);
+            }
             first = last;
         }
-        if let Some((maps, bytes)) = &per_wheel {
-            let t0 = Instant::now();
-            let readback = storage(
-                &self.device,
-                "maps readback",
-                *bytes,
-                wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-            );
-            let mut enc = self.device.create_command_encoder(&Default::default());
-            enc.copy_buffer_to_buffer(maps, 0, &readback, 0, *bytes);
-            self.queue.submit([enc.finish()]);
-            let b = self.read_back(&readback, *bytes)?;
-            out = bytemuck::cast_slice::<u8, u32>(&b).to_vec();
-            timings.readback += t0.elapsed();
+        let mut out = Vec::with_capacity(kernels.len());
+        for target in targets {
+            out.push(match target {
+                Target::PerChunk(words, _) => words,
+                Target::PerWheel(maps, bytes) => {
+                    let t0 = Instant::now();
+                    let readback = storage(
+                        &self.device,
+                        "maps readback",
+                        bytes,
+                        wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+                    );
+                    let mut enc = self.device.create_command_encoder(&Default::default());
+                    enc.copy_buffer_to_buffer(maps, 0, &readback, 0, bytes);
+                    self.queue.submit([enc.finish()]);
+                    let b = self.read_back(&readback, bytes)?;
+                    timings.readback += t0.elapsed();
+                    bytemuck::cast_slice::<u8, u32>(&b).to_vec()
+                }
+            });
         }
         Ok((out, timings))
     }
 
-    fn dispatch(
+    /// Writes one piece's samples and chunks into the shared input buffers
+    /// (grown to the next power of two when too small) and waits until the
+    /// queue is idle, so the upload is timed on its own.
+    fn upload<'a>(
         &self,
-        k: &ChunkKernel,
+        guard: &'a mut Option<(u64, u64, Inputs)>,
         samples: &[ReduceSample],
         chunks: &[ReduceChunk],
-        refs: &wgpu::Buffer,
-        shared: Option<(&wgpu::Buffer, u64)>,
-    ) -> Result<(Vec<u32>, GpuTimings), GpuError> {
+    ) -> Result<&'a Inputs, GpuError> {
         let sample_bytes = size_of_val(samples) as u64;
         let chunk_bytes = size_of_val(chunks) as u64;
-        let per_chunk = match k.output {
-            Output::PerChunk(n) => n,
-            Output::PerWheel(_) => 0,
-        };
-        let partial_bytes = (chunks.len() * per_chunk * 4) as u64;
-        let mut guard = k.scratch.lock().expect("scratch lock");
         let fits = matches!(&*guard, Some((s, c, _)) if *s >= sample_bytes && *c >= chunk_bytes);
         if !fits {
             let (s, c) = (
                 sample_bytes.next_power_of_two(),
                 chunk_bytes.next_power_of_two(),
             );
-            let p = c / size_of::<ReduceChunk>() as u64 * per_chunk as u64 * 4;
             use wgpu::BufferUsages as U;
             *guard = Some((
                 s,
                 c,
-                Scratch {
+                Inputs {
                     samples: storage(&self.device, "samples", s, U::STORAGE | U::COPY_DST),
                     chunks: storage(&self.device, "chunks", c, U::STORAGE | U::COPY_DST),
-                    partials: storage(&self.device, "partials", p, U::STORAGE | U::COPY_SRC),
-                    readback: storage(&self.device, "readback", p, U::MAP_READ | U::COPY_DST),
                 },
             ));
         }
-        let sc = &guard.as_ref().expect("scratch").2;
-        let mut t = GpuTimings::default();
-        let t0 = Instant::now();
+        let input = &guard.as_ref().expect("inputs").2;
         self.queue
-            .write_buffer(&sc.samples, 0, bytemuck::cast_slice(samples));
+            .write_buffer(&input.samples, 0, bytemuck::cast_slice(samples));
         self.queue
-            .write_buffer(&sc.chunks, 0, bytemuck::cast_slice(chunks));
+            .write_buffer(&input.chunks, 0, bytemuck::cast_slice(chunks));
         self.queue.submit([]);
         self.wait()?;
-        t.upload = t0.elapsed();
+        Ok(input)
+    }
 
-        fn bind(b: &wgpu::Buffer, size: u64) -> wgpu::BindingResource<'_> {
-            wgpu::BindingResource::Buffer(wgpu::BufferBinding {
-                buffer: b,
-                offset: 0,
-                size: wgpu::BufferSize::new(size.max(4)),
-            })
-        }
+    fn dispatch(
+        &self,
+        k: &ChunkKernel,
+        input: &Inputs,
+        samples: &[ReduceSample],
+        chunks: &[ReduceChunk],
+        refs: &wgpu::Buffer,
+        target: &mut Target,
+    ) -> Result<GpuTimings, GpuError> {
+        let sample_bytes = size_of_val(samples) as u64;
+        let chunk_bytes = size_of_val(chunks) as u64;
+        let mut t = GpuTimings::default();
+        let mut partials = k.partials.lock().expect("partials lock");
+        let out_binding = match &*target {
+            Target::PerWheel(b, bytes) => bind(b, *bytes),
+            Target::PerChunk(_, n) => {
+                let bytes = (chunks.len() * n * 4) as u64;
+                if !matches!(&*partials, Some((p, _, _)) if *p >= bytes) {
+                    let p = bytes.next_power_of_two();
+                    use wgpu::BufferUsages as U;
+                    *partials = Some((
+                        p,
+                        storage(&self.device, "partials", p, U::STORAGE | U::COPY_SRC),
+                        storage(&self.device, "readback", p, U::MAP_READ | U::COPY_DST),
+                    ));
+                }
+                bind(&partials.as_ref().expect("partials").1, bytes)
+            }
+        };
         let mut entries = vec![
             wgpu::BindGroupEntry {
                 binding: 0,
-                resource: bind(&sc.samples, sample_bytes),
+                resource: bind(&input.samples, sample_bytes),
             },
             wgpu::BindGroupEntry {
                 binding: 1,
-                resource: bind(&sc.chunks, chunk_bytes),
+                resource: bind(&input.chunks, chunk_bytes),
             },
         ];
         if k.uses_refs {
@@ -260,10 +330,7 @@ impl GpuContext {
         }
         entries.push(wgpu::BindGroupEntry {
             binding: entries.len() as u32,
-            resource: match shared {
-                Some((b, bytes)) => bind(b, bytes),
-                None => bind(&sc.partials, partial_bytes),
-            },
+            resource: out_binding,
         });
         let group = self.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some(k.name),
@@ -290,16 +357,17 @@ impl GpuContext {
         }
         t.compute = t0.elapsed();
 
-        if shared.is_some() {
-            return Ok((Vec::new(), t));
+        if let Target::PerChunk(words, n) = target {
+            let bytes = (chunks.len() * *n * 4) as u64;
+            let (_, p, readback) = partials.as_ref().expect("partials");
+            let t0 = Instant::now();
+            let mut enc = self.device.create_command_encoder(&Default::default());
+            enc.copy_buffer_to_buffer(p, 0, readback, 0, bytes);
+            self.queue.submit([enc.finish()]);
+            let b = self.read_back(readback, bytes)?;
+            words.extend_from_slice(bytemuck::cast_slice::<u8, u32>(&b));
+            t.readback = t0.elapsed();
         }
-        let t0 = Instant::now();
-        let mut enc = self.device.create_command_encoder(&Default::default());
-        enc.copy_buffer_to_buffer(&sc.partials, 0, &sc.readback, 0, partial_bytes);
-        self.queue.submit([enc.finish()]);
-        let bytes = self.read_back(&sc.readback, partial_bytes)?;
-        let out = bytemuck::cast_slice::<u8, u32>(&bytes).to_vec();
-        t.readback = t0.elapsed();
-        Ok((out, t))
+        Ok(t)
     }
 }

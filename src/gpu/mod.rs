@@ -47,6 +47,8 @@ pub struct GpuContext {
     telemetry_reduce: chunk_kernel::ChunkKernel,
     energy_map: chunk_kernel::ChunkKernel,
     roughness: roughness::RoughnessKernels,
+    /// Samples and chunks, shared by the chunk kernels.
+    chunk_inputs: chunk_kernel::InputScratch,
     /// Test overrides: samples per dispatch and workgroups per grid dimension.
     dispatch_samples: Option<usize>,
     grid_dim: Option<u32>,
@@ -139,6 +141,7 @@ impl GpuContext {
             telemetry_reduce,
             energy_map,
             roughness,
+            chunk_inputs: Default::default(),
             dispatch_samples: None,
             grid_dim: None,
         })

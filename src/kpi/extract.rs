@@ -281,13 +281,10 @@ fn run_rows(
         batch.push_wheel(&p.samples);
         prepared.push(p);
     }
-    let partials = engine
-        .telemetry_reduce(&batch)
+    let (partials, maps) = engine
+        .telemetry_and_maps(&batch)
         .map_err(|e| format!("{}: {} engine: {e}", path.display(), engine.name()))?;
     let sums = merge(&batch, &partials);
-    let maps = engine
-        .energy_map(&batch)
-        .map_err(|e| format!("{}: {} engine: {e}", path.display(), engine.name()))?;
     for (i, ((w, p), maps)) in Wheel::ALL.into_iter().zip(prepared).zip(maps).enumerate() {
         let rep = p.report;
         let k = finish_wheel(&sums[i], &batch.refs[i])
