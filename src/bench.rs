@@ -245,23 +245,33 @@ pub fn run_bench(o: &BenchOptions) -> BenchReport {
         report.lines.push(w.line("gpu", d, Some(split)));
     }
 
-    // Both, as extraction calls them: the GPU uploads the samples once.
-    w.kernel = "reduce+maps";
-    let both = || {
-        (
-            CpuEngine.telemetry_reduce(&batch),
-            CpuEngine.energy_map(&batch),
-        )
-    };
-    let (d, _) = best(o.repeats, || one_thread(both));
+    // Condition maps over the same samples.
+    w.kernel = "condition_map";
+    let (d, _) = best(o.repeats, || one_thread(|| CpuEngine.condition_map(&batch)));
     report.lines.push(w.line("cpu, 1 thread", d, None));
-    let (d, _) = best(o.repeats, both);
+    let (d, _) = best(o.repeats, || CpuEngine.condition_map(&batch));
     report
         .lines
         .push(w.line(&format!("cpu, {threads} threads"), d, None));
     if let Some(g) = &gpu
         && let Some((d, split)) = gpu_best(o.repeats, &mut report.notes, || {
-            g.ctx.telemetry_and_maps(&batch).map(|r| r.1)
+            g.ctx.condition_map(&batch).map(|r| r.1)
+        })
+    {
+        report.lines.push(w.line("gpu", d, Some(split)));
+    }
+
+    // All three, as extraction calls them: the GPU uploads the samples once.
+    w.kernel = "all three";
+    let (d, _) = best(o.repeats, || one_thread(|| CpuEngine.reductions(&batch)));
+    report.lines.push(w.line("cpu, 1 thread", d, None));
+    let (d, _) = best(o.repeats, || CpuEngine.reductions(&batch));
+    report
+        .lines
+        .push(w.line(&format!("cpu, {threads} threads"), d, None));
+    if let Some(g) = &gpu
+        && let Some((d, split)) = gpu_best(o.repeats, &mut report.notes, || {
+            g.ctx.reductions(&batch).map(|r| r.1)
         })
     {
         report.lines.push(w.line("gpu, one upload", d, Some(split)));

@@ -3,6 +3,7 @@
 //! (wgpu). Tests are written once against the trait and run for both.
 
 use crate::gpu::{GpuContext, GpuError, GpuTimings};
+use crate::kpi::condition_map::{ConditionMaps, condition_map, condition_maps_from_quanta};
 use crate::kpi::energy_map::EnergyMaps;
 use crate::kpi::energy_map_kernel::{energy_map, maps_from_quanta};
 use crate::kpi::roughness_batch::{RoughnessBatch, Spectral, cpu_twins};
@@ -10,8 +11,17 @@ use crate::kpi::telemetry::finish_wheel;
 use crate::kpi::telemetry_reduce::{ReduceBatch, SUMS, merge, telemetry_reduce};
 use std::sync::Mutex;
 
-/// Every chunk's partial sums of the telemetry reduction and every wheel's energy maps.
-pub type TelemetryAndMaps = (Vec<[f64; SUMS]>, Vec<EnergyMaps>);
+/// Everything the engines compute from one batch of wheel samples.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Reductions {
+    /// Every chunk's partial sums of the telemetry reduction (merge with
+    /// `telemetry_reduce::merge`).
+    pub partials: Vec<[f64; SUMS]>,
+    /// Every wheel's friction-energy maps.
+    pub energy_maps: Vec<EnergyMaps>,
+    /// Every wheel's condition energy maps.
+    pub condition_maps: Vec<ConditionMaps>,
+}
 
 /// A reduction engine.
 pub trait ReduceEngine: Send + Sync {
@@ -24,9 +34,15 @@ pub trait ReduceEngine: Send + Sync {
     fn telemetry_reduce(&self, batch: &ReduceBatch) -> Result<Vec<[f64; SUMS]>, GpuError>;
     /// Every wheel's friction-energy maps (`shaders/energy_map.wgsl`).
     fn energy_map(&self, batch: &ReduceBatch) -> Result<Vec<EnergyMaps>, GpuError>;
-    /// Both of the above on one batch (the GPU uploads the samples once).
-    fn telemetry_and_maps(&self, batch: &ReduceBatch) -> Result<TelemetryAndMaps, GpuError> {
-        Ok((self.telemetry_reduce(batch)?, self.energy_map(batch)?))
+    /// Every wheel's condition energy maps (`shaders/condition_map.wgsl`).
+    fn condition_map(&self, batch: &ReduceBatch) -> Result<Vec<ConditionMaps>, GpuError>;
+    /// The three above on one batch (the GPU uploads the samples once).
+    fn reductions(&self, batch: &ReduceBatch) -> Result<Reductions, GpuError> {
+        Ok(Reductions {
+            partials: self.telemetry_reduce(batch)?,
+            energy_maps: self.energy_map(batch)?,
+            condition_maps: self.condition_map(batch)?,
+        })
     }
     /// Height moments, HDC and Welch PSD of every profile (the roughness
     /// kernels); finish with `road::profile_indices_from`.
@@ -48,6 +64,9 @@ impl ReduceEngine for CpuEngine {
     }
     fn energy_map(&self, batch: &ReduceBatch) -> Result<Vec<EnergyMaps>, GpuError> {
         Ok(maps_from_quanta(&energy_map(batch)))
+    }
+    fn condition_map(&self, batch: &ReduceBatch) -> Result<Vec<ConditionMaps>, GpuError> {
+        Ok(condition_maps_from_quanta(&condition_map(batch)))
     }
     fn roughness(&self, batch: &RoughnessBatch) -> Result<Vec<Spectral>, GpuError> {
         Ok(cpu_twins(batch))
@@ -95,8 +114,13 @@ impl ReduceEngine for GpuEngine {
         self.timings.lock().expect("timings lock").add(&t);
         Ok(p)
     }
-    fn telemetry_and_maps(&self, batch: &ReduceBatch) -> Result<TelemetryAndMaps, GpuError> {
-        let (p, t) = self.ctx.telemetry_and_maps(batch)?;
+    fn condition_map(&self, batch: &ReduceBatch) -> Result<Vec<ConditionMaps>, GpuError> {
+        let (p, t) = self.ctx.condition_map(batch)?;
+        self.timings.lock().expect("timings lock").add(&t);
+        Ok(p)
+    }
+    fn reductions(&self, batch: &ReduceBatch) -> Result<Reductions, GpuError> {
+        let (p, t) = self.ctx.reductions(batch)?;
         self.timings.lock().expect("timings lock").add(&t);
         Ok(p)
     }
@@ -236,6 +260,47 @@ pub fn compare_energy_maps(
         let scale: f64 = x.iter().map(|v| v.abs()).sum();
         let diff: f64 = x.iter().zip(&y).map(|(u, v)| (u - v).abs()).sum();
         worst = worst.max(if scale > 0.0 { diff / scale } else { diff });
+    }
+    Ok(worst)
+}
+
+/// Tolerance of the GPU condition maps against the CPU's: for every wheel,
+/// condition and energy component, the summed |difference| over the
+/// condition's bins at most 1e-3 of its summed |energy|. Why: the sums are
+/// exact integers on both engines, and raw channels are binned from the same
+/// f32 value with correctly rounded f32 operations on both, so they agree
+/// bin for bin; the ratios (slip ratio, lateral and combined slip, friction
+/// utilisation) take a square root and a division, which the GPU rounds
+/// within a few ulps and the CPU computes in f64. A value within that of a
+/// bin edge may land on either side — and a simulator's tire force that
+/// saturates at μ·F_z holds the utilisation exactly on an edge for a whole
+/// slide. Measured on a whole season on an H100: median 2e-8, worst 3.2e-4
+/// (friction utilisation).
+pub const CONDITION_MAP_TOLERANCE: f64 = 1e-3;
+
+/// Largest L1 difference of one condition map of one component and wheel,
+/// relative to that map's summed |energy|.
+pub fn compare_condition_maps(
+    reference: &dyn ReduceEngine,
+    other: &dyn ReduceEngine,
+    batch: &ReduceBatch,
+) -> Result<f64, GpuError> {
+    use crate::kpi::condition_map::{CONDITIONS, Component};
+    let (a, b) = (reference.condition_map(batch)?, other.condition_map(batch)?);
+    let mut worst = 0.0f64;
+    for (x, y) in a.iter().zip(&b) {
+        for c in 0..CONDITIONS.len() {
+            for comp in [
+                Component::Total,
+                Component::Longitudinal,
+                Component::Lateral,
+            ] {
+                let (u, v) = (x.map(comp, c), y.map(comp, c));
+                let scale: f64 = u.iter().map(|e| e.abs()).sum();
+                let diff: f64 = u.iter().zip(v).map(|(p, q)| (p - q).abs()).sum();
+                worst = worst.max(if scale > 0.0 { diff / scale } else { diff });
+            }
+        }
     }
     Ok(worst)
 }

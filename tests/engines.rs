@@ -10,9 +10,11 @@
 mod common;
 
 use tirewear::engine::{
-    CpuEngine, ENERGY_MAP_TOLERANCE, ROUGHNESS_TOLERANCE, ReduceEngine, TELEMETRY_TOLERANCE,
-    compare_energy_maps, compare_roughness, compare_telemetry, gpu_for_tests,
+    CONDITION_MAP_TOLERANCE, CpuEngine, ENERGY_MAP_TOLERANCE, ROUGHNESS_TOLERANCE, ReduceEngine,
+    TELEMETRY_TOLERANCE, compare_condition_maps, compare_energy_maps, compare_roughness,
+    compare_telemetry, gpu_for_tests,
 };
+use tirewear::kpi::condition_map::{CONDITIONS, Component, ConditionMaps};
 use tirewear::kpi::table::read_parquet;
 use tirewear::kpi::telemetry::finish_wheel;
 use tirewear::kpi::telemetry_reduce::{ReduceBatch, ReduceSample, merge};
@@ -130,6 +132,72 @@ fn full_length_run_matches_the_f64_reference() {
             e.name()
         );
         assert!(m <= ENERGY_MAP_TOLERANCE, "{}: {m}", e.name());
+        let c = compare_condition_maps(&CpuEngine, e.as_ref(), &batch).unwrap();
+        eprintln!(
+            "{} engine: condition maps differ by {c:.2e} of the energy",
+            e.name()
+        );
+        assert!(c <= CONDITION_MAP_TOLERANCE, "{}: {c}", e.name());
+    }
+}
+
+#[test]
+fn condition_maps_by_hand_on_every_engine() {
+    // a: v_x 50.5, ω·r 50 → v_sx 0.5, κ = −0.5/50.5 = −0.0099 (bin 14), tan α
+    // 0 (bin 15), F 2000 N on F_z 0 → utilisation 2000/100 = 20 (last bin), v_x
+    // 50.5 m/s (bin 12), P_x = 1000 W. b: v_x 0 → slip speed floor 1 m/s,
+    // κ 0 (bin 15), tan α = 12/1 (last bin), F_y −25 N → 0.25
+    // (bin 2), speed 0 (bin 0), P_y = 300 W. 10 ms each.
+    let a = ReduceSample {
+        vx: 50.5,
+        omega: 100.0,
+        radius: 0.5,
+        fx: -2000.0,
+        t_surface: 82.0,
+        t_inner: 101.0,
+        ..sample(0.01)
+    };
+    let b = ReduceSample {
+        vx: 0.0,
+        omega: 0.0,
+        fx: 0.0,
+        vy: 12.0,
+        fy: -25.0,
+        t_surface: 19.0,
+        t_inner: 170.0,
+        ..a
+    };
+    let mut wheel = vec![a; 1500];
+    wheel.extend(vec![b; 700]);
+    let mut batch = ReduceBatch::default();
+    batch.push_wheel(&wheel);
+    let (ea, eb) = (1000.0 * 0.01 * 1500.0, 300.0 * 0.01 * 700.0);
+    let at = |name: &str| ConditionMaps::condition_index(name).unwrap();
+    for (e, tol) in engines("condition_maps_by_hand_on_every_engine") {
+        let m = &e.condition_map(&batch).unwrap()[0];
+        let close = |got: f64, want: f64| (got - want).abs() <= tol * want.abs() + 1e-6;
+        let total = |c: &str| m.map(Component::Total, at(c));
+        let n = e.name();
+        assert!(close(total("slip_ratio")[14], ea), "{n}");
+        assert!(close(total("slip_ratio")[15], eb), "{n}");
+        assert!(close(total("lateral_slip")[15], ea), "{n}");
+        assert!(close(total("lateral_slip")[29], eb), "{n}");
+        assert!(close(total("friction_utilisation")[24], ea), "{n}");
+        assert!(close(total("friction_utilisation")[2], eb), "{n}");
+        assert!(close(total("speed_mps")[12], ea), "{n}");
+        assert!(close(total("speed_mps")[0], eb), "{n}");
+        assert!(close(total("t_inner_c")[23], eb), "{n}");
+        // Components: a slides along, b sideways.
+        let slip = at("slip_ratio");
+        assert!(close(m.map(Component::Longitudinal, slip)[14], ea), "{n}");
+        assert!(close(m.map(Component::Lateral, slip)[15], eb), "{n}");
+        assert_eq!(m.map(Component::Longitudinal, slip)[15], 0.0, "{n}");
+        assert_eq!(m.map(Component::Lateral, slip)[14], 0.0, "{n}");
+        // Every condition's map holds the whole energy.
+        for (c, cd) in CONDITIONS.iter().enumerate() {
+            let sum: f64 = m.map(Component::Total, c).iter().sum();
+            assert!(close(sum, ea + eb), "{n}: {} sums to {sum}", cd.name);
+        }
     }
 }
 
@@ -234,15 +302,19 @@ fn gpu_splits_batches_and_spreads_grids_in_2d() {
     batch.push_wheel(&run[100_000..111_000]);
     batch.push_wheel(&run[200_000..212_000]);
     assert_eq!(batch.chunks.len(), 15 + 11 + 12);
+    let unsplit = g.condition_map(&batch).unwrap();
     g.ctx.set_test_limits(5 * 1024, 3);
     let c = compare_telemetry(&CpuEngine, &g as &dyn ReduceEngine, &batch).unwrap();
     assert!(c.passes(), "{:?}", c.errors);
     let m = compare_energy_maps(&CpuEngine, &g as &dyn ReduceEngine, &batch).unwrap();
     assert!(m <= ENERGY_MAP_TOLERANCE, "{m}");
-    // One upload for both kernels gives what two calls give, bit for bit.
-    let (sums, maps) = g.telemetry_and_maps(&batch).unwrap();
-    assert_eq!(sums, g.telemetry_reduce(&batch).unwrap());
-    assert_eq!(maps, g.energy_map(&batch).unwrap());
+    // Exact sums: the split changes no bit of the condition maps.
+    assert_eq!(g.condition_map(&batch).unwrap(), unsplit);
+    // One upload for the three kernels gives what three calls give, bit for bit.
+    let all = g.reductions(&batch).unwrap();
+    assert_eq!(all.partials, g.telemetry_reduce(&batch).unwrap());
+    assert_eq!(all.energy_maps, g.energy_map(&batch).unwrap());
+    assert_eq!(all.condition_maps, g.condition_map(&batch).unwrap());
 }
 
 #[test]

@@ -68,6 +68,7 @@ fn demo_season_extracts_to_complete_rows() {
     for side in [
         "kpis.road.parquet",
         "kpis.energy_maps.parquet",
+        "kpis.condition_maps.parquet",
         "kpis.report.json",
     ] {
         assert!(dir.path().join(side).exists(), "{side}");
@@ -101,6 +102,33 @@ fn demo_season_extracts_to_complete_rows() {
             m.lateral_surface_inner.iter().sum(),
             r.friction_energy_y_j,
         );
+    }
+    // The condition maps read back (format version checked): every
+    // condition's map holds the row's friction energy, its longitudinal and
+    // its lateral part, as the telemetry reduction summed them (quanta of
+    // 6e-8 J per sample: 1e-3 J of slack).
+    let path = dir.path().join("kpis.condition_maps.parquet");
+    let cmaps = tirewear::kpi::condition_map::read_condition_maps(&path).unwrap();
+    assert_eq!(cmaps.len(), rows.len());
+    use tirewear::kpi::condition_map::{CONDITIONS, Component};
+    for r in &rows {
+        let m = &cmaps[&(r.run.clone(), r.wheel.clone())];
+        for (c, cd) in CONDITIONS.iter().enumerate() {
+            for (comp, want) in [
+                (Component::Total, r.friction_energy_j),
+                (Component::Longitudinal, r.friction_energy_x_j),
+                (Component::Lateral, r.friction_energy_y_j),
+            ] {
+                let got: f64 = m.map(comp, c).iter().sum();
+                assert!(
+                    (got - want).abs() <= 1e-9 * want.abs() + 1e-3,
+                    "{} {}: {} {comp:?} {got} vs {want}",
+                    r.run,
+                    r.wheel,
+                    cd.name
+                );
+            }
+        }
     }
     // The extracted wear target tracks the simulator's truth (readings noise and
     // the virtual-rib interpolation of a non-uniform profile: within 3 points),

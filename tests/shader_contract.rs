@@ -222,6 +222,37 @@ fn energy_map_matches_its_cpu_twin() {
     assert!(workgroup_bytes(&m) <= 16384);
 }
 
+#[test]
+fn condition_map_matches_its_cpu_twin() {
+    use tirewear::kpi::condition_map as cm;
+    let m = shader("condition_map.wgsl");
+    assert_eq!(constant(&m, "WG_SIZE"), WG_SIZE as f64);
+    assert_eq!(constant(&m, "ITEMS"), ITEMS as f64);
+    assert_eq!(workgroup_size(&m), [WG_SIZE as u32, 1, 1]);
+    assert_eq!(constant(&m, "N_CONDITIONS"), cm::N_CONDITIONS as f64);
+    assert_eq!(constant(&m, "CONDITION_BINS"), cm::CONDITION_BINS as f64);
+    assert_eq!(constant(&m, "MAP_BINS"), cm::MAP_BINS as f64);
+    assert_eq!(
+        constant(&m, "SLIP_SPEED_FLOOR_MPS"),
+        cm::SLIP_SPEED_FLOOR_MPS
+    );
+    assert_eq!(constant(&m, "LOAD_FLOOR_N"), cm::LOAD_FLOOR_N);
+    assert_eq!(constant(&m, "ENERGY_QUANTA_PER_J"), em::ENERGY_QUANTA_PER_J);
+    let t = shader("telemetry_reduce.wgsl");
+    assert_eq!(wgsl_struct(&m, "Sample"), wgsl_struct(&t, "Sample"));
+    assert_eq!(wgsl_struct(&m, "Chunk"), wgsl_struct(&t, "Chunk"));
+    assert_eq!(
+        wgsl_struct(&m, "ConditionBins"),
+        rust_struct!(cm::ConditionBins, [lo: f32, inv_width: f32, n: u32, offset: u32])
+    );
+    assert_eq!(
+        names(&bindings(&m)),
+        ["samples", "chunks", "conditions", "maps"]
+    );
+    assert_eq!(workgroup_bytes(&m), 2 * 4 * cm::MAP_BINS as u32);
+    assert!(workgroup_bytes(&m) <= 16384);
+}
+
 /// Bytes of workgroup memory a module declares.
 fn workgroup_bytes(m: &Module) -> u32 {
     let mut layouter = Layouter::default();

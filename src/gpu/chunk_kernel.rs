@@ -8,6 +8,8 @@
 //! grids over 65 535 workgroups in 2-D.
 
 use super::{GpuContext, GpuError, GpuTimings};
+use crate::engine::Reductions;
+use crate::kpi::condition_map::{ConditionMaps, condition_maps_from_quanta};
 use crate::kpi::energy_map::EnergyMaps;
 use crate::kpi::energy_map_kernel::{BINS, maps_from_quanta};
 use crate::kpi::telemetry_reduce::{CHUNK, ReduceBatch, ReduceChunk, ReduceSample, SUMS};
@@ -33,11 +35,20 @@ pub(crate) struct Inputs {
     chunks: wgpu::Buffer,
 }
 
+/// A chunk kernel's binding 2, where it has one (then the output is binding 3).
+#[derive(Clone, Copy, PartialEq)]
+pub(crate) enum Extra {
+    None,
+    /// The batch's per-wheel reference values (`ReduceRef`).
+    Refs,
+    /// The condition-map bin table (`ConditionBins`), uploaded once.
+    ConditionTable,
+}
+
 pub(crate) struct ChunkKernel {
     name: &'static str,
     output: Output,
-    /// Whether binding 2 is the per-wheel reference buffer (then the output is binding 3).
-    uses_refs: bool,
+    extra: Extra,
     pipeline: wgpu::ComputePipeline,
     layout: wgpu::BindGroupLayout,
     /// Per-chunk outputs and their readback buffer: (bytes, partials, readback).
@@ -72,13 +83,13 @@ impl ChunkKernel {
         name: &'static str,
         source: wgpu::ShaderModuleDescriptor,
         output: Output,
-        uses_refs: bool,
+        extra: Extra,
     ) -> Result<Self, GpuError> {
         let (pipeline, layout) = super::compute_pipeline(device, name, source)?;
         Ok(ChunkKernel {
             name,
             output,
-            uses_refs,
+            extra,
             pipeline,
             layout,
             partials: Mutex::new(None),
@@ -101,12 +112,16 @@ fn per_chunk_words(sums: &[u32]) -> Vec<[f64; SUMS]> {
         .collect()
 }
 
-fn maps_from_words(words: &[u32]) -> Vec<EnergyMaps> {
-    let quanta: Vec<u64> = words
+/// (lo, hi) u32 pairs as u64 sums of quanta.
+fn quanta(words: &[u32]) -> Vec<u64> {
+    words
         .chunks_exact(2)
         .map(|w| w[0] as u64 | (w[1] as u64) << 32)
-        .collect();
-    maps_from_quanta(&quanta)
+        .collect()
+}
+
+fn maps_from_words(words: &[u32]) -> Vec<EnergyMaps> {
+    maps_from_quanta(&quanta(words))
 }
 
 impl GpuContext {
@@ -142,13 +157,31 @@ impl GpuContext {
         Ok((maps_from_words(&out[0]), t))
     }
 
-    /// Both: the samples cross the bus once for the two kernels.
-    pub fn telemetry_and_maps(
+    /// Every wheel's condition maps and the time split.
+    pub fn condition_map(
         &self,
         batch: &ReduceBatch,
-    ) -> Result<(crate::engine::TelemetryAndMaps, GpuTimings), GpuError> {
-        let (out, t) = self.run_chunks(&[&self.telemetry_reduce, &self.energy_map], batch)?;
-        Ok(((per_chunk_words(&out[0]), maps_from_words(&out[1])), t))
+    ) -> Result<(Vec<ConditionMaps>, GpuTimings), GpuError> {
+        let (out, t) = self.run_chunks(&[&self.condition_map], batch)?;
+        Ok((condition_maps_from_quanta(&quanta(&out[0])), t))
+    }
+
+    /// All three: the samples cross the bus once for the three kernels.
+    pub fn reductions(&self, batch: &ReduceBatch) -> Result<(Reductions, GpuTimings), GpuError> {
+        let kernels = [
+            &self.telemetry_reduce,
+            &self.energy_map,
+            &self.condition_map,
+        ];
+        let (out, t) = self.run_chunks(&kernels, batch)?;
+        Ok((
+            Reductions {
+                partials: per_chunk_words(&out[0]),
+                energy_maps: maps_from_words(&out[1]),
+                condition_maps: condition_maps_from_quanta(&quanta(&out[2])),
+            },
+            t,
+        ))
     }
 
     /// The kernels over a whole batch: each one's output words (per chunk,
@@ -322,10 +355,15 @@ impl GpuContext {
                 resource: bind(&input.chunks, chunk_bytes),
             },
         ];
-        if k.uses_refs {
+        let extra = match k.extra {
+            Extra::None => None,
+            Extra::Refs => Some(refs),
+            Extra::ConditionTable => Some(&self.condition_table),
+        };
+        if let Some(b) = extra {
             entries.push(wgpu::BindGroupEntry {
                 binding: 2,
-                resource: refs.as_entire_binding(),
+                resource: b.as_entire_binding(),
             });
         }
         entries.push(wgpu::BindGroupEntry {

@@ -46,6 +46,9 @@ pub struct GpuContext {
     pub limits: wgpu::Limits,
     telemetry_reduce: chunk_kernel::ChunkKernel,
     energy_map: chunk_kernel::ChunkKernel,
+    condition_map: chunk_kernel::ChunkKernel,
+    /// The condition maps' bin table (binding 2 of `condition_map`).
+    condition_table: wgpu::Buffer,
     roughness: roughness::RoughnessKernels,
     /// Samples and chunks, shared by the chunk kernels.
     chunk_inputs: chunk_kernel::InputScratch,
@@ -116,15 +119,30 @@ impl GpuContext {
             "telemetry_reduce",
             wgpu::include_wgsl!("../../shaders/telemetry_reduce.wgsl"),
             chunk_kernel::Output::PerChunk(crate::kpi::telemetry_reduce::SUMS),
-            true,
+            chunk_kernel::Extra::Refs,
         )?;
         let energy_map = chunk_kernel::ChunkKernel::new(
             &device,
             "energy_map",
             wgpu::include_wgsl!("../../shaders/energy_map.wgsl"),
             chunk_kernel::Output::PerWheel(2 * crate::kpi::energy_map_kernel::BINS),
-            false,
+            chunk_kernel::Extra::None,
         )?;
+        let condition_map = chunk_kernel::ChunkKernel::new(
+            &device,
+            "condition_map",
+            wgpu::include_wgsl!("../../shaders/condition_map.wgsl"),
+            chunk_kernel::Output::PerWheel(2 * crate::kpi::condition_map::MAP_BINS),
+            chunk_kernel::Extra::ConditionTable,
+        )?;
+        let condition_table = {
+            use wgpu::util::DeviceExt;
+            device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some("condition table"),
+                contents: bytemuck::cast_slice(&crate::kpi::condition_map::condition_table()),
+                usage: wgpu::BufferUsages::STORAGE,
+            })
+        };
         let roughness = roughness::RoughnessKernels::new(&device)?;
         tracing::info!(
             "GPU: {} ({:?}, {:?} backend, driver {})",
@@ -140,6 +158,8 @@ impl GpuContext {
             limits,
             telemetry_reduce,
             energy_map,
+            condition_map,
+            condition_table,
             roughness,
             chunk_inputs: Default::default(),
             dispatch_samples: None,

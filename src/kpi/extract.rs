@@ -4,8 +4,11 @@
 //! - `kpis.parquet` (and `--csv`): one row per tire and run;
 //! - `kpis.road.parquet`: per track and location, the PSD and HDC curves;
 //! - `kpis.energy_maps.parquet`: per tire and run, the non-empty bins of both energy maps;
+//! - `kpis.condition_maps.parquet`: per tire and run, the non-empty bins of the
+//!   condition energy maps (`condition_map::side_table`);
 //! - `kpis.report.json`: what was skipped and why, cleaning counts, timings.
 
+use super::condition_map::ConditionMaps;
 use super::energy_map::{EnergyMaps, SLIDING_SPEED_BINS, T_INNER_BINS, T_SURFACE_BINS};
 use super::road::{RoadCurves, RoadIndices, mean_indices, profile_indices, profile_indices_from};
 use super::roughness_batch::{FFT_N, Spectral, batches};
@@ -220,7 +223,7 @@ fn road_on_engine(
 
 struct RunOutput {
     rows: Vec<KpiRow>,
-    maps: Vec<(Wheel, EnergyMaps)>,
+    maps: Vec<(Wheel, EnergyMaps, ConditionMaps)>,
     cleaning: Vec<(String, CleaningReport)>,
     samples: u64,
     bytes: u64,
@@ -281,11 +284,14 @@ fn run_rows(
         batch.push_wheel(&p.samples);
         prepared.push(p);
     }
-    let (partials, maps) = engine
-        .telemetry_and_maps(&batch)
+    let all = engine
+        .reductions(&batch)
         .map_err(|e| format!("{}: {} engine: {e}", path.display(), engine.name()))?;
-    let sums = merge(&batch, &partials);
-    for (i, ((w, p), maps)) in Wheel::ALL.into_iter().zip(prepared).zip(maps).enumerate() {
+    let sums = merge(&batch, &all.partials);
+    let maps = all.energy_maps.into_iter().zip(all.condition_maps);
+    for (i, ((w, p), (maps, conditions))) in
+        Wheel::ALL.into_iter().zip(prepared).zip(maps).enumerate()
+    {
         let rep = p.report;
         let k = finish_wheel(&sums[i], &batch.refs[i])
             .map_err(|e| format!("{}: topic {}: {e}", path.display(), w.topic()))?;
@@ -365,7 +371,7 @@ fn run_rows(
         };
         row.quality = quality(&row, &reasons);
         out.rows.push(row);
-        out.maps.push((w, maps));
+        out.maps.push((w, maps, conditions));
         out.cleaning.push((format!("{}/{}", run.id, w), rep));
     }
     out.reduce_s = t1.elapsed().as_secs_f64();
@@ -484,6 +490,7 @@ pub fn extract(opts: &ExtractOptions) -> Result<ExtractSummary, IngestError> {
 
     let mut rows = Vec::new();
     let mut maps = Vec::new();
+    let mut conditions = Vec::new();
     let mut skipped = Vec::new();
     let mut cleaning = BTreeMap::new();
     let (mut samples, mut bytes, mut decode_s, mut reduce_s) = (0, 0, 0.0, 0.0);
@@ -498,7 +505,10 @@ pub fn extract(opts: &ExtractOptions) -> Result<ExtractSummary, IngestError> {
                         ));
                     }
                 }
-                maps.extend(o.maps.into_iter().map(|(w, mp)| (run.id.clone(), w, mp)));
+                for (w, mp, c) in o.maps {
+                    maps.push((run.id.clone(), w, mp));
+                    conditions.push((run.id.clone(), w, c));
+                }
                 rows.extend(o.rows);
                 cleaning.extend(o.cleaning);
                 samples += o.samples;
@@ -533,7 +543,11 @@ pub fn extract(opts: &ExtractOptions) -> Result<ExtractSummary, IngestError> {
         reduce_seconds: reduce_s,
         cleaning,
     };
-    write_outputs(opts, &extraction_id, &rows, &curves, &maps, &summary)?;
+    let maps = SideMaps {
+        energy: &maps,
+        conditions: &conditions,
+    };
+    write_outputs(opts, &extraction_id, &rows, &curves, maps, &summary)?;
     Ok(summary)
 }
 
@@ -560,6 +574,12 @@ fn new_extraction_id() -> String {
     format!("{nanos:x}-{:x}", std::process::id())
 }
 
+/// The per-tire maps of one extraction.
+struct SideMaps<'a> {
+    energy: &'a [(String, Wheel, EnergyMaps)],
+    conditions: &'a [(String, Wheel, ConditionMaps)],
+}
+
 /// Writes every output of one extraction as one set: all become visible
 /// together, each Parquet file and the report carrying `extraction_id`.
 fn write_outputs(
@@ -567,7 +587,7 @@ fn write_outputs(
     extraction_id: &str,
     rows: &[KpiRow],
     curves: &[(Profile, RoadCurves)],
-    maps: &[(String, Wheel, EnergyMaps)],
+    maps: SideMaps,
     summary: &ExtractSummary,
 ) -> Result<(), IngestError> {
     let stem = opts
@@ -595,9 +615,13 @@ fn write_outputs(
     set.add(&road, |f| write_batch_to(f, &batch))
         .map_err(io(&road))?;
     let energy = side_path(&opts.out, "energy_maps.parquet");
-    let batch = tagged(energy_maps_batch(maps));
+    let batch = tagged(energy_maps_batch(maps.energy));
     set.add(&energy, |f| write_batch_to(f, &batch))
         .map_err(io(&energy))?;
+    let conditions = side_path(&opts.out, "condition_maps.parquet");
+    let batch = tagged(crate::kpi::condition_map::side_table(maps.conditions));
+    set.add(&conditions, |f| write_batch_to(f, &batch))
+        .map_err(io(&conditions))?;
     let report = side_path(&opts.out, "report.json");
     let text = serde_json::to_string_pretty(summary)
         .map_err(|e| IngestError::invalid(&report, "report", e.to_string()))?;

@@ -2,6 +2,7 @@
 //! road (table 3), telemetry (table 4) and viscoelastic (table 5) indices
 //! plus the mean wear. Formulas and units: docs/kpis.md.
 
+pub mod condition_map;
 pub mod energy_map;
 pub mod energy_map_kernel;
 pub mod extract;

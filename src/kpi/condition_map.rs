@@ -1,0 +1,638 @@
+//! Condition energy maps and the CPU twin of `shaders/condition_map.wgsl`:
+//! per tire and run, the friction energy (total, longitudinal and lateral
+//! parts) binned by each per-sample condition of [`CONDITIONS`] — slip
+//! ratio, lateral slip (tan α), combined slip, sliding speed, load, friction
+//! utilisation, temperatures, pressure, camber, speed — so that a wear
+//! effect acting only under some condition can be looked for later without
+//! re-reading telemetry. One 1-D map per condition; each sums to the run's
+//! friction energy.
+//!
+//! Raw channels are binned in their logged SI units (N, Pa), never rescaled,
+//! so that a value both engines hold exactly lands in the same bin on both
+//! (see [`ConditionBins`]). The bin table lives here only: the GPU engine uploads it (binding 2), so
+//! the shader holds no bin edges. Energies are summed as fixed-point quanta
+//! exactly as in `energy_map` (see `energy_map_kernel`), so both engines'
+//! maps are deterministic and differ only by f32 against f64 per sample.
+
+use super::energy_map::Bins;
+use super::energy_map_kernel::{from_quanta, to_quanta};
+use super::telemetry_reduce::{ITEMS, ReduceBatch, ReduceChunk, ReduceSample, WG_SIZE};
+use bytemuck::{Pod, Zeroable};
+use rayon::prelude::*;
+
+/// A per-sample condition: its name in the side table, unit, bins and formula.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Condition {
+    pub name: &'static str,
+    pub unit: &'static str,
+    pub bins: Bins,
+    /// How it is computed from the sample (docs/kpis.md repeats it).
+    pub formula: &'static str,
+}
+
+/// Speed below which slip ratio and slip angle use this floor (m/s), so a
+/// slow or stopped wheel does not divide by zero.
+pub const SLIP_SPEED_FLOOR_MPS: f64 = 1.0;
+/// Load below which friction utilisation uses this floor (N).
+pub const LOAD_FLOOR_N: f64 = 100.0;
+
+const fn bins(lo: f64, width: f64, n: usize) -> Bins {
+    Bins { lo, width, n }
+}
+
+/// The conditions, in the order the shader computes them (`condition_values`).
+/// Values outside a condition's bins go to its first or last bin.
+pub const CONDITIONS: [Condition; N_CONDITIONS] = [
+    Condition {
+        name: "slip_ratio",
+        unit: "1",
+        bins: bins(-0.3, 0.02, 30),
+        formula: "κ = (ω·r − v_x) / max(|v_x|, 1 m/s) = −v_sx / max(|v_x|, 1 m/s)",
+    },
+    Condition {
+        name: "lateral_slip",
+        unit: "1",
+        bins: bins(-0.3, 0.02, 30),
+        formula: "tan α = v_y / max(|v_x|, 1 m/s) (the slip angle's tangent: ±0.3 is ±16.7°)",
+    },
+    Condition {
+        name: "combined_slip",
+        unit: "1",
+        bins: bins(0.0, 0.02, 30),
+        formula: "√(κ² + tan²α) = |v_s| / max(|v_x|, 1 m/s)",
+    },
+    Condition {
+        name: "sliding_speed_mps",
+        unit: "m/s",
+        bins: bins(0.0, 0.5, 20),
+        formula: "|v_s| = √(v_sx² + v_sy²)",
+    },
+    Condition {
+        name: "load_n",
+        unit: "N",
+        bins: bins(0.0, 500.0, 24),
+        formula: "F_z",
+    },
+    Condition {
+        name: "friction_utilisation",
+        unit: "1",
+        bins: bins(0.0, 0.1, 25),
+        formula: "√(F_x² + F_y²) / max(F_z, 100 N)",
+    },
+    Condition {
+        name: "t_surface_c",
+        unit: "°C",
+        bins: bins(20.0, 5.0, 24),
+        formula: "T_surface",
+    },
+    Condition {
+        name: "t_inner_c",
+        unit: "°C",
+        bins: bins(40.0, 5.0, 24),
+        formula: "T_inner (inner liner)",
+    },
+    Condition {
+        name: "pressure_pa",
+        unit: "Pa",
+        bins: bins(100e3, 5e3, 30),
+        formula: "p (inflation pressure)",
+    },
+    Condition {
+        name: "camber_deg",
+        unit: "deg",
+        bins: bins(-6.0, 0.25, 32),
+        formula: "γ",
+    },
+    Condition {
+        name: "speed_mps",
+        unit: "m/s",
+        bins: bins(0.0, 4.0, 25),
+        formula: "v_x (wheel centre, longitudinal)",
+    },
+];
+
+/// Number of conditions. Must match `N_CONDITIONS` in the shader (checked by tests/shader_contract.rs).
+pub const N_CONDITIONS: usize = 11;
+/// Bins of one energy component over all conditions. Must match
+/// `CONDITION_BINS` in the shader (checked by tests/shader_contract.rs).
+pub const CONDITION_BINS: usize = 294;
+/// Energy components: total, longitudinal (−F_x·v_sx·Δt), lateral (−F_y·v_sy·Δt).
+pub const COMPONENTS: usize = 3;
+/// Bins of one wheel's maps. Must match `MAP_BINS` in the shader (checked by tests/shader_contract.rs).
+pub const MAP_BINS: usize = COMPONENTS * CONDITION_BINS;
+
+const fn total_bins() -> usize {
+    let mut n = 0;
+    let mut c = 0;
+    while c < N_CONDITIONS {
+        n += CONDITIONS[c].bins.n;
+        c += 1;
+    }
+    n
+}
+const _: () = assert!(CONDITION_BINS == total_bins());
+
+/// One condition's bins as both engines apply them: in f32, as
+/// ⌊(x − lo)·inv_width⌋ clamped to 0..n−1 (NaN to 0). Subtraction and
+/// multiplication are correctly rounded in Rust and in Vulkan's SPIR-V, so
+/// a value both engines hold exactly — a raw channel, such as a camber
+/// logged as a constant −1.5° that sits on an edge — lands in the same bin
+/// on both. Must match `ConditionBins` in the shader (checked by
+/// tests/shader_contract.rs).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Pod, Zeroable)]
+pub struct ConditionBins {
+    pub lo: f32,
+    /// 1 / width, rounded to f32.
+    pub inv_width: f32,
+    pub n: u32,
+    /// First bin of this condition within a component's `CONDITION_BINS`.
+    pub offset: u32,
+}
+
+/// The table the GPU engine uploads (f32 edges; the CPU twin bins in f64).
+pub fn condition_table() -> Vec<ConditionBins> {
+    let mut offset = 0;
+    CONDITIONS
+        .iter()
+        .map(|c| {
+            let b = ConditionBins {
+                lo: c.bins.lo as f32,
+                inv_width: (1.0 / c.bins.width) as f32,
+                n: c.bins.n as u32,
+                offset,
+            };
+            offset += c.bins.n as u32;
+            b
+        })
+        .collect()
+}
+
+impl ConditionBins {
+    /// The bin of a value (the shader's `bin_index`): the value is rounded
+    /// to f32 first, then binned in f32.
+    pub fn index(&self, x: f64) -> usize {
+        let i = ((x as f32 - self.lo) * self.inv_width).floor();
+        if i.is_nan() || i < 0.0 {
+            0
+        } else {
+            (i as usize).min(self.n as usize - 1)
+        }
+    }
+}
+
+/// First bin of each condition within a component.
+fn offsets() -> [usize; N_CONDITIONS] {
+    let mut o = [0; N_CONDITIONS];
+    for c in 1..N_CONDITIONS {
+        o[c] = o[c - 1] + CONDITIONS[c - 1].bins.n;
+    }
+    o
+}
+
+/// The conditions of one sample, in [`CONDITIONS`] order (the shader's
+/// `condition_values`, in f64).
+pub fn condition_values(p: &ReduceSample) -> [f64; N_CONDITIONS] {
+    let f = |x: f32| x as f64;
+    let v_sx = f(p.vx) - f(p.omega) * f(p.radius); // eq. 21
+    let v_sy = f(p.vy); // eq. 22
+    let v_s = (v_sx * v_sx + v_sy * v_sy).sqrt();
+    let v_ref = f(p.vx).abs().max(SLIP_SPEED_FLOOR_MPS);
+    let force = (f(p.fx) * f(p.fx) + f(p.fy) * f(p.fy)).sqrt();
+    [
+        -v_sx / v_ref,
+        f(p.vy) / v_ref,
+        v_s / v_ref,
+        v_s,
+        f(p.fz),
+        force / f(p.fz).max(LOAD_FLOOR_N),
+        f(p.t_surface),
+        f(p.t_inner),
+        f(p.pressure),
+        f(p.camber),
+        f(p.vx),
+    ]
+}
+
+fn workgroup(batch: &ReduceBatch, chunk: &ReduceChunk, table: &[ConditionBins], maps: &mut [u64]) {
+    let count = chunk.count as usize;
+    // Phase 0.
+    let mut bins = [0u64; MAP_BINS];
+    // Phase 1.
+    for lid in 0..WG_SIZE {
+        for k in 0..ITEMS {
+            let j = lid + k * WG_SIZE;
+            if j < count {
+                let p = &batch.samples[chunk.start as usize + j];
+                let f = |x: f32| x as f64;
+                let dt = f(p.dt) + f(p.dt_lo);
+                let v_sx = f(p.vx) - f(p.omega) * f(p.radius); // eq. 21
+                let v_sy = f(p.vy); // eq. 22
+                let e_x = -f(p.fx) * v_sx * dt; // eq. 23
+                let e_y = -f(p.fy) * v_sy * dt; // eq. 24
+                let q = [to_quanta(e_x + e_y), to_quanta(e_x), to_quanta(e_y)];
+                let values = condition_values(p);
+                for c in 0..N_CONDITIONS {
+                    let t = &table[c];
+                    let b = t.offset as usize + t.index(values[c]);
+                    for (m, &qm) in q.iter().enumerate() {
+                        let slot = &mut bins[m * CONDITION_BINS + b];
+                        *slot = slot.wrapping_add(qm);
+                    }
+                }
+            }
+        }
+    }
+    // Phase 2.
+    let wheel = chunk.wheel as usize;
+    for (b, &q) in bins.iter().enumerate() {
+        if q != 0 {
+            let slot = &mut maps[wheel * MAP_BINS + b];
+            *slot = slot.wrapping_add(q);
+        }
+    }
+}
+
+/// The CPU engine's kernel: every wheel's condition maps as `MAP_BINS` sums
+/// of quanta (rayon over chunks; exact, so the split does not change them).
+pub fn condition_map(batch: &ReduceBatch) -> Vec<u64> {
+    let n = batch.wheels() * MAP_BINS;
+    let table = condition_table();
+    batch
+        .chunks
+        .par_iter()
+        .fold(
+            || vec![0u64; n],
+            |mut maps, c| {
+                workgroup(batch, c, &table, &mut maps);
+                maps
+            },
+        )
+        .reduce(
+            || vec![0u64; n],
+            |mut a, b| {
+                for (x, y) in a.iter_mut().zip(b) {
+                    *x = x.wrapping_add(y);
+                }
+                a
+            },
+        )
+}
+
+/// One tire and run's condition maps (J per bin): for each component, the
+/// bins of every condition back to back in [`CONDITIONS`] order.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ConditionMaps {
+    /// [component][CONDITION_BINS]: total, longitudinal, lateral.
+    pub energy_j: [Vec<f64>; COMPONENTS],
+}
+
+impl Default for ConditionMaps {
+    fn default() -> Self {
+        ConditionMaps {
+            energy_j: std::array::from_fn(|_| vec![0.0; CONDITION_BINS]),
+        }
+    }
+}
+
+/// An energy component of the condition maps.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Component {
+    Total,
+    Longitudinal,
+    Lateral,
+}
+
+impl ConditionMaps {
+    /// One condition's map of one component (J per bin of `CONDITIONS[c].bins`).
+    pub fn map(&self, component: Component, condition: usize) -> &[f64] {
+        let o = offsets()[condition];
+        &self.energy_j[component as usize][o..o + CONDITIONS[condition].bins.n]
+    }
+    /// Index of a condition by its side-table name.
+    pub fn condition_index(name: &str) -> Option<usize> {
+        CONDITIONS.iter().position(|c| c.name == name)
+    }
+}
+
+/// Each wheel's condition maps (J per bin) from its `MAP_BINS` sums of quanta.
+pub fn condition_maps_from_quanta(quanta: &[u64]) -> Vec<ConditionMaps> {
+    quanta
+        .chunks_exact(MAP_BINS)
+        .map(|q| ConditionMaps {
+            energy_j: std::array::from_fn(|m| {
+                q[m * CONDITION_BINS..(m + 1) * CONDITION_BINS]
+                    .iter()
+                    .map(|&v| from_quanta(v))
+                    .collect()
+            }),
+        })
+        .collect()
+}
+
+/// Schema-metadata key of the side table's format version.
+pub const VERSION_KEY: &str = "tirewear.condition_maps.version";
+/// The side table's format version this build writes and reads.
+pub const VERSION: u32 = 1;
+
+/// Side table of condition maps (`NAME.condition_maps.parquet`): one row per
+/// tire, run, condition and non-empty bin: run, wheel, condition, unit, bin,
+/// lo, hi (the bin's edges; the first and last bins also hold the values
+/// below and above), energy_j, energy_x_j, energy_y_j. Versioned in the
+/// schema metadata ([`VERSION_KEY`]).
+pub fn side_table(maps: &[(String, crate::Wheel, ConditionMaps)]) -> arrow_array::RecordBatch {
+    use arrow_array::{Float64Array, StringArray, UInt32Array};
+    use arrow_schema::{DataType, Field, Schema};
+    use std::sync::Arc;
+    let (mut run, mut wheel, mut cond, mut unit) = (vec![], vec![], vec![], vec![]);
+    let (mut bin, mut lo, mut hi) = (vec![], vec![], vec![]);
+    let mut e: [Vec<f64>; COMPONENTS] = Default::default();
+    let offsets = offsets();
+    for (r, w, m) in maps {
+        for (c, cd) in CONDITIONS.iter().enumerate() {
+            for b in 0..cd.bins.n {
+                let k = offsets[c] + b;
+                if (0..COMPONENTS).all(|m_| m.energy_j[m_][k] == 0.0) {
+                    continue;
+                }
+                run.push(r.clone());
+                wheel.push(w.name());
+                cond.push(cd.name);
+                unit.push(cd.unit);
+                bin.push(b as u32);
+                lo.push(cd.bins.lower_edge(b));
+                hi.push(cd.bins.lower_edge(b + 1));
+                for (col, comp) in e.iter_mut().zip(&m.energy_j) {
+                    col.push(comp[k]);
+                }
+            }
+        }
+    }
+    let schema = Schema::new(vec![
+        Field::new("run", DataType::Utf8, false),
+        Field::new("wheel", DataType::Utf8, false),
+        Field::new("condition", DataType::Utf8, false),
+        Field::new("unit", DataType::Utf8, false),
+        Field::new("bin", DataType::UInt32, false),
+        Field::new("lo", DataType::Float64, false),
+        Field::new("hi", DataType::Float64, false),
+        Field::new("energy_j", DataType::Float64, false),
+        Field::new("energy_x_j", DataType::Float64, false),
+        Field::new("energy_y_j", DataType::Float64, false),
+    ])
+    .with_metadata(std::collections::HashMap::from([(
+        VERSION_KEY.to_string(),
+        VERSION.to_string(),
+    )]));
+    let [et, ex, ey] = e;
+    arrow_array::RecordBatch::try_new(
+        Arc::new(schema),
+        vec![
+            Arc::new(StringArray::from(run)),
+            Arc::new(StringArray::from(wheel)),
+            Arc::new(StringArray::from(cond)),
+            Arc::new(StringArray::from(unit)),
+            Arc::new(UInt32Array::from(bin)),
+            Arc::new(Float64Array::from(lo)),
+            Arc::new(Float64Array::from(hi)),
+            Arc::new(Float64Array::from(et)),
+            Arc::new(Float64Array::from(ex)),
+            Arc::new(Float64Array::from(ey)),
+        ],
+    )
+    .expect("columns match the schema")
+}
+
+/// Reads a condition-map side table back, keyed by (run, wheel). A file of
+/// another format version, an unknown condition, a bin outside its
+/// condition's grid, a bin whose edges differ from this build's, or a
+/// non-finite energy is an error naming the record.
+pub fn read_condition_maps(
+    path: &std::path::Path,
+) -> Result<std::collections::BTreeMap<(String, String), ConditionMaps>, crate::ingest::IngestError>
+{
+    use crate::ingest::IngestError;
+    use arrow_array::{Array, Float64Array, StringArray, UInt32Array};
+    use arrow_schema::DataType;
+    let perr = |e: parquet::errors::ParquetError| IngestError::Parquet {
+        path: path.to_path_buf(),
+        source: e,
+    };
+    let file = std::fs::File::open(path).map_err(|e| IngestError::io(path, e))?;
+    let builder = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file)
+        .map_err(perr)?;
+    match builder.schema().metadata().get(VERSION_KEY) {
+        Some(v) if v == &VERSION.to_string() => {}
+        Some(v) => {
+            return Err(IngestError::invalid(
+                path,
+                "schema metadata",
+                format!("condition maps of format version {v}; this build reads version {VERSION}"),
+            ));
+        }
+        None => {
+            return Err(IngestError::invalid(
+                path,
+                "schema metadata",
+                format!("no '{VERSION_KEY}': not a condition-map table"),
+            ));
+        }
+    }
+    let reader = builder.build().map_err(perr)?;
+    let offsets = offsets();
+    let mut out: std::collections::BTreeMap<(String, String), ConditionMaps> = Default::default();
+    let mut record = 0usize;
+    for batch in reader {
+        let batch = batch.map_err(|e| perr(e.into()))?;
+        let col = |name: &str, ty: &DataType| -> Result<std::sync::Arc<dyn Array>, IngestError> {
+            let c = batch.column_by_name(name).ok_or_else(|| {
+                IngestError::invalid(path, "schema", format!("missing column '{name}'"))
+            })?;
+            let cast = arrow_cast::cast(c, ty).map_err(|e| perr(e.into()))?;
+            if let Some(k) = (0..cast.len()).find(|&k| cast.is_null(k)) {
+                return Err(IngestError::invalid(
+                    path,
+                    format!("record {}", record + k + 1),
+                    format!("column '{name}' is empty or not a {ty}"),
+                ));
+            }
+            Ok(cast)
+        };
+        let text = |name: &str| -> Result<StringArray, IngestError> {
+            let a = col(name, &DataType::Utf8)?;
+            Ok(a.as_any()
+                .downcast_ref::<StringArray>()
+                .expect("cast")
+                .clone())
+        };
+        let float = |name: &str| -> Result<Float64Array, IngestError> {
+            let a = col(name, &DataType::Float64)?;
+            Ok(a.as_any()
+                .downcast_ref::<Float64Array>()
+                .expect("cast")
+                .clone())
+        };
+        let (run, wheel, cond) = (text("run")?, text("wheel")?, text("condition")?);
+        let bin = col("bin", &DataType::UInt32)?;
+        let bin = bin
+            .as_any()
+            .downcast_ref::<UInt32Array>()
+            .expect("cast")
+            .clone();
+        let (lo, hi) = (float("lo")?, float("hi")?);
+        let e = [
+            float("energy_j")?,
+            float("energy_x_j")?,
+            float("energy_y_j")?,
+        ];
+        for k in 0..batch.num_rows() {
+            record += 1;
+            let at = || format!("record {record}");
+            let name = cond.value(k);
+            let c = ConditionMaps::condition_index(name).ok_or_else(|| {
+                IngestError::invalid(path, at(), format!("unknown condition '{name}'"))
+            })?;
+            let bins = CONDITIONS[c].bins;
+            let b = bin.value(k) as usize;
+            if b >= bins.n {
+                return Err(IngestError::invalid(
+                    path,
+                    at(),
+                    format!("bin {b} outside the {} bins of '{name}'", bins.n),
+                ));
+            }
+            let edges = (bins.lower_edge(b), bins.lower_edge(b + 1));
+            let close = |a: f64, b: f64| (a - b).abs() <= 1e-9 * (1.0 + b.abs());
+            if !close(lo.value(k), edges.0) || !close(hi.value(k), edges.1) {
+                return Err(IngestError::invalid(
+                    path,
+                    at(),
+                    format!(
+                        "bin {b} of '{name}' is [{}, {}) in the file but [{}, {}) in this build",
+                        lo.value(k),
+                        hi.value(k),
+                        edges.0,
+                        edges.1
+                    ),
+                ));
+            }
+            let m = out
+                .entry((run.value(k).to_string(), wheel.value(k).to_string()))
+                .or_default();
+            for (comp, col) in e.iter().enumerate() {
+                let v = col.value(k);
+                if !v.is_finite() {
+                    return Err(IngestError::invalid(
+                        path,
+                        at(),
+                        format!("energy {v} of '{name}' bin {b} is not finite"),
+                    ));
+                }
+                m.energy_j[comp][offsets[c] + b] += v;
+            }
+        }
+    }
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn table_is_consistent() {
+        let t = condition_table();
+        assert_eq!(t.len(), N_CONDITIONS);
+        assert_eq!(
+            t.last().map(|b| (b.offset + b.n) as usize),
+            Some(CONDITION_BINS)
+        );
+        let mut names: Vec<_> = CONDITIONS.iter().map(|c| c.name).collect();
+        names.sort();
+        names.dedup();
+        assert_eq!(names.len(), N_CONDITIONS, "condition names are unique");
+    }
+
+    #[test]
+    fn conditions_of_one_sample_by_hand() {
+        // v_x 40, ω·r = 41.2 → v_sx = −1.2, κ = 0.03; v_y = −2 → tan α = −0.05; |v_s| = √(1.44 + 4) = 2.332; F = (3000, −4000) → |F| = 5000,
+        // F_z 4000 → μ-use 1.25.
+        let p = ReduceSample {
+            vx: 40.0,
+            vy: -2.0,
+            omega: 103.0,
+            radius: 0.4,
+            fx: 3000.0,
+            fy: -4000.0,
+            fz: 4000.0,
+            t_surface: 91.0,
+            t_inner: 104.0,
+            pressure: 172_000.0,
+            camber: -3.1,
+            ..Default::default()
+        };
+        let v = condition_values(&p);
+        let close = |a: f64, b: f64| (a - b).abs() < 1e-5;
+        assert!(close(v[0], 0.03), "{}", v[0]);
+        assert!(close(v[1], -0.05), "{}", v[1]);
+        assert!(close(v[2], 2.332381 / 40.0), "{}", v[2]);
+        assert!(close(v[3], 2.332381), "{}", v[3]);
+        assert!(close(v[4], 4000.0) && close(v[5], 1.25));
+        assert!(close(v[8], 172_000.0) && close(v[9], -3.1) && close(v[10], 40.0));
+        // Bins: κ 0.03 → (0.03 + 0.3)/0.02 = 16.5 → 16; tan α → 12.5 → 12; load 4 kN → 8.
+        let t = condition_table();
+        assert_eq!(t[0].index(v[0]), 16);
+        assert_eq!(t[1].index(v[1]), 12);
+        assert_eq!(t[4].index(v[4]), 8);
+        // An edge value lands in the bin above it; NaN and the ends clamp.
+        assert_eq!(t[9].index(-1.5), 18);
+        assert_eq!(t[9].index(f64::NAN), 0);
+        assert_eq!(t[9].index(-99.0), 0);
+        assert_eq!(t[9].index(99.0), 31);
+    }
+
+    #[test]
+    fn side_table_reads_back_and_refuses_other_versions_and_names() {
+        use std::sync::Arc;
+        let mut m = ConditionMaps::default();
+        m.energy_j[0][3] = 12.5;
+        m.energy_j[1][3] = 10.0;
+        m.energy_j[2][3] = 2.5;
+        m.energy_j[0][CONDITION_BINS - 1] = -1.0;
+        let batch = side_table(&[("r1".into(), crate::Wheel::FL, m.clone())]);
+        assert_eq!(batch.num_rows(), 2);
+        let dir = tempfile::tempdir().unwrap();
+        let write = |name: &str, b: &arrow_array::RecordBatch| {
+            let path = dir.path().join(name);
+            let f = std::fs::File::create(&path).unwrap();
+            let mut w = parquet::arrow::ArrowWriter::try_new(f, b.schema(), None).unwrap();
+            w.write(b).unwrap();
+            w.close().unwrap();
+            path
+        };
+        let back = read_condition_maps(&write("ok.parquet", &batch)).unwrap();
+        assert_eq!(back[&("r1".to_string(), "FL".to_string())], m);
+        // Another format version.
+        let mut meta = batch.schema().metadata().clone();
+        meta.insert(VERSION_KEY.to_string(), "2".to_string());
+        let v2 = arrow_array::RecordBatch::try_new(
+            Arc::new(batch.schema().as_ref().clone().with_metadata(meta)),
+            batch.columns().to_vec(),
+        )
+        .unwrap();
+        let e = read_condition_maps(&write("v2.parquet", &v2)).unwrap_err();
+        assert!(e.to_string().contains("format version 2"), "{e}");
+        // An unknown condition names its record.
+        let mut cols = batch.columns().to_vec();
+        cols[2] = Arc::new(arrow_array::StringArray::from(vec![
+            "slip_ratio",
+            "toe_deg",
+        ]));
+        let bad = arrow_array::RecordBatch::try_new(batch.schema(), cols).unwrap();
+        let e = read_condition_maps(&write("bad.parquet", &bad)).unwrap_err();
+        assert!(
+            e.to_string().contains("record 2") && e.to_string().contains("toe_deg"),
+            "{e}"
+        );
+    }
+}
