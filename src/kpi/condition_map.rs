@@ -172,11 +172,13 @@ impl ConditionBins {
     /// The bin of a value (the shader's `bin_index`): the value is rounded
     /// to f32 first, then binned in f32.
     pub fn index(&self, x: f64) -> usize {
-        let i = ((x as f32 - self.lo) * self.inv_width).floor();
-        if i.is_nan() || i < 0.0 {
-            0
-        } else {
+        let i = (x as f32 - self.lo) * self.inv_width;
+        // For i ≥ 0 truncation is the shader's floor (and needs no SSE4.1
+        // libcall); below 0 and NaN go to bin 0.
+        if i >= 0.0 {
             (i as usize).min(self.n as usize - 1)
+        } else {
+            0
         }
     }
 }

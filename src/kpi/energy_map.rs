@@ -34,11 +34,13 @@ pub struct Bins {
 
 impl Bins {
     pub fn index(&self, x: f64) -> usize {
-        let i = ((x - self.lo) / self.width).floor();
-        if i.is_nan() || i < 0.0 {
-            0
-        } else {
+        let i = (x - self.lo) / self.width;
+        // For i ≥ 0 truncation is floor (without SSE4.1 floor is a libcall);
+        // below 0 and NaN go to bin 0.
+        if i >= 0.0 {
             (i as usize).min(self.n - 1)
+        } else {
+            0
         }
     }
     pub fn lower_edge(&self, i: usize) -> f64 {

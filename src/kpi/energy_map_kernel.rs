@@ -31,8 +31,17 @@ const _: () = assert!(BINS == LATERAL_BINS_AT + SURFACE_INNER_BINS);
 /// round(e · ENERGY_QUANTA_PER_J) in 64-bit two's complement (the shader's
 /// `to_quanta`: ties to even, magnitude rounded then negated).
 pub fn to_quanta(e: f64) -> u64 {
-    let m = (e.abs() * ENERGY_QUANTA_PER_J).round_ties_even() as u64;
+    let m = round_ties_even(e.abs() * ENERGY_QUANTA_PER_J) as u64;
     if e < 0.0 { m.wrapping_neg() } else { m }
+}
+
+/// `x.round_ties_even()` for x ≥ 0 (and NaN) without the libcall that
+/// baseline x86-64 (no SSE4.1) makes of it: adding and subtracting 2^52
+/// rounds to an integer in the current (ties-to-even) mode; from 2^52 on
+/// every f64 is an integer already.
+fn round_ties_even(x: f64) -> f64 {
+    const TWO_52: f64 = 4_503_599_627_370_496.0;
+    if x < TWO_52 { (x + TWO_52) - TWO_52 } else { x }
 }
 
 /// A 64-bit two's-complement sum of quanta back in joules.
@@ -131,6 +140,11 @@ mod tests {
         // Ties to even, as WGSL's round().
         assert_eq!(to_quanta(2.5 / ENERGY_QUANTA_PER_J), 2);
         assert_eq!(to_quanta(3.5 / ENERGY_QUANTA_PER_J), 4);
+        assert_eq!(to_quanta(0.49999 / ENERGY_QUANTA_PER_J), 0);
+        assert_eq!(to_quanta(1e40), u64::MAX); // saturates, as `as` does
+        for x in [0.0, 0.5, 1.5, 2.5, 1e15 + 0.5, 4.5e15, 1e300] {
+            assert_eq!(round_ties_even(x), x.round_ties_even(), "{x}");
+        }
         assert_eq!(from_quanta(to_quanta(-1234.5)), -1234.5);
         // Past 2^32 quanta (256 J) the high word carries.
         assert_eq!(to_quanta(300.0), 300 << 24);
