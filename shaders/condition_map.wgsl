@@ -9,40 +9,15 @@
 // CPU twin: src/kpi/condition_map.rs; chunks and samples are those of
 // telemetry_reduce.
 
+// shared.wgsl (prepended by the host): WG_SIZE, ITEMS, Sample, Chunk,
+// ENERGY_QUANTA_PER_J, to_quanta, carried.
+
 // Must match src/kpi/condition_map.rs (checked by tests/shader_contract.rs).
-const WG_SIZE: u32 = 128u;
-const ITEMS: u32 = 8u;
 const N_CONDITIONS: u32 = 11u;
 const CONDITION_BINS: u32 = 294u; // bins of one component over all conditions
 const MAP_BINS: u32 = 882u; // 3 components
 const SLIP_SPEED_FLOOR_MPS: f32 = 1.0;
 const LOAD_FLOOR_N: f32 = 100.0;
-const ENERGY_QUANTA_PER_J: f32 = 16777216.0; // as energy_map.wgsl
-
-// Must match ReduceSample (src/kpi/telemetry_reduce.rs) (checked by tests/shader_contract.rs).
-struct Sample {
-    vx: f32,
-    vy: f32,
-    omega: f32,
-    radius: f32,
-    fx: f32,
-    fy: f32,
-    fz: f32,
-    t_surface: f32,
-    t_inner: f32,
-    pressure: f32,
-    camber: f32,
-    dt: f32,
-    dt_lo: f32,
-}
-
-// Must match ReduceChunk (checked by tests/shader_contract.rs).
-struct Chunk {
-    start: u32,
-    count: u32,
-    wheel: u32,
-    pad: u32,
-}
 
 // Must match ConditionBins (checked by tests/shader_contract.rs).
 struct ConditionBins {
@@ -71,22 +46,9 @@ fn bin_index(x: f32, b: ConditionBins) -> u32 {
     return min(u32(i), b.n - 1u);
 }
 
-// round(e · ENERGY_QUANTA_PER_J) as a 64-bit two's-complement (lo, hi).
-fn to_quanta(e: f32) -> vec2<u32> {
-    let m = round(abs(e) * ENERGY_QUANTA_PER_J);
-    let h = floor(m / 4294967296.0);
-    var lo = u32(m - h * 4294967296.0);
-    var hi = u32(h);
-    if e < 0.0 {
-        lo = ~lo + 1u;
-        hi = ~hi + select(0u, 1u, lo == 0u);
-    }
-    return vec2<u32>(lo, hi);
-}
-
 fn add_to_workgroup(bin: u32, q: vec2<u32>) {
     let old = atomicAdd(&bin_lo[bin], q.x);
-    let hi = q.y + select(0u, 1u, old + q.x < old);
+    let hi = carried(old, q.x, q.y);
     if hi != 0u {
         atomicAdd(&bin_hi[bin], hi);
     }
@@ -94,7 +56,7 @@ fn add_to_workgroup(bin: u32, q: vec2<u32>) {
 
 fn add_to_map(slot: u32, lo: u32, hi: u32) {
     let old = atomicAdd(&maps[2u * slot], lo);
-    let h = hi + select(0u, 1u, old + lo < old);
+    let h = carried(old, lo, hi);
     if h != 0u {
         atomicAdd(&maps[2u * slot + 1u], h);
     }

@@ -18,10 +18,10 @@
 // CPU twin: src/kpi/energy_map_kernel.rs; chunks and samples are those of
 // telemetry_reduce.
 
+// shared.wgsl (prepended by the host): WG_SIZE, ITEMS, CHUNK, Sample, Chunk,
+// ENERGY_QUANTA_PER_J, to_quanta, carried.
+
 // Must match src/kpi/energy_map_kernel.rs and src/kpi/energy_map.rs (bin edges) (checked by tests/shader_contract.rs).
-const WG_SIZE: u32 = 128u;
-const ITEMS: u32 = 8u;
-const CHUNK: u32 = 1024u;
 const T_SURFACE_LO: f32 = 20.0;
 const T_SURFACE_WIDTH: f32 = 5.0;
 const T_SURFACE_N: u32 = 24u;
@@ -34,32 +34,6 @@ const SPEED_N: u32 = 20u;
 const SURFACE_INNER_BINS: u32 = 576u; // T_SURFACE_N * T_INNER_N
 const LATERAL_BINS_AT: u32 = 1056u; // SURFACE_INNER_BINS + SPEED_N * T_SURFACE_N
 const BINS: u32 = 1632u; // + SURFACE_INNER_BINS (lateral map)
-const ENERGY_QUANTA_PER_J: f32 = 16777216.0; // 2^24: a quantum of 6e-8 J, sums up to 5.5e11 J
-
-// Must match ReduceSample (src/kpi/telemetry_reduce.rs) (checked by tests/shader_contract.rs).
-struct Sample {
-    vx: f32,
-    vy: f32,
-    omega: f32,
-    radius: f32,
-    fx: f32,
-    fy: f32,
-    fz: f32,
-    t_surface: f32,
-    t_inner: f32,
-    pressure: f32,
-    camber: f32,
-    dt: f32,
-    dt_lo: f32,
-}
-
-// Must match ReduceChunk (checked by tests/shader_contract.rs).
-struct Chunk {
-    start: u32,
-    count: u32,
-    wheel: u32,
-    pad: u32,
-}
 
 @group(0) @binding(0) var<storage, read> samples: array<Sample>;
 @group(0) @binding(1) var<storage, read> chunks: array<Chunk>;
@@ -78,22 +52,9 @@ fn bin_index(x: f32, lo: f32, width: f32, n: u32) -> u32 {
     return min(u32(i), n - 1u);
 }
 
-// round(e · ENERGY_QUANTA_PER_J) as a 64-bit two's-complement (lo, hi).
-fn to_quanta(e: f32) -> vec2<u32> {
-    let m = round(abs(e) * ENERGY_QUANTA_PER_J);
-    let h = floor(m / 4294967296.0);
-    var lo = u32(m - h * 4294967296.0);
-    var hi = u32(h);
-    if e < 0.0 {
-        lo = ~lo + 1u;
-        hi = ~hi + select(0u, 1u, lo == 0u);
-    }
-    return vec2<u32>(lo, hi);
-}
-
 fn add_to_workgroup(bin: u32, q: vec2<u32>) {
     let old = atomicAdd(&bin_lo[bin], q.x);
-    let hi = q.y + select(0u, 1u, old + q.x < old);
+    let hi = carried(old, q.x, q.y);
     if hi != 0u {
         atomicAdd(&bin_hi[bin], hi);
     }
@@ -101,7 +62,7 @@ fn add_to_workgroup(bin: u32, q: vec2<u32>) {
 
 fn add_to_map(slot: u32, lo: u32, hi: u32) {
     let old = atomicAdd(&maps[2u * slot], lo);
-    let h = hi + select(0u, 1u, old + lo < old);
+    let h = carried(old, lo, hi);
     if h != 0u {
         atomicAdd(&maps[2u * slot + 1u], h);
     }

@@ -3,36 +3,11 @@
 // CPU twin: src/kpi/telemetry_reduce.rs (same workgroup size, items per
 // thread, sum order and tree); partials are merged per wheel in f64 on the CPU.
 
-// Must match src/kpi/telemetry_reduce.rs: WG_SIZE, ITEMS, SUMS, CARCASS_PRESSURE_PA (checked by tests/shader_contract.rs).
-const WG_SIZE: u32 = 128u;
-const ITEMS: u32 = 8u;
+// shared.wgsl (prepended by the host): WG_SIZE, ITEMS, Sample, Chunk.
+
+// Must match src/kpi/telemetry_reduce.rs: SUMS, CARCASS_PRESSURE_PA (checked by tests/shader_contract.rs).
 const SUMS: u32 = 22u;
 const CARCASS_PRESSURE_PA: f32 = 40000.0;
-
-// Must match ReduceSample (checked by tests/shader_contract.rs).
-struct Sample {
-    vx: f32,
-    vy: f32,
-    omega: f32,
-    radius: f32,
-    fx: f32,
-    fy: f32,
-    fz: f32,
-    t_surface: f32,
-    t_inner: f32,
-    pressure: f32,
-    camber: f32,
-    dt: f32,
-    dt_lo: f32, // f64 remainder of dt, used by the CPU twin only
-}
-
-// Must match ReduceChunk (checked by tests/shader_contract.rs).
-struct Chunk {
-    start: u32,
-    count: u32,
-    wheel: u32,
-    pad: u32,
-}
 
 // Must match ReduceRef (checked by tests/shader_contract.rs).
 struct Reference {

@@ -10,6 +10,20 @@ pub use error::GpuError;
 
 use std::time::Duration;
 
+/// A chunk kernel's shader: `shaders/shared.wgsl` (the sample records and
+/// fixed-point helpers) followed by the kernel's own file.
+macro_rules! chunk_shader {
+    ($file:literal) => {
+        wgpu::ShaderModuleDescriptor {
+            label: Some($file),
+            source: wgpu::ShaderSource::Wgsl(std::borrow::Cow::Borrowed(concat!(
+                include_str!("../../shaders/shared.wgsl"),
+                include_str!(concat!("../../shaders/", $file))
+            ))),
+        }
+    };
+}
+
 /// Builds a kernel's compute pipeline (entry point `main`, layout from the
 /// shader) and its bind-group layout; a shader that does not validate is an
 /// error naming the kernel, not a panic.
@@ -117,21 +131,21 @@ impl GpuContext {
         let telemetry_reduce = chunk_kernel::ChunkKernel::new(
             &device,
             "telemetry_reduce",
-            wgpu::include_wgsl!("../../shaders/telemetry_reduce.wgsl"),
+            chunk_shader!("telemetry_reduce.wgsl"),
             chunk_kernel::Output::PerChunk(crate::kpi::telemetry_reduce::SUMS),
             chunk_kernel::Extra::Refs,
         )?;
         let energy_map = chunk_kernel::ChunkKernel::new(
             &device,
             "energy_map",
-            wgpu::include_wgsl!("../../shaders/energy_map.wgsl"),
+            chunk_shader!("energy_map.wgsl"),
             chunk_kernel::Output::PerWheel(2 * crate::kpi::energy_map_kernel::BINS),
             chunk_kernel::Extra::None,
         )?;
         let condition_map = chunk_kernel::ChunkKernel::new(
             &device,
             "condition_map",
-            wgpu::include_wgsl!("../../shaders/condition_map.wgsl"),
+            chunk_shader!("condition_map.wgsl"),
             chunk_kernel::Output::PerWheel(2 * crate::kpi::condition_map::MAP_BINS),
             chunk_kernel::Extra::ConditionTable,
         )?;

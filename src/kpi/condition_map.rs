@@ -15,10 +15,9 @@
 //! maps are deterministic and differ only by f32 against f64 per sample.
 
 use super::energy_map::Bins;
-use super::energy_map_kernel::{from_quanta, to_quanta};
+use super::energy_map_kernel::{add_to_wheel, from_quanta, per_wheel_sums, to_quanta};
 use super::telemetry_reduce::{ITEMS, ReduceBatch, ReduceChunk, ReduceSample, WG_SIZE};
 use bytemuck::{Pod, Zeroable};
-use rayon::prelude::*;
 
 /// A per-sample condition: its name in the side table, unit, bins and formula.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -246,39 +245,14 @@ fn workgroup(batch: &ReduceBatch, chunk: &ReduceChunk, table: &[ConditionBins], 
         }
     }
     // Phase 2.
-    let wheel = chunk.wheel as usize;
-    for (b, &q) in bins.iter().enumerate() {
-        if q != 0 {
-            let slot = &mut maps[wheel * MAP_BINS + b];
-            *slot = slot.wrapping_add(q);
-        }
-    }
+    add_to_wheel(&bins, chunk.wheel as usize, maps);
 }
 
 /// The CPU engine's kernel: every wheel's condition maps as `MAP_BINS` sums
 /// of quanta (rayon over chunks; exact, so the split does not change them).
 pub fn condition_map(batch: &ReduceBatch) -> Vec<u64> {
-    let n = batch.wheels() * MAP_BINS;
     let table = condition_table();
-    batch
-        .chunks
-        .par_iter()
-        .fold(
-            || vec![0u64; n],
-            |mut maps, c| {
-                workgroup(batch, c, &table, &mut maps);
-                maps
-            },
-        )
-        .reduce(
-            || vec![0u64; n],
-            |mut a, b| {
-                for (x, y) in a.iter_mut().zip(b) {
-                    *x = x.wrapping_add(y);
-                }
-                a
-            },
-        )
+    per_wheel_sums(batch, MAP_BINS, |c, maps| workgroup(batch, c, &table, maps))
 }
 
 /// One tire and run's condition maps (J per bin): for each component, the

@@ -78,26 +78,36 @@ fn workgroup(batch: &ReduceBatch, chunk: &ReduceChunk, maps: &mut [u64]) {
         }
     }
     // Phase 2.
-    let wheel = chunk.wheel as usize;
-    for (b, &q) in bins.iter().enumerate() {
+    add_to_wheel(&bins, chunk.wheel as usize, maps);
+}
+
+/// Phase 2 of a histogram kernel: a workgroup's non-zero bins added to its
+/// wheel's bins (`maps` holds `bins.len()` per wheel).
+pub(crate) fn add_to_wheel(bins: &[u64], wheel: usize, maps: &mut [u64]) {
+    let n = bins.len();
+    for (slot, &q) in maps[wheel * n..(wheel + 1) * n].iter_mut().zip(bins) {
         if q != 0 {
-            let slot = &mut maps[wheel * BINS + b];
             *slot = slot.wrapping_add(q);
         }
     }
 }
 
-/// The CPU engine's kernel: every wheel's maps as `BINS` sums of quanta
-/// (rayon over chunks; exact, so the split does not change the result).
-pub fn energy_map(batch: &ReduceBatch) -> Vec<u64> {
-    let n = batch.wheels() * BINS;
+/// Runs a histogram kernel's workgroups over a batch: `per_wheel` sums of
+/// quanta per wheel, each chunk added by `workgroup` (rayon over chunks;
+/// the sums are exact, so the split does not change them).
+pub(crate) fn per_wheel_sums(
+    batch: &ReduceBatch,
+    per_wheel: usize,
+    workgroup: impl Fn(&ReduceChunk, &mut [u64]) + Sync,
+) -> Vec<u64> {
+    let n = batch.wheels() * per_wheel;
     batch
         .chunks
         .par_iter()
         .fold(
             || vec![0u64; n],
             |mut maps, c| {
-                workgroup(batch, c, &mut maps);
+                workgroup(c, &mut maps);
                 maps
             },
         )
@@ -110,6 +120,12 @@ pub fn energy_map(batch: &ReduceBatch) -> Vec<u64> {
                 a
             },
         )
+}
+
+/// The CPU engine's kernel: every wheel's maps as `BINS` sums of quanta
+/// (rayon over chunks; exact, so the split does not change the result).
+pub fn energy_map(batch: &ReduceBatch) -> Vec<u64> {
+    per_wheel_sums(batch, BINS, |c, maps| workgroup(batch, c, maps))
 }
 
 /// Each wheel's maps (J per bin) from its `BINS` sums of quanta.
