@@ -34,8 +34,11 @@ pub struct BenchLine {
     pub unit: String,
     /// Bytes of input per second.
     pub gb_per_s: f64,
-    /// Time of the memory pass over the same bytes divided by this time.
+    /// Time of the reference pass over the same bytes divided by this time:
+    /// a memory pass for the kernels, zstd-only decompression for decoding.
     pub vs_memory_pass: f64,
+    /// What `vs_memory_pass` compares with: "memory pass" or "zstd only".
+    pub reference: String,
     /// GPU only: upload / compute / readback seconds.
     pub gpu_split_s: Option<[f64; 3]>,
 }
@@ -57,8 +60,9 @@ struct Workload {
     items: f64,
     unit: &'static str,
     bytes: f64,
-    /// The plain memory pass over the same bytes.
+    /// The plain memory pass over the same bytes (or decoding's reference).
     memory_pass: Duration,
+    reference: &'static str,
 }
 
 impl Workload {
@@ -73,6 +77,7 @@ impl Workload {
             unit: self.unit.into(),
             gb_per_s: self.bytes / t / 1e9,
             vs_memory_pass: self.memory_pass.as_secs_f64() / t,
+            reference: self.reference.into(),
             gpu_split_s,
         }
     }
@@ -211,6 +216,7 @@ pub fn run_bench(o: &BenchOptions) -> BenchReport {
         unit: "samples/s",
         bytes: bytes.len() as f64,
         memory_pass: mem,
+        reference: "memory pass",
     };
     report.lines.push(w.line("memory pass", mem, None));
     let (d, _) = best(o.repeats, || {
@@ -312,6 +318,7 @@ pub fn run_bench(o: &BenchOptions) -> BenchReport {
             unit: "profiles/s",
             bytes: bytes.len() as f64,
             memory_pass: pmem,
+            reference: "memory pass",
         };
         report.lines.push(w.line("memory pass", pmem, None));
         let profiles: Vec<Profile> = heights
@@ -354,7 +361,100 @@ pub fn run_bench(o: &BenchOptions) -> BenchReport {
             report.lines.push(w.line("gpu", d, Some(split)));
         }
     }
+    decode_lines(o, &mut report);
     report
+}
+
+/// Telemetry decoding against its physical reference, in one run: every
+/// MCAP file of a simulated season (the demo at 20 Hz; `--small`: the tiny
+/// one), block and per-sample forms, read from the page cache by
+/// `read_telemetry` (CRC checks, decompression, protobuf decoding into
+/// channels) and by zstd alone over the same chunks, on one thread and on
+/// all. Files in parallel on all threads, as `extract` reads them.
+fn decode_lines(o: &BenchOptions, report: &mut BenchReport) {
+    use crate::ingest::telemetry::{Encoding, decompress_only, read_telemetry};
+    use crate::sim::{Preset, SimOptions, simulate};
+    let threads = report.threads;
+    let Ok(dir) = tempfile::tempdir() else {
+        report
+            .notes
+            .push("decode skipped: no temporary folder".into());
+        return;
+    };
+    for (encoding, label) in [
+        (Encoding::Block, "decode, block"),
+        (Encoding::Sample, "decode, sample"),
+    ] {
+        let out = dir.path().join(label.replace(", ", "-"));
+        let opts = SimOptions {
+            preset: if o.small { Preset::Tiny } else { Preset::Demo },
+            scale: 1.0,
+            seed: 1,
+            effects: vec![],
+            encoding,
+            rate_hz: None,
+            out: out.clone(),
+            sensor_noise: true,
+            progress: false,
+        };
+        let files: Vec<std::path::PathBuf> = match simulate(&opts) {
+            Ok(_) => std::fs::read_dir(out.join("telemetry"))
+                .map(|d| {
+                    d.filter_map(|e| e.ok().map(|e| e.path()))
+                        .filter(|p| p.extension().is_some_and(|x| x == "mcap"))
+                        .collect()
+                })
+                .unwrap_or_default(),
+            Err(e) => {
+                report.notes.push(format!("{label} skipped: {e}"));
+                continue;
+            }
+        };
+        let bytes: u64 = files
+            .iter()
+            .filter_map(|f| std::fs::metadata(f).ok())
+            .map(|m| m.len())
+            .sum();
+        let decode = |f: &std::path::PathBuf| {
+            read_telemetry(f)
+                .map(|t| t.wheels.iter().map(|w| w.len() as u64).sum::<u64>())
+                .unwrap_or(0)
+        };
+        let samples: u64 = files.iter().map(decode).sum();
+        let zstd = || {
+            files
+                .par_iter()
+                .map(|f| decompress_only(f).unwrap_or(0))
+                .sum::<u64>()
+        };
+        let (z1, _) = best(o.repeats, || one_thread(zstd));
+        let w = Workload {
+            kernel: label,
+            size: format!("{} runs, {:.0} MB MCAP", files.len(), bytes as f64 / 1e6),
+            items: samples as f64,
+            unit: "samples/s",
+            bytes: bytes as f64,
+            memory_pass: z1,
+            reference: "zstd only",
+        };
+        report.lines.push(w.line("zstd only, 1 thread", z1, None));
+        let (d, _) = best(o.repeats, || {
+            one_thread(|| files.iter().map(decode).sum::<u64>())
+        });
+        report.lines.push(w.line("tirewear, 1 thread", d, None));
+        let (zn, _) = best(o.repeats, zstd);
+        let wn = Workload {
+            memory_pass: zn,
+            ..w
+        };
+        report
+            .lines
+            .push(wn.line(&format!("zstd only, {threads} thr"), zn, None));
+        let (d, _) = best(o.repeats, || files.par_iter().map(decode).sum::<u64>());
+        report
+            .lines
+            .push(wn.line(&format!("tirewear, {threads} threads"), d, None));
+    }
 }
 
 /// The report as a table.
@@ -365,7 +465,7 @@ pub fn render(r: &BenchReport) -> String {
     let _ = writeln!(
         s,
         "{:<17} {:<28} {:<20} {:>10} {:>14} {:>9} {:>8}  gpu upload/compute/readback",
-        "kernel", "size", "engine", "time ms", "rate", "GB/s", "vs mem"
+        "kernel", "size", "engine", "time ms", "rate", "GB/s", "vs ref"
     );
     for l in &r.lines {
         let split = l.gpu_split_s.map_or(String::new(), |[u, c, b]| {
@@ -384,6 +484,11 @@ pub fn render(r: &BenchReport) -> String {
             l.vs_memory_pass
         );
     }
+    let _ = writeln!(
+        s,
+        "vs ref: the reference's time over this time (kernels: a memory pass over \
+         the same bytes; decode: zstd alone decompressing the same chunks)"
+    );
     for n in &r.notes {
         let _ = writeln!(s, "note: {n}");
     }

@@ -637,7 +637,13 @@ fn check_data_crc(path: &Path, bytes: &[u8], data_end: usize) -> Result<bool> {
 /// One chunk's records, decompressed from the file and checked against the
 /// chunk's own header (sizes, compression) and its CRC of the uncompressed
 /// records. Sizes are bounded before any allocation.
-fn chunk_records(path: &Path, bytes: &[u8], ci: &mcap::records::ChunkIndex) -> Result<Vec<u8>> {
+/// A chunk's compressed bytes, checked against its index: (compression,
+/// data, uncompressed size, CRC of the uncompressed records or 0).
+fn chunk_data<'b>(
+    path: &Path,
+    bytes: &'b [u8],
+    ci: &mcap::records::ChunkIndex,
+) -> Result<(&'b str, &'b [u8], usize, u32)> {
     let rec = format!("chunk at offset {}", ci.chunk_start_offset);
     let bad = |what: String| IngestError::invalid(path, rec.clone(), what);
     let start = usize::try_from(ci.chunk_start_offset).unwrap_or(usize::MAX);
@@ -688,7 +694,14 @@ fn chunk_records(path: &Path, bytes: &[u8], ci: &mcap::records::ChunkIndex) -> R
                 bytes.len()
             ))
         })?;
-    let size = uncompressed_size as usize;
+    Ok((name, data, uncompressed_size as usize, crc))
+}
+
+/// A chunk's records, decompressed and checked against the chunk's CRC.
+fn chunk_records(path: &Path, bytes: &[u8], ci: &mcap::records::ChunkIndex) -> Result<Vec<u8>> {
+    let rec = format!("chunk at offset {}", ci.chunk_start_offset);
+    let bad = |what: String| IngestError::invalid(path, rec.clone(), what);
+    let (name, data, size, crc) = chunk_data(path, bytes, ci)?;
     let out = match name {
         "" => data.to_vec(),
         "zstd" => zstd::bulk::decompress(data, size).map_err(|e| bad(format!("zstd: {e}")))?,
@@ -718,6 +731,30 @@ fn chunk_records(path: &Path, bytes: &[u8], ci: &mcap::records::ChunkIndex) -> R
         }
     }
     Ok(out)
+}
+
+/// The physical reference for decoding: decompresses every chunk of an
+/// indexed MCAP file with zstd (or lz4) and nothing else — no CRC, no
+/// parsing — and returns the uncompressed bytes. `tirewear bench` times it
+/// against [`read_telemetry`] over the same files.
+pub fn decompress_only(path: &Path) -> Result<u64> {
+    let file = File::open(path).map_err(|e| IngestError::io(path, e))?;
+    // SAFETY: as in `read_indexed`.
+    let map = unsafe { memmap2::Mmap::map(&file) }.map_err(|e| IngestError::io(path, e))?;
+    let bytes: &[u8] = &map;
+    let summary = read_summary(path, bytes)?
+        .ok_or_else(|| IngestError::invalid(path, "summary", "no summary to find chunks by"))?;
+    let mut total = 0u64;
+    for ci in &summary.chunk_indexes {
+        let (name, data, size, _) = chunk_data(path, bytes, ci)?;
+        total += match name {
+            "zstd" => zstd::bulk::decompress(data, size)
+                .map_err(|e| IngestError::invalid(path, "chunk", format!("zstd: {e}")))?
+                .len() as u64,
+            _ => chunk_records(path, bytes, ci)?.len() as u64,
+        };
+    }
+    Ok(total)
 }
 
 /// Parallel path: every chunk through its own indexed reader over the memory map.
