@@ -610,8 +610,7 @@ fn run_gap(
     let stem = kpis.file_stem().and_then(|s| s.to_str()).unwrap_or("kpis");
     let maps_path = kpis.with_file_name(format!("{stem}.energy_maps.parquet"));
     let maps = if maps_path.exists() {
-        tirewear::kpi::table::check_same_extraction(kpis, &maps_path)?;
-        tirewear::kpi::energy_map::read_energy_maps(&maps_path)?
+        tirewear::kpi::energy_map::read_tire_maps(kpis)?
     } else {
         tracing::warn!(
             "{} not found: candidate effects and shrinkage are skipped",

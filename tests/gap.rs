@@ -405,3 +405,86 @@ fn a_predictions_file_is_a_baseline_like_the_model_it_came_from() {
         "{err}"
     );
 }
+
+/// An effect the tool was not written for, planted outside it: on a clean
+/// season, each tire's wear gains a term proportional to the friction energy
+/// it dissipated at combined slip (|v_s| / max(|v_x|, 1 m/s)) above 0.08 —
+/// computed here from the raw telemetry with a plain f64 loop (time steps
+/// from the timestamps), not from the condition maps — scaled to about a
+/// quarter of the wear variance. No named mechanism covers it; the generated
+/// condition candidates must name a slip condition first and shrink the
+/// testing gap most of the way to the clean season's.
+#[test]
+fn an_unlisted_slip_effect_is_found_among_the_generated_candidates() {
+    use tirewear::gap::report::{Baseline, diagnose};
+    use tirewear::ingest::telemetry::read_telemetry;
+    let dir = tempfile::tempdir().unwrap();
+    let mut s = season_settings(dir.path());
+    s.keep = true;
+    let (_, clean) = run_case(None, 11, &s).unwrap();
+    let season_dir = dir.path().join("clean-s11");
+    let season = tirewear::ingest::manifest::Season::open(&season_dir).unwrap();
+    // Per tire: energy (MJ) at combined slip above 0.08.
+    let mut extra = std::collections::HashMap::new();
+    for run in &season.manifest.runs {
+        let t = read_telemetry(&season.path(&run.telemetry)).unwrap();
+        for (w, name) in t.wheels.iter().zip(["FL", "FR", "RL", "RR"]) {
+            let mut e = 0.0;
+            for i in 0..w.len().saturating_sub(1) {
+                let dt = (w.time_ns[i + 1] - w.time_ns[i]) as f64 * 1e-9;
+                if dt > 1.0 {
+                    continue;
+                }
+                let f = |x: f32| x as f64;
+                let v_sx = f(w.vx_mps[i]) - f(w.omega_radps[i]) * f(w.rolling_radius_m[i]);
+                let v_sy = f(w.vy_mps[i]);
+                let v_s = (v_sx * v_sx + v_sy * v_sy).sqrt();
+                if v_s / f(w.vx_mps[i]).abs().max(1.0) > 0.08 {
+                    e += (-f(w.fx_n[i]) * v_sx - f(w.fy_n[i]) * v_sy) * dt;
+                }
+            }
+            extra.insert((run.id.clone(), name.to_string()), e * 1e-6);
+        }
+    }
+    let mut rows = tirewear::kpi::table::read_parquet(&season_dir.join("kpis.parquet")).unwrap();
+    let var = |v: &[f64]| {
+        let m = v.iter().sum::<f64>() / v.len() as f64;
+        v.iter().map(|x| (x - m) * (x - m)).sum::<f64>() / v.len() as f64
+    };
+    let wear: Vec<f64> = rows.iter().map(|r| r.wear_mean_pct).collect();
+    let planted: Vec<f64> = rows
+        .iter()
+        .map(|r| extra[&(r.run.clone(), r.wheel.clone())])
+        .collect();
+    assert!(var(&planted) > 0.0, "the condition occurs");
+    // a²·var(planted) = var(wear)/3: about a quarter of the new variance.
+    let a = (var(&wear) / 3.0 / var(&planted)).sqrt();
+    for (r, p) in rows.iter_mut().zip(&planted) {
+        r.wear_mean_pct += a * p;
+    }
+    let maps = tirewear::kpi::energy_map::read_tire_maps(&season_dir.join("kpis.parquet")).unwrap();
+    assert!(maps.values().all(|m| m.conditions.is_some()));
+    let gap = GapSettings {
+        wlf: tirewear::gap::validate::read_wlf(&season_dir.join("compounds")).unwrap(),
+        ..s.gap.clone()
+    };
+    let d = diagnose(&rows, &maps, &Baseline::Physics, &gap).unwrap();
+    let rmse = |d: &Diagnosis, i: usize| d.steps[i].testing.as_ref().unwrap().rmse_pct;
+    let ideal = rmse(&clean, 0);
+    let last = d.steps.len() - 1;
+    let shrink = (rmse(&d, 0) - rmse(&d, last)) / (rmse(&d, 0) - ideal);
+    println!(
+        "combined slip > 0.08 planted (a = {a:.3} %/MJ): terms {:?} (θ = {}), testing RMSE {:.3} -> {:.3} %, ideal {ideal:.3} %: shrinkage {shrink:.2}",
+        added(&d),
+        d.steps.get(1).map_or(f64::NAN, |s| s.threshold),
+        rmse(&d, 0),
+        rmse(&d, last)
+    );
+    let first = added(&d).get(1).copied().unwrap_or("");
+    assert!(first.contains("slip"), "{:?}", added(&d));
+    if first.contains("combined_slip") {
+        let theta = d.steps[1].threshold;
+        assert!((theta - 0.08).abs() <= 0.021, "θ = {theta}");
+    }
+    assert!(shrink > 0.6, "{shrink}");
+}

@@ -6,6 +6,7 @@
 
 use super::user_effects::UserEffect;
 use crate::kpi::KpiRow;
+use crate::kpi::condition_map::{CONDITIONS, Component};
 use crate::kpi::energy_map::EnergyMaps;
 use crate::model::data::candidate_inputs;
 use std::sync::Arc;
@@ -52,6 +53,11 @@ pub enum Feature {
     /// index is a track-level term on the law's energy instead
     /// ([`candidate_feature`]).
     Kpi(&'static str),
+    /// Generated from the condition energy maps: the friction energy of the
+    /// samples whose condition `CONDITIONS[condition]` lies above θ (or
+    /// below, `above` false), θ a bin edge (MJ). Wear per joule that is
+    /// higher under some condition no named mechanism covers.
+    ConditionEnergy { condition: usize, above: bool },
     /// A user hypothesis from `effects.toml` (`Candidate::user`).
     User,
     /// Set-up: the law's own wear of the tires of one group (a car, a car's
@@ -80,6 +86,7 @@ impl Feature {
             | Feature::PressureEnergy
             | Feature::SmallPatchEnergy
             | Feature::Kpi(_)
+            | Feature::ConditionEnergy { .. }
             | Feature::User
             | Feature::Group => None,
         }
@@ -113,6 +120,10 @@ impl Feature {
             Feature::CamberEnergy => "°",
             Feature::PressureEnergy => "Pa",
             Feature::SmallPatchEnergy => "mm²",
+            Feature::ConditionEnergy { condition, .. } => match CONDITIONS[*condition].unit {
+                "1" => "",
+                u => u,
+            },
             Feature::Kpi(_) | Feature::User | Feature::Group => "",
         }
     }
@@ -284,6 +295,7 @@ pub fn library(rows: &[&KpiRow]) -> Vec<Candidate> {
             });
         }
     }
+    out.extend(condition_candidates());
     // Set-up mechanisms, on both axles (the generic KPI candidates below
     // cover them linearly too); thresholds at the deciles of the rows.
     let deciles = |col: &str, f: fn(f64) -> f64| -> Vec<f64> {
@@ -349,6 +361,58 @@ pub fn library(rows: &[&KpiRow]) -> Vec<Candidate> {
                 user: None,
                 group: None,
             });
+        }
+    }
+    out
+}
+
+/// Named mechanisms that are points of the generated space: (condition,
+/// above) → the mechanism's candidate, which stands for it (one registry
+/// line per mechanism).
+pub const NAMED_CONDITIONS: [(&str, bool, Feature); 3] = [
+    ("t_surface_c", true, Feature::HotSurfaceEnergy),
+    ("t_inner_c", true, Feature::HotInnerEnergy),
+    ("sliding_speed_mps", true, Feature::FastSlidingEnergy),
+];
+
+/// Candidates generated from the condition energy maps: for every condition,
+/// the energy above θ and below θ (θ every other inner bin edge, scanned in
+/// the cross-validation like a mechanism's threshold), on both axles and on
+/// each alone — except the points a named mechanism already covers
+/// ([`NAMED_CONDITIONS`]). Rows whose extraction wrote no condition maps
+/// give NaN terms, and the scoring passes these candidates over.
+fn condition_candidates() -> Vec<Candidate> {
+    let mut out = Vec::new();
+    for (c, cd) in CONDITIONS.iter().enumerate() {
+        let thresholds: Vec<f64> = (2..cd.bins.n)
+            .step_by(2)
+            .map(|k| cd.bins.lower_edge(k))
+            .collect();
+        for above in [true, false] {
+            if NAMED_CONDITIONS
+                .iter()
+                .any(|(name, a, _)| *name == cd.name && *a == above)
+            {
+                continue;
+            }
+            let side = if above { "above" } else { "below" };
+            for axle in [None, Some("front"), Some("rear")] {
+                let name = format!("energy with {} {side} θ", cd.name);
+                out.push(Candidate {
+                    name: match axle {
+                        None => name,
+                        Some(a) => format!("{name}, {a} axle"),
+                    },
+                    feature: Feature::ConditionEnergy {
+                        condition: c,
+                        above,
+                    },
+                    thresholds: thresholds.clone(),
+                    axle,
+                    user: None,
+                    group: None,
+                });
+            }
         }
     }
     out
@@ -486,6 +550,25 @@ pub fn feature(
         Feature::Kpi(c) => {
             r.friction_energy_j * mj * kpi_scale.standardised(r.number(c).unwrap_or(f64::NAN))
         }
+        Feature::ConditionEnergy { condition, above } => maps
+            .and_then(|m| m.conditions.as_deref())
+            .map_or(f64::NAN, |cm| {
+                let bins = CONDITIONS[condition].bins;
+                let tol = 1e-9 * (1.0 + theta.abs());
+                cm.map(Component::Total, condition)
+                    .iter()
+                    .enumerate()
+                    .filter(|(b, _)| {
+                        if above {
+                            bins.lower_edge(*b) >= theta - tol
+                        } else {
+                            bins.lower_edge(b + 1) <= theta + tol
+                        }
+                    })
+                    .map(|(_, e)| e)
+                    .sum::<f64>()
+                    * mj
+            }),
         // Needs the candidate's expression or group: see `candidate_feature`.
         Feature::User | Feature::Group => f64::NAN,
     }
@@ -693,6 +776,68 @@ mod tests {
             ..scale(30.0, 5.0)
         };
         assert!((value(kpi("t_air_avg_c"), f64::NAN, seen) - 3.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn condition_candidates_sum_the_energy_beyond_the_threshold() {
+        // Slip ratio bins are 0.02 wide from −0.3: 2 MJ in bin 20 ([0.10,
+        // 0.12)), 1 MJ in bin 5 ([−0.20, −0.18)).
+        use crate::kpi::condition_map::ConditionMaps;
+        let slip = ConditionMaps::condition_index("slip_ratio").unwrap();
+        let mut cm = ConditionMaps::default();
+        let o: usize = CONDITIONS[..slip].iter().map(|c| c.bins.n).sum();
+        cm.energy_j[0][o + 20] = 2e6;
+        cm.energy_j[0][o + 5] = 1e6;
+        let mut m = EnergyMaps::new();
+        m.conditions = Some(Box::new(cm));
+        let r = KpiRow::default();
+        let f = |above: bool, theta: f64| {
+            feature(
+                Feature::ConditionEnergy {
+                    condition: slip,
+                    above,
+                },
+                &r,
+                Some(&m),
+                theta,
+                KpiScale::NONE,
+            )
+        };
+        let close = |a: f64, b: f64| (a - b).abs() < 1e-9;
+        assert!(close(f(true, 0.1), 2.0));
+        assert!(close(f(true, 0.12), 0.0));
+        assert!(close(f(true, -0.2), 3.0));
+        assert!(close(f(false, -0.1), 1.0));
+        assert!(close(f(false, -0.2), 0.0));
+        // Without condition maps (an older extraction) the term is undefined.
+        assert!(
+            feature(
+                Feature::ConditionEnergy {
+                    condition: slip,
+                    above: true
+                },
+                &r,
+                Some(&EnergyMaps::new()),
+                0.1,
+                KpiScale::NONE
+            )
+            .is_nan()
+        );
+        // The generated space: every condition both ways on three scopes,
+        // less the points the named mechanisms stand for.
+        let generated = condition_candidates();
+        assert_eq!(
+            generated.len(),
+            (2 * CONDITIONS.len() - NAMED_CONDITIONS.len()) * 3
+        );
+        for (name, above, _) in NAMED_CONDITIONS {
+            let c = ConditionMaps::condition_index(name).unwrap();
+            assert!(!generated.iter().any(|g| g.feature
+                == Feature::ConditionEnergy {
+                    condition: c,
+                    above
+                }));
+        }
     }
 
     #[test]

@@ -296,7 +296,7 @@ pub fn run_case(
         allow_external_paths: false,
     })?;
     let rows = crate::kpi::table::read_parquet(&kpis)?;
-    let maps = crate::kpi::energy_map::read_energy_maps(&dir.join("kpis.energy_maps.parquet"))?;
+    let maps = crate::kpi::energy_map::read_tire_maps(&kpis)?;
     // The diagnosis sees the KPI tables and the compound files only.
     let gap = GapSettings {
         wlf: read_wlf(&dir.join("compounds"))?,

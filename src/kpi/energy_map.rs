@@ -62,6 +62,9 @@ pub struct EnergyMaps {
     /// Lateral friction energy −F_y·v_sy·Δt, [T_surface bin][T_inner bin]
     /// (all zero in files written before it existed).
     pub lateral_surface_inner: Vec<f64>,
+    /// The tire's condition energy maps, where its extraction wrote them
+    /// (`NAME.condition_maps.parquet`; attached by [`read_tire_maps`]).
+    pub conditions: Option<Box<crate::kpi::condition_map::ConditionMaps>>,
 }
 
 impl Default for EnergyMaps {
@@ -76,6 +79,7 @@ impl EnergyMaps {
             surface_inner: vec![0.0; T_SURFACE_BINS.n * T_INNER_BINS.n],
             speed_surface: vec![0.0; SLIDING_SPEED_BINS.n * T_SURFACE_BINS.n],
             lateral_surface_inner: vec![0.0; T_SURFACE_BINS.n * T_INNER_BINS.n],
+            conditions: None,
         }
     }
 
@@ -247,6 +251,34 @@ pub fn read_energy_maps(
         }
     }
     Ok(out)
+}
+
+/// Every tire's maps of one extraction: the energy maps beside a KPI table
+/// (`NAME.energy_maps.parquet`), with its condition maps attached where
+/// `NAME.condition_maps.parquet` exists (older extractions have none). Each
+/// side table must come from the same extraction as the KPI table. An
+/// absent energy-map table gives no maps.
+pub fn read_tire_maps(
+    kpis: &std::path::Path,
+) -> Result<std::collections::BTreeMap<(String, String), EnergyMaps>, crate::ingest::IngestError> {
+    use crate::kpi::table::check_same_extraction;
+    let stem = kpis.file_stem().and_then(|s| s.to_str()).unwrap_or("kpis");
+    let side = |suffix: &str| kpis.with_file_name(format!("{stem}.{suffix}"));
+    let energy = side("energy_maps.parquet");
+    if !energy.exists() {
+        return Ok(Default::default());
+    }
+    check_same_extraction(kpis, &energy)?;
+    let mut maps = read_energy_maps(&energy)?;
+    let conditions = side("condition_maps.parquet");
+    if conditions.exists() {
+        check_same_extraction(kpis, &conditions)?;
+        let mut cm = crate::kpi::condition_map::read_condition_maps(&conditions)?;
+        for (key, m) in maps.iter_mut() {
+            m.conditions = Some(Box::new(cm.remove(key).unwrap_or_default()));
+        }
+    }
+    Ok(maps)
 }
 
 #[cfg(test)]

@@ -138,6 +138,7 @@ pub fn maps_from_quanta(quanta: &[u64]) -> Vec<EnergyMaps> {
                 surface_inner: j(&q[..SURFACE_INNER_BINS]),
                 speed_surface: j(&q[SURFACE_INNER_BINS..LATERAL_BINS_AT]),
                 lateral_surface_inner: j(&q[LATERAL_BINS_AT..]),
+                conditions: None,
             }
         })
         .collect()
