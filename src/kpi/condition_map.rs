@@ -420,19 +420,8 @@ pub fn read_condition_maps(
     let mut record = 0usize;
     for batch in reader {
         let batch = batch.map_err(|e| perr(e.into()))?;
-        let col = |name: &str, ty: &DataType| -> Result<std::sync::Arc<dyn Array>, IngestError> {
-            let c = batch.column_by_name(name).ok_or_else(|| {
-                IngestError::invalid(path, "schema", format!("missing column '{name}'"))
-            })?;
-            let cast = arrow_cast::cast(c, ty).map_err(|e| perr(e.into()))?;
-            if let Some(k) = (0..cast.len()).find(|&k| cast.is_null(k)) {
-                return Err(IngestError::invalid(
-                    path,
-                    format!("record {}", record + k + 1),
-                    format!("column '{name}' is empty or not a {ty}"),
-                ));
-            }
-            Ok(cast)
+        let col = |name: &str, ty: &DataType| {
+            crate::kpi::table::checked_column(path, &batch, name, ty, record)
         };
         let text = |name: &str| -> Result<StringArray, IngestError> {
             let a = col(name, &DataType::Utf8)?;

@@ -163,20 +163,8 @@ pub fn read_energy_maps(
     let mut record = 0usize;
     for batch in reader {
         let batch = batch.map_err(|e| perr(e.into()))?;
-        let col = |name: &str, ty: &DataType| -> Result<std::sync::Arc<dyn Array>, IngestError> {
-            let c = batch.column_by_name(name).ok_or_else(|| {
-                IngestError::invalid(path, "schema", format!("missing column '{name}'"))
-            })?;
-            let cast = arrow_cast::cast(c, ty).map_err(|e| perr(e.into()))?;
-            // A null, or a value that does not convert, must not read as 0.
-            if let Some(k) = (0..cast.len()).find(|&k| cast.is_null(k)) {
-                return Err(IngestError::invalid(
-                    path,
-                    format!("record {}", record + k + 1),
-                    format!("column '{name}' is empty or not a {ty}"),
-                ));
-            }
-            Ok(cast)
+        let col = |name: &str, ty: &DataType| {
+            crate::kpi::table::checked_column(path, &batch, name, ty, record)
         };
         let (run, wheel, map) = (
             col("run", &DataType::Utf8)?,

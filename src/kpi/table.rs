@@ -265,6 +265,23 @@ fn strict_cast(
     Ok(lenient)
 }
 
+/// Column `name` of a record batch cast to `to` by [`strict_cast`]: a
+/// missing column, a null or a value that does not convert is an error
+/// naming the column and the row (`first_row` is the batch's first row in
+/// the file). For the side-table readers.
+pub(crate) fn checked_column(
+    path: &Path,
+    batch: &RecordBatch,
+    name: &str,
+    to: &DataType,
+    first_row: usize,
+) -> Result<ArrayRef, IngestError> {
+    let col = batch
+        .column_by_name(name)
+        .ok_or_else(|| IngestError::invalid(path, "schema", format!("missing column '{name}'")))?;
+    strict_cast(path, name, col, to, first_row)
+}
+
 /// Checks each numeric column's `unit` metadata, where the file states one,
 /// against the unit this build expects: a table in other units is refused
 /// rather than read as numbers in ours.
