@@ -391,6 +391,7 @@ fn decode_lines(o: &BenchOptions, report: &mut BenchReport) {
             scale: 1.0,
             seed: 1,
             effects: vec![],
+            generated: None,
             encoding,
             rate_hz: None,
             out: out.clone(),

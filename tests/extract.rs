@@ -15,6 +15,7 @@ fn sim(out: &Path, preset: Preset, rate: f64) {
         scale: 1.0,
         seed: 7,
         effects: vec![],
+        generated: None,
         encoding: Encoding::Block,
         rate_hz: Some(rate),
         out: out.to_path_buf(),

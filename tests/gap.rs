@@ -6,7 +6,7 @@
 use tirewear::gap::report::{Diagnosis, GapSettings};
 use tirewear::gap::scoring::ScoringSettings;
 use tirewear::gap::stats::{VarianceComponents, benjamini_hochberg, clustered_difference};
-use tirewear::gap::validate::{Case, ValidateSettings, run_case};
+use tirewear::gap::validate::{Case, Planted, ValidateSettings, run_case};
 use tirewear::sim::{Effect, EffectKind};
 
 #[derive(serde::Deserialize)]
@@ -60,6 +60,7 @@ fn settings(work: &std::path::Path) -> ValidateSettings {
         magnitudes: vec![],
         seeds: vec![],
         clean_seeds: vec![],
+        random: vec![],
         preset: tirewear::sim::Preset::Demo,
         scale: 1.0,
         rate_hz: 5.0,
@@ -85,7 +86,7 @@ fn planted_graining_is_found_on_the_front_axle() {
     let dir = tempfile::tempdir().unwrap();
     let s = settings(dir.path());
     let e = planted(EffectKind::Graining, 1.0, 81.0);
-    let (case, d) = run_case(Some(&e), 1, &s).unwrap();
+    let (case, d) = run_case(&Planted::Named(e.clone()), 1, &s).unwrap();
     assert!(case.hit, "{case:?}\n{:?}", d.candidates.first());
     assert!(
         case.first_front_share > 0.7 && case.truth_front_share > 0.7,
@@ -106,7 +107,7 @@ fn planted_graining_is_found_on_the_front_axle() {
 fn planted_blistering_is_found() {
     let dir = tempfile::tempdir().unwrap();
     let e = planted(EffectKind::Blistering, 1.0, 125.0);
-    let (case, d) = run_case(Some(&e), 3, &settings(dir.path())).unwrap();
+    let (case, d) = run_case(&Planted::Named(e.clone()), 3, &settings(dir.path())).unwrap();
     assert!(
         case.hit && case.hit_axle,
         "{case:?}\n{:?}",
@@ -120,7 +121,7 @@ fn planted_blistering_is_found() {
 #[test]
 fn clean_season_reports_no_effect() {
     let dir = tempfile::tempdir().unwrap();
-    let (case, d) = run_case(None, 2, &settings(dir.path())).unwrap();
+    let (case, d) = run_case(&Planted::Clean, 2, &settings(dir.path())).unwrap();
     assert_eq!(case.significant_terms, 0, "{:?}", d.steps);
     assert!(
         d.candidates
@@ -151,7 +152,8 @@ fn season_settings(work: &std::path::Path) -> ValidateSettings {
 /// extracted, diagnosed and scored in a temporary folder.
 fn season_case(effect: Option<&Effect>, seed: u64) -> (Case, Diagnosis) {
     let dir = tempfile::tempdir().unwrap();
-    run_case(effect, seed, &season_settings(dir.path())).unwrap()
+    let planted = effect.map_or(Planted::Clean, |e| Planted::Named(e.clone()));
+    run_case(&planted, seed, &season_settings(dir.path())).unwrap()
 }
 
 /// The names of the terms step 3 added, the baseline first.
@@ -273,7 +275,7 @@ fn a_planted_set_up_effect_is_named_by_its_car_and_axle() {
     let dir = tempfile::tempdir().unwrap();
     let mut s = season_settings(dir.path());
     s.keep = true;
-    let (_, clean) = run_case(None, 9, &s).unwrap();
+    let (_, clean) = run_case(&Planted::Clean, 9, &s).unwrap();
     assert!(
         !added(&clean).iter().any(|a| a.starts_with("set-up")),
         "{:?}",
@@ -357,7 +359,7 @@ fn a_predictions_file_is_a_baseline_like_the_model_it_came_from() {
     let mut s = settings(dir.path());
     s.keep = true;
     s.gap.scoring.permutations = 199;
-    run_case(None, 4, &s).unwrap();
+    run_case(&Planted::Clean, 4, &s).unwrap();
     let season = dir.path().join("clean-s4");
     let rows = tirewear::kpi::table::read_parquet(&season.join("kpis.parquet")).unwrap();
     let maps =
@@ -421,7 +423,7 @@ fn an_unlisted_slip_effect_is_found_among_the_generated_candidates() {
     let dir = tempfile::tempdir().unwrap();
     let mut s = season_settings(dir.path());
     s.keep = true;
-    let (_, clean) = run_case(None, 11, &s).unwrap();
+    let (_, clean) = run_case(&Planted::Clean, 11, &s).unwrap();
     let season_dir = dir.path().join("clean-s11");
     let season = tirewear::ingest::manifest::Season::open(&season_dir).unwrap();
     // Per tire: energy (MJ) at combined slip above 0.08.

@@ -82,6 +82,7 @@ fn findings(seed: u64) -> Findings {
         scale: 1.0,
         seed,
         effects: vec![],
+        generated: None,
         encoding: Encoding::Block,
         rate_hz: Some(5.0), // the findings do not need 20 Hz; keeps the test quick
         out: dir.path().to_path_buf(),

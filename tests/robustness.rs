@@ -435,6 +435,7 @@ fn mutated_manifests_compounds_roads_and_wear_never_panic() {
         scale: 1.0,
         seed: 5,
         effects: vec![],
+        generated: None,
         encoding: tirewear::ingest::telemetry::Encoding::Block,
         rate_hz: Some(5.0),
         out: season_dir.clone(),

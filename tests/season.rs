@@ -16,6 +16,7 @@ fn sim(out: &Path, seed: u64, encoding: Encoding, noise: bool, effects: Vec<Effe
         scale: 1.0,
         seed,
         effects,
+        generated: None,
         encoding,
         rate_hz: None,
         out: out.to_path_buf(),

@@ -144,6 +144,17 @@ pub struct Diagnosis {
     pub candidates: Vec<Score>,
     /// Step 3: the gap before and after each significant term, added in turn.
     pub steps: Vec<Step>,
+    /// The wear (%) step 3's terms together add to each tire diagnosed
+    /// (training and testing), in the final model (empty without terms).
+    pub terms_wear: Vec<TermsWear>,
+}
+
+/// What step 3's terms add to one tire's predicted wear.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct TermsWear {
+    pub run: String,
+    pub wheel: String,
+    pub wear_pct: f64,
 }
 
 fn size(r: &[f64]) -> GapSize {
@@ -320,6 +331,9 @@ pub fn diagnose(
     let mut steps = vec![step_of("baseline".into(), None, &all_res)];
     let mut refitted_law: Option<PhysicsBaseline> = None;
     let mut candidates = Vec::new();
+    // The final model's coefficients (of `base`, whose last columns are the terms).
+    let mut final_k: Vec<f64> = Vec::new();
+    let mut n_terms = 0;
     if !maps.is_empty() {
         let mut lib = library(&all_rows[..n_train]);
         lib.extend(settings.user_effects.iter().cloned());
@@ -461,6 +475,8 @@ pub fn diagnose(
             }
             track_level.push(cand.feature.track_level());
             terms.push(term);
+            n_terms = terms.len();
+            final_k = k.clone();
             if let Some(r) = law_refit {
                 base = r.columns;
                 law = r.law_rows;
@@ -473,7 +489,22 @@ pub fn diagnose(
             steps.push(step_of(best.name.clone(), Some(&refitted), &res));
         }
     }
+    let terms_wear = if n_terms == 0 {
+        Vec::new()
+    } else {
+        let first = base.len() - n_terms;
+        all_rows
+            .iter()
+            .enumerate()
+            .map(|(i, r)| TermsWear {
+                run: r.run.clone(),
+                wheel: r.wheel.clone(),
+                wear_pct: (first..base.len()).map(|j| final_k[j] * base[j][i]).sum(),
+            })
+            .collect()
+    };
     Ok(Diagnosis {
+        terms_wear,
         baseline: name,
         physics,
         physics_with_terms: refitted_law,

@@ -11,13 +11,19 @@
 //!   over the ideal one (baseline recalibrated on wear minus the exact planted
 //!   contribution, which is then added back);
 //! - false discovery: a clean season with any significant term.
+//!
+//! `--random N` adds seasons with a generated effect each
+//! (`sim::generated`: conditions, pairs, bands, power laws and set-up
+//! factors on random scopes, outside the candidate space); a hit there is
+//! a diagnosis whose terms' wear correlates ≥ 0.8 with the planted wear
+//! over the tires diagnosed.
 
 use super::candidates::significant;
 use super::error::GapError;
 use super::report::{Baseline, Diagnosis, GapSettings, diagnose};
 use crate::kpi::KpiRow;
 use crate::model::metrics::median;
-use crate::sim::{Effect, EffectKind};
+use crate::sim::{Effect, EffectKind, GeneratedEffect};
 use std::collections::BTreeMap;
 use std::fmt::Write;
 use std::path::{Path, PathBuf};
@@ -30,6 +36,9 @@ pub struct ValidateSettings {
     pub seeds: Vec<u64>,
     /// Seeds of the clean seasons.
     pub clean_seeds: Vec<u64>,
+    /// Seeds of generated effects (`GeneratedEffect::draw`), one season
+    /// each (its season seed is the same number).
+    pub random: Vec<u64>,
     /// Season preset and scale of the simulated seasons.
     pub preset: crate::sim::Preset,
     pub scale: f64,
@@ -46,8 +55,10 @@ pub struct ValidateSettings {
 /// One season of the matrix and how its diagnosis scored.
 #[derive(Debug, Clone, serde::Serialize)]
 pub struct Case {
-    /// Planted effect (`None` for a clean season).
+    /// Planted effect (`None` for a clean season or a generated effect).
     pub effect: Option<Effect>,
+    /// The generated effect as the simulator resolved it (from truth/).
+    pub generated: Option<GeneratedEffect>,
     pub seed: u64,
     /// Variance of the planted contribution over the variance of measured
     /// wear (truth), over the tires that are not worn through.
@@ -67,11 +78,33 @@ pub struct Case {
     pub rmse_ideal_pct: f64,
     /// (baseline − diagnosed) / (baseline − ideal).
     pub shrinkage_ratio: f64,
+    /// Pearson correlation, over the tires diagnosed, of the wear the
+    /// diagnosis's terms add with the planted wear (0 without terms).
+    pub terms_correlation: f64,
     pub error: Option<String>,
 }
 
-/// The matrix: planted cases first, then the clean seasons.
-pub fn matrix(s: &ValidateSettings) -> Vec<(Option<Effect>, u64)> {
+/// What a season of the matrix has planted.
+#[derive(Debug, Clone)]
+pub enum Planted {
+    Named(Effect),
+    /// As drawn; the simulator resolves it on the season.
+    Generated(GeneratedEffect),
+    Clean,
+}
+
+impl Planted {
+    fn label(&self) -> String {
+        match self {
+            Planted::Named(e) => e.to_string(),
+            Planted::Generated(g) => format!("generated #{}", g.seed),
+            Planted::Clean => "clean".into(),
+        }
+    }
+}
+
+/// The matrix: planted cases first, then the generated effects, then the clean seasons.
+pub fn matrix(s: &ValidateSettings) -> Vec<(Planted, u64)> {
     let mut out = Vec::new();
     for &kind in &s.effects {
         for &m in &s.magnitudes {
@@ -85,11 +118,16 @@ pub fn matrix(s: &ValidateSettings) -> Vec<(Option<Effect>, u64)> {
                         EffectKind::RoadAbrasion => 0.005,
                         _ => 3.0,
                     };
-                out.push((Some(e), seed));
+                out.push((Planted::Named(e), seed));
             }
         }
     }
-    out.extend(s.clean_seeds.iter().map(|&seed| (None, seed)));
+    out.extend(
+        s.random
+            .iter()
+            .map(|&seed| (Planted::Generated(GeneratedEffect::draw(seed)), seed)),
+    );
+    out.extend(s.clean_seeds.iter().map(|&seed| (Planted::Clean, seed)));
     out
 }
 
@@ -113,10 +151,11 @@ pub fn read_wlf(dir: &Path) -> Result<BTreeMap<String, crate::ingest::compound::
     Ok(out)
 }
 
-/// Planted wear (%) per (run, wheel) from `truth/wear_truth.csv`.
+/// Planted wear (%) per (run, wheel) from `truth/wear_truth.csv`: the
+/// column `wear_<column>_pct` (None: zero).
 pub fn read_planted(
     truth: &Path,
-    kind: Option<EffectKind>,
+    column: Option<&str>,
 ) -> Result<BTreeMap<(String, String), f64>, GapError> {
     let file = truth.display().to_string();
     let mut rd = csv::Reader::from_path(truth).map_err(|e| GapError::Truth {
@@ -143,8 +182,8 @@ pub fn read_planted(
             })
     };
     let (run, wheel) = (col("run")?, col("wheel")?);
-    let effect = match kind {
-        Some(k) => Some(col(&format!("wear_{}_pct", k.name().replace('-', "_")))?),
+    let effect = match column {
+        Some(k) => Some(col(&format!("wear_{}_pct", k.replace('-', "_")))?),
         None => None,
     };
     let mut out = BTreeMap::new();
@@ -174,7 +213,7 @@ fn variance(v: &[f64]) -> f64 {
 
 /// Scores a diagnosis of `rows` against the planted wear.
 pub fn score_case(
-    effect: Option<&Effect>,
+    planted_kind: &Planted,
     seed: u64,
     rows: &[KpiRow],
     maps: &BTreeMap<(String, String), crate::kpi::energy_map::EnergyMaps>,
@@ -234,11 +273,25 @@ pub fn score_case(
         .map(str::to_string);
     let first_front_share = first_score.map_or(f64::NAN, |c| c.front_share);
     let truth_front_share = front / total;
-    let hit = effect.is_some_and(|e| first_mechanism.as_deref() == Some(e.kind.name()));
+    let effect = match planted_kind {
+        Planted::Named(e) => Some(e),
+        _ => None,
+    };
+    let terms_correlation = terms_correlation(d, planted);
+    let hit = match planted_kind {
+        Planted::Named(e) => first_mechanism.as_deref() == Some(e.kind.name()),
+        Planted::Generated(_) => terms_correlation >= 0.8,
+        Planted::Clean => false,
+    };
     Ok(Case {
         effect: effect.cloned(),
+        generated: match planted_kind {
+            Planted::Generated(g) => Some(g.clone()),
+            _ => None,
+        },
         seed,
-        variance_share: if effect.is_some() {
+        terms_correlation,
+        variance_share: if !matches!(planted_kind, Planted::Clean) {
             variance(&p_kept) / variance(&w_kept)
         } else {
             0.0
@@ -249,7 +302,9 @@ pub fn score_case(
         first_front_share,
         significant_terms: d.steps.len() - 1,
         hit,
-        hit_axle: hit && (first_front_share - truth_front_share).abs() <= 0.25,
+        // A generated effect's scope is judged by the correlation itself.
+        hit_axle: hit
+            && (effect.is_none() || (first_front_share - truth_front_share).abs() <= 0.25),
         rmse_baseline_pct: rmse_base,
         rmse_diagnosed_pct: rmse_diag,
         rmse_ideal_pct: rmse_ideal,
@@ -258,20 +313,74 @@ pub fn score_case(
     })
 }
 
+/// Pearson correlation of the wear the diagnosis's terms add with the
+/// planted wear, over the tires diagnosed (0 without terms or without
+/// variation in either).
+fn terms_correlation(d: &Diagnosis, planted: &BTreeMap<(String, String), f64>) -> f64 {
+    let pairs: Vec<(f64, f64)> = d
+        .terms_wear
+        .iter()
+        .map(|t| {
+            let p = planted
+                .get(&(t.run.clone(), t.wheel.clone()))
+                .copied()
+                .unwrap_or(0.0);
+            (t.wear_pct, p)
+        })
+        .collect();
+    let n = pairs.len() as f64;
+    if pairs.len() < 3 {
+        return 0.0;
+    }
+    let (ma, mb) = (
+        pairs.iter().map(|p| p.0).sum::<f64>() / n,
+        pairs.iter().map(|p| p.1).sum::<f64>() / n,
+    );
+    let (mut ab, mut aa, mut bb) = (0.0, 0.0, 0.0);
+    for (a, b) in &pairs {
+        ab += (a - ma) * (b - mb);
+        aa += (a - ma) * (a - ma);
+        bb += (b - mb) * (b - mb);
+    }
+    if aa <= 0.0 || bb <= 0.0 {
+        0.0
+    } else {
+        ab / (aa * bb).sqrt()
+    }
+}
+
+/// The generated effect as the simulator resolved it (`truth/settings.toml`).
+fn read_generated(settings: &Path) -> Result<GeneratedEffect, GapError> {
+    let truth = |message: String| GapError::Truth {
+        file: settings.display().to_string(),
+        line: 0,
+        message,
+    };
+    let text = std::fs::read_to_string(settings).map_err(|e| truth(e.to_string()))?;
+    #[derive(serde::Deserialize)]
+    struct Settings {
+        generated: Option<GeneratedEffect>,
+    }
+    let s: Settings = toml::from_str(&text).map_err(|e| truth(e.to_string()))?;
+    s.generated
+        .ok_or_else(|| truth("no [generated] effect".into()))
+}
+
 /// Simulates, extracts, diagnoses and scores one season.
 pub fn run_case(
-    effect: Option<&Effect>,
+    planted_kind: &Planted,
     seed: u64,
     s: &ValidateSettings,
 ) -> Result<(Case, Diagnosis), GapError> {
-    let name = match effect {
-        Some(e) => format!(
+    let name = match planted_kind {
+        Planted::Named(e) => format!(
             "{}-m{}-t{}-s{seed}",
             e.kind.name(),
             e.magnitude,
             e.threshold
         ),
-        None => format!("clean-s{seed}"),
+        Planted::Generated(g) => format!("generated-{}-s{seed}", g.seed),
+        Planted::Clean => format!("clean-s{seed}"),
     };
     let dir = s.work.join(name);
     let _ = std::fs::remove_dir_all(&dir);
@@ -279,7 +388,14 @@ pub fn run_case(
         preset: s.preset,
         scale: s.scale,
         seed,
-        effects: effect.into_iter().cloned().collect(),
+        effects: match planted_kind {
+            Planted::Named(e) => vec![e.clone()],
+            _ => Vec::new(),
+        },
+        generated: match planted_kind {
+            Planted::Generated(g) => Some(g.clone()),
+            _ => None,
+        },
         encoding: crate::ingest::telemetry::Encoding::Block,
         rate_hz: Some(s.rate_hz),
         out: dir.clone(),
@@ -303,11 +419,17 @@ pub fn run_case(
         ..s.gap.clone()
     };
     let d = diagnose(&rows, &maps, &Baseline::Physics, &gap)?;
-    let planted = read_planted(
-        &dir.join("truth").join("wear_truth.csv"),
-        effect.map(|e| e.kind),
-    )?;
-    let case = score_case(effect, seed, &rows, &maps, &planted, &d, &gap)?;
+    let truth = dir.join("truth");
+    let (resolved, column) = match planted_kind {
+        Planted::Named(e) => (planted_kind.clone(), Some(e.kind.name())),
+        Planted::Generated(_) => (
+            Planted::Generated(read_generated(&truth.join("settings.toml"))?),
+            Some("generated"),
+        ),
+        Planted::Clean => (Planted::Clean, None),
+    };
+    let planted = read_planted(&truth.join("wear_truth.csv"), column)?;
+    let case = score_case(&resolved, seed, &rows, &maps, &planted, &d, &gap)?;
     if !s.keep {
         std::fs::remove_dir_all(&dir).map_err(|e| GapError::Io {
             path: dir.display().to_string(),
@@ -334,14 +456,22 @@ pub fn validate(s: &ValidateSettings) -> Vec<Case> {
         indicatif::ProgressBar::hidden()
     };
     let mut out = Vec::new();
-    for (effect, seed) in &cases {
-        pb.set_message(effect.as_ref().map_or("clean".into(), |e| e.to_string()));
-        let case = match run_case(effect.as_ref(), *seed, s) {
+    for (planted, seed) in &cases {
+        pb.set_message(planted.label());
+        let case = match run_case(planted, *seed, s) {
             Ok((c, _)) => c,
             Err(e) => {
-                tracing::error!("season {:?} seed {seed}: {e}", effect);
+                tracing::error!("season {} seed {seed}: {e}", planted.label());
                 Case {
-                    effect: effect.clone(),
+                    effect: match planted {
+                        Planted::Named(e) => Some(e.clone()),
+                        _ => None,
+                    },
+                    generated: match planted {
+                        Planted::Generated(g) => Some(g.clone()),
+                        _ => None,
+                    },
+                    terms_correlation: f64::NAN,
                     seed: *seed,
                     variance_share: f64::NAN,
                     truth_front_share: f64::NAN,
@@ -361,7 +491,9 @@ pub fn validate(s: &ValidateSettings) -> Vec<Case> {
         };
         tracing::info!(
             "{} seed {seed}: first term {:?}, share {:.3}, shrinkage {:.2}",
-            effect.as_ref().map_or("clean".into(), |e| e.to_string()),
+            case.generated
+                .as_ref()
+                .map_or_else(|| planted.label(), |g| g.to_string()),
             case.first_term,
             case.variance_share,
             case.shrinkage_ratio
@@ -468,7 +600,11 @@ pub fn render(cases: &[Case]) -> String {
             );
         }
     }
-    let clean: Vec<&Case> = cases.iter().filter(|c| c.effect.is_none()).collect();
+    render_generated(&mut s, cases);
+    let clean: Vec<&Case> = cases
+        .iter()
+        .filter(|c| c.effect.is_none() && c.generated.is_none())
+        .collect();
     if !clean.is_empty() {
         let fd = clean.iter().filter(|c| c.significant_terms > 0).count();
         let _ = writeln!(
@@ -499,6 +635,79 @@ pub fn render(cases: &[Case]) -> String {
     s
 }
 
+/// The generated effects: the targets over those at ≥ 10 % of the
+/// variance (median shrinkage ≥ 0.8 of the ideal, hit ≥ 80 %), by form and
+/// scope, then season by season.
+fn render_generated(s: &mut String, cases: &[Case]) {
+    let generated: Vec<&Case> = cases
+        .iter()
+        .filter(|c| c.generated.is_some() && c.error.is_none())
+        .collect();
+    if generated.is_empty() {
+        return;
+    }
+    let big: Vec<&Case> = generated
+        .iter()
+        .copied()
+        .filter(|c| c.variance_share >= 0.1)
+        .collect();
+    let line = |s: &mut String, label: &str, g: &[&Case]| {
+        let n = g.len();
+        if n == 0 {
+            return;
+        }
+        let hits = g.iter().filter(|c| c.hit).count();
+        let _ = writeln!(
+            s,
+            "| {label} | {n} | {hits}/{n} ({:.0} %) | {:.2} | {:.2} | {} |",
+            100.0 * hits as f64 / n as f64,
+            median(g.iter().map(|c| c.terms_correlation).collect()),
+            median(g.iter().map(|c| c.shrinkage_ratio).collect()),
+            g.iter().filter(|c| c.significant_terms == 0).count(),
+        );
+    };
+    s.push_str(
+        "\nGenerated effects (targets over those at ≥ 10 % of the wear variance: hit ≥ 80 %, median shrinkage ≥ 0.8 of the ideal; hit: the terms' wear correlates ≥ 0.8 with the planted wear):\n\n| seasons | n | hit | correlation (median) | shrinkage / ideal (median) | no term |\n|---|---|---|---|---|---|\n",
+    );
+    line(s, "all generated", &generated);
+    line(s, "≥ 10 % of the variance", &big);
+    // By form, then by scope.
+    for part in 0..2 {
+        let mut groups: BTreeMap<String, Vec<&Case>> = BTreeMap::new();
+        for c in &big {
+            let g = c.generated.as_ref().expect("generated");
+            let (form, scope) = g.kind_label();
+            let key = if part == 0 { form } else { scope };
+            groups.entry(key.to_string()).or_default().push(c);
+        }
+        for (label, g) in &groups {
+            line(s, &format!("≥ 10 %: {label}"), g);
+        }
+    }
+    s.push_str(
+        "\n| effect | variance share | terms | correlation | RMSE baseline / diagnosed / ideal | shrinkage / ideal |\n|---|---|---|---|---|---|\n",
+    );
+    for c in &generated {
+        let g = c.generated.as_ref().expect("generated");
+        let _ = writeln!(
+            s,
+            "| {g} | {:.1} % | {} | {:.2} | {:.3} / {:.3} / {:.3} | {:.2} |",
+            100.0 * c.variance_share,
+            c.first_term
+                .as_deref()
+                .map_or("none".to_string(), |t| format!(
+                    "{} (of {})",
+                    t, c.significant_terms
+                )),
+            c.terms_correlation,
+            c.rmse_baseline_pct,
+            c.rmse_diagnosed_pct,
+            c.rmse_ideal_pct,
+            c.shrinkage_ratio,
+        );
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -519,6 +728,8 @@ mod tests {
             rmse_diagnosed_pct: 9.0 - shrinkage * 7.0,
             rmse_ideal_pct: 2.0,
             shrinkage_ratio: shrinkage,
+            terms_correlation: f64::NAN,
+            generated: None,
             error: None,
         }
     }

@@ -5,6 +5,7 @@
 pub mod compound;
 pub mod effects;
 pub mod error;
+pub mod generated;
 pub mod lap;
 pub mod preset;
 pub mod road;
@@ -17,6 +18,7 @@ pub mod wear;
 
 pub use effects::{Effect, EffectKind};
 pub use error::SimError;
+pub use generated::GeneratedEffect;
 pub use preset::{Plan, Preset};
 
 use crate::Wheel;
@@ -39,6 +41,10 @@ pub struct SimOptions {
     pub scale: f64,
     pub seed: u64,
     pub effects: Vec<Effect>,
+    /// A randomly generated effect (`GeneratedEffect::draw`), resolved on
+    /// this season: thresholds from its energy quantiles, magnitude from
+    /// its variance share.
+    pub generated: Option<GeneratedEffect>,
     pub encoding: Encoding,
     pub rate_hz: Option<f64>,
     pub out: PathBuf,
@@ -162,6 +168,7 @@ pub fn simulate(opts: &SimOptions) -> Result<SimSummary, SimError> {
                 thermal: thermal::ThermalParams::default(),
                 road_grip: track.grip,
                 effects: &opts.effects,
+                generated: opts.generated.as_ref(),
             };
             let settings = run::RunSettings {
                 distance_m: rp.distance_m,
@@ -200,6 +207,7 @@ pub fn simulate(opts: &SimOptions) -> Result<SimSummary, SimError> {
     let truths = results.into_iter().collect::<Result<Vec<_>, _>>()?;
 
     // Wear: truth and readings.
+    let generated = resolve_generated(opts, &plan, &roads, &truths);
     let mut readings = Vec::new();
     let mut truth_rows = Vec::new();
     let mut saturated = 0u64;
@@ -213,7 +221,12 @@ pub fn simulate(opts: &SimOptions) -> Result<SimSummary, SimError> {
         total_samples += truth.samples * 4;
         for w in Wheel::ALL {
             let wt = &truth.wheels[w.index()];
-            let tw = wear::tire_wear(compound, &roads[ev.track], w, wt, &opts.effects, &mut rng);
+            let mut tw =
+                wear::tire_wear(compound, &roads[ev.track], w, wt, &opts.effects, &mut rng);
+            if let Some((g, _)) = &generated {
+                tw.generated_pct =
+                    g.magnitude * generated_unit_pct(g, rp, w, wt, compound, &roads[ev.track], &tw);
+            }
             let set = tire_set_id(rp, w);
             readings.extend(wear::spot_readings(
                 &rp.id,
@@ -236,7 +249,15 @@ pub fn simulate(opts: &SimOptions) -> Result<SimSummary, SimError> {
         }
     }
     write_wear_csv(&out.join("wear/readings.csv"), &readings)?;
-    write_truth(out, &plan, &roads, &truth_rows, truths.as_slice(), opts)?;
+    write_truth(
+        out,
+        &plan,
+        &roads,
+        &truth_rows,
+        truths.as_slice(),
+        opts,
+        generated.as_ref(),
+    )?;
 
     let manifest = Manifest {
         format_version: manifest::FORMAT_VERSION,
@@ -430,6 +451,7 @@ struct TruthRow {
     wear_blistering_pct: f64,
     wear_thermal_pct: f64,
     wear_road_abrasion_pct: f64,
+    wear_generated_pct: f64,
     wear_total_pct: f64,
 }
 
@@ -465,6 +487,7 @@ impl TruthRow {
             wear_blistering_pct: tw.effect_pct[1],
             wear_thermal_pct: tw.effect_pct[2],
             wear_road_abrasion_pct: tw.effect_pct[3],
+            wear_generated_pct: tw.generated_pct,
             wear_total_pct: tw.total_pct(),
         }
     }
@@ -478,6 +501,9 @@ struct TruthSettings<'a> {
     sample_rate_hz: f64,
     encoding: Encoding,
     effects: &'a [Effect],
+    /// The generated effect as resolved, and in words.
+    generated: Option<&'a GeneratedEffect>,
+    generated_description: Option<&'a str>,
     tracks: Vec<TrackTruth<'a>>,
     compounds: &'a [compound::CompoundModel],
     thermal: thermal::ThermalParams,
@@ -509,8 +535,11 @@ fn write_truth(
     rows: &[TruthRow],
     truths: &[run::RunTruth],
     opts: &SimOptions,
+    generated: Option<&(GeneratedEffect, String)>,
 ) -> Result<(), SimError> {
     let settings = TruthSettings {
+        generated: generated.map(|g| &g.0),
+        generated_description: generated.map(|g| g.1.as_str()),
         preset: format!("{:?}", opts.preset).to_lowercase(),
         seed: opts.seed,
         scale: opts.scale,
@@ -548,6 +577,75 @@ fn write_truth(
         })
         .collect();
     write_csv(&out.join("truth/runs.csv"), &run_rows)
+}
+
+/// The generated effect resolved on the season: thresholds from the energy
+/// quantiles of every tire's histogram, then the magnitude from its variance
+/// share (against the rest of the true wear, tire by tire); with its
+/// description. The wear's random draws are replayed, not consumed, so the
+/// readings match a season without the effect but for its wear.
+fn resolve_generated(
+    opts: &SimOptions,
+    plan: &Plan,
+    roads: &[RoadTruth],
+    truths: &[run::RunTruth],
+) -> Option<(GeneratedEffect, String)> {
+    let mut g = opts.generated.clone()?;
+    let len = g.histogram_len();
+    let mut season = vec![0.0; len];
+    for t in truths {
+        for wt in &t.wheels {
+            for (s, e) in season.iter_mut().zip(&wt.generated_histogram) {
+                *s += e;
+            }
+        }
+    }
+    g.resolve(plan.cars.len(), &season);
+    g.magnitude = 1.0;
+    let (mut other, mut unit) = (Vec::new(), Vec::new());
+    for (rp, truth) in plan.runs.iter().zip(truths) {
+        let ev = &plan.events[rp.event];
+        let car = &plan.cars[rp.car];
+        let compound = &plan.compounds[rp.compound];
+        let mut rng = ChaCha8Rng::seed_from_u64(rp.seed ^ 0x5745_4152);
+        for w in Wheel::ALL {
+            let wt = &truth.wheels[w.index()];
+            let tw = wear::tire_wear(compound, &roads[ev.track], w, wt, &opts.effects, &mut rng);
+            // Advance the stream as the readings will.
+            wear::spot_readings(&rp.id, w, "", car.tread_width(w), &tw, &mut rng);
+            other.push(tw.total_pct());
+            unit.push(generated_unit_pct(
+                &g,
+                rp,
+                w,
+                wt,
+                compound,
+                &roads[ev.track],
+                &tw,
+            ));
+        }
+    }
+    g.magnitude = g.magnitude_for(&other, &unit);
+    let text = g.to_string();
+    tracing::info!("generated effect: {text}");
+    Some((g, text))
+}
+
+/// A generated effect's wear (%) on one tire at magnitude 1 (0 outside its scope).
+fn generated_unit_pct(
+    g: &GeneratedEffect,
+    rp: &preset::RunPlan,
+    w: Wheel,
+    wt: &run::WheelTruth,
+    compound: &compound::CompoundModel,
+    road: &RoadTruth,
+    tw: &wear::TireWear,
+) -> f64 {
+    if !g.scope.contains(rp.car, w) {
+        return 0.0;
+    }
+    let energy = g.weighted_energy_j(&wt.generated_histogram);
+    100.0 * wear::abrasion_mm_per_j(compound, road) * energy / tw.new_depth_mm
 }
 
 fn write_csv<T: serde::Serialize>(path: &Path, rows: &[T]) -> Result<(), SimError> {

@@ -7,6 +7,7 @@
 
 use super::compound::CompoundModel;
 use super::effects::{Effect, EffectKind};
+use super::generated::{GeneratedEffect, SampleState};
 use super::lap::LapProfile;
 use super::thermal::{ThermalParams, TireTemps, hot_pressure_pa};
 use super::tire::slips;
@@ -25,6 +26,9 @@ pub struct RunContext<'a> {
     /// Road grip factor of the track.
     pub road_grip: f64,
     pub effects: &'a [Effect],
+    /// A generated effect whose quantities each wheel's friction power is
+    /// histogrammed by (`WheelTruth::generated_histogram`).
+    pub generated: Option<&'a GeneratedEffect>,
 }
 
 /// The run's own settings.
@@ -54,6 +58,10 @@ pub struct WheelTruth {
     pub weighted_energy_j: f64,
     /// Per planted effect (in `EffectKind::ALL` order): ∫ P_e·w dt (J).
     pub effect_energy_j: [f64; 4],
+    /// The generated effect's component energy (J) binned by its quantities
+    /// (`GeneratedEffect::bin`); empty without one.
+    #[serde(skip)]
+    pub generated_histogram: Vec<f64>,
     pub mean_camber_deg: f64,
     pub mean_pressure_pa: f64,
     pub mean_surface_c: f64,
@@ -171,6 +179,14 @@ pub fn simulate_run<E>(
     // The driver's tire management (1: none), following its target with a lag.
     let mut manage: f64 = 1.0;
     let mut tires = [TireSample::default(); 4];
+    if let Some(g) = ctx.generated {
+        for wt in &mut truth.wheels {
+            wt.generated_histogram = vec![0.0; g.histogram_len()];
+        }
+    }
+    let static_load = car.wheel_loads(0.0, 0.0, 0.0);
+    // dT_surface/dt over the last sample, per wheel (K/s).
+    let mut surface_rate = [0.0f64; 4];
     while distance < set.distance_m {
         // Interpolate the lap profile at s, scaled by this lap's pace.
         let x = s_lap / lap.ds_m;
@@ -227,6 +243,27 @@ pub fn simulate_run<E>(
                 wt.effect_energy_j[idx] +=
                     power * e.weight(temps[k].surface_c, temps[k].inner_c) * dt;
             }
+            if let Some(g) = ctx.generated {
+                let state = SampleState {
+                    slip_ratio: sx,
+                    slip_angle: sy,
+                    sliding_speed_mps: v_sx.hypot(v_sy),
+                    load_n: f.fz,
+                    static_load_n: static_load[k],
+                    utilisation: f.fx.hypot(f.fy) / f.fz.max(100.0),
+                    t_surface_c: temps[k].surface_c,
+                    t_inner_c: temps[k].inner_c,
+                    t_surface_rate_kps: surface_rate[k],
+                    pressure_pa: pressure,
+                    camber_deg: camber,
+                    speed_mps: v,
+                    ax_mps2: ax,
+                    ay_mps2: ay,
+                    time_s: time,
+                    distance_m: distance,
+                };
+                wt.generated_histogram[g.bin(&state)] += g.component.power(p_x, p_y) * dt;
+            }
             wt.mean_camber_deg += camber;
             wt.mean_pressure_pa += pressure;
             wt.mean_surface_c += temps[k].surface_c;
@@ -246,7 +283,9 @@ pub fn simulate_run<E>(
                 pressure_pa: (pressure + noise.pressure.sample(rng)) as f32,
                 camber_deg: (camber + noise.camber.sample(rng)) as f32,
             };
+            let before = temps[k].surface_c;
             temps[k] = ctx.thermal.step(temps[k], dt, p, f.fz, vx, t_air, t_track);
+            surface_rate[k] = (temps[k].surface_c - before) / dt;
         }
         manage += (tire_management(&temps) - manage) * (dt / MANAGE_LAG_S).min(1.0);
         let vehicle = VehicleSample {

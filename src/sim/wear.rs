@@ -45,6 +45,8 @@ pub struct TireWear {
     pub irregular_pct: f64,
     /// In `EffectKind::ALL` order.
     pub effect_pct: [f64; 4],
+    /// A generated effect's wear (`sim::generated`).
+    pub generated_pct: f64,
     /// Camber tilt and pressure crowning of the base-wear distribution.
     pub camber_tilt: f64,
     pub pressure_crown: f64,
@@ -53,7 +55,10 @@ pub struct TireWear {
 
 impl TireWear {
     pub fn total_pct(&self) -> f64 {
-        self.base_pct + self.irregular_pct + self.effect_pct.iter().sum::<f64>()
+        self.base_pct
+            + self.irregular_pct
+            + self.effect_pct.iter().sum::<f64>()
+            + self.generated_pct
     }
 
     /// Wear (mm) at fraction `y` of the width from the inner edge.
@@ -65,10 +70,16 @@ impl TireWear {
         .max(0.05);
         // Irregular front wear concentrates on the inner shoulder (mean 1 over the width).
         let irregular = (-y / 0.2).exp() / (0.2 * (1.0 - (-5.0f64).exp()));
-        let effects: f64 = self.effect_pct.iter().sum();
+        let effects: f64 = self.effect_pct.iter().sum::<f64>() + self.generated_pct;
         (to_mm * (self.base_pct * base + self.irregular_pct * irregular + effects))
             .min(0.98 * self.new_depth_mm)
     }
+}
+
+/// The compound's base abrasion on this road (mm of tread per J of
+/// temperature-weighted friction energy): the unit of every effect's magnitude.
+pub fn abrasion_mm_per_j(compound: &CompoundModel, road: &RoadTruth) -> f64 {
+    compound.wear_mm_per_mj * road.factor() / 1e6
 }
 
 /// Applies the wear law to one wheel's integrals.
@@ -81,7 +92,7 @@ pub fn tire_wear(
     rng: &mut impl Rng,
 ) -> TireWear {
     let new_depth_mm = NEW_DEPTH_MM + rng.random_range(-0.05..0.05);
-    let k = compound.wear_mm_per_mj * road.factor() / 1e6; // mm per J
+    let k = abrasion_mm_per_j(compound, road);
     let pct = |mm: f64| 100.0 * mm / new_depth_mm;
     let base_pct = pct(k * truth.weighted_energy_j);
     let irregular_pct = if wheel.axle() == crate::Axle::Front {
@@ -107,6 +118,7 @@ pub fn tire_wear(
         base_pct,
         irregular_pct,
         effect_pct,
+        generated_pct: 0.0,
         camber_tilt: -0.1 * truth.mean_camber_deg,
         pressure_crown: 2.0 * (truth.mean_pressure_pa / 130_000.0 - 1.0),
         new_depth_mm,
@@ -155,6 +167,7 @@ mod tests {
             base_pct: 30.0,
             irregular_pct: 6.0,
             effect_pct: [2.0, 0.0, 1.0, 0.0],
+            generated_pct: 0.5,
             camber_tilt: 0.3,
             pressure_crown: 0.1,
             new_depth_mm: 4.0,

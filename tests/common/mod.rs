@@ -12,6 +12,7 @@ pub fn simulate_demo(dir: &Path) {
         scale: 1.0,
         seed: 7,
         effects: vec![],
+        generated: None,
         encoding: tirewear::ingest::telemetry::Encoding::Block,
         rate_hz: Some(5.0),
         out: dir.to_path_buf(),

@@ -1,0 +1,188 @@
+//! The simulator's generated effects (`sim::generated`), checked against
+//! the telemetry it wrote: the threshold is the drawn energy quantile, the
+//! wear per tire is the magnitude times the base abrasion per joule times
+//! the energy weighted by the onset (summed here sample by sample, in f64,
+//! not from the simulator's histograms), and the magnitude gives the drawn
+//! share of the wear's variance.
+
+use std::path::Path;
+use tirewear::ingest::manifest::Season;
+use tirewear::ingest::telemetry::{Encoding, read_telemetry};
+use tirewear::sim::generated::{Component, Form, Onset, Quantity, Scope};
+use tirewear::sim::{GeneratedEffect, Preset, SimOptions, simulate};
+use tirewear::{Axle, Wheel};
+
+#[derive(Debug, serde::Deserialize)]
+struct TruthRow {
+    run: String,
+    wheel: Wheel,
+    friction_energy_j: f64,
+    weighted_energy_j: f64,
+    wear_base_pct: f64,
+    wear_generated_pct: f64,
+    wear_total_pct: f64,
+}
+
+#[derive(serde::Deserialize)]
+struct Settings {
+    generated: GeneratedEffect,
+}
+
+fn simulate_with(out: &Path, g: GeneratedEffect) -> (Vec<TruthRow>, GeneratedEffect) {
+    simulate(&SimOptions {
+        preset: Preset::Tiny,
+        scale: 1.0,
+        seed: 5,
+        effects: vec![],
+        generated: Some(g),
+        encoding: Encoding::Block,
+        rate_hz: Some(20.0),
+        out: out.to_path_buf(),
+        sensor_noise: false,
+        progress: false,
+    })
+    .unwrap();
+    let rows = csv::Reader::from_path(out.join("truth/wear_truth.csv"))
+        .unwrap()
+        .deserialize()
+        .map(Result::unwrap)
+        .collect();
+    let text = std::fs::read_to_string(out.join("truth/settings.toml")).unwrap();
+    let s: Settings = toml::from_str(&text).unwrap();
+    (rows, s.generated)
+}
+
+/// One tire's run: (run, wheel, samples of (surface temperature °C, friction energy J)).
+type TireSamples = (String, Wheel, Vec<(f64, f64)>);
+
+/// Per tire of the season: (run, wheel, samples of (surface temperature
+/// °C, friction energy J)), from the telemetry with time steps from the
+/// timestamps: P = −F_x·v_sx − F_y·v_sy, v_sx = v_x − ω·r.
+fn energy_by_temperature(dir: &Path) -> Vec<TireSamples> {
+    let season = Season::open(dir).unwrap();
+    let mut out = Vec::new();
+    for run in &season.manifest.runs {
+        let t = read_telemetry(&season.path(&run.telemetry)).unwrap();
+        for (w, wheel) in t.wheels.iter().zip(Wheel::ALL) {
+            let f = |x: f32| x as f64;
+            let samples = (0..w.len().saturating_sub(1))
+                .map(|i| {
+                    let dt = (w.time_ns[i + 1] - w.time_ns[i]) as f64 * 1e-9;
+                    let v_sx = f(w.vx_mps[i]) - f(w.omega_radps[i]) * f(w.rolling_radius_m[i]);
+                    let p = -f(w.fx_n[i]) * v_sx - f(w.fy_n[i]) * f(w.vy_mps[i]);
+                    (f(w.t_surface_c[i]), p * dt)
+                })
+                .collect();
+            out.push((run.id.clone(), wheel, samples));
+        }
+    }
+    out
+}
+
+#[test]
+fn a_generated_onset_acts_where_and_as_much_as_it_was_drawn() {
+    let dir = tempfile::tempdir().unwrap();
+    let drawn = GeneratedEffect {
+        seed: 0,
+        form: Form::Onset {
+            onset: Onset {
+                quantity: Quantity::SurfaceTemperature,
+                above: true,
+                quantile: 0.7,
+                width_fraction: 0.1,
+                threshold: f64::NAN,
+                width: f64::NAN,
+            },
+        },
+        component: Component::Total,
+        scope: Scope::Axle { axle: Axle::Front },
+        variance_share: 0.2,
+        magnitude: f64::NAN,
+    };
+    let (rows, g) = simulate_with(dir.path(), drawn);
+    let Form::Onset { onset } = g.form else {
+        panic!("{:?}", g.form)
+    };
+
+    // The threshold: the season's energy-weighted 0.7 quantile of the
+    // surface temperature, over every tire (the simulator reads it off a
+    // 512-bin histogram over 0-200 °C: within one bin, 0.39 K).
+    let tires = energy_by_temperature(dir.path());
+    let mut all: Vec<(f64, f64)> = tires.iter().flat_map(|t| t.2.iter().copied()).collect();
+    all.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let total: f64 = all.iter().map(|s| s.1).sum();
+    let mut acc = 0.0;
+    let q70 = all
+        .iter()
+        .find(|s| {
+            acc += s.1;
+            acc >= 0.7 * total
+        })
+        .unwrap()
+        .0;
+    assert!(
+        (onset.threshold - q70).abs() < 200.0 / 512.0,
+        "{} vs {q70}",
+        onset.threshold
+    );
+
+    // The wear per tire: magnitude × (base wear per J of the law's weighted
+    // energy) × Σ P·w(T)·dt on the fronts, none on the rears. The simulator
+    // weights by bin centres (bins of 0.39 K against an onset width of
+    // several K) and integrates with its own time step: 1 %.
+    for (run, wheel, samples) in &tires {
+        let row = rows
+            .iter()
+            .find(|r| &r.run == run && r.wheel == *wheel)
+            .unwrap();
+        if wheel.axle() == Axle::Rear {
+            assert_eq!(row.wear_generated_pct, 0.0);
+            continue;
+        }
+        let energy: f64 = samples.iter().map(|(t, e)| e * onset.weight(*t)).sum();
+        let expected = g.magnitude * row.wear_base_pct / row.weighted_energy_j * energy;
+        assert!(
+            (row.wear_generated_pct - expected).abs() <= 0.01 * expected,
+            "{run} {wheel}: {} vs {expected}",
+            row.wear_generated_pct
+        );
+    }
+
+    // Its share of the wear's variance over the season's tires is the drawn one.
+    let var = |v: &[f64]| {
+        let m = v.iter().sum::<f64>() / v.len() as f64;
+        v.iter().map(|x| (x - m) * (x - m)).sum::<f64>()
+    };
+    let planted: Vec<f64> = rows.iter().map(|r| r.wear_generated_pct).collect();
+    let total: Vec<f64> = rows.iter().map(|r| r.wear_total_pct).collect();
+    let share = var(&planted) / var(&total);
+    assert!((share - 0.2).abs() < 1e-9, "{share}");
+}
+
+#[test]
+fn a_set_up_effect_scales_one_wheel_position() {
+    let dir = tempfile::tempdir().unwrap();
+    let drawn = GeneratedEffect {
+        seed: 0,
+        form: Form::SetUp,
+        component: Component::Total,
+        scope: Scope::Wheel { wheel: Wheel::FR },
+        variance_share: 0.1,
+        magnitude: f64::NAN,
+    };
+    let (rows, g) = simulate_with(dir.path(), drawn);
+    // Weight 1 on every joule of the right-front tires: their extra wear is
+    // the magnitude times the law's wear per joule times all their energy.
+    for r in &rows {
+        if r.wheel == Wheel::FR {
+            let expected =
+                g.magnitude * r.wear_base_pct / r.weighted_energy_j * r.friction_energy_j;
+            assert!(
+                (r.wear_generated_pct - expected).abs() <= 1e-9 * expected,
+                "{r:?}: {expected}"
+            );
+        } else {
+            assert_eq!(r.wear_generated_pct, 0.0, "{r:?}");
+        }
+    }
+}
