@@ -194,7 +194,10 @@ struct FitArgs {
 /// Statistics settings shared by `gap` and `gap validate`.
 #[derive(clap::Args)]
 struct GapStatsArgs {
-    /// False-discovery rate of the slice and candidate tests (Benjamini–Hochberg).
+    /// Error rate of the tests: the false-discovery rate of the slices
+    /// (Benjamini-Hochberg), the family-wise rate of the candidates (the
+    /// permutation max-statistic over all of them; road terms:
+    /// Benjamini-Hochberg among themselves).
     #[arg(long, default_value_t = 0.05)]
     fdr: f64,
     /// Permutations of each candidate's significance test.

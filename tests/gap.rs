@@ -487,6 +487,13 @@ fn an_unlisted_slip_effect_is_found_among_the_generated_candidates() {
     if first.contains("combined_slip") {
         let theta = d.steps[1].threshold;
         assert!((theta - 0.08).abs() <= 0.021, "θ = {theta}");
+        // The findings say it in words, with the threshold in place of θ.
+        let md = tirewear::gap::report::render_markdown(&d, 12);
+        let said = format!(
+            "1. Energy with combined_slip above {} abrades ",
+            tirewear::gap::candidates::significant(theta)
+        );
+        assert!(md.contains(&said), "{md}");
     }
     assert!(shrink > 0.6, "{shrink}");
 }

@@ -46,6 +46,7 @@ pub fn render_markdown(d: &Diagnosis, max_slices: usize) -> String {
             t.rmse_pct
         );
     }
+    findings(&mut s, d);
     let _ = writeln!(
         s,
         "\n## Where the gap lies\n\n{} distinct slices tested (singly and in pairs, against the rest, t-test allowing for the residuals' correlation within events); {} survive Benjamini–Hochberg at FDR {}. Ranked by the part of the squared gap their offset accounts for (n·mean²/Σr²).\n",
@@ -168,20 +169,6 @@ pub fn render_markdown(d: &Diagnosis, max_slices: usize) -> String {
                 sl.join(", ")
             );
         }
-        for st in d
-            .steps
-            .iter()
-            .filter(|st| st.feature == Some(Feature::Group))
-        {
-            let what = st.added.trim_start_matches("set-up: ");
-            let _ = writeln!(
-                s,
-                "\nSet-up effect: {what} wears {:.2} times what the law predicts from its \
-                 telemetry. The telemetry does not show why: look at the alignment (toe, \
-                 camber settings), a suspension setting or the tire batch of that group.",
-                1.0 + st.coefficient
-            );
-        }
         if let Some(p) = &d.physics_with_terms {
             let _ = writeln!(
                 s,
@@ -191,6 +178,132 @@ pub fn render_markdown(d: &Diagnosis, max_slices: usize) -> String {
         }
     }
     s
+}
+
+/// What the diagnosis found, in words: each term step 3 added with its
+/// threshold, its rate against the law's and its part of the wear where it
+/// acts; then the flagged slices the terms leave unexplained.
+fn findings(s: &mut String, d: &Diagnosis) {
+    s.push_str("\n## Findings\n\n");
+    let terms = &d.steps[1.min(d.steps.len())..];
+    if terms.is_empty() {
+        let _ = writeln!(
+            s,
+            "No candidate effect is significant{}.",
+            if d.slices.is_empty() {
+                " and no slice of the tires stands out: the model and the measurements agree within their noise"
+            } else {
+                ": the flagged slices below stay unexplained"
+            }
+        );
+    }
+    for (t, st) in terms.iter().enumerate() {
+        let name = if st.threshold.is_finite() {
+            let th = st.feature.map_or_else(
+                || significant(st.threshold),
+                |f| f.format_threshold(st.threshold),
+            );
+            st.added.replace('θ', &th)
+        } else {
+            st.added.clone()
+        };
+        let rate = match st.feature {
+            Some(Feature::Kpi(k)) => {
+                format!(
+                    "wear per MJ changes by {:+.4} % per standard deviation of {k}",
+                    st.coefficient
+                )
+            }
+            Some(Feature::Group) => format!(
+                "wears {:.2} times what the law predicts from its telemetry",
+                1.0 + st.coefficient
+            ),
+            Some(f) if d.physics.is_some() && !f.track_level() && f != Feature::User => format!(
+                "abrades {:.2} times the law's rate where it acts",
+                1.0 + st.coefficient
+            ),
+            _ => format!("coefficient {:+.4}", st.coefficient),
+        };
+        // Its part of the predicted wear of the tires it acts on.
+        let (part, total) = d
+            .terms_wear
+            .iter()
+            .filter(|w| w.by_term_pct.get(t).is_some_and(|v| *v != 0.0))
+            .fold((0.0, 0.0), |(a, b), w| {
+                (a + w.by_term_pct[t], b + w.predicted_pct)
+            });
+        let share = match 100.0 * part / total {
+            x if !(total > 0.0 && x.is_finite()) => String::new(),
+            x if x >= 0.0 => format!(": {x:.0} % of the predicted wear of the tires it acts on"),
+            x => format!(": {:.0} % less predicted wear on the tires it acts on", -x),
+        };
+        let testing = match (d.steps[t].testing, st.testing) {
+            (Some(a), Some(b)) => format!(
+                " Testing-event RMSE {:.3} → {:.3} %.",
+                a.rmse_pct, b.rmse_pct
+            ),
+            _ => String::new(),
+        };
+        let acts = d
+            .candidates
+            .iter()
+            .find(|c| c.name == st.added)
+            .filter(|c| !c.acts_in.is_empty())
+            .map(|c| {
+                format!(
+                    " Acts in: {}.",
+                    c.acts_in
+                        .iter()
+                        .map(|a| format!(
+                            "{} ({:.0} % of its mean gap)",
+                            a.slice,
+                            100.0 * a.share_of_offset
+                        ))
+                        .collect::<Vec<_>>()
+                        .join("; ")
+                )
+            })
+            .unwrap_or_default();
+        let name = match name.strip_prefix("set-up: ") {
+            Some(group) => format!("Set-up effect: {group}"),
+            None => {
+                let mut c = name.chars();
+                c.next()
+                    .map_or(String::new(), |f| f.to_uppercase().chain(c).collect())
+            }
+        };
+        let advice = if st.feature == Some(Feature::Group) {
+            " The telemetry does not show why: look at the alignment (toe, camber settings), a suspension setting or the tire batch of that group."
+        } else {
+            ""
+        };
+        let _ = writeln!(s, "{}. {name} {rate}{share}.{advice}{testing}{acts}", t + 1);
+    }
+    // Flagged slices whose mean residual the terms leave at more than half.
+    if let (Some(first), Some(last)) = (d.steps.first(), d.steps.last())
+        && d.steps.len() > 1
+    {
+        let open: Vec<String> = d
+            .slices
+            .iter()
+            .zip(first.slices.iter().zip(&last.slices))
+            .take(5)
+            .filter(|(_, (a, b))| b.bias_pct.abs() > 0.5 * a.bias_pct.abs())
+            .map(|(sl, (a, b))| {
+                format!(
+                    "{} (mean residual {:+.2} % → {:+.2} %)",
+                    sl.name, a.bias_pct, b.bias_pct
+                )
+            })
+            .collect();
+        if !open.is_empty() {
+            let _ = writeln!(
+                s,
+                "\nNot explained by any term (more than half of the mean residual remains): {}.",
+                open.join("; ")
+            );
+        }
+    }
 }
 
 /// The physics law's calibrated constants in words.

@@ -154,7 +154,13 @@ pub struct Diagnosis {
 pub struct TermsWear {
     pub run: String,
     pub wheel: String,
+    pub axle: String,
+    /// All terms together (%).
     pub wear_pct: f64,
+    /// Each term's part (%), in the order of `Diagnosis::steps[1..]`.
+    pub by_term_pct: Vec<f64>,
+    /// The final model's predicted wear (%).
+    pub predicted_pct: f64,
 }
 
 fn size(r: &[f64]) -> GapSize {
@@ -496,10 +502,18 @@ pub fn diagnose(
         all_rows
             .iter()
             .enumerate()
-            .map(|(i, r)| TermsWear {
-                run: r.run.clone(),
-                wheel: r.wheel.clone(),
-                wear_pct: (first..base.len()).map(|j| final_k[j] * base[j][i]).sum(),
+            .map(|(i, r)| {
+                let by_term_pct: Vec<f64> = (first..base.len())
+                    .map(|j| final_k[j] * base[j][i])
+                    .collect();
+                TermsWear {
+                    run: r.run.clone(),
+                    wheel: r.wheel.clone(),
+                    axle: r.axle.clone(),
+                    wear_pct: by_term_pct.iter().sum(),
+                    by_term_pct,
+                    predicted_pct: (0..base.len()).map(|j| final_k[j] * base[j][i]).sum(),
+                }
             })
             .collect()
     };

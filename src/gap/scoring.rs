@@ -726,7 +726,13 @@ mod tests {
             .into_iter()
             .map(|s| (s.name, s.p_adjusted))
             .collect();
-        let want = [("A", 0.4), ("R1", 0.02), ("B", 0.8), ("C", 1.0), ("R2", 0.04)];
+        let want = [
+            ("A", 0.4),
+            ("R1", 0.02),
+            ("B", 0.8),
+            ("C", 1.0),
+            ("R2", 0.04),
+        ];
         for ((name, got), (n, w)) in adj.iter().zip(want) {
             assert_eq!(name, n);
             assert!((got - w).abs() < 1e-12, "{name}: {got} vs {w}");
