@@ -307,6 +307,18 @@ fn a_planted_set_up_effect_is_named_by_its_car_and_axle() {
     );
     let factor = 1.0 + d.steps[1].coefficient;
     assert!((factor - 1.3).abs() < 0.1, "factor {factor}");
+    // The final model's factor with its event-bootstrap interval.
+    let f = &d.final_terms[0];
+    assert!(
+        f.ci95.0 <= f.coefficient && f.coefficient <= f.ci95.1,
+        "{f:?}"
+    );
+    println!(
+        "final factor {:.3}, 95 % interval {:.3} to {:.3} (planted 1.3)",
+        1.0 + f.coefficient,
+        1.0 + f.ci95.0,
+        1.0 + f.ci95.1
+    );
     let rmse = |i: usize| d.steps[i].testing.as_ref().unwrap().rmse_pct;
     println!(
         "set-up {car} rear × 1.3: terms {:?}, factor {factor:.3}, testing RMSE {:.3} -> {:.3} %",

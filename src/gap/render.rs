@@ -207,22 +207,40 @@ fn findings(s: &mut String, d: &Diagnosis) {
         } else {
             st.added.clone()
         };
-        let rate = match st.feature {
-            Some(Feature::Kpi(k)) => {
+        // The final model's coefficient and its event-bootstrap interval.
+        let (c, (lo, hi)) = d
+            .final_terms
+            .get(t)
+            .map_or((st.coefficient, (f64::NAN, f64::NAN)), |f| {
+                (f.coefficient, f.ci95)
+            });
+        let ci = |shift: f64, digits: usize| {
+            if lo.is_finite() && hi.is_finite() {
                 format!(
-                    "wear per MJ changes by {:+.4} % per standard deviation of {k}",
-                    st.coefficient
+                    " (95 % interval {:.digits$} to {:.digits$})",
+                    shift + lo,
+                    shift + hi
                 )
+            } else {
+                String::new()
             }
+        };
+        let rate = match st.feature {
+            Some(Feature::Kpi(k)) => format!(
+                "wear per MJ changes by {c:+.4} %{} per standard deviation of {k}",
+                ci(0.0, 4)
+            ),
             Some(Feature::Group) => format!(
-                "wears {:.2} times what the law predicts from its telemetry",
-                1.0 + st.coefficient
+                "wears {:.2}{} times what the law predicts from its telemetry",
+                1.0 + c,
+                ci(1.0, 2)
             ),
             Some(f) if d.physics.is_some() && !f.track_level() && f != Feature::User => format!(
-                "abrades {:.2} times the law's rate where it acts",
-                1.0 + st.coefficient
+                "abrades {:.2}{} times the law's rate where it acts",
+                1.0 + c,
+                ci(1.0, 2)
             ),
-            _ => format!("coefficient {:+.4}", st.coefficient),
+            _ => format!("coefficient {c:+.4}{}", ci(0.0, 4)),
         };
         // Its part of the predicted wear of the tires it acts on.
         let (part, total) = d

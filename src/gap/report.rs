@@ -147,6 +147,62 @@ pub struct Diagnosis {
     /// The wear (%) step 3's terms together add to each tire diagnosed
     /// (training and testing), in the final model (empty without terms).
     pub terms_wear: Vec<TermsWear>,
+    /// Step 3's terms in the final model, in the order they were added.
+    pub final_terms: Vec<FinalTerm>,
+}
+
+/// A term of the final model: its coefficient and a 95 % interval.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct FinalTerm {
+    pub name: String,
+    pub coefficient: f64,
+    /// 2.5 and 97.5 percentiles of the coefficient over [`BOOTSTRAP_DRAWS`]
+    /// refits on the training events resampled with replacement (whole
+    /// events: the tires of one event share its track and weather), with
+    /// the law's temperature factor, skewness coefficient and the terms'
+    /// thresholds held at their fitted values.
+    pub ci95: (f64, f64),
+}
+
+/// Event-bootstrap draws of the final terms' intervals.
+pub const BOOTSTRAP_DRAWS: usize = 999;
+
+/// The final model's coefficients of the last `n_terms` columns of `cols`
+/// refitted on training events drawn with replacement: the 2.5 and 97.5
+/// percentiles of each.
+fn bootstrap_terms(
+    cols: &[Vec<f64>],
+    w: &[f64],
+    y: &[f64],
+    events: &[&str],
+    n_terms: usize,
+    seed: u64,
+) -> Vec<(f64, f64)> {
+    use rand::{Rng, SeedableRng};
+    let (names, of) = super::stats::levels(events.iter().copied());
+    let members: Vec<Vec<usize>> = (0..names.len())
+        .map(|e| (0..events.len()).filter(|&i| of[i] == e).collect())
+        .collect();
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed ^ 0x626f_6f74);
+    let first = cols.len() - n_terms;
+    let mut draws: Vec<Vec<f64>> = vec![Vec::with_capacity(BOOTSTRAP_DRAWS); n_terms];
+    for _ in 0..BOOTSTRAP_DRAWS {
+        let idx: Vec<usize> = (0..members.len())
+            .flat_map(|_| members[rng.random_range(0..members.len())].iter().copied())
+            .collect();
+        let (k, _) = weighted_fit(cols, w, y, &idx);
+        for (t, d) in draws.iter_mut().enumerate() {
+            d.push(k[first + t]);
+        }
+    }
+    draws
+        .into_iter()
+        .map(|mut d| {
+            d.sort_by(f64::total_cmp);
+            let at = |q: f64| d[((q * (d.len() - 1) as f64).round() as usize).min(d.len() - 1)];
+            (at(0.025), at(0.975))
+        })
+        .collect()
 }
 
 /// What step 3's terms add to one tire's predicted wear.
@@ -340,6 +396,8 @@ pub fn diagnose(
     // The final model's coefficients (of `base`, whose last columns are the terms).
     let mut final_k: Vec<f64> = Vec::new();
     let mut n_terms = 0;
+    // The final fit's row weights (training rows).
+    let mut final_w: Vec<f64> = Vec::new();
     if !maps.is_empty() {
         let mut lib = library(&all_rows[..n_train]);
         lib.extend(settings.user_effects.iter().cloned());
@@ -483,6 +541,10 @@ pub fn diagnose(
             terms.push(term);
             n_terms = terms.len();
             final_k = k.clone();
+            final_w = match &law_refit {
+                Some(r) => r.weights.clone(),
+                None => w.clone(),
+            };
             if let Some(r) = law_refit {
                 base = r.columns;
                 law = r.law_rows;
@@ -517,8 +579,28 @@ pub fn diagnose(
             })
             .collect()
     };
+    let final_terms = if n_terms == 0 {
+        Vec::new()
+    } else {
+        let events: Vec<&str> = all_rows[..n_train]
+            .iter()
+            .map(|r| r.event.as_str())
+            .collect();
+        let ci = bootstrap_terms(&base, &final_w, &y, &events, n_terms, settings.scoring.seed);
+        steps[1..]
+            .iter()
+            .zip(ci)
+            .enumerate()
+            .map(|(t, (st, ci95))| FinalTerm {
+                name: st.added.clone(),
+                coefficient: final_k[base.len() - n_terms + t],
+                ci95,
+            })
+            .collect()
+    };
     Ok(Diagnosis {
         terms_wear,
+        final_terms,
         baseline: name,
         physics,
         physics_with_terms: refitted_law,
@@ -567,4 +649,35 @@ fn slice_members(name: &str, rows: &[&KpiRow]) -> Vec<bool> {
     rows.iter()
         .map(|r| name.split(" & ").all(|p| part(p, r)))
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn event_bootstrap_intervals_by_hand() {
+        // Two events of 10 tires, y = 1·x in the first and 3·x in the
+        // second, x the same in both. Drawing two events with replacement
+        // gives the slope 1 (both first, p = 1/4), 2 (one of each, 1/2) or
+        // 3 (both second, 1/4): the 2.5 and 97.5 percentiles are 1 and 3.
+        let x: Vec<f64> = (0..20).map(|i| 1.0 + (i % 10) as f64).collect();
+        let y: Vec<f64> = (0..20)
+            .map(|i| if i < 10 { 1.0 } else { 3.0 } * x[i])
+            .collect();
+        let events: Vec<&str> = (0..20).map(|i| if i < 10 { "e1" } else { "e2" }).collect();
+        let w = vec![1.0; 20];
+        let ci = bootstrap_terms(std::slice::from_ref(&x), &w, &y, &events, 1, 7);
+        assert!(
+            (ci[0].0 - 1.0).abs() < 1e-9 && (ci[0].1 - 3.0).abs() < 1e-9,
+            "{ci:?}"
+        );
+        // One slope everywhere: the interval is that slope.
+        let y2: Vec<f64> = x.iter().map(|v| 2.0 * v).collect();
+        let ci = bootstrap_terms(&[x], &w, &y2, &events, 1, 7);
+        assert!(
+            (ci[0].0 - 2.0).abs() < 1e-9 && (ci[0].1 - 2.0).abs() < 1e-9,
+            "{ci:?}"
+        );
+    }
 }
