@@ -161,7 +161,7 @@ struct ExtractArgs {
     csv: Option<PathBuf>,
     /// Engine for the heavy reductions: cpu, gpu, or auto (GPU when usable, else CPU).
     #[arg(long, value_enum, default_value = "auto")]
-    engine: tirewear::kpi::Engine,
+    engine: EngineArg,
     /// Worker threads (default: all cores).
     #[arg(long)]
     jobs: Option<usize>,
@@ -274,7 +274,7 @@ enum GapAction {
         /// needs the tracks (the demo's 6 training tracks leave its test 3
         /// degrees of freedom).
         #[arg(long, value_enum, default_value = "season")]
-        preset: tirewear::sim::Preset,
+        preset: PresetArg,
         /// Multiplies the number of events of the `season` preset (0.5: one
         /// event per track).
         #[arg(long, default_value_t = 0.5)]
@@ -302,6 +302,64 @@ enum BenchEngine {
     All,
 }
 
+/// `--preset`: the library's `sim::Preset` (the library knows nothing of clap).
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum PresetArg {
+    /// 2 tracks, 2 events, 1 car, 2 short runs each: for tests and quick checks.
+    Tiny,
+    /// 8 tracks, 10 events, 2 cars, 320 tire-runs at 20 Hz: under a minute.
+    Demo,
+    /// 12 tracks, 24 events × scale, 3 cars, 6 runs each at 200 Hz: ~20 GB at scale 1.
+    Season,
+}
+
+impl From<PresetArg> for Preset {
+    fn from(p: PresetArg) -> Preset {
+        match p {
+            PresetArg::Tiny => Preset::Tiny,
+            PresetArg::Demo => Preset::Demo,
+            PresetArg::Season => Preset::Season,
+        }
+    }
+}
+
+/// `--engine` of `extract`: the library's `kpi::Engine`.
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum EngineArg {
+    Cpu,
+    Gpu,
+    /// The GPU when one is usable, else the CPU (with a message saying so).
+    Auto,
+}
+
+impl From<EngineArg> for tirewear::kpi::Engine {
+    fn from(e: EngineArg) -> Self {
+        match e {
+            EngineArg::Cpu => Self::Cpu,
+            EngineArg::Gpu => Self::Gpu,
+            EngineArg::Auto => Self::Auto,
+        }
+    }
+}
+
+/// `--encoding` of `simulate`: the library's `Encoding`.
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum EncodingArg {
+    /// One message per sample per topic (`TireSample`, `VehicleSample`).
+    Sample,
+    /// Packed blocks of equally spaced samples (`TireBlock`, `VehicleBlock`).
+    Block,
+}
+
+impl From<EncodingArg> for Encoding {
+    fn from(e: EncodingArg) -> Encoding {
+        match e {
+            EncodingArg::Sample => Encoding::Sample,
+            EncodingArg::Block => Encoding::Block,
+        }
+    }
+}
+
 #[derive(Clone, Copy, clap::ValueEnum)]
 enum MethodArg {
     Ffnn,
@@ -314,7 +372,7 @@ enum MethodArg {
 struct SimulateArgs {
     /// Season preset.
     #[arg(long, value_enum, default_value = "demo")]
-    preset: Preset,
+    preset: PresetArg,
     /// Multiplies the number of events of the `season` preset (toward full-season archives).
     #[arg(long, default_value_t = 1.0)]
     scale: f64,
@@ -337,7 +395,7 @@ struct SimulateArgs {
     random_effect: Option<u64>,
     /// Telemetry message form: per-sample messages (Foxglove-friendly) or packed blocks (fast).
     #[arg(long, value_enum, default_value = "block")]
-    encoding: Encoding,
+    encoding: EncodingArg,
     /// Telemetry sample rate in Hz (default: 20 for demo, 200 for season; at most 1000).
     #[arg(long)]
     rate: Option<f64>,
@@ -688,12 +746,12 @@ fn run() -> Result<std::process::ExitCode> {
     match cli.command {
         Command::Simulate(a) => {
             let opts = SimOptions {
-                preset: a.preset,
+                preset: a.preset.into(),
                 scale: a.scale,
                 seed: a.seed,
                 effects: parse_effects(&a.effects)?,
                 generated: a.random_effect.map(tirewear::sim::GeneratedEffect::draw),
-                encoding: a.encoding,
+                encoding: a.encoding.into(),
                 rate_hz: a.rate,
                 out: a.out,
                 sensor_noise: !a.no_noise,
@@ -711,7 +769,7 @@ fn run() -> Result<std::process::ExitCode> {
                 season: a.season,
                 out: a.out,
                 csv: a.csv,
-                engine: a.engine,
+                engine: a.engine.into(),
                 progress,
                 allow_external_paths: a.allow_external_paths,
             })?;
@@ -772,7 +830,7 @@ fn run() -> Result<std::process::ExitCode> {
                 seeds,
                 clean_seeds,
                 random: (random_from..random_from + random).collect(),
-                preset,
+                preset: preset.into(),
                 scale,
                 rate_hz: rate,
                 work: work.unwrap_or_else(|| out.join("seasons")),

@@ -32,9 +32,7 @@ pub const VEHICLE_TOPIC: &str = "/vehicle";
 pub const RECORD_LENGTH_LIMIT: usize = 256 << 20;
 
 /// Which message form a file uses.
-#[derive(
-    Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, serde::Serialize, serde::Deserialize,
-)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Encoding {
     /// One message per sample per topic (`TireSample`, `VehicleSample`).

@@ -34,7 +34,7 @@ use std::sync::Arc;
 use std::time::Instant;
 
 /// Which engine reduces the telemetry and roughness.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Engine {
     Cpu,
@@ -391,7 +391,7 @@ pub fn open_engine(choice: Engine) -> Result<(Engine, Option<GpuEngine>), crate:
             }
             Ok(g) => {
                 tracing::info!(
-                    "engine auto: the only GPU adapter is a software one ({}); using the CPU engine (--engine gpu forces it)",
+                    "engine auto: the only GPU adapter is a software one ({}); using the CPU engine (the gpu engine forces it)",
                     g.ctx.adapter.name
                 );
                 Ok((Engine::Cpu, None))
@@ -410,8 +410,8 @@ pub fn extract(opts: &ExtractOptions) -> Result<ExtractSummary, IngestError> {
     let (engine, reducer) = open_engine(opts.engine).map_err(|e| {
         IngestError::invalid(
             &opts.season,
-            "--engine gpu",
-            format!("{e} (use --engine cpu or auto)"),
+            "gpu engine",
+            format!("{e} (the cpu and auto engines need no GPU)"),
         )
     })?;
     let reducer_gpu = reducer.as_ref();

@@ -13,7 +13,7 @@ use crate::kpi::KpiRow;
 use std::fmt::Write;
 
 /// A wear-model method.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Method {
     /// Feed-forward network trained by Levenberg–Marquardt (paper 4.1).

@@ -74,7 +74,7 @@ const ROAD_MICRO_LAMBDA_MM: f64 = 0.5;
 pub fn simulate(opts: &SimOptions) -> Result<SimSummary, SimError> {
     if !(opts.scale > 0.0 && opts.scale.is_finite()) {
         return Err(SimError::Config(format!(
-            "--scale must be > 0, got {}",
+            "the scale must be > 0, got {}",
             opts.scale
         )));
     }
@@ -82,7 +82,7 @@ pub fn simulate(opts: &SimOptions) -> Result<SimSummary, SimError> {
         && !(1.0..=1000.0).contains(&r)
     {
         return Err(SimError::Config(format!(
-            "--rate must be within 1..1000 Hz, got {r}"
+            "the sample rate must be within 1..1000 Hz, got {r}"
         )));
     }
     let mut kinds: Vec<_> = opts.effects.iter().map(|e| e.kind).collect();

@@ -6,7 +6,8 @@ use super::vehicle::CarParams;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+/// A season layout of the simulator.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Preset {
     /// 2 tracks, 2 events, 1 car, 2 short runs each: for tests and quick checks.
     Tiny,
