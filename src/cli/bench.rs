@@ -1,0 +1,50 @@
+//! `tirewear bench`: its arguments and what it runs.
+
+use anyhow::{Context, Result};
+use std::path::PathBuf;
+
+#[derive(clap::Args)]
+pub(crate) struct BenchArgs {
+    /// Engines to measure: cpu, gpu, or all.
+    #[arg(long, value_enum, default_value = "all")]
+    engine: BenchEngine,
+    /// Small sizes (a quick check that everything runs).
+    #[arg(long)]
+    small: bool,
+    /// Repeats per measurement (the best is kept).
+    #[arg(long, default_value_t = 3)]
+    repeats: usize,
+    /// Where to save the results.
+    #[arg(long, default_value = "bench.json")]
+    out: PathBuf,
+}
+
+#[derive(Clone, Copy, PartialEq, clap::ValueEnum)]
+pub(crate) enum BenchEngine {
+    Cpu,
+    Gpu,
+    All,
+}
+
+/// Runs `tirewear bench`.
+pub(crate) fn run(a: BenchArgs) -> Result<()> {
+    let BenchArgs {
+        engine,
+        small,
+        repeats,
+        out,
+    } = a;
+    let r = tirewear::bench::run_bench(&tirewear::bench::BenchOptions {
+        small,
+        gpu: engine != BenchEngine::Cpu,
+        repeats,
+    });
+    print!("{}", tirewear::bench::render(&r));
+    if engine == BenchEngine::Gpu && r.gpu.is_none() {
+        anyhow::bail!("--engine gpu: no GPU adapter could be opened (see the note above)");
+    }
+    tirewear::atomic::write_bytes(&out, serde_json::to_string_pretty(&r)?.as_bytes())
+        .with_context(|| format!("writing {}", out.display()))?;
+    println!("wrote {}", out.display());
+    Ok(())
+}

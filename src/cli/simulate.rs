@@ -1,0 +1,138 @@
+//! `tirewear simulate`: its arguments and what it runs.
+
+use anyhow::{Context, Result};
+use std::path::PathBuf;
+use std::time::Instant;
+use tirewear::ingest::telemetry::Encoding;
+use tirewear::sim::{self, Effect, Preset, SimOptions};
+
+#[derive(clap::Args)]
+pub(crate) struct SimulateArgs {
+    /// Season preset.
+    #[arg(long, value_enum, default_value = "demo")]
+    preset: PresetArg,
+    /// Multiplies the number of events of the `season` preset (toward full-season archives).
+    #[arg(long, default_value_t = 1.0)]
+    scale: f64,
+    /// Random seed: the same seed gives the same season.
+    #[arg(long, default_value_t = 7)]
+    seed: u64,
+    /// Planted effect, repeatable: NAME[=MAGNITUDE][,threshold=T][,width=W] with NAME one of
+    /// graining, blistering, thermal, road-abrasion (or `none`). The magnitude is the effect's
+    /// abrasion per joule relative to base wear where it acts (default 0.5). Thresholds are °C
+    /// (graining: tread-bulk temperature below; blistering: inner liner above; thermal: surface
+    /// above) or mm (road-abrasion: micro-texture rms above).
+    #[arg(long = "effect", value_name = "SPEC")]
+    effects: Vec<String>,
+    /// Plant a randomly generated effect drawn from SEED (docs/gap.md,
+    /// "Generated effects"): a condition, pair of conditions, band, power law
+    /// or set-up factor the gap diagnosis was not written for, on a random
+    /// scope, with 5-40 % of the wear's variance. truth/settings.toml
+    /// describes it; truth/wear_truth.csv has its wear per tire.
+    #[arg(long, value_name = "SEED")]
+    random_effect: Option<u64>,
+    /// Telemetry message form: per-sample messages (Foxglove-friendly) or packed blocks (fast).
+    #[arg(long, value_enum, default_value = "block")]
+    encoding: EncodingArg,
+    /// Telemetry sample rate in Hz (default: 20 for demo, 200 for season; at most 1000).
+    #[arg(long)]
+    rate: Option<f64>,
+    /// Ideal sensors: no measurement noise and no logger dropouts.
+    #[arg(long)]
+    no_noise: bool,
+    /// Output folder (created; files in it are replaced).
+    #[arg(long)]
+    out: PathBuf,
+}
+
+/// `--preset`: the library's `sim::Preset` (the library knows nothing of clap).
+#[derive(Clone, Copy, clap::ValueEnum)]
+pub(crate) enum PresetArg {
+    /// 2 tracks, 2 events, 1 car, 2 short runs each: for tests and quick checks.
+    Tiny,
+    /// 8 tracks, 10 events, 2 cars, 320 tire-runs at 20 Hz: under a minute.
+    Demo,
+    /// 12 tracks, 24 events × scale, 3 cars, 6 runs each at 200 Hz: ~20 GB at scale 1.
+    Season,
+}
+
+impl From<PresetArg> for Preset {
+    fn from(p: PresetArg) -> Preset {
+        match p {
+            PresetArg::Tiny => Preset::Tiny,
+            PresetArg::Demo => Preset::Demo,
+            PresetArg::Season => Preset::Season,
+        }
+    }
+}
+
+/// `--encoding` of `simulate`: the library's `Encoding`.
+#[derive(Clone, Copy, clap::ValueEnum)]
+pub(crate) enum EncodingArg {
+    /// One message per sample per topic (`TireSample`, `VehicleSample`).
+    Sample,
+    /// Packed blocks of equally spaced samples (`TireBlock`, `VehicleBlock`).
+    Block,
+}
+
+impl From<EncodingArg> for Encoding {
+    fn from(e: EncodingArg) -> Encoding {
+        match e {
+            EncodingArg::Sample => Encoding::Sample,
+            EncodingArg::Block => Encoding::Block,
+        }
+    }
+}
+
+pub(crate) fn parse_effects(specs: &[String]) -> Result<Vec<Effect>> {
+    specs
+        .iter()
+        .filter(|s| s.as_str() != "none")
+        .map(|s| {
+            s.parse::<Effect>()
+                .map_err(|e| anyhow::anyhow!("--effect {s}: {e}"))
+        })
+        .collect()
+}
+
+pub(crate) fn run_simulation(opts: &SimOptions) -> Result<sim::SimSummary> {
+    let t0 = Instant::now();
+    let s =
+        sim::simulate(opts).with_context(|| format!("simulating into {}", opts.out.display()))?;
+    println!(
+        "wrote {}: {} tracks, {} events, {} runs, {} tire-run observations, {:.1} M telemetry samples, {:.1} MB in {:.1} s",
+        s.out.display(),
+        s.tracks,
+        s.events,
+        s.runs,
+        s.observations,
+        s.samples as f64 / 1e6,
+        s.bytes as f64 / 1e6,
+        t0.elapsed().as_secs_f64()
+    );
+    if s.saturated_fraction > 0.0 {
+        tracing::debug!(
+            "{:.3} % of wheel samples past the tire's force peak",
+            100.0 * s.saturated_fraction
+        );
+    }
+    Ok(s)
+}
+
+/// Runs `tirewear simulate`.
+pub(crate) fn run(a: SimulateArgs, progress: bool) -> Result<()> {
+    let opts = SimOptions {
+        preset: a.preset.into(),
+        scale: a.scale,
+        seed: a.seed,
+        effects: parse_effects(&a.effects)?,
+        generated: a.random_effect.map(tirewear::sim::GeneratedEffect::draw),
+        encoding: a.encoding.into(),
+        rate_hz: a.rate,
+        out: a.out,
+        sensor_noise: !a.no_noise,
+        progress,
+    };
+    run_simulation(&opts)?;
+    Ok(())
+}
