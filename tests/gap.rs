@@ -70,6 +70,7 @@ fn settings(work: &std::path::Path) -> ValidateSettings {
             scoring: ScoringSettings {
                 permutations: 999,
                 seed: 2026,
+                ..Default::default()
             },
             ..Default::default()
         },
