@@ -89,8 +89,9 @@ pub struct ReduceRef {
     pub v: [f32; 8],
 }
 
-/// Mean contact pressure model (Pa); same constant as `telemetry::CARCASS_PRESSURE_PA`.
-pub const CARCASS_PRESSURE_PA: f32 = 40_000.0;
+/// Mean contact pressure model (Pa): `telemetry::CARCASS_PRESSURE_PA` in
+/// the shader's f32 (tests/shader_contract.rs checks the shader's copy).
+pub const CARCASS_PRESSURE_PA: f32 = super::telemetry::CARCASS_PRESSURE_PA as f32;
 
 /// A batch of wheels: their samples back to back, cut into chunks.
 #[derive(Debug, Clone, Default)]
