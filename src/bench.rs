@@ -392,6 +392,7 @@ fn decode_lines(o: &BenchOptions, report: &mut BenchReport) {
             seed: 1,
             effects: vec![],
             generated: None,
+            scatter: crate::sim::WearScatter::NONE,
             encoding,
             rate_hz: None,
             out: out.clone(),

@@ -16,6 +16,7 @@ fn sim(out: &Path, preset: Preset, rate: f64) {
         seed: 7,
         effects: vec![],
         generated: None,
+        scatter: tirewear::sim::WearScatter::NONE,
         encoding: Encoding::Block,
         rate_hz: Some(rate),
         out: out.to_path_buf(),

@@ -64,6 +64,7 @@ fn settings(work: &std::path::Path) -> ValidateSettings {
         preset: tirewear::sim::Preset::Demo,
         scale: 1.0,
         rate_hz: 5.0,
+        scatter: tirewear::sim::WearScatter::NONE,
         work: work.to_path_buf(),
         keep: false,
         gap: GapSettings {

@@ -83,6 +83,7 @@ fn findings(seed: u64) -> Findings {
         seed,
         effects: vec![],
         generated: None,
+        scatter: tirewear::sim::WearScatter::NONE,
         encoding: Encoding::Block,
         rate_hz: Some(5.0), // the findings do not need 20 Hz; keeps the test quick
         out: dir.path().to_path_buf(),

@@ -436,6 +436,7 @@ fn mutated_manifests_compounds_roads_and_wear_never_panic() {
         seed: 5,
         effects: vec![],
         generated: None,
+        scatter: tirewear::sim::WearScatter::NONE,
         encoding: tirewear::ingest::telemetry::Encoding::Block,
         rate_hz: Some(5.0),
         out: season_dir.clone(),

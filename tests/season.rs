@@ -17,6 +17,7 @@ fn sim(out: &Path, seed: u64, encoding: Encoding, noise: bool, effects: Vec<Effe
         seed,
         effects,
         generated: None,
+        scatter: tirewear::sim::WearScatter::NONE,
         encoding,
         rate_hz: None,
         out: out.to_path_buf(),

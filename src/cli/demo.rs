@@ -33,6 +33,7 @@ pub(crate) fn run(a: DemoArgs, progress: bool) -> Result<()> {
         seed,
         effects: parse_effects(&effects)?,
         generated: None,
+        scatter: tirewear::sim::WearScatter::NONE,
         encoding: Encoding::Block,
         rate_hz: None,
         out: out.clone(),

@@ -141,6 +141,10 @@ pub(crate) enum GapAction {
         /// Telemetry rate of the simulated seasons (Hz).
         #[arg(long, default_value_t = 5.0)]
         rate: f64,
+        /// Wear variation no KPI measures in the simulated seasons (as
+        /// `tirewear simulate --wear-scatter`).
+        #[arg(long, value_enum, default_value = "none")]
+        wear_scatter: super::simulate::WearScatterArg,
         /// Scratch folder for the seasons (default: OUT/seasons).
         #[arg(long)]
         work: Option<PathBuf>,
@@ -269,6 +273,7 @@ pub(crate) fn run(a: GapArgs, progress: bool) -> Result<()> {
         preset,
         scale,
         rate,
+        wear_scatter,
         work,
         keep,
         stats,
@@ -298,6 +303,7 @@ pub(crate) fn run(a: GapArgs, progress: bool) -> Result<()> {
             preset: preset.into(),
             scale,
             rate_hz: rate,
+            scatter: wear_scatter.into(),
             work: work.unwrap_or_else(|| out.join("seasons")),
             keep,
             gap: stats.settings(None),

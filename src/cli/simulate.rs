@@ -37,6 +37,12 @@ pub(crate) struct SimulateArgs {
     /// Telemetry sample rate in Hz (default: 20 for demo, 200 for season; at most 1000).
     #[arg(long)]
     rate: Option<f64>,
+    /// Wear variation that no KPI measures (docs/simulator.md): `none`, or
+    /// `realistic` (day-to-day grip, the driver's style, tire-to-tire
+    /// scatter, gauge bias) tuned so the physical model's testing R² on the
+    /// demo comes near the paper's real data.
+    #[arg(long, value_enum, default_value = "none")]
+    wear_scatter: WearScatterArg,
     /// Ideal sensors: no measurement noise and no logger dropouts.
     #[arg(long)]
     no_noise: bool,
@@ -127,6 +133,7 @@ pub(crate) fn run(a: SimulateArgs, progress: bool) -> Result<()> {
         seed: a.seed,
         effects: parse_effects(&a.effects)?,
         generated: a.random_effect.map(tirewear::sim::GeneratedEffect::draw),
+        scatter: a.wear_scatter.into(),
         encoding: a.encoding.into(),
         rate_hz: a.rate,
         out: a.out,
@@ -135,4 +142,22 @@ pub(crate) fn run(a: SimulateArgs, progress: bool) -> Result<()> {
     };
     run_simulation(&opts)?;
     Ok(())
+}
+
+/// `--wear-scatter`: the library's `sim::WearScatter` presets.
+#[derive(Clone, Copy, clap::ValueEnum)]
+pub(crate) enum WearScatterArg {
+    /// No variation beyond the physics and the reading noise.
+    None,
+    /// Day-to-day grip, driver style, tire-to-tire scatter, gauge bias.
+    Realistic,
+}
+
+impl From<WearScatterArg> for tirewear::sim::WearScatter {
+    fn from(w: WearScatterArg) -> Self {
+        match w {
+            WearScatterArg::None => Self::NONE,
+            WearScatterArg::Realistic => Self::REALISTIC,
+        }
+    }
 }

@@ -44,6 +44,8 @@ pub struct ValidateSettings {
     pub scale: f64,
     /// Telemetry rate of the simulated seasons (Hz).
     pub rate_hz: f64,
+    /// Wear variation no KPI measures in the simulated seasons.
+    pub scatter: crate::sim::WearScatter,
     /// Scratch folder for the seasons.
     pub work: PathBuf,
     /// Keep each season's files instead of deleting them after scoring.
@@ -396,6 +398,7 @@ pub fn run_case(
             Planted::Generated(g) => Some(g.clone()),
             _ => None,
         },
+        scatter: s.scatter,
         encoding: crate::ingest::telemetry::Encoding::Block,
         rate_hz: Some(s.rate_hz),
         out: dir.clone(),

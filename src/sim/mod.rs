@@ -20,6 +20,7 @@ pub use effects::{Effect, EffectKind};
 pub use error::SimError;
 pub use generated::GeneratedEffect;
 pub use preset::{Plan, Preset};
+pub use wear::WearScatter;
 
 use crate::Wheel;
 use crate::ingest::manifest::{self, Manifest, ProfileRef, TireSets};
@@ -45,6 +46,8 @@ pub struct SimOptions {
     /// this season: thresholds from its energy quantiles, magnitude from
     /// its variance share.
     pub generated: Option<GeneratedEffect>,
+    /// Wear variation no KPI measures (`WearScatter::NONE`: none).
+    pub scatter: WearScatter,
     pub encoding: Encoding,
     pub rate_hz: Option<f64>,
     pub out: PathBuf,
@@ -227,6 +230,8 @@ pub fn simulate(opts: &SimOptions) -> Result<SimSummary, SimError> {
                 tw.generated_pct =
                     g.magnitude * generated_unit_pct(g, rp, w, wt, compound, &roads[ev.track], &tw);
             }
+            let (factor, gauge_bias_mm) = opts.scatter.draw(event_seed(opts, rp), rp.seed, w);
+            tw.scale(factor);
             let set = tire_set_id(rp, w);
             readings.extend(wear::spot_readings(
                 &rp.id,
@@ -234,6 +239,7 @@ pub fn simulate(opts: &SimOptions) -> Result<SimSummary, SimError> {
                 &set,
                 car.tread_width(w),
                 &tw,
+                gauge_bias_mm,
                 &mut rng,
             ));
             truth_rows.push(TruthRow::new(
@@ -501,6 +507,8 @@ struct TruthSettings<'a> {
     sample_rate_hz: f64,
     encoding: Encoding,
     effects: &'a [Effect],
+    /// Wear variation no KPI measures.
+    scatter: WearScatter,
     /// The generated effect as resolved, and in words.
     generated: Option<&'a GeneratedEffect>,
     generated_description: Option<&'a str>,
@@ -538,6 +546,7 @@ fn write_truth(
     generated: Option<&(GeneratedEffect, String)>,
 ) -> Result<(), SimError> {
     let settings = TruthSettings {
+        scatter: opts.scatter,
         generated: generated.map(|g| &g.0),
         generated_description: generated.map(|g| g.1.as_str()),
         preset: format!("{:?}", opts.preset).to_lowercase(),
@@ -612,23 +621,24 @@ fn resolve_generated(
             let wt = &truth.wheels[w.index()];
             let tw = wear::tire_wear(compound, &roads[ev.track], w, wt, &opts.effects, &mut rng);
             // Advance the stream as the readings will.
-            wear::spot_readings(&rp.id, w, "", car.tread_width(w), &tw, &mut rng);
-            other.push(tw.total_pct());
-            unit.push(generated_unit_pct(
-                &g,
-                rp,
-                w,
-                wt,
-                compound,
-                &roads[ev.track],
-                &tw,
-            ));
+            wear::spot_readings(&rp.id, w, "", car.tread_width(w), &tw, 0.0, &mut rng);
+            // The share is of the wear as it will be, scatter included.
+            let (factor, _) = opts.scatter.draw(event_seed(opts, rp), rp.seed, w);
+            other.push(factor * tw.total_pct());
+            unit.push(factor * generated_unit_pct(&g, rp, w, wt, compound, &roads[ev.track], &tw));
         }
     }
     g.magnitude = g.magnitude_for(&other, &unit);
     let text = g.to_string();
     tracing::info!("generated effect: {text}");
     Some((g, text))
+}
+
+/// The seed of a run's event's shared draws (`WearScatter`).
+fn event_seed(opts: &SimOptions, rp: &preset::RunPlan) -> u64 {
+    opts.seed
+        .wrapping_mul(0x9e37_79b9_7f4a_7c15)
+        .wrapping_add(rp.event as u64)
 }
 
 /// A generated effect's wear (%) on one tire at magnitude 1 (0 outside its scope).

@@ -13,6 +13,7 @@ pub fn simulate_demo(dir: &Path) {
         seed: 7,
         effects: vec![],
         generated: None,
+        scatter: tirewear::sim::WearScatter::NONE,
         encoding: tirewear::ingest::telemetry::Encoding::Block,
         rate_hz: Some(5.0),
         out: dir.to_path_buf(),
