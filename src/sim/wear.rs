@@ -232,6 +232,26 @@ mod tests {
     use super::*;
 
     #[test]
+    fn scatter_factors_have_mean_one_and_the_stated_spread() {
+        assert_eq!(WearScatter::NONE.draw(1, 2, Wheel::FL), (1.0, 0.0));
+        let s = WearScatter::REALISTIC;
+        let n = 20_000u64;
+        let draws: Vec<(f64, f64)> = (0..n)
+            .map(|i| s.draw(i, 1_000_000 + i, Wheel::RR))
+            .collect();
+        let mean = draws.iter().map(|d| d.0).sum::<f64>() / n as f64;
+        let logs: Vec<f64> = draws.iter().map(|d| d.0.ln()).collect();
+        let m = logs.iter().sum::<f64>() / n as f64;
+        let sd = (logs.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (n - 1) as f64).sqrt();
+        let want = (s.event_sd.powi(2) + s.run_sd.powi(2) + s.tire_sd.powi(2)).sqrt();
+        // Standard errors: mean 0.25/√n ≈ 0.002, sd of the log sd/√(2n) ≈ 0.001.
+        assert!((mean - 1.0).abs() < 0.01, "{mean}");
+        assert!((sd - want).abs() < 0.01, "{sd} vs {want}");
+        let bias_sd = (draws.iter().map(|d| d.1 * d.1).sum::<f64>() / n as f64).sqrt();
+        assert!((bias_sd - s.gauge_bias_sd_mm).abs() < 0.003, "{bias_sd}");
+    }
+
+    #[test]
     fn width_distribution_keeps_the_mean() {
         let w = TireWear {
             base_pct: 30.0,
