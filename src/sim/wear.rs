@@ -87,7 +87,7 @@ impl WearScatter {
         };
         let ze = z(event_seed ^ 0x6576_656e_7400);
         let zr = z(run_seed ^ 0x7275_6e00);
-        let zt = z(run_seed ^ (0x7469_7265_00 + wheel.index() as u64));
+        let zt = z(run_seed ^ (0x0074_6972_6500 + wheel.index() as u64));
         let zg = z(run_seed ^ (0x6761_7567_6500 + wheel.index() as u64));
         let var = self.event_sd.powi(2) + self.run_sd.powi(2) + self.tire_sd.powi(2);
         let factor = (self.event_sd * ze + self.run_sd * zr + self.tire_sd * zt - 0.5 * var).exp();
