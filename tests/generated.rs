@@ -35,6 +35,7 @@ fn simulate_with(out: &Path, g: GeneratedEffect) -> (Vec<TruthRow>, GeneratedEff
         seed: 5,
         effects: vec![],
         generated: Some(g),
+        scatter: tirewear::sim::WearScatter::NONE,
         encoding: Encoding::Block,
         rate_hz: Some(20.0),
         out: out.to_path_buf(),
