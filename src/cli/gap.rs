@@ -312,7 +312,8 @@ pub(crate) fn run(a: GapArgs, progress: bool) -> Result<()> {
         run_validate(&settings, &out)?;
         return Ok(());
     }
-    let kpis = kpis.expect("clap requires it");
+    let kpis =
+        kpis.ok_or_else(|| anyhow::anyhow!("a KPI database is needed: tirewear gap KPIS"))?;
     let mut settings = stats.settings(test_events);
     if let Some(f) = &effects {
         settings.user_effects = tirewear::gap::user_effects::load(f)?;
