@@ -80,26 +80,35 @@ fn energy_by_temperature(dir: &Path) -> Vec<TireSamples> {
     out
 }
 
+/// An effect on the total energy as drawn, before the simulator resolves
+/// its thresholds and magnitude on the season.
+fn unresolved(form: Form, scope: Scope, variance_share: f64) -> GeneratedEffect {
+    GeneratedEffect {
+        seed: 0,
+        form,
+        component: Component::Total,
+        scope,
+        variance_share,
+        magnitude: f64::NAN,
+    }
+}
+
 #[test]
 fn a_generated_onset_acts_where_and_as_much_as_it_was_drawn() {
     let dir = tempfile::tempdir().unwrap();
-    let drawn = GeneratedEffect {
-        seed: 0,
-        form: Form::Onset {
-            onset: Onset {
-                quantity: Quantity::SurfaceTemperature,
-                above: true,
-                quantile: 0.7,
-                width_fraction: 0.1,
-                threshold: f64::NAN,
-                width: f64::NAN,
-            },
-        },
-        component: Component::Total,
-        scope: Scope::Axle { axle: Axle::Front },
-        variance_share: 0.2,
-        magnitude: f64::NAN,
+    let onset = Onset {
+        quantity: Quantity::SurfaceTemperature,
+        above: true,
+        quantile: 0.7,
+        width_fraction: 0.1,
+        threshold: f64::NAN,
+        width: f64::NAN,
     };
+    let drawn = unresolved(
+        Form::Onset { onset },
+        Scope::Axle { axle: Axle::Front },
+        0.2,
+    );
     let (rows, g) = simulate_with(dir.path(), drawn);
     let Form::Onset { onset } = g.form else {
         panic!("{:?}", g.form)
@@ -163,14 +172,7 @@ fn a_generated_onset_acts_where_and_as_much_as_it_was_drawn() {
 #[test]
 fn a_set_up_effect_scales_one_wheel_position() {
     let dir = tempfile::tempdir().unwrap();
-    let drawn = GeneratedEffect {
-        seed: 0,
-        form: Form::SetUp,
-        component: Component::Total,
-        scope: Scope::Wheel { wheel: Wheel::FR },
-        variance_share: 0.1,
-        magnitude: f64::NAN,
-    };
+    let drawn = unresolved(Form::SetUp, Scope::Wheel { wheel: Wheel::FR }, 0.1);
     let (rows, g) = simulate_with(dir.path(), drawn);
     // Weight 1 on every joule of the right-front tires: their extra wear is
     // the magnitude times the law's wear per joule times all their energy.

@@ -513,10 +513,13 @@ pub fn rank(problem: &Problem, library: &[Candidate], settings: &ScoringSettings
             };
             let (ft, nf) = projected(&null.q, &x);
             let observed = max_f(&null.e0, &null.q, &ft, &nf, positive);
-            // Every within-track candidate's statistic under every
-            // permutation, also where its own observed one is 0: the
-            // family's max over them is the null of the max-statistic.
-            let draws = (!track_level).then(|| {
+            let testable = fit.is_some() && observed > 0.0;
+            // The statistic under every permutation: for a candidate's own
+            // p-value when it has one to test, and under the max-statistic
+            // for every within-track candidate (also where its own observed
+            // one is 0), since the family's max over them is that null.
+            let family = settings.multiple_testing == MultipleTesting::MaxStatistic;
+            let draws = (!track_level && (testable || family)).then(|| {
                 let mut e = vec![0.0; n];
                 let stats = perms
                     .iter()
@@ -532,7 +535,7 @@ pub fn rank(problem: &Problem, library: &[Candidate], settings: &ScoringSettings
                     stats,
                 }
             });
-            let p = if fit.is_none() || observed <= 0.0 {
+            let p = if !testable {
                 1.0
             } else if track_level {
                 severities.p_value(

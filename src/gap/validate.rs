@@ -319,7 +319,7 @@ pub fn score_case(
 /// planted wear, over the tires diagnosed (0 without terms or without
 /// variation in either).
 fn terms_correlation(d: &Diagnosis, planted: &BTreeMap<(String, String), f64>) -> f64 {
-    let pairs: Vec<(f64, f64)> = d
+    let (terms, truth): (Vec<f64>, Vec<f64>) = d
         .terms_wear
         .iter()
         .map(|t| {
@@ -329,26 +329,13 @@ fn terms_correlation(d: &Diagnosis, planted: &BTreeMap<(String, String), f64>) -
                 .unwrap_or(0.0);
             (t.wear_pct, p)
         })
-        .collect();
-    let n = pairs.len() as f64;
-    if pairs.len() < 3 {
+        .unzip();
+    // Too few tires or a constant side (no terms entered) is no match.
+    let constant = |v: &[f64]| v.iter().all(|x| *x == v[0]);
+    if terms.len() < 3 || constant(&terms) || constant(&truth) {
         return 0.0;
     }
-    let (ma, mb) = (
-        pairs.iter().map(|p| p.0).sum::<f64>() / n,
-        pairs.iter().map(|p| p.1).sum::<f64>() / n,
-    );
-    let (mut ab, mut aa, mut bb) = (0.0, 0.0, 0.0);
-    for (a, b) in &pairs {
-        ab += (a - ma) * (b - mb);
-        aa += (a - ma) * (a - ma);
-        bb += (b - mb) * (b - mb);
-    }
-    if aa <= 0.0 || bb <= 0.0 {
-        0.0
-    } else {
-        ab / (aa * bb).sqrt()
-    }
+    crate::model::data::correlation(&terms, &truth)
 }
 
 /// The generated effect as the simulator resolved it (`truth/settings.toml`).

@@ -308,6 +308,21 @@ fn check_units(path: &Path, schema: &Schema) -> Result<(), IngestError> {
 /// Nulls, cells of the wrong type and columns in other units are errors
 /// naming the column (and row).
 pub fn read_parquet(path: &Path) -> Result<Vec<KpiRow>, IngestError> {
+    if path.is_dir() {
+        // Opening a folder fails late, inside the Parquet reader, with a bare
+        // "Is a directory"; say what was expected instead.
+        let hint = path.join("kpis.parquet");
+        let hint = if hint.is_file() {
+            format!("; did you mean {}?", hint.display())
+        } else {
+            String::new()
+        };
+        return Err(IngestError::invalid(
+            path,
+            "file",
+            format!("is a folder, not a KPI database (the Parquet file `extract` writes){hint}"),
+        ));
+    }
     let file = std::fs::File::open(path).map_err(|e| IngestError::io(path, e))?;
     let builder = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file)
         .map_err(|e| parquet_err(path, e))?;

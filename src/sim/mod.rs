@@ -210,25 +210,24 @@ pub fn simulate(opts: &SimOptions) -> Result<SimSummary, SimError> {
     let truths = results.into_iter().collect::<Result<Vec<_>, _>>()?;
 
     // Wear: truth and readings.
-    let generated = resolve_generated(opts, &plan, &roads, &truths);
+    let mut drawn = draw_tire_wear(opts, &plan, &roads, &truths);
+    let generated = resolve_generated(opts, &plan, &roads, &truths, &drawn);
     let mut readings = Vec::new();
     let mut truth_rows = Vec::new();
     let mut saturated = 0u64;
     let mut total_samples = 0u64;
-    for (rp, truth) in plan.runs.iter().zip(&truths) {
+    for ((rp, truth), tires) in plan.runs.iter().zip(&truths).zip(&mut drawn) {
         let ev = &plan.events[rp.event];
         let car = &plan.cars[rp.car];
         let compound = &plan.compounds[rp.compound];
-        let mut rng = ChaCha8Rng::seed_from_u64(rp.seed ^ 0x5745_4152);
         saturated += truth.saturated_samples;
         total_samples += truth.samples * 4;
-        for w in Wheel::ALL {
+        for (w, tire) in Wheel::ALL.into_iter().zip(tires.iter_mut()) {
             let wt = &truth.wheels[w.index()];
-            let mut tw =
-                wear::tire_wear(compound, &roads[ev.track], w, wt, &opts.effects, &mut rng);
+            let tw = &mut tire.wear;
             if let Some((g, _)) = &generated {
                 tw.generated_pct =
-                    g.magnitude * generated_unit_pct(g, rp, w, wt, compound, &roads[ev.track], &tw);
+                    g.magnitude * generated_unit_pct(g, rp, w, wt, compound, &roads[ev.track], tw);
             }
             let (factor, gauge_bias_mm) = opts.scatter.draw(event_seed(opts, rp), rp.seed, w);
             tw.scale(factor);
@@ -238,9 +237,9 @@ pub fn simulate(opts: &SimOptions) -> Result<SimSummary, SimError> {
                 w,
                 &set,
                 car.tread_width(w),
-                &tw,
+                tw,
                 gauge_bias_mm,
-                &mut rng,
+                &mut tire.readings_rng,
             ));
             truth_rows.push(TruthRow::new(
                 rp,
@@ -250,7 +249,7 @@ pub fn simulate(opts: &SimOptions) -> Result<SimSummary, SimError> {
                 w,
                 &set,
                 wt,
-                &tw,
+                tw,
             ));
         }
     }
@@ -588,16 +587,54 @@ fn write_truth(
     write_csv(&out.join("truth/runs.csv"), &run_rows)
 }
 
+/// One tire's true wear before a generated effect and the scatter, with its
+/// run's wear stream as it stands just before the tire's readings.
+struct DrawnTire {
+    wear: wear::TireWear,
+    readings_rng: ChaCha8Rng,
+}
+
+/// Every tire's wear, drawn once. Each run has one wear stream, drawn in
+/// wheel order: a tire's wear, then its readings. The readings' draws do not
+/// depend on the wear (the gauge noise is drawn alike at any depth), so the
+/// stream is advanced past them here and the readings drawn later, once a
+/// generated effect's magnitude is known, from the saved state.
+fn draw_tire_wear(
+    opts: &SimOptions,
+    plan: &Plan,
+    roads: &[RoadTruth],
+    truths: &[run::RunTruth],
+) -> Vec<[DrawnTire; 4]> {
+    plan.runs
+        .iter()
+        .zip(truths)
+        .map(|(rp, truth)| {
+            let ev = &plan.events[rp.event];
+            let car = &plan.cars[rp.car];
+            let compound = &plan.compounds[rp.compound];
+            let mut rng = ChaCha8Rng::seed_from_u64(rp.seed ^ 0x5745_4152);
+            Wheel::ALL.map(|w| {
+                let wt = &truth.wheels[w.index()];
+                let wear =
+                    wear::tire_wear(compound, &roads[ev.track], w, wt, &opts.effects, &mut rng);
+                let readings_rng = rng.clone();
+                wear::spot_readings(&rp.id, w, "", car.tread_width(w), &wear, 0.0, &mut rng);
+                DrawnTire { wear, readings_rng }
+            })
+        })
+        .collect()
+}
+
 /// The generated effect resolved on the season: thresholds from the energy
 /// quantiles of every tire's histogram, then the magnitude from its variance
 /// share (against the rest of the true wear, tire by tire); with its
-/// description. The wear's random draws are replayed, not consumed, so the
-/// readings match a season without the effect but for its wear.
+/// description.
 fn resolve_generated(
     opts: &SimOptions,
     plan: &Plan,
     roads: &[RoadTruth],
     truths: &[run::RunTruth],
+    drawn: &[[DrawnTire; 4]],
 ) -> Option<(GeneratedEffect, String)> {
     let mut g = opts.generated.clone()?;
     let len = g.histogram_len();
@@ -612,20 +649,16 @@ fn resolve_generated(
     g.resolve(plan.cars.len(), &season);
     g.magnitude = 1.0;
     let (mut other, mut unit) = (Vec::new(), Vec::new());
-    for (rp, truth) in plan.runs.iter().zip(truths) {
+    for ((rp, truth), tires) in plan.runs.iter().zip(truths).zip(drawn) {
         let ev = &plan.events[rp.event];
-        let car = &plan.cars[rp.car];
         let compound = &plan.compounds[rp.compound];
-        let mut rng = ChaCha8Rng::seed_from_u64(rp.seed ^ 0x5745_4152);
-        for w in Wheel::ALL {
+        for (w, tire) in Wheel::ALL.into_iter().zip(tires) {
             let wt = &truth.wheels[w.index()];
-            let tw = wear::tire_wear(compound, &roads[ev.track], w, wt, &opts.effects, &mut rng);
-            // Advance the stream as the readings will.
-            wear::spot_readings(&rp.id, w, "", car.tread_width(w), &tw, 0.0, &mut rng);
+            let tw = &tire.wear;
             // The share is of the wear as it will be, scatter included.
             let (factor, _) = opts.scatter.draw(event_seed(opts, rp), rp.seed, w);
             other.push(factor * tw.total_pct());
-            unit.push(factor * generated_unit_pct(&g, rp, w, wt, compound, &roads[ev.track], &tw));
+            unit.push(factor * generated_unit_pct(&g, rp, w, wt, compound, &roads[ev.track], tw));
         }
     }
     g.magnitude = g.magnitude_for(&other, &unit);
