@@ -20,6 +20,19 @@ pub struct BenchOptions {
     /// Run the GPU engine (skipped with a message when there is no adapter).
     pub gpu: bool,
     pub repeats: usize,
+    /// Which parts to measure.
+    pub parts: BenchParts,
+}
+
+/// The parts of a bench run.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum BenchParts {
+    /// The kernels and the decoding.
+    All,
+    /// The engines' kernels on synthetic buffers.
+    Kernels,
+    /// Telemetry decoding against zstd alone, on a simulated season.
+    Decode,
 }
 
 /// One measured line.
@@ -199,6 +212,18 @@ pub fn run_bench(o: &BenchOptions) -> BenchReport {
         None
     };
 
+    if o.parts != BenchParts::Decode {
+        kernel_lines(o, gpu.as_ref(), &mut report);
+    }
+    if o.parts != BenchParts::Kernels {
+        decode_lines(o, &mut report);
+    }
+    report
+}
+
+/// Each kernel on the CPU engine and the GPU engine, against a memory pass.
+fn kernel_lines(o: &BenchOptions, gpu: Option<&GpuEngine>, report: &mut BenchReport) {
+    let threads = report.threads;
     // Telemetry reduction: 4 wheels × 1 h at 1 kHz (small: 4 × 2 min).
     let per_wheel = if o.small { 120_000 } else { 3_600_000 };
     let batch = telemetry_batch(per_wheel);
@@ -361,8 +386,6 @@ pub fn run_bench(o: &BenchOptions) -> BenchReport {
             report.lines.push(w.line("gpu", d, Some(split)));
         }
     }
-    decode_lines(o, &mut report);
-    report
 }
 
 /// Telemetry decoding against its physical reference, in one run: every

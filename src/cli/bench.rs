@@ -14,9 +14,19 @@ pub(crate) struct BenchArgs {
     /// Repeats per measurement (the best is kept).
     #[arg(long, default_value_t = 3)]
     repeats: usize,
+    /// Measure only one part: `kernels` (the engines on synthetic buffers)
+    /// or `decode` (MCAP decoding against zstd alone on a simulated season).
+    #[arg(long, value_enum)]
+    only: Option<BenchPart>,
     /// Where to save the results.
     #[arg(long, default_value = "bench.json")]
     out: PathBuf,
+}
+
+#[derive(Clone, Copy, PartialEq, clap::ValueEnum)]
+pub(crate) enum BenchPart {
+    Kernels,
+    Decode,
 }
 
 #[derive(Clone, Copy, PartialEq, clap::ValueEnum)]
@@ -32,12 +42,19 @@ pub(crate) fn run(a: BenchArgs) -> Result<()> {
         engine,
         small,
         repeats,
+        only,
         out,
     } = a;
+    use tirewear::bench::BenchParts;
     let r = tirewear::bench::run_bench(&tirewear::bench::BenchOptions {
         small,
         gpu: engine != BenchEngine::Cpu,
         repeats,
+        parts: match only {
+            None => BenchParts::All,
+            Some(BenchPart::Kernels) => BenchParts::Kernels,
+            Some(BenchPart::Decode) => BenchParts::Decode,
+        },
     });
     print!("{}", tirewear::bench::render(&r));
     if engine == BenchEngine::Gpu && r.gpu.is_none() {

@@ -4,6 +4,7 @@
 pub mod compound;
 pub mod error;
 pub mod manifest;
+mod protowire;
 pub mod road;
 pub mod telemetry;
 pub mod wear;

@@ -3,6 +3,7 @@
 //! `proto/tirewear.proto`. Two message forms: per-sample messages (Foxglove
 //! plots them) and packed blocks of equally spaced samples (fast).
 
+use super::protowire::{self, Field, Scalar};
 use super::{IngestError, Result};
 use crate::Wheel;
 use mcap::records::MessageHeader;
@@ -42,9 +43,13 @@ pub enum Encoding {
 }
 
 /// Declares a columnar series type with one `Vec` per channel, and the code
-/// that appends a per-sample message or a packed block to it, from one list.
+/// that appends a per-sample message or a packed block to it, from one list
+/// of channels with their field numbers in the per-sample message (in the
+/// block message each channel is field number + 2, after the start time and
+/// the sample period; `proto/tirewear.proto`).
 macro_rules! series {
-    ($series:ident, $sample:ident, $block:ident, $elem:ident, [$($ch:ident: $t:ty),* $(,)?]) => {
+    ($series:ident, $sample:ident, $block:ident, $elem:ident,
+     [$($ch:ident: $t:ty = $num:literal),* $(,)?]) => {
         /// Columnar channels of one topic, in file order; `time_ns` is the sample time.
         #[derive(Debug, Clone, Default, PartialEq)]
         pub struct $series {
@@ -72,22 +77,69 @@ macro_rules! series {
                         stringify!($ch), b.$ch.len(), stringify!($elem)
                     ));
                 })*
-                if n > 0 && b.sample_period_ns == 0 {
-                    return Err("sample_period_ns is 0".into());
-                }
-                let last = (n as u64).checked_sub(1).map_or(Some(b.start_time_ns), |k| {
-                    k.checked_mul(b.sample_period_ns)
-                        .and_then(|d| d.checked_add(b.start_time_ns))
-                });
-                if last.is_none() {
-                    return Err(format!(
-                        "{n} samples of {} ns from {} ns run past the end of time (u64 ns)",
-                        b.sample_period_ns, b.start_time_ns
-                    ));
-                }
+                check_block_times(n, b.start_time_ns, b.sample_period_ns)?;
                 self.time_ns.extend((0..n as u64).map(|i| b.start_time_ns + i * b.sample_period_ns));
                 $(self.$ch.extend_from_slice(&b.$ch);)*
                 Ok(())
+            }
+            /// [`Self::push_sample`] straight from the message's bytes;
+            /// false (and nothing appended) where they use anything the
+            /// fast reader does not (`protowire`).
+            fn push_sample_bytes(&mut self, time_ns: u64, mut data: &[u8]) -> bool {
+                $(let mut $ch = <$t>::default();)*
+                while let Some((&key, rest)) = data.split_first() {
+                    // Every field is a fixed-width number below 16: a
+                    // one-byte key, then the value.
+                    let read = $(if u32::from(key) == ($num << 3) | <$t as Scalar>::WIRE {
+                        <$t as Scalar>::read_fixed(rest).map(|(v, rest)| {
+                            $ch = v;
+                            rest
+                        })
+                    } else)* {
+                        None
+                    };
+                    match read {
+                        Some(rest) => data = rest,
+                        None => return false,
+                    }
+                }
+                self.time_ns.push(time_ns);
+                $(self.$ch.push($ch);)*
+                true
+            }
+            /// [`Self::push_block`] straight from the message's bytes, the
+            /// packed arrays copied from them; `None` (and nothing appended)
+            /// where they use anything the fast reader does not (`protowire`).
+            fn push_block_bytes(&mut self, mut data: &[u8]) -> Option<std::result::Result<(), String>> {
+                let (mut start, mut period) = (0u64, 0u64);
+                $(let mut $ch: Option<&[u8]> = None;)*
+                while !data.is_empty() {
+                    match protowire::next_field(&mut data)? {
+                        (1, Field::Varint(v)) => start = v,
+                        (2, Field::Varint(v)) => period = v,
+                        $((n, Field::Bytes(b)) if n == $num + 2 && $ch.is_none() => $ch = Some(b),)*
+                        _ => return None,
+                    }
+                }
+                let n = protowire::packed_len::<f32>($elem)?;
+                $(let len = protowire::packed_len::<$t>($ch)?;
+                if len != n {
+                    return Some(Err(format!(
+                        "channel {} has {len} samples, {} has {n}",
+                        stringify!($ch), stringify!($elem)
+                    )));
+                })*
+                if let Err(e) = check_block_times(n, start, period) {
+                    return Some(Err(e));
+                }
+                self.time_ns.extend((0..n as u64).map(|i| start + i * period));
+                $(<$t as Scalar>::extend_packed(&mut self.$ch, $ch.unwrap_or_default());)*
+                Some(Ok(()))
+            }
+            /// Room for `additional` more samples in every channel.
+            fn reserve(&mut self, additional: usize) {
+                self.time_ns.reserve(additional);
+                $(self.$ch.reserve(additional);)*
             }
             /// Appends another series (the next part of the same topic).
             pub fn append(&mut self, mut other: Self) {
@@ -110,13 +162,30 @@ macro_rules! series {
 }
 
 series!(WheelSeries, TireSample, TireBlock, vx_mps, [
-    vx_mps: f32, vy_mps: f32, omega_radps: f32, rolling_radius_m: f32,
-    fx_n: f32, fy_n: f32, fz_n: f32, t_surface_c: f32, t_inner_c: f32,
-    pressure_pa: f32, camber_deg: f32,
+    vx_mps: f32 = 1, vy_mps: f32 = 2, omega_radps: f32 = 3, rolling_radius_m: f32 = 4,
+    fx_n: f32 = 5, fy_n: f32 = 6, fz_n: f32 = 7, t_surface_c: f32 = 8, t_inner_c: f32 = 9,
+    pressure_pa: f32 = 10, camber_deg: f32 = 11,
 ]);
 series!(VehicleSeries, VehicleSample, VehicleBlock, speed_mps, [
-    speed_mps: f32, t_track_c: f32, t_air_c: f32, distance_m: f64,
+    speed_mps: f32 = 1, t_track_c: f32 = 2, t_air_c: f32 = 3, distance_m: f64 = 4,
 ]);
+
+/// A block's times must be representable: a non-zero period when it has
+/// samples, and the last sample's time within u64 nanoseconds.
+fn check_block_times(n: usize, start: u64, period: u64) -> std::result::Result<(), String> {
+    if n > 0 && period == 0 {
+        return Err("sample_period_ns is 0".into());
+    }
+    let last = (n as u64).checked_sub(1).map_or(Some(start), |k| {
+        k.checked_mul(period).and_then(|d| d.checked_add(start))
+    });
+    if last.is_none() {
+        return Err(format!(
+            "{n} samples of {period} ns from {start} ns run past the end of time (u64 ns)"
+        ));
+    }
+    Ok(())
+}
 
 /// Identifies a run inside its telemetry file (an MCAP metadata record named
 /// `tirewear.run`; informative, readers rely on the manifest).
@@ -403,80 +472,136 @@ fn check_spans(path: &Path, run: &RunTelemetry) -> Result<()> {
     Ok(())
 }
 
-/// Decodes one message into `run`.
+/// What a channel's messages are, decided once per channel.
+#[derive(Debug, Clone)]
+enum ChannelKind {
+    /// A topic this reader does not know: its messages are counted, not read.
+    Ignored,
+    /// One wheel's (`Some`) or the vehicle's (`None`) telemetry.
+    Telemetry(Option<Wheel>, Encoding),
+    /// A tirewear topic that cannot be read: the error for its messages.
+    Invalid(String),
+}
+
+impl ChannelKind {
+    fn of(channel: &mcap::Channel) -> Self {
+        let topic = channel.topic.as_str();
+        let wheel = Wheel::from_topic(topic);
+        if wheel.is_none() && topic != VEHICLE_TOPIC {
+            return Self::Ignored;
+        }
+        let schema = channel
+            .schema
+            .as_ref()
+            .map(|s| s.name.as_str())
+            .unwrap_or("");
+        if channel.message_encoding != "protobuf" {
+            return Self::Invalid(format!(
+                "message encoding is '{}', expected 'protobuf'",
+                channel.message_encoding
+            ));
+        }
+        match (wheel, schema) {
+            (Some(_), TIRE_SAMPLE) | (None, VEHICLE_SAMPLE) => {
+                Self::Telemetry(wheel, Encoding::Sample)
+            }
+            (Some(_), TIRE_BLOCK) | (None, VEHICLE_BLOCK) => {
+                Self::Telemetry(wheel, Encoding::Block)
+            }
+            _ => Self::Invalid(format!(
+                "schema '{schema}' is not a tirewear.v1 schema for this topic"
+            )),
+        }
+    }
+}
+
+/// Where a message sits, for its errors.
+struct MessageAt<'a> {
+    topic: &'a str,
+    sequence: u32,
+    log_time: u64,
+}
+
+impl MessageAt<'_> {
+    fn record(&self) -> String {
+        format!(
+            "topic {}, message sequence {} at log_time {} ns",
+            self.topic, self.sequence, self.log_time
+        )
+    }
+}
+
+/// Decodes one message into `run`: straight from its bytes where they are
+/// in the form tirewear writes (`protowire`), through `prost` otherwise.
 fn decode_into(
     run: &mut RunTelemetry,
     path: &Path,
-    channel: &mcap::Channel,
-    sequence: u32,
-    log_time: u64,
+    kind: &ChannelKind,
+    at: &MessageAt,
     data: &[u8],
 ) -> Result<()> {
-    let topic = channel.topic.as_str();
-    let wheel = Wheel::from_topic(topic);
-    if wheel.is_none() && topic != VEHICLE_TOPIC {
-        run.ignored_messages += 1;
-        return Ok(());
-    }
-    let rec = || format!("topic {topic}, message sequence {sequence} at log_time {log_time} ns");
-    let schema = channel
-        .schema
-        .as_ref()
-        .map(|s| s.name.as_str())
-        .unwrap_or("");
-    if channel.message_encoding != "protobuf" {
-        return Err(IngestError::invalid(
-            path,
-            rec(),
-            format!(
-                "message encoding is '{}', expected 'protobuf'",
-                channel.message_encoding
-            ),
-        ));
-    }
-    let encoding = match (wheel, schema) {
-        (Some(_), TIRE_SAMPLE) | (None, VEHICLE_SAMPLE) => Encoding::Sample,
-        (Some(_), TIRE_BLOCK) | (None, VEHICLE_BLOCK) => Encoding::Block,
-        _ => {
-            return Err(IngestError::invalid(
-                path,
-                rec(),
-                format!("schema '{schema}' is not a tirewear.v1 schema for this topic"),
-            ));
+    let (wheel, encoding) = match kind {
+        ChannelKind::Ignored => {
+            run.ignored_messages += 1;
+            return Ok(());
         }
+        ChannelKind::Invalid(what) => {
+            return Err(IngestError::invalid(path, at.record(), what.as_str()));
+        }
+        ChannelKind::Telemetry(wheel, encoding) => (*wheel, *encoding),
     };
     match run.encoding {
         None => run.encoding = Some(encoding),
         Some(e) if e != encoding => {
             return Err(IngestError::invalid(
                 path,
-                rec(),
+                at.record(),
                 "file mixes per-sample and block messages",
             ));
         }
         _ => {}
     }
     let undecodable = |e: prost::DecodeError| {
-        IngestError::invalid(path, rec(), format!("cannot decode {schema}: {e}"))
+        let schema = match (wheel, encoding) {
+            (Some(_), Encoding::Sample) => TIRE_SAMPLE,
+            (Some(_), Encoding::Block) => TIRE_BLOCK,
+            (None, Encoding::Sample) => VEHICLE_SAMPLE,
+            (None, Encoding::Block) => VEHICLE_BLOCK,
+        };
+        IngestError::invalid(path, at.record(), format!("cannot decode {schema}: {e}"))
     };
-    let bad_block = |what: String| IngestError::invalid(path, rec(), what);
+    let bad_block = |what: String| IngestError::invalid(path, at.record(), what);
     match (wheel, encoding) {
         (Some(w), Encoding::Sample) => {
-            let s = proto::TireSample::decode(data).map_err(undecodable)?;
-            run.wheels[w.index()].push_sample(log_time, &s);
+            let series = &mut run.wheels[w.index()];
+            if !series.push_sample_bytes(at.log_time, data) {
+                let s = proto::TireSample::decode(data).map_err(undecodable)?;
+                series.push_sample(at.log_time, &s);
+            }
         }
         (Some(w), Encoding::Block) => {
-            let b = proto::TireBlock::decode(data).map_err(undecodable)?;
-            run.wheels[w.index()].push_block(&b).map_err(bad_block)?;
+            let series = &mut run.wheels[w.index()];
+            match series.push_block_bytes(data) {
+                Some(pushed) => pushed.map_err(bad_block)?,
+                None => {
+                    let b = proto::TireBlock::decode(data).map_err(undecodable)?;
+                    series.push_block(&b).map_err(bad_block)?;
+                }
+            }
         }
         (None, Encoding::Sample) => {
-            let s = proto::VehicleSample::decode(data).map_err(undecodable)?;
-            run.vehicle.push_sample(log_time, &s);
+            if !run.vehicle.push_sample_bytes(at.log_time, data) {
+                let s = proto::VehicleSample::decode(data).map_err(undecodable)?;
+                run.vehicle.push_sample(at.log_time, &s);
+            }
         }
-        (None, Encoding::Block) => {
-            let b = proto::VehicleBlock::decode(data).map_err(undecodable)?;
-            run.vehicle.push_block(&b).map_err(bad_block)?;
-        }
+        (None, Encoding::Block) => match run.vehicle.push_block_bytes(data) {
+            Some(pushed) => pushed.map_err(bad_block)?,
+            None => {
+                let b = proto::VehicleBlock::decode(data).map_err(undecodable)?;
+                run.vehicle.push_block(&b).map_err(bad_block)?;
+            }
+        },
     }
     Ok(())
 }
@@ -777,64 +902,44 @@ fn read_indexed(path: &Path) -> Result<Option<RunTelemetry>> {
     }
     let mut chunks = summary.chunk_indexes.clone();
     chunks.sort_by_key(|c| c.chunk_start_offset);
+    let kinds: BTreeMap<u16, (ChannelKind, &str)> = summary
+        .channels
+        .iter()
+        .map(|(&id, c)| (id, (ChannelKind::of(c), c.topic.as_str())))
+        .collect();
     let parts: Vec<Result<RunTelemetry>> = chunks
         .par_iter()
-        .map(|ci| {
-            let mc = |source| IngestError::Mcap {
-                path: path.to_path_buf(),
-                source,
-            };
+        .map_init(Vec::new, |order, ci| {
             let records = chunk_records(path, bytes, ci)?;
-            // The reader gets the checked records as an uncompressed chunk.
-            let mut plain = ci.clone();
-            plain.compression = String::new();
-            plain.compressed_size = records.len() as u64;
-            let offset = plain.compressed_data_offset().map_err(mc)?;
-            let mut one = summary.clone();
-            one.chunk_indexes = vec![plain];
-            let opts = mcap::sans_io::IndexedReaderOptions::new()
-                .with_record_length_limit(RECORD_LENGTH_LIMIT);
-            let mut reader =
-                mcap::sans_io::IndexedReader::new_with_options(&one, opts).map_err(mc)?;
+            let chunk = format!("chunk at offset {}", ci.chunk_start_offset);
+            chunk_messages(path, &chunk, &records, order)?;
             let mut part = RunTelemetry::default();
-            let mut records = Some(records);
-            while let Some(event) = reader.next_event() {
-                match event.map_err(mc)? {
-                    mcap::sans_io::IndexedReadEvent::ReadChunkRequest { .. } => {
-                        let Some(r) = records.take() else {
-                            return Err(IngestError::invalid(
-                                path,
-                                format!("chunk at offset {}", ci.chunk_start_offset),
-                                "the reader asked for the chunk twice",
-                            ));
-                        };
-                        reader.insert_chunk_record_data(offset, &r).map_err(mc)?;
-                    }
-                    mcap::sans_io::IndexedReadEvent::Message { header, data } => {
-                        let channel = one.channels.get(&header.channel_id).ok_or_else(|| {
-                            IngestError::invalid(
-                                path,
-                                format!("message sequence {}", header.sequence),
-                                format!("unknown channel {}", header.channel_id),
-                            )
-                        })?;
-                        decode_into(
-                            &mut part,
-                            path,
-                            channel,
-                            header.sequence,
-                            header.log_time,
-                            data,
-                        )?;
-                    }
-                }
+            for m in order.iter() {
+                let (kind, topic) = kinds.get(&m.channel).ok_or_else(|| {
+                    IngestError::invalid(
+                        path,
+                        format!("{chunk}, message sequence {}", m.sequence),
+                        format!("unknown channel {}", m.channel),
+                    )
+                })?;
+                let at = MessageAt {
+                    topic,
+                    sequence: m.sequence,
+                    log_time: m.log_time,
+                };
+                decode_into(&mut part, path, kind, &at, &records[m.data.clone()])?;
             }
             Ok(part)
         })
         .collect();
+    let parts = parts.into_iter().collect::<Result<Vec<_>>>()?;
     let mut run = RunTelemetry::default();
+    for (i, w) in run.wheels.iter_mut().enumerate() {
+        w.reserve(parts.iter().map(|p| p.wheels[i].len()).sum());
+    }
+    run.vehicle
+        .reserve(parts.iter().map(|p| p.vehicle.len()).sum());
     for part in parts {
-        let part = part?;
         match (run.encoding, part.encoding) {
             (Some(a), Some(b)) if a != b => {
                 return Err(IngestError::invalid(
@@ -853,6 +958,71 @@ fn read_indexed(path: &Path) -> Result<Option<RunTelemetry>> {
         run.vehicle.append(part.vehicle);
     }
     Ok(Some(run))
+}
+
+/// A message record inside a chunk's records.
+struct ChunkMessage {
+    channel: u16,
+    sequence: u32,
+    log_time: u64,
+    /// Its data, as a range of the chunk's records.
+    data: std::ops::Range<usize>,
+}
+
+/// The message records of one chunk's (decompressed, checked) records, in
+/// log-time order with ties in file order: the order of the mcap crate's
+/// indexed reader. Schema and channel records are skipped (the summary's
+/// channels are the ones used); a record that runs past the end is an error.
+fn chunk_messages(
+    path: &Path,
+    chunk: &str,
+    records: &[u8],
+    out: &mut Vec<ChunkMessage>,
+) -> Result<()> {
+    const OP_MESSAGE: u8 = 0x05;
+    // channel id u16, sequence u32, log_time u64, publish_time u64.
+    const MESSAGE_HEADER: usize = 2 + 4 + 8 + 8;
+    out.clear();
+    let mut at = 0usize;
+    while at < records.len() {
+        let bad = |what: String| {
+            IngestError::invalid(
+                path,
+                format!("{chunk}, record at offset {at} of its records"),
+                what,
+            )
+        };
+        let len = le_u64(records, at + 1)
+            .and_then(|l| usize::try_from(l).ok())
+            .filter(|&l| l <= records.len() - at - 9)
+            .ok_or_else(|| {
+                bad(format!(
+                    "its length runs past the end of the chunk's {} bytes of records",
+                    records.len()
+                ))
+            })?;
+        let body = at + 9..at + 9 + len;
+        if records[at] == OP_MESSAGE {
+            if len < MESSAGE_HEADER {
+                return Err(bad(format!(
+                    "a message record of {len} bytes is shorter than its {MESSAGE_HEADER}-byte header"
+                )));
+            }
+            let b = &records[body.clone()];
+            out.push(ChunkMessage {
+                channel: u16::from_le_bytes([b[0], b[1]]),
+                sequence: le_u32(b, 2).unwrap_or(0),
+                log_time: le_u64(b, 6).unwrap_or(0),
+                data: body.start + MESSAGE_HEADER..body.end,
+            });
+        }
+        at = body.end;
+    }
+    if !out.is_sorted_by_key(|m| m.log_time) {
+        // Stable: equal log times keep their file order.
+        out.sort_by_key(|m| m.log_time);
+    }
+    Ok(())
 }
 
 /// Walks the top-level records from the header to `DataEnd`, each length
@@ -943,14 +1113,420 @@ pub fn read_telemetry_linear(path: &Path) -> Result<RunTelemetry> {
             path: path.to_path_buf(),
             source,
         })?;
+        let at = MessageAt {
+            topic: &msg.channel.topic,
+            sequence: msg.sequence,
+            log_time: msg.log_time,
+        };
         decode_into(
             &mut run,
             path,
-            &msg.channel,
-            msg.sequence,
-            msg.log_time,
+            &ChannelKind::of(&msg.channel),
+            &at,
             &msg.data,
         )?;
     }
     Ok(run)
+}
+
+#[cfg(test)]
+mod tests {
+    //! The fast readers (`protowire`) against `prost`: on every message of
+    //! every MCAP fixture (tirewear's writer and Python's), and on messages
+    //! written in every other valid way a protobuf encoder may use, where the
+    //! fast reader must give up and the `prost` route give the same series.
+    use super::*;
+    use rand::{Rng, SeedableRng};
+
+    fn key(number: u32, wire: u32) -> Vec<u8> {
+        varint_bytes(u64::from(number << 3 | wire))
+    }
+
+    fn varint_bytes(mut v: u64) -> Vec<u8> {
+        let mut out = Vec::new();
+        while v >= 0x80 {
+            out.push((v as u8) | 0x80);
+            v >>= 7;
+        }
+        out.push(v as u8);
+        out
+    }
+
+    /// A block through the route `decode_into` takes: fast, else prost.
+    fn block_any(data: &[u8]) -> (bool, std::result::Result<WheelSeries, String>) {
+        let mut s = WheelSeries::default();
+        match s.push_block_bytes(data) {
+            Some(r) => (true, r.map(|()| s)),
+            None => (false, block_prost(data)),
+        }
+    }
+
+    fn block_prost(data: &[u8]) -> std::result::Result<WheelSeries, String> {
+        let mut s = WheelSeries::default();
+        let b = proto::TireBlock::decode(data).map_err(|e| e.to_string())?;
+        s.push_block(&b)?;
+        Ok(s)
+    }
+
+    fn sample_any(data: &[u8]) -> (bool, std::result::Result<WheelSeries, String>) {
+        let mut s = WheelSeries::default();
+        if s.push_sample_bytes(5, data) {
+            return (true, Ok(s));
+        }
+        (false, sample_prost(data))
+    }
+
+    fn sample_prost(data: &[u8]) -> std::result::Result<WheelSeries, String> {
+        let mut s = WheelSeries::default();
+        let m = proto::TireSample::decode(data).map_err(|e| e.to_string())?;
+        s.push_sample(5, &m);
+        Ok(s)
+    }
+
+    /// Every channel's bits (NaN payloads included), and the times.
+    fn bits(s: &WheelSeries) -> (Vec<u64>, Vec<Vec<u32>>) {
+        let channels = [
+            &s.vx_mps,
+            &s.vy_mps,
+            &s.omega_radps,
+            &s.rolling_radius_m,
+            &s.fx_n,
+            &s.fy_n,
+            &s.fz_n,
+            &s.t_surface_c,
+            &s.t_inner_c,
+            &s.pressure_pa,
+            &s.camber_deg,
+        ];
+        let channels = channels
+            .iter()
+            .map(|c| c.iter().map(|x| x.to_bits()).collect())
+            .collect();
+        (s.time_ns.clone(), channels)
+    }
+
+    /// The same series bit for bit, or both an error.
+    fn same(
+        a: &std::result::Result<WheelSeries, String>,
+        b: &std::result::Result<WheelSeries, String>,
+    ) -> bool {
+        match (a, b) {
+            (Ok(a), Ok(b)) => bits(a) == bits(b),
+            (Err(_), Err(_)) => true,
+            _ => false,
+        }
+    }
+
+    #[test]
+    fn every_fixture_message_reads_the_same_fast_and_through_prost() {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures");
+        let mut fast = 0;
+        for name in ["tiny-block", "tiny-sample", "python-block", "python-sample"] {
+            let bytes = std::fs::read(dir.join(format!("{name}.mcap"))).unwrap();
+            for msg in mcap::MessageStream::new(&bytes).unwrap() {
+                let msg = msg.unwrap();
+                let data = msg.data.as_ref();
+                let (wheel, vehicle) = (
+                    Wheel::from_topic(&msg.channel.topic).is_some(),
+                    msg.channel.topic == VEHICLE_TOPIC,
+                );
+                let schema = msg.channel.schema.as_ref().unwrap().name.as_str();
+                let took_fast = match schema {
+                    TIRE_BLOCK if wheel => {
+                        let (f, got) = block_any(data);
+                        assert!(same(&got, &block_prost(data)), "{name}");
+                        f
+                    }
+                    TIRE_SAMPLE if wheel => {
+                        let (f, got) = sample_any(data);
+                        assert!(same(&got, &sample_prost(data)), "{name}");
+                        f
+                    }
+                    VEHICLE_BLOCK if vehicle => {
+                        let mut a = VehicleSeries::default();
+                        let f = a.push_block_bytes(data).unwrap().is_ok();
+                        let mut b = VehicleSeries::default();
+                        b.push_block(&proto::VehicleBlock::decode(data).unwrap())
+                            .unwrap();
+                        assert_eq!(format!("{a:?}"), format!("{b:?}"), "{name}");
+                        f
+                    }
+                    VEHICLE_SAMPLE if vehicle => {
+                        let mut a = VehicleSeries::default();
+                        let f = a.push_sample_bytes(9, data);
+                        let mut b = VehicleSeries::default();
+                        b.push_sample(9, &proto::VehicleSample::decode(data).unwrap());
+                        assert_eq!(format!("{a:?}"), format!("{b:?}"), "{name}");
+                        f
+                    }
+                    other => panic!("{name}: unexpected schema {other}"),
+                };
+                // Both writers' messages take the fast route.
+                assert!(took_fast, "{name}: {schema} fell back to prost");
+                fast += 1;
+            }
+        }
+        assert!(fast > 100, "{fast}");
+    }
+
+    /// A random block as prost writes it, and its channels by field number.
+    fn random_block(rng: &mut impl Rng) -> (proto::TireBlock, Vec<(u32, Vec<f32>)>) {
+        let n = rng.random_range(0..6);
+        let mut channels = Vec::new();
+        for number in 3..=13u32 {
+            let v: Vec<f32> = (0..n)
+                .map(|_| f32::from_bits(rng.random::<u32>()))
+                .collect();
+            channels.push((number, v));
+        }
+        let c = |i: usize| channels[i].1.clone();
+        let block = proto::TireBlock {
+            start_time_ns: rng.random_range(0..1u64 << 40),
+            sample_period_ns: rng.random_range(0..3) * 1_000_000,
+            vx_mps: c(0),
+            vy_mps: c(1),
+            omega_radps: c(2),
+            rolling_radius_m: c(3),
+            fx_n: c(4),
+            fy_n: c(5),
+            fz_n: c(6),
+            t_surface_c: c(7),
+            t_inner_c: c(8),
+            pressure_pa: c(9),
+            camber_deg: c(10),
+        };
+        (block, channels)
+    }
+
+    /// The same block written by hand: fields in a random order, the times
+    /// with redundant varint bytes, each channel packed, split into two
+    /// packed runs, or unpacked, and maybe an unknown field.
+    fn rewritten(
+        b: &proto::TireBlock,
+        channels: &[(u32, Vec<f32>)],
+        rng: &mut impl Rng,
+    ) -> Vec<Vec<u8>> {
+        let mut fields: Vec<Vec<u8>> = Vec::new();
+        for (number, value) in [(1, b.start_time_ns), (2, b.sample_period_ns)] {
+            let mut f = key(number, 0);
+            let mut v = varint_bytes(value);
+            if rng.random_bool(0.5) {
+                // 0x80 continuation with a zero group: same value, longer.
+                let last = v.pop().unwrap();
+                v.extend([last | 0x80, 0x00]);
+            }
+            f.extend(v);
+            fields.push(f);
+        }
+        // Half the blocks keep every channel in one packed run (the fast
+        // reader takes them), half mix the three ways.
+        let mixed = rng.random_bool(0.5);
+        for (number, values) in channels {
+            let packed = |vals: &[f32]| {
+                let mut f = key(*number, 2);
+                f.extend(varint_bytes(4 * vals.len() as u64));
+                f.extend(vals.iter().flat_map(|x| x.to_le_bytes()));
+                f
+            };
+            match if mixed { rng.random_range(0..3) } else { 0 } {
+                0 => fields.push(packed(values)),
+                1 => {
+                    let cut = rng.random_range(0..=values.len());
+                    fields.push(packed(&values[..cut]));
+                    fields.push(packed(&values[cut..]));
+                }
+                _ => {
+                    let mut f = Vec::new();
+                    for x in values {
+                        f.extend(key(*number, 5));
+                        f.extend(x.to_le_bytes());
+                    }
+                    fields.push(f);
+                }
+            }
+        }
+        if rng.random_bool(0.3) {
+            let mut f = key(99, 2);
+            f.extend([3, 1, 2, 3]);
+            fields.push(f);
+        }
+        // File order as written or reversed (split runs then concatenate
+        // the other way round, for prost as for the fast reader).
+        let mut order: Vec<usize> = (0..fields.len()).collect();
+        if rng.random_bool(0.5) {
+            order.reverse();
+        }
+        order.into_iter().map(|i| fields[i].clone()).collect()
+    }
+
+    #[test]
+    fn blocks_written_any_valid_way_read_as_prost_reads_them() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
+        let (mut fast, mut fallback) = (0, 0);
+        for _ in 0..2000 {
+            let (block, channels) = random_block(&mut rng);
+            let canonical = block.encode_to_vec();
+            let (f, got) = block_any(&canonical);
+            assert!(f, "prost's own encoding takes the fast route");
+            assert!(same(&got, &block_prost(&canonical)));
+            let fields = rewritten(&block, &channels, &mut rng);
+            let data: Vec<u8> = fields.concat();
+            let (f, got) = block_any(&data);
+            assert!(same(&got, &block_prost(&data)), "{data:?}");
+            if f {
+                fast += 1
+            } else {
+                fallback += 1
+            }
+            // Damaged: cut anywhere, or one byte changed.
+            let cut = rng.random_range(0..=data.len());
+            assert!(same(&block_any(&data[..cut]).1, &block_prost(&data[..cut])));
+            if !data.is_empty() {
+                let mut flipped = data.clone();
+                let i = rng.random_range(0..data.len());
+                flipped[i] ^= 1 << rng.random_range(0..8);
+                assert!(
+                    same(&block_any(&flipped).1, &block_prost(&flipped)),
+                    "{flipped:?}"
+                );
+            }
+        }
+        // Both routes were exercised.
+        assert!(
+            fast > 50 && fallback > 500,
+            "{fast} fast, {fallback} through prost"
+        );
+    }
+
+    #[test]
+    fn samples_written_any_valid_way_read_as_prost_reads_them() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(12);
+        for _ in 0..2000 {
+            let values: Vec<f32> = (0..11)
+                .map(|_| {
+                    if rng.random_bool(0.2) {
+                        0.0
+                    } else {
+                        f32::from_bits(rng.random::<u32>())
+                    }
+                })
+                .collect();
+            let m = proto::TireSample {
+                vx_mps: values[0],
+                vy_mps: values[1],
+                omega_radps: values[2],
+                rolling_radius_m: values[3],
+                fx_n: values[4],
+                fy_n: values[5],
+                fz_n: values[6],
+                t_surface_c: values[7],
+                t_inner_c: values[8],
+                pressure_pa: values[9],
+                camber_deg: values[10],
+            };
+            let canonical = m.encode_to_vec();
+            let (f, got) = sample_any(&canonical);
+            assert!(f);
+            assert!(same(&got, &sample_prost(&canonical)));
+            // Fields in any order, some twice (the last one counts), maybe
+            // an unknown one.
+            let mut fields: Vec<Vec<u8>> = (1..=11u32)
+                .map(|n| {
+                    let mut f = key(n, 5);
+                    f.extend(values[n as usize - 1].to_le_bytes());
+                    f
+                })
+                .collect();
+            let twice = rng.random_range(0..11usize);
+            let mut again = key(twice as u32 + 1, 5);
+            again.extend(rng.random::<u32>().to_le_bytes());
+            fields.push(again);
+            if rng.random_bool(0.3) {
+                fields.push([key(20, 0), vec![7]].concat());
+            }
+            for i in (1..fields.len() - 1).rev() {
+                fields.swap(i, rng.random_range(0..=i));
+            }
+            let data = fields.concat();
+            assert!(same(&sample_any(&data).1, &sample_prost(&data)));
+            let cut = rng.random_range(0..=data.len());
+            assert!(same(
+                &sample_any(&data[..cut]).1,
+                &sample_prost(&data[..cut])
+            ));
+            let mut flipped = data.clone();
+            let i = rng.random_range(0..data.len());
+            flipped[i] ^= 1 << rng.random_range(0..8);
+            assert!(same(&sample_any(&flipped).1, &sample_prost(&flipped)));
+        }
+    }
+}
+
+#[cfg(test)]
+mod chunk_tests {
+    use super::*;
+
+    fn record(op: u8, body: &[u8]) -> Vec<u8> {
+        let mut r = vec![op];
+        r.extend((body.len() as u64).to_le_bytes());
+        r.extend(body);
+        r
+    }
+
+    fn message(channel: u16, sequence: u32, log_time: u64, data: &[u8]) -> Vec<u8> {
+        let mut b = channel.to_le_bytes().to_vec();
+        b.extend(sequence.to_le_bytes());
+        b.extend(log_time.to_le_bytes());
+        b.extend(0u64.to_le_bytes());
+        b.extend(data);
+        record(0x05, &b)
+    }
+
+    #[test]
+    fn messages_come_in_log_time_order_with_ties_in_file_order() {
+        let records = [
+            record(0x04, b"a channel record, skipped"),
+            message(1, 0, 30, b"c"),
+            message(2, 1, 10, b"a"),
+            message(1, 2, 30, b"d"),
+            message(3, 3, 20, b"b"),
+        ]
+        .concat();
+        let mut out = Vec::new();
+        chunk_messages(Path::new("f.mcap"), "chunk", &records, &mut out).unwrap();
+        let got: Vec<(u16, u32, u64, &[u8])> = out
+            .iter()
+            .map(|m| (m.channel, m.sequence, m.log_time, &records[m.data.clone()]))
+            .collect();
+        let want: Vec<(u16, u32, u64, &[u8])> = vec![
+            (2, 1, 10, b"a"),
+            (3, 3, 20, b"b"),
+            (1, 0, 30, b"c"),
+            (1, 2, 30, b"d"),
+        ];
+        assert_eq!(got, want);
+    }
+
+    #[test]
+    fn a_record_past_the_end_or_a_short_message_is_named() {
+        let mut records = message(1, 0, 5, b"xyz");
+        records.truncate(records.len() - 1);
+        let mut out = Vec::new();
+        let e = chunk_messages(Path::new("f.mcap"), "chunk at offset 8", &records, &mut out)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("f.mcap") && e.contains("chunk at offset 8, record at offset 0"),
+            "{e}"
+        );
+        assert!(e.contains("past the end"), "{e}");
+        let short = record(0x05, &[0; 10]);
+        let e = chunk_messages(Path::new("f.mcap"), "chunk", &short, &mut out)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("shorter than its 22-byte header"), "{e}");
+        // Eight bytes: not even a record's opcode and length.
+        let e = chunk_messages(Path::new("f.mcap"), "chunk", &[5; 8], &mut out).unwrap_err();
+        assert!(e.to_string().contains("past the end"), "{e}");
+    }
 }

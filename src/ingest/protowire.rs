@@ -1,0 +1,202 @@
+//! The protobuf wire format, only as far as the `tirewear.v1` messages use
+//! it: the fast path of telemetry decoding (packed float arrays read straight
+//! from the decompressed chunk, per-sample fields without a message struct).
+//!
+//! Anything else a valid encoder may write (unknown fields, an unpacked or
+//! split repeated field, a field with another wire type) makes these readers
+//! give up (`None`); the caller then decodes the message with `prost`, which
+//! accepts every valid encoding and names what is wrong with an invalid one.
+//! Both routes give the same series: `tests/oracle_mcap.rs` and the unit
+//! tests below compare them.
+
+/// One field's value as it appears on the wire.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) enum Field<'a> {
+    /// Wire type 0.
+    Varint(u64),
+    /// Wire type 1 (little-endian).
+    Fixed64([u8; 8]),
+    /// Wire type 2.
+    Bytes(&'a [u8]),
+    /// Wire type 5 (little-endian).
+    Fixed32([u8; 4]),
+}
+
+/// A base-128 varint at the front of `buf`, which is advanced past it.
+/// `None` when it runs off the end or is longer than a u64 allows.
+#[inline]
+pub(crate) fn varint(buf: &mut &[u8]) -> Option<u64> {
+    // Tags and short lengths take one byte.
+    if let Some((&byte, rest)) = buf.split_first()
+        && byte < 0x80
+    {
+        *buf = rest;
+        return Some(u64::from(byte));
+    }
+    let mut value = 0u64;
+    for i in 0..10 {
+        let byte = *buf.get(i)?;
+        // The tenth byte holds bit 63 only.
+        if i == 9 && byte > 1 {
+            return None;
+        }
+        value |= u64::from(byte & 0x7f) << (7 * i);
+        if byte < 0x80 {
+            *buf = &buf[i + 1..];
+            return Some(value);
+        }
+    }
+    None
+}
+
+/// The field at the front of `buf` (its number and value); `buf` is advanced
+/// past it. `None` for a malformed field or a group (wire types 3 and 4).
+#[inline]
+pub(crate) fn next_field<'a>(buf: &mut &'a [u8]) -> Option<(u32, Field<'a>)> {
+    let key = varint(buf)?;
+    let number = u32::try_from(key >> 3).ok().filter(|&n| n > 0)?;
+    let field = match key & 7 {
+        0 => Field::Varint(varint(buf)?),
+        1 => {
+            let (head, rest) = buf.split_first_chunk::<8>()?;
+            *buf = rest;
+            Field::Fixed64(*head)
+        }
+        2 => {
+            let len = usize::try_from(varint(buf)?).ok()?;
+            let bytes = buf.get(..len)?;
+            *buf = &buf[len..];
+            Field::Bytes(bytes)
+        }
+        5 => {
+            let (head, rest) = buf.split_first_chunk::<4>()?;
+            *buf = rest;
+            Field::Fixed32(*head)
+        }
+        _ => return None,
+    };
+    Some((number, field))
+}
+
+/// A channel's element type: `float` (fixed32) or `double` (fixed64).
+pub(crate) trait Scalar: Copy + Default {
+    /// Bytes per element in a packed array.
+    const SIZE: usize;
+    /// The wire type of a singular field (5: fixed32, 1: fixed64).
+    const WIRE: u32;
+    /// A singular field's value at the front of `buf` (after its key), and
+    /// the rest; `None` if `buf` is too short.
+    fn read_fixed(buf: &[u8]) -> Option<(Self, &[u8])>;
+    /// Appends a packed array's elements (`bytes.len()` a multiple of `SIZE`).
+    fn extend_packed(v: &mut Vec<Self>, bytes: &[u8]);
+}
+
+impl Scalar for f32 {
+    const SIZE: usize = 4;
+    const WIRE: u32 = 5;
+    #[inline]
+    fn read_fixed(buf: &[u8]) -> Option<(Self, &[u8])> {
+        let (head, rest) = buf.split_first_chunk::<4>()?;
+        Some((f32::from_le_bytes(*head), rest))
+    }
+    fn extend_packed(v: &mut Vec<Self>, bytes: &[u8]) {
+        extend_le(v, bytes, f32::from_le_bytes);
+    }
+}
+
+impl Scalar for f64 {
+    const SIZE: usize = 8;
+    const WIRE: u32 = 1;
+    #[inline]
+    fn read_fixed(buf: &[u8]) -> Option<(Self, &[u8])> {
+        let (head, rest) = buf.split_first_chunk::<8>()?;
+        Some((f64::from_le_bytes(*head), rest))
+    }
+    fn extend_packed(v: &mut Vec<Self>, bytes: &[u8]) {
+        extend_le(v, bytes, f64::from_le_bytes);
+    }
+}
+
+/// Appends little-endian elements: one reservation, then a loop the
+/// compiler turns into a copy on little-endian machines.
+fn extend_le<T: Copy, const N: usize>(v: &mut Vec<T>, bytes: &[u8], from: fn([u8; N]) -> T) {
+    let (elements, rest) = bytes.as_chunks::<N>();
+    debug_assert!(rest.is_empty(), "packed length checked by the caller");
+    v.extend(elements.iter().map(|b| from(*b)));
+}
+
+/// A packed array's length in elements, if `bytes` holds whole elements.
+pub(crate) fn packed_len<T: Scalar>(bytes: Option<&[u8]>) -> Option<usize> {
+    let len = bytes.map_or(0, <[u8]>::len);
+    len.is_multiple_of(T::SIZE).then_some(len / T::SIZE)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn varints_read_as_the_protobuf_encoding_guide_writes_them() {
+        // https://protobuf.dev/programming-guides/encoding/: 150 = 96 01.
+        let mut b: &[u8] = &[0x96, 0x01, 0x07];
+        assert_eq!(varint(&mut b), Some(150));
+        assert_eq!(b, &[0x07]);
+        let mut max: &[u8] = &[0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0x01];
+        assert_eq!(varint(&mut max), Some(u64::MAX));
+        // Eleven bytes, a tenth byte above 1, and a varint cut short.
+        let mut long: &[u8] = &[0xff; 11];
+        assert_eq!(varint(&mut long), None);
+        let mut over: &[u8] = &[0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0x02];
+        assert_eq!(varint(&mut over), None);
+        let mut cut: &[u8] = &[0x80];
+        assert_eq!(varint(&mut cut), None);
+    }
+
+    #[test]
+    fn fields_of_each_wire_type_and_malformed_ones() {
+        // Field 1 varint 3; field 2 fixed32 1.0; field 3 bytes [1, 2];
+        // field 4 fixed64 -2.0.
+        let mut b: Vec<u8> = vec![0x08, 0x03, 0x15];
+        b.extend(1.0f32.to_le_bytes());
+        b.extend([0x1a, 0x02, 0x01, 0x02, 0x21]);
+        b.extend((-2.0f64).to_le_bytes());
+        let mut buf = b.as_slice();
+        assert_eq!(next_field(&mut buf), Some((1, Field::Varint(3))));
+        let one = Field::Fixed32(1.0f32.to_le_bytes());
+        assert_eq!(next_field(&mut buf), Some((2, one)));
+        assert_eq!(next_field(&mut buf), Some((3, Field::Bytes(&[1, 2]))));
+        let minus_two = Field::Fixed64((-2.0f64).to_le_bytes());
+        assert_eq!(next_field(&mut buf), Some((4, minus_two)));
+        assert!(buf.is_empty());
+        // Field number 0, a group, bytes past the end, a fixed32 cut short.
+        for bad in [
+            &[0x00, 0x01][..],
+            &[0x0b],
+            &[0x0a, 0x05, 0x01],
+            &[0x0d, 0x00, 0x00],
+        ] {
+            let mut buf = bad;
+            assert_eq!(next_field(&mut buf), None, "{bad:?}");
+        }
+    }
+
+    #[test]
+    fn fixed_values_read_little_endian() {
+        let mut b = 2.5f64.to_le_bytes().to_vec();
+        b.push(9);
+        assert_eq!(f64::read_fixed(&b), Some((2.5, &[9u8][..])));
+        assert_eq!(f32::read_fixed(&b[..3]), None);
+    }
+
+    #[test]
+    fn packed_arrays_copy_their_elements() {
+        let values = [1.5f32, -0.0, f32::MAX, 3.25e-20];
+        let bytes: Vec<u8> = values.iter().flat_map(|v| v.to_le_bytes()).collect();
+        let mut v = vec![7.0f32];
+        assert_eq!(packed_len::<f32>(Some(&bytes)), Some(4));
+        f32::extend_packed(&mut v, &bytes);
+        assert_eq!(v, [7.0, 1.5, -0.0, f32::MAX, 3.25e-20]);
+        assert_eq!(packed_len::<f64>(Some(&bytes[..12])), None);
+        assert_eq!(packed_len::<f64>(None), Some(0));
+    }
+}
