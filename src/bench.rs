@@ -22,6 +22,8 @@ pub struct BenchOptions {
     pub repeats: usize,
     /// Which parts to measure.
     pub parts: BenchParts,
+    /// Decode lines on this season archive instead of simulated ones.
+    pub season: Option<std::path::PathBuf>,
 }
 
 /// The parts of a bench run.
@@ -389,97 +391,150 @@ fn kernel_lines(o: &BenchOptions, gpu: Option<&GpuEngine>, report: &mut BenchRep
 }
 
 /// Telemetry decoding against its physical reference, in one run: every
-/// MCAP file of a simulated season (the demo at 20 Hz; `--small`: the tiny
-/// one), block and per-sample forms, read from the page cache by
-/// `read_telemetry` (CRC checks, decompression, protobuf decoding into
-/// channels) and by zstd alone over the same chunks, on one thread and on
-/// all. Files in parallel on all threads, as `extract` reads them.
+/// MCAP file of a season (by default simulated: the demo at 20 Hz, `--small`
+/// the tiny one, in the block and the per-sample form; or the user's own
+/// with `--season`), read from the page cache by `read_telemetry` (CRC
+/// checks, decompression, protobuf decoding into channels) and by zstd alone
+/// over the same chunks, on one thread and on all; then the whole extraction
+/// of the season (`kpi::extract`, CPU engine: decoding, every reduction and
+/// the Parquet outputs) against the same reference. Files in parallel on all
+/// threads, as `extract` reads them.
 fn decode_lines(o: &BenchOptions, report: &mut BenchReport) {
-    use crate::ingest::telemetry::{Encoding, decompress_only, read_telemetry};
-    use crate::sim::{Preset, SimOptions, simulate};
-    let threads = report.threads;
     let Ok(dir) = tempfile::tempdir() else {
         report
             .notes
             .push("decode skipped: no temporary folder".into());
         return;
     };
-    for (encoding, label) in [
-        (Encoding::Block, "decode, block"),
-        (Encoding::Sample, "decode, sample"),
-    ] {
-        let out = dir.path().join(label.replace(", ", "-"));
-        let opts = SimOptions {
-            preset: if o.small { Preset::Tiny } else { Preset::Demo },
-            scale: 1.0,
-            seed: 1,
-            effects: vec![],
-            generated: None,
-            scatter: crate::sim::WearScatter::NONE,
-            encoding,
-            rate_hz: None,
-            out: out.clone(),
-            sensor_noise: true,
-            progress: false,
-        };
-        let files: Vec<std::path::PathBuf> = match simulate(&opts) {
-            Ok(_) => std::fs::read_dir(out.join("telemetry"))
-                .map(|d| {
-                    d.filter_map(|e| e.ok().map(|e| e.path()))
-                        .filter(|p| p.extension().is_some_and(|x| x == "mcap"))
-                        .collect()
-                })
-                .unwrap_or_default(),
-            Err(e) => {
-                report.notes.push(format!("{label} skipped: {e}"));
-                continue;
+    let seasons: Vec<(&'static str, std::path::PathBuf)> = match &o.season {
+        Some(season) => vec![("decode, season", season.clone())],
+        None => {
+            use crate::ingest::telemetry::Encoding;
+            let mut seasons = Vec::new();
+            for (encoding, label) in [
+                (Encoding::Block, "decode, block"),
+                (Encoding::Sample, "decode, sample"),
+            ] {
+                let out = dir.path().join(label.replace(", ", "-"));
+                match simulate_for_decode(o, encoding, &out) {
+                    Ok(()) => seasons.push((label, out)),
+                    Err(e) => report.notes.push(format!("{label} skipped: {e}")),
+                }
             }
-        };
-        let bytes: u64 = files
-            .iter()
-            .filter_map(|f| std::fs::metadata(f).ok())
-            .map(|m| m.len())
-            .sum();
-        let decode = |f: &std::path::PathBuf| {
-            read_telemetry(f)
-                .map(|t| t.wheels.iter().map(|w| w.len() as u64).sum::<u64>())
-                .unwrap_or(0)
-        };
-        let samples: u64 = files.iter().map(decode).sum();
-        let zstd = || {
-            files
-                .par_iter()
-                .map(|f| decompress_only(f).unwrap_or(0))
-                .sum::<u64>()
-        };
-        let (z1, _) = best(o.repeats, || one_thread(zstd));
-        let w = Workload {
-            kernel: label,
-            size: format!("{} runs, {:.0} MB MCAP", files.len(), bytes as f64 / 1e6),
-            items: samples as f64,
-            unit: "samples/s",
-            bytes: bytes as f64,
-            memory_pass: z1,
-            reference: "zstd only",
-        };
-        report.lines.push(w.line("zstd only, 1 thread", z1, None));
-        let (d, _) = best(o.repeats, || {
-            one_thread(|| files.iter().map(decode).sum::<u64>())
-        });
-        report.lines.push(w.line("tirewear, 1 thread", d, None));
-        let (zn, _) = best(o.repeats, zstd);
-        let wn = Workload {
-            memory_pass: zn,
-            ..w
-        };
-        report
-            .lines
-            .push(wn.line(&format!("zstd only, {threads} thr"), zn, None));
-        let (d, _) = best(o.repeats, || files.par_iter().map(decode).sum::<u64>());
-        report
-            .lines
-            .push(wn.line(&format!("tirewear, {threads} threads"), d, None));
+            seasons
+        }
+    };
+    for (label, season) in seasons {
+        if let Err(e) = season_decode_lines(o, label, &season, dir.path(), report) {
+            report.notes.push(format!("{label} skipped: {e}"));
+        }
     }
+}
+
+/// A simulated season in one telemetry form, for the decode lines.
+fn simulate_for_decode(
+    o: &BenchOptions,
+    encoding: crate::ingest::telemetry::Encoding,
+    out: &std::path::Path,
+) -> Result<(), crate::sim::SimError> {
+    use crate::sim::{Preset, SimOptions, simulate};
+    let opts = SimOptions {
+        preset: if o.small { Preset::Tiny } else { Preset::Demo },
+        scale: 1.0,
+        seed: 1,
+        effects: vec![],
+        generated: None,
+        scatter: crate::sim::WearScatter::NONE,
+        encoding,
+        rate_hz: None,
+        out: out.to_path_buf(),
+        sensor_noise: true,
+        progress: false,
+    };
+    simulate(&opts).map(|_| ())
+}
+
+/// The decode and extraction lines of one season.
+fn season_decode_lines(
+    o: &BenchOptions,
+    label: &'static str,
+    season: &std::path::Path,
+    scratch: &std::path::Path,
+    report: &mut BenchReport,
+) -> Result<(), String> {
+    use crate::ingest::manifest::Season;
+    use crate::ingest::telemetry::{decompress_only, read_telemetry};
+    let threads = report.threads;
+    let manifest = Season::open(season).map_err(|e| e.to_string())?;
+    let files: Vec<std::path::PathBuf> = manifest
+        .manifest
+        .runs
+        .iter()
+        .map(|r| manifest.path(&r.telemetry))
+        .collect();
+    let bytes: u64 = files
+        .iter()
+        .filter_map(|f| std::fs::metadata(f).ok())
+        .map(|m| m.len())
+        .sum();
+    let decode = |f: &std::path::PathBuf| {
+        read_telemetry(f)
+            .map(|t| t.wheels.iter().map(|w| w.len() as u64).sum::<u64>())
+            .unwrap_or(0)
+    };
+    let samples: u64 = files.iter().map(decode).sum();
+    let zstd = || {
+        files
+            .par_iter()
+            .map(|f| decompress_only(f).unwrap_or(0))
+            .sum::<u64>()
+    };
+    let (z1, _) = best(o.repeats, || one_thread(zstd));
+    let w = Workload {
+        kernel: label,
+        size: format!("{} runs, {:.0} MB MCAP", files.len(), bytes as f64 / 1e6),
+        items: samples as f64,
+        unit: "samples/s",
+        bytes: bytes as f64,
+        memory_pass: z1,
+        reference: "zstd only",
+    };
+    report.lines.push(w.line("zstd only, 1 thread", z1, None));
+    let (d, _) = best(o.repeats, || {
+        one_thread(|| files.iter().map(decode).sum::<u64>())
+    });
+    report.lines.push(w.line("tirewear, 1 thread", d, None));
+    let extract = || {
+        crate::kpi::extract(&crate::kpi::ExtractOptions {
+            season: season.to_path_buf(),
+            out: scratch.join("bench-kpis.parquet"),
+            csv: None,
+            engine: crate::kpi::Engine::Cpu,
+            progress: false,
+            allow_external_paths: false,
+        })
+        .map(|s| s.rows)
+    };
+    let (e1, rows) = best(o.repeats, || one_thread(extract));
+    rows.map_err(|e| format!("extract: {e}"))?;
+    report.lines.push(w.line("extract, 1 thread", e1, None));
+    let (zn, _) = best(o.repeats, zstd);
+    let wn = Workload {
+        memory_pass: zn,
+        ..w
+    };
+    report
+        .lines
+        .push(wn.line(&format!("zstd only, {threads} thr"), zn, None));
+    let (d, _) = best(o.repeats, || files.par_iter().map(decode).sum::<u64>());
+    report
+        .lines
+        .push(wn.line(&format!("tirewear, {threads} threads"), d, None));
+    let (en, _) = best(o.repeats, extract);
+    report
+        .lines
+        .push(wn.line(&format!("extract, {threads} threads"), en, None));
+    Ok(())
 }
 
 /// The report as a table.

@@ -18,6 +18,10 @@ pub(crate) struct BenchArgs {
     /// or `decode` (MCAP decoding against zstd alone on a simulated season).
     #[arg(long, value_enum)]
     only: Option<BenchPart>,
+    /// Season archive (folder with season.toml) to measure decoding and
+    /// extraction on, instead of the simulated demo season in both forms.
+    #[arg(long)]
+    season: Option<PathBuf>,
     /// Where to save the results.
     #[arg(long, default_value = "bench.json")]
     out: PathBuf,
@@ -43,6 +47,7 @@ pub(crate) fn run(a: BenchArgs) -> Result<()> {
         small,
         repeats,
         only,
+        season,
         out,
     } = a;
     use tirewear::bench::BenchParts;
@@ -55,6 +60,7 @@ pub(crate) fn run(a: BenchArgs) -> Result<()> {
             Some(BenchPart::Kernels) => BenchParts::Kernels,
             Some(BenchPart::Decode) => BenchParts::Decode,
         },
+        season,
     });
     print!("{}", tirewear::bench::render(&r));
     if engine == BenchEngine::Gpu && r.gpu.is_none() {
