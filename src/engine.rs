@@ -3,13 +3,23 @@
 //! (wgpu). Tests are written once against the trait and run for both.
 
 use crate::gpu::{GpuContext, GpuError, GpuTimings};
+use crate::ingest::road::Profile;
 use crate::kpi::condition_map::{ConditionMaps, condition_map, condition_maps_from_quanta};
 use crate::kpi::energy_map::EnergyMaps;
 use crate::kpi::energy_map_kernel::{energy_map, maps_from_quanta};
+use crate::kpi::road::{RoadCurves, RoadIndices, profile_indices, profile_indices_on};
 use crate::kpi::roughness_batch::{RoughnessBatch, Spectral, cpu_twins};
 use crate::kpi::telemetry::finish_wheel;
 use crate::kpi::telemetry_reduce::{ReduceBatch, SUMS, merge, telemetry_reduce};
 use std::sync::Mutex;
+
+/// Why an engine could not compute: only the GPU engine can fail (its
+/// device, a buffer readback, a validation error); the CPU engine cannot.
+#[derive(Debug, thiserror::Error)]
+pub enum EngineError {
+    #[error(transparent)]
+    Gpu(#[from] GpuError),
+}
 
 /// Everything the engines compute from one batch of wheel samples.
 #[derive(Debug, Clone, PartialEq)]
@@ -31,13 +41,13 @@ pub trait ReduceEngine: Send + Sync {
     fn device(&self) -> String;
     /// Every chunk's partial sums of the telemetry reduction
     /// (`shaders/telemetry_reduce.wgsl`); merge with `telemetry_reduce::merge`.
-    fn telemetry_reduce(&self, batch: &ReduceBatch) -> Result<Vec<[f64; SUMS]>, GpuError>;
+    fn telemetry_reduce(&self, batch: &ReduceBatch) -> Result<Vec<[f64; SUMS]>, EngineError>;
     /// Every wheel's friction-energy maps (`shaders/energy_map.wgsl`).
-    fn energy_map(&self, batch: &ReduceBatch) -> Result<Vec<EnergyMaps>, GpuError>;
+    fn energy_map(&self, batch: &ReduceBatch) -> Result<Vec<EnergyMaps>, EngineError>;
     /// Every wheel's condition energy maps (`shaders/condition_map.wgsl`).
-    fn condition_map(&self, batch: &ReduceBatch) -> Result<Vec<ConditionMaps>, GpuError>;
+    fn condition_map(&self, batch: &ReduceBatch) -> Result<Vec<ConditionMaps>, EngineError>;
     /// The three above on one batch (the GPU uploads the samples once).
-    fn reductions(&self, batch: &ReduceBatch) -> Result<Reductions, GpuError> {
+    fn reductions(&self, batch: &ReduceBatch) -> Result<Reductions, EngineError> {
         Ok(Reductions {
             partials: self.telemetry_reduce(batch)?,
             energy_maps: self.energy_map(batch)?,
@@ -46,7 +56,16 @@ pub trait ReduceEngine: Send + Sync {
     }
     /// Height moments, HDC and Welch PSD of every profile (the roughness
     /// kernels); finish with `road::profile_indices_from`.
-    fn roughness(&self, batch: &RoughnessBatch) -> Result<Vec<Spectral>, GpuError>;
+    fn roughness(&self, batch: &RoughnessBatch) -> Result<Vec<Spectral>, EngineError>;
+    /// Road indices and curves of every profile, as extraction computes
+    /// them: the CPU engine by one real FFT per Welch segment (rayon over
+    /// profiles; the `roughness` twins are the reference the GPU is held
+    /// to, this route is 5× faster and checked against the same oracles),
+    /// the GPU engine by its roughness kernels in batches.
+    fn road_indices(
+        &self,
+        profiles: Vec<Profile>,
+    ) -> Result<Vec<(Profile, RoadIndices, RoadCurves)>, EngineError>;
 }
 
 /// The CPU engine: the shaders' Rust twins in f64, parallel over chunks.
@@ -59,17 +78,30 @@ impl ReduceEngine for CpuEngine {
     fn device(&self) -> String {
         format!("CPU, {} threads", rayon::current_num_threads())
     }
-    fn telemetry_reduce(&self, batch: &ReduceBatch) -> Result<Vec<[f64; SUMS]>, GpuError> {
+    fn telemetry_reduce(&self, batch: &ReduceBatch) -> Result<Vec<[f64; SUMS]>, EngineError> {
         Ok(telemetry_reduce(batch))
     }
-    fn energy_map(&self, batch: &ReduceBatch) -> Result<Vec<EnergyMaps>, GpuError> {
+    fn energy_map(&self, batch: &ReduceBatch) -> Result<Vec<EnergyMaps>, EngineError> {
         Ok(maps_from_quanta(&energy_map(batch)))
     }
-    fn condition_map(&self, batch: &ReduceBatch) -> Result<Vec<ConditionMaps>, GpuError> {
+    fn condition_map(&self, batch: &ReduceBatch) -> Result<Vec<ConditionMaps>, EngineError> {
         Ok(condition_maps_from_quanta(&condition_map(batch)))
     }
-    fn roughness(&self, batch: &RoughnessBatch) -> Result<Vec<Spectral>, GpuError> {
+    fn roughness(&self, batch: &RoughnessBatch) -> Result<Vec<Spectral>, EngineError> {
         Ok(cpu_twins(batch))
+    }
+    fn road_indices(
+        &self,
+        profiles: Vec<Profile>,
+    ) -> Result<Vec<(Profile, RoadIndices, RoadCurves)>, EngineError> {
+        use rayon::prelude::*;
+        Ok(profiles
+            .into_par_iter()
+            .map(|p| {
+                let (i, c) = profile_indices(&p);
+                (p, i, c)
+            })
+            .collect())
     }
 }
 
@@ -104,30 +136,36 @@ impl ReduceEngine for GpuEngine {
             a.name, a.device_type, a.backend, a.driver_info
         )
     }
-    fn telemetry_reduce(&self, batch: &ReduceBatch) -> Result<Vec<[f64; SUMS]>, GpuError> {
+    fn telemetry_reduce(&self, batch: &ReduceBatch) -> Result<Vec<[f64; SUMS]>, EngineError> {
         let (p, t) = self.ctx.telemetry_reduce(batch)?;
         self.timings.lock().expect("timings lock").add(&t);
         Ok(p)
     }
-    fn energy_map(&self, batch: &ReduceBatch) -> Result<Vec<EnergyMaps>, GpuError> {
+    fn energy_map(&self, batch: &ReduceBatch) -> Result<Vec<EnergyMaps>, EngineError> {
         let (p, t) = self.ctx.energy_map(batch)?;
         self.timings.lock().expect("timings lock").add(&t);
         Ok(p)
     }
-    fn condition_map(&self, batch: &ReduceBatch) -> Result<Vec<ConditionMaps>, GpuError> {
+    fn condition_map(&self, batch: &ReduceBatch) -> Result<Vec<ConditionMaps>, EngineError> {
         let (p, t) = self.ctx.condition_map(batch)?;
         self.timings.lock().expect("timings lock").add(&t);
         Ok(p)
     }
-    fn reductions(&self, batch: &ReduceBatch) -> Result<Reductions, GpuError> {
+    fn reductions(&self, batch: &ReduceBatch) -> Result<Reductions, EngineError> {
         let (p, t) = self.ctx.reductions(batch)?;
         self.timings.lock().expect("timings lock").add(&t);
         Ok(p)
     }
-    fn roughness(&self, batch: &RoughnessBatch) -> Result<Vec<Spectral>, GpuError> {
+    fn roughness(&self, batch: &RoughnessBatch) -> Result<Vec<Spectral>, EngineError> {
         let (p, t) = self.ctx.roughness(batch)?;
         self.timings.lock().expect("timings lock").add(&t);
         Ok(p)
+    }
+    fn road_indices(
+        &self,
+        profiles: Vec<Profile>,
+    ) -> Result<Vec<(Profile, RoadIndices, RoadCurves)>, EngineError> {
+        profile_indices_on(profiles, self)
     }
 }
 
@@ -182,8 +220,8 @@ pub fn compare_telemetry(
     reference: &dyn ReduceEngine,
     other: &dyn ReduceEngine,
     batch: &ReduceBatch,
-) -> Result<Comparison, GpuError> {
-    let finish = |e: &dyn ReduceEngine| -> Result<Vec<serde_json::Value>, GpuError> {
+) -> Result<Comparison, EngineError> {
+    let finish = |e: &dyn ReduceEngine| -> Result<Vec<serde_json::Value>, EngineError> {
         let sums = merge(batch, &e.telemetry_reduce(batch)?);
         Ok(sums
             .iter()
@@ -243,7 +281,7 @@ pub fn compare_energy_maps(
     reference: &dyn ReduceEngine,
     other: &dyn ReduceEngine,
     batch: &ReduceBatch,
-) -> Result<f64, GpuError> {
+) -> Result<f64, EngineError> {
     let a = reference.energy_map(batch)?;
     let b = other.energy_map(batch)?;
     let mut worst = 0.0f64;
@@ -284,7 +322,7 @@ pub fn compare_condition_maps(
     reference: &dyn ReduceEngine,
     other: &dyn ReduceEngine,
     batch: &ReduceBatch,
-) -> Result<f64, GpuError> {
+) -> Result<f64, EngineError> {
     use crate::kpi::condition_map::{CONDITIONS, Component};
     let (a, b) = (reference.condition_map(batch)?, other.condition_map(batch)?);
     let mut worst = 0.0f64;
@@ -319,7 +357,7 @@ pub fn compare_roughness(
     reference: &dyn ReduceEngine,
     other: &dyn ReduceEngine,
     batch: &RoughnessBatch,
-) -> Result<(f64, f64, f64), GpuError> {
+) -> Result<(f64, f64, f64), EngineError> {
     use crate::kpi::road::{HURST_BAND_MM, log_bin};
     let (a, b) = (reference.roughness(batch)?, other.roughness(batch)?);
     let band = (

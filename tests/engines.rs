@@ -463,3 +463,62 @@ fn gpu_roughness_within_tolerance_of_the_cpu_twins() {
         "{m} {h} {p}"
     );
 }
+
+#[test]
+fn road_indices_on_every_engine_match_the_cpu_route() {
+    use tirewear::ingest::road::Profile;
+    use tirewear::kpi::road::profile_indices;
+    let mut profiles: Vec<Profile> = road_profiles()
+        .into_iter()
+        .enumerate()
+        .map(|(i, z)| Profile {
+            track: format!("t{}", i % 3),
+            location: format!("L{i}"),
+            x0_mm: 0.0,
+            dx_mm: 0.01,
+            z_mm: z,
+        })
+        .collect();
+    // One profile shorter than a Welch segment takes the CPU route on every engine.
+    let mut short = profiles[0].clone();
+    short.z_mm.truncate(3000);
+    short.location = "short".into();
+    profiles.push(short);
+    let want: Vec<_> = profiles.iter().map(|p| profile_indices(p).0).collect();
+    for (e, tol) in engines("road_indices_on_every_engine_match_the_cpu_route") {
+        let got = e.road_indices(profiles.clone()).unwrap();
+        assert_eq!(got.len(), profiles.len());
+        let mut worst = 0.0f64;
+        for ((p, g, _), w) in got.iter().zip(&want) {
+            let pairs = [
+                (g.macro_wavelength_mm, w.macro_wavelength_mm),
+                (g.micro_wavelength_mm, w.micro_wavelength_mm),
+                (g.hurst, w.hurst),
+                (g.hurst_hdc, w.hurst_hdc),
+                (g.ra_macro_mm, w.ra_macro_mm),
+                (g.ra_micro_mm, w.ra_micro_mm),
+                (g.peakyness_mm, w.peakyness_mm),
+                (g.skewness, w.skewness),
+                (g.kurtosis, w.kurtosis),
+                (g.rq_mm, w.rq_mm),
+                (g.ra_mm, w.ra_mm),
+            ];
+            for (a, b) in pairs {
+                assert_eq!(a.is_nan(), b.is_nan(), "{} {}", e.name(), p.location);
+                if !b.is_nan() {
+                    // Dimensionless indices near 0 (skewness) on an absolute scale.
+                    worst = worst.max((a - b).abs() / b.abs().max(1.0));
+                }
+            }
+        }
+        eprintln!("{} engine: road indices within {worst:.2e}", e.name());
+        // The CPU engine takes this very route; the GPU's f32 kernels are
+        // held to the telemetry tolerance, as in extract_on_gpu_equals_extract_on_cpu.
+        let limit = if e.name() == "cpu" {
+            0.0
+        } else {
+            TELEMETRY_TOLERANCE.max(tol)
+        };
+        assert!(worst <= limit, "{} engine: {worst:e}", e.name());
+    }
+}

@@ -10,8 +10,7 @@
 
 use super::condition_map::ConditionMaps;
 use super::energy_map::{EnergyMaps, SLIDING_SPEED_BINS, T_INNER_BINS, T_SURFACE_BINS};
-use super::road::{RoadCurves, RoadIndices, mean_indices, profile_indices, profile_indices_from};
-use super::roughness_batch::{FFT_N, Spectral, batches};
+use super::road::{RoadCurves, RoadIndices, mean_indices};
 use super::table::{KpiRow, kpi_batch, quality, with_extraction_id, write_batch_to};
 use super::telemetry::{CleaningReport, finish_wheel, prepare_wheel, vehicle_indices};
 use super::telemetry_reduce::{ReduceBatch, merge};
@@ -138,19 +137,13 @@ fn road_kpis(
     engine: &dyn ReduceEngine,
 ) -> Result<(TrackRoads, Vec<(Profile, RoadCurves)>), IngestError> {
     let profiles = read_profiles(season, warnings)?;
-    let results = if engine.name() == "gpu" {
-        road_on_engine(profiles, engine).map_err(|e| {
-            IngestError::invalid(&season.root, "road profiles", format!("GPU engine: {e}"))
-        })?
-    } else {
-        profiles
-            .into_par_iter()
-            .map(|p| {
-                let (i, c) = profile_indices(&p);
-                (p, i, c)
-            })
-            .collect()
-    };
+    let results = engine.road_indices(profiles).map_err(|e| {
+        IngestError::invalid(
+            &season.root,
+            "road profiles",
+            format!("{} engine: {e}", engine.name()),
+        )
+    })?;
     let mut by_track: HashMap<String, Vec<RoadIndices>> = HashMap::new();
     for (p, i, _) in &results {
         by_track.entry(p.track.clone()).or_default().push(*i);
@@ -178,47 +171,6 @@ fn road_kpis(
         }
     }
     Ok((roads, results.into_iter().map(|(p, _, c)| (p, c)).collect()))
-}
-
-/// Road indices with the engine's roughness kernels for profiles of at least
-/// one Welch segment (shorter ones, and the ISO split, λa and Hurst fits, on the CPU).
-fn road_on_engine(
-    profiles: Vec<Profile>,
-    engine: &dyn ReduceEngine,
-) -> Result<Vec<(Profile, RoadIndices, RoadCurves)>, crate::gpu::GpuError> {
-    let long: Vec<(&[f64], f64)> = profiles
-        .iter()
-        .filter(|p| p.z_mm.len() >= FFT_N)
-        .map(|p| (p.z_mm.as_slice(), p.dx_mm))
-        .collect();
-    let mut spectral: Vec<Option<Spectral>> = vec![None; long.len()];
-    for (ids, batch) in batches(&long) {
-        for (i, s) in ids.into_iter().zip(engine.roughness(&batch)?) {
-            spectral[i] = Some(s);
-        }
-    }
-    let mut spectral = spectral.into_iter();
-    let work: Vec<(Profile, Option<Spectral>)> = profiles
-        .into_iter()
-        .map(|p| {
-            let s = if p.z_mm.len() >= FFT_N {
-                spectral.next().flatten()
-            } else {
-                None
-            };
-            (p, s)
-        })
-        .collect();
-    Ok(work
-        .into_par_iter()
-        .map(|(p, s)| {
-            let (i, c) = match s {
-                Some(s) => profile_indices_from(&p, s),
-                None => profile_indices(&p),
-            };
-            (p, i, c)
-        })
-        .collect())
 }
 
 struct RunOutput {

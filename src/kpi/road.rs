@@ -1,8 +1,9 @@
 //! Road roughness indices (paper table 3) of one profile, and their mean
 //! over a track's measurement locations. Formulas and units: docs/kpis.md.
 
-use super::roughness_batch::Spectral;
+use super::roughness_batch::{FFT_N, Spectral, batches};
 use crate::ingest::road::Profile;
+use rayon::prelude::*;
 use realfft::RealFftPlanner;
 
 /// ISO 16610-21 Gaussian filter cut-off separating macro and micro texture
@@ -264,6 +265,48 @@ pub struct RoadCurves {
     pub psd_c: Vec<f64>,
     pub hdc_lag_mm: Vec<f64>,
     pub hdc_c: Vec<f64>,
+}
+
+/// Road indices of every profile with an engine's roughness kernels for
+/// profiles of at least one Welch segment (shorter ones, and the ISO split,
+/// λa and Hurst fits, on the CPU): the GPU engine's route.
+pub(crate) fn profile_indices_on(
+    profiles: Vec<Profile>,
+    engine: &dyn crate::engine::ReduceEngine,
+) -> Result<Vec<(Profile, RoadIndices, RoadCurves)>, crate::engine::EngineError> {
+    let long: Vec<(&[f64], f64)> = profiles
+        .iter()
+        .filter(|p| p.z_mm.len() >= FFT_N)
+        .map(|p| (p.z_mm.as_slice(), p.dx_mm))
+        .collect();
+    let mut spectral: Vec<Option<Spectral>> = vec![None; long.len()];
+    for (ids, batch) in batches(&long) {
+        for (i, s) in ids.into_iter().zip(engine.roughness(&batch)?) {
+            spectral[i] = Some(s);
+        }
+    }
+    let mut spectral = spectral.into_iter();
+    let work: Vec<(Profile, Option<Spectral>)> = profiles
+        .into_iter()
+        .map(|p| {
+            let s = if p.z_mm.len() >= FFT_N {
+                spectral.next().flatten()
+            } else {
+                None
+            };
+            (p, s)
+        })
+        .collect();
+    Ok(work
+        .into_par_iter()
+        .map(|(p, s)| {
+            let (i, c) = match s {
+                Some(s) => profile_indices_from(&p, s),
+                None => profile_indices(&p),
+            };
+            (p, i, c)
+        })
+        .collect())
 }
 
 /// All indices and curves of one profile.
