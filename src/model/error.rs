@@ -16,4 +16,17 @@ pub enum ModelError {
     ConstantTarget(String),
     #[error("{0}")]
     Invalid(String),
+    /// A model file that cannot be read (I/O), named.
+    #[error("{path}: {message}")]
+    Io { path: String, message: String },
+    /// A model file that is not a tirewear model this version reads.
+    #[error("{path}: {what}")]
+    File { path: String, what: String },
+    /// A setting out of its range (`FitSettings::check`).
+    #[error("setting {name} = {value}: {expected}")]
+    Setting {
+        name: &'static str,
+        value: String,
+        expected: &'static str,
+    },
 }

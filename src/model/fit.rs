@@ -9,6 +9,7 @@ use super::ols::OlsFit;
 use super::pca::PcaFit;
 use super::physical::{PHYSICAL_INPUTS, analyse_axle};
 use super::saved::{Feature, Indicators, MODEL_FORMAT, MODEL_VERSION, ModelBody, SavedModel};
+use crate::Axle;
 use crate::kpi::KpiRow;
 use std::fmt::Write;
 
@@ -29,13 +30,39 @@ impl Method {
 }
 
 /// Settings of a fit.
-#[derive(Debug, Clone, Default)]
+#[derive(Debug, Clone)]
 pub struct FitSettings {
     /// Testing events; None = every third event (docs/models.md).
     pub test_events: Option<Vec<String>>,
     pub network: NetworkSettings,
-    /// PCA variance threshold; 0 = the paper's 0.99.
+    /// Share of the inputs' variance the kept principal components explain
+    /// (0 < t ≤ 1; the paper's 0.99).
     pub pca_threshold: f64,
+}
+
+impl Default for FitSettings {
+    fn default() -> Self {
+        FitSettings {
+            test_events: None,
+            network: NetworkSettings::default(),
+            pca_threshold: 0.99,
+        }
+    }
+}
+
+impl FitSettings {
+    /// Every setting in its range, or the first one that is not, named.
+    pub fn check(&self) -> Result<(), ModelError> {
+        let t = self.pca_threshold;
+        if !(t > 0.0 && t <= 1.0) {
+            return Err(ModelError::Setting {
+                name: "pca_threshold",
+                value: t.to_string(),
+                expected: "a share of variance in (0, 1]",
+            });
+        }
+        self.network.check()
+    }
 }
 
 /// Rows usable by a model: finite target and inputs, and a tread not worn
@@ -152,6 +179,7 @@ pub fn fit_method(
     s: &Split,
     settings: &FitSettings,
 ) -> Result<(SavedModel, Vec<String>), ModelError> {
+    settings.check()?;
     let candidates: Vec<String> = candidate_inputs().iter().map(|c| c.to_string()).collect();
     let (train, mut notes) = usable(&s.train, &candidates);
     let (test, dropped) = usable(&s.test, &candidates);
@@ -207,12 +235,7 @@ pub fn fit_method(
                 .map(|c| c.0.to_string())
                 .filter(|c| !inputs.contains(c))
                 .collect();
-            let threshold = if settings.pca_threshold > 0.0 {
-                settings.pca_threshold
-            } else {
-                0.99
-            };
-            let pca = PcaFit::fit(&matrix(&train, &inputs), &inputs, threshold)?;
+            let pca = PcaFit::fit(&matrix(&train, &inputs), &inputs, settings.pca_threshold)?;
             let scores = pca.transform(&matrix(&train, &inputs));
             let names: Vec<String> = (1..=pca.kept).map(|i| format!("PC{i}")).collect();
             let regression = OlsFit::fit(&scores, &y, &names)?;
@@ -238,8 +261,8 @@ pub fn fit_method(
             fn axle<'r>(rows: &[&'r KpiRow], a: &str) -> Vec<&'r KpiRow> {
                 rows.iter().filter(|r| r.axle == a).copied().collect()
             }
-            let front = analyse_axle("front", &axle(&train, "front"))?;
-            let rear = analyse_axle("rear", &axle(&train, "rear"))?;
+            let of = |a: Axle| analyse_axle(a, &axle(&train, &a.to_string()));
+            let (front, rear) = (of(Axle::Front)?, of(Axle::Rear)?);
             let mut table = Vec::new();
             for (name, a) in [("Front—", &front), ("Rear—", &rear)] {
                 let predict = |r: &KpiRow| a.regression.predict_one(&super::physical::inputs_of(r));
@@ -386,4 +409,36 @@ pub fn render_comparison(models: &[SavedModel]) -> String {
         }
     }
     s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn settings_out_of_range_are_named() {
+        assert_eq!(FitSettings::default().check(), Ok(()));
+        assert_eq!(FitSettings::default().pca_threshold, 0.99);
+        for t in [0.0, -0.5, 1.5, f64::NAN] {
+            let s = FitSettings {
+                pca_threshold: t,
+                ..Default::default()
+            };
+            let e = s.check().unwrap_err().to_string();
+            assert!(e.starts_with("setting pca_threshold = "), "{e}");
+        }
+        let mut s = FitSettings::default();
+        s.network.validation_fraction = 1.0;
+        let e = s.check().unwrap_err().to_string();
+        assert!(e.contains("network.validation_fraction = 1"), "{e}");
+        s.network.validation_fraction = 0.2;
+        s.network.hidden2_candidates = vec![3, 0];
+        assert!(matches!(
+            s.check(),
+            Err(ModelError::Setting {
+                name: "network.hidden2_candidates",
+                ..
+            })
+        ));
+    }
 }

@@ -42,6 +42,56 @@ impl Default for NetworkSettings {
     }
 }
 
+impl NetworkSettings {
+    /// Every setting in its range, or the first one that is not, named.
+    pub fn check(&self) -> Result<(), ModelError> {
+        let bad = |name, value: String, expected| {
+            Err(ModelError::Setting {
+                name,
+                value,
+                expected,
+            })
+        };
+        let corr = |c: f64| (0.0..=1.0).contains(&c);
+        if !corr(self.min_target_corr) {
+            return bad(
+                "network.min_target_corr",
+                self.min_target_corr.to_string(),
+                "a |correlation| in [0, 1]",
+            );
+        }
+        if !corr(self.max_mutual_corr) {
+            return bad(
+                "network.max_mutual_corr",
+                self.max_mutual_corr.to_string(),
+                "a |correlation| in [0, 1]",
+            );
+        }
+        if !(self.validation_fraction > 0.0 && self.validation_fraction < 1.0) {
+            return bad(
+                "network.validation_fraction",
+                self.validation_fraction.to_string(),
+                "a share of the training rows in (0, 1)",
+            );
+        }
+        if self.hidden2_candidates.contains(&0) {
+            return bad(
+                "network.hidden2_candidates",
+                format!("{:?}", self.hidden2_candidates),
+                "layer widths of at least 1",
+            );
+        }
+        if self.max_epochs == 0 || self.validation_checks == 0 {
+            return bad(
+                "network.max_epochs / validation_checks",
+                format!("{} / {}", self.max_epochs, self.validation_checks),
+                "at least 1 each",
+            );
+        }
+        Ok(())
+    }
+}
+
 /// One trial of the width loop.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct WidthTrial {

@@ -5,6 +5,7 @@
 //! and OLS on the six inputs of table 10. Definitions: docs/models.md.
 
 use super::{ModelError, data::correlation, metrics::median, ols::OlsFit};
+use crate::Axle;
 use crate::kpi::KpiRow;
 
 /// Table 10: skewness Sk, kurtosis Ku, T_Surf Avg, FP_TOT, CP_Area, tan δ(T*).
@@ -134,7 +135,7 @@ pub fn inputs_of(r: &KpiRow) -> Vec<f64> {
 }
 
 /// The whole analysis of one axle's training rows.
-pub fn analyse_axle(axle: &str, rows: &[&KpiRow]) -> Result<AxleAnalysis, ModelError> {
+pub fn analyse_axle(axle: Axle, rows: &[&KpiRow]) -> Result<AxleAnalysis, ModelError> {
     let lines = track_lines(rows);
     let reliable: Vec<&TrackLine> = lines
         .iter()

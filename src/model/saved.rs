@@ -137,28 +137,31 @@ impl SavedModel {
 
     /// Reads a model file, refusing other formats and newer versions.
     pub fn load(path: &Path) -> Result<SavedModel, ModelError> {
-        let text = std::fs::read_to_string(path)
-            .map_err(|e| ModelError::Invalid(format!("{}: {e}", path.display())))?;
-        let head: serde_json::Value = serde_json::from_str(&text)
-            .map_err(|e| ModelError::Invalid(format!("{}: not JSON: {e}", path.display())))?;
+        let file = |what: String| ModelError::File {
+            path: path.display().to_string(),
+            what,
+        };
+        let text = std::fs::read_to_string(path).map_err(|e| ModelError::Io {
+            path: path.display().to_string(),
+            message: e.to_string(),
+        })?;
+        let head: serde_json::Value =
+            serde_json::from_str(&text).map_err(|e| file(format!("not JSON: {e}")))?;
         if head["format"] != MODEL_FORMAT {
-            return Err(ModelError::Invalid(format!(
-                "{}: not a tirewear model (field \"format\" is {}, expected \"{MODEL_FORMAT}\")",
-                path.display(),
+            return Err(file(format!(
+                "not a tirewear model (field \"format\" is {}, expected \"{MODEL_FORMAT}\")",
                 head["format"]
             )));
         }
         match head["version"].as_u64() {
             Some(v) if v as u32 == MODEL_VERSION => {}
             v => {
-                return Err(ModelError::Invalid(format!(
-                    "{}: model format version {v:?}, this tirewear reads version {MODEL_VERSION}",
-                    path.display()
+                return Err(file(format!(
+                    "model format version {v:?}, this tirewear reads version {MODEL_VERSION}"
                 )));
             }
         }
-        serde_json::from_str(&text)
-            .map_err(|e| ModelError::Invalid(format!("{}: {e}", path.display())))
+        serde_json::from_str(&text).map_err(|e| file(e.to_string()))
     }
 
     /// Checks a KPI table's columns and units against the model's features;
@@ -199,4 +202,31 @@ pub fn save_all(models: &[SavedModel], dir: &Path) -> std::io::Result<Vec<std::p
             m.save(&p).map(|_| p)
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn unreadable_and_foreign_model_files_are_named() {
+        let dir = tempfile::tempdir().unwrap();
+        let missing = dir.path().join("none.json");
+        assert!(matches!(
+            SavedModel::load(&missing),
+            Err(ModelError::Io { path, .. }) if path.ends_with("none.json")
+        ));
+        let foreign = dir.path().join("other.json");
+        std::fs::write(&foreign, r#"{"format": "something-else", "version": 1}"#).unwrap();
+        let e = SavedModel::load(&foreign).unwrap_err();
+        assert!(matches!(&e, ModelError::File { .. }), "{e:?}");
+        assert!(e.to_string().contains("not a tirewear model"), "{e}");
+        std::fs::write(&foreign, "not json").unwrap();
+        assert!(
+            SavedModel::load(&foreign)
+                .unwrap_err()
+                .to_string()
+                .contains("not JSON")
+        );
+    }
 }
