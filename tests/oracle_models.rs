@@ -8,8 +8,9 @@
 use serde_json::Value;
 use std::path::PathBuf;
 use tirewear::model::lm::{LeastSquares, LmSettings, levenberg_marquardt};
-use tirewear::model::ols::OlsFit;
-use tirewear::model::pca::PcaFit;
+use tirewear::model::ols::OlsSettings;
+use tirewear::model::pca::PcaSettings;
+use tirewear::model::{Dataset, Fit};
 
 #[derive(serde::Deserialize)]
 struct Row {
@@ -84,7 +85,7 @@ fn ols_matches_statsmodels() {
         .collect();
     let y: Vec<f64> = rear.iter().map(|r| r.wear_mean_pct).collect();
     let names = strings(&g["inputs"]);
-    let f = OlsFit::fit(&rows, &y, &names).unwrap();
+    let f = OlsSettings.fit(Dataset::new(&rows, &y, &names)).unwrap();
     assert_eq!(f.train.n as u64, g["n"].as_u64().unwrap());
     for (name, got, want) in [
         ("coef", &f.coef, floats(&g["coef"])),
@@ -127,7 +128,9 @@ fn pca_matches_scikit_learn() {
         })
         .collect();
     let names = strings(&g["inputs"]);
-    let p = PcaFit::fit(&rows, &names, 0.99).unwrap();
+    let p = PcaSettings { threshold: 0.99 }
+        .fit(Dataset::new(&rows, &[], &names))
+        .unwrap();
     for (i, (a, b)) in p
         .proportions
         .iter()

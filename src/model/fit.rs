@@ -1,14 +1,14 @@
 //! `tirewear fit`: the three methods on one split of the KPI database,
 //! each returned as a saved model with its performance table.
 
-use super::ModelError;
 use super::data::{TARGET, candidate_inputs, select_inputs, split_by_events};
 use super::metrics::metrics;
-use super::network::{NetworkSettings, fit_network};
-use super::ols::OlsFit;
-use super::pca::PcaFit;
+use super::network::NetworkSettings;
+use super::ols::OlsSettings;
+use super::pca::PcaSettings;
 use super::physical::{PHYSICAL_INPUTS, analyse_axle};
 use super::saved::{Feature, Indicators, MODEL_FORMAT, MODEL_VERSION, ModelBody, SavedModel};
+use super::{Dataset, Fit, ModelError};
 use crate::Axle;
 use crate::kpi::KpiRow;
 use std::fmt::Write;
@@ -53,14 +53,10 @@ impl Default for FitSettings {
 impl FitSettings {
     /// Every setting in its range, or the first one that is not, named.
     pub fn check(&self) -> Result<(), ModelError> {
-        let t = self.pca_threshold;
-        if !(t > 0.0 && t <= 1.0) {
-            return Err(ModelError::Setting {
-                name: "pca_threshold",
-                value: t.to_string(),
-                expected: "a share of variance in (0, 1]",
-            });
+        PcaSettings {
+            threshold: self.pca_threshold,
         }
+        .check()?;
         self.network.check()
     }
 }
@@ -207,7 +203,8 @@ pub fn fit_method(
                 Some((&y, ns.min_target_corr)),
                 ns.max_mutual_corr,
             );
-            let network = fit_network(&matrix(&train, &inputs), &y, ns)?;
+            let x = matrix(&train, &inputs);
+            let network = ns.fit(Dataset::new(&x, &y, &inputs))?;
             let net = network.net.clone();
             let predict = |r: &KpiRow| {
                 net.predict_one(
@@ -235,10 +232,14 @@ pub fn fit_method(
                 .map(|c| c.0.to_string())
                 .filter(|c| !inputs.contains(c))
                 .collect();
-            let pca = PcaFit::fit(&matrix(&train, &inputs), &inputs, settings.pca_threshold)?;
+            let x = matrix(&train, &inputs);
+            let pca = PcaSettings {
+                threshold: settings.pca_threshold,
+            }
+            .fit(Dataset::new(&x, &[], &inputs))?;
             let scores = pca.transform(&matrix(&train, &inputs));
             let names: Vec<String> = (1..=pca.kept).map(|i| format!("PC{i}")).collect();
-            let regression = OlsFit::fit(&scores, &y, &names)?;
+            let regression = OlsSettings.fit(Dataset::new(&scores, &y, &names))?;
             let predict = |r: &KpiRow| {
                 let x: Vec<f64> = inputs
                     .iter()

@@ -4,8 +4,8 @@
 //! layer's width in parallel keeping the lowest validation MSE, retrain the
 //! best pair and keep whichever of the two is better.
 
-use super::ModelError;
 use super::ffnn::{Ffnn, FfnnSettings};
+use super::{Dataset, Fit, ModelError, Predict};
 use rand::SeedableRng;
 use rand::seq::SliceRandom;
 use rand_chacha::ChaCha8Rng;
@@ -117,12 +117,23 @@ fn validation_mse(net: &Ffnn, x: &[Vec<f64>], y: &[f64]) -> f64 {
     p.iter().zip(y).map(|(p, y)| (p - y).powi(2)).sum::<f64>() / y.len() as f64 / s2
 }
 
+impl Fit for NetworkSettings {
+    type Fitted = NetworkFit;
+    /// The network method on rows of selected inputs and the target.
+    fn fit(&self, data: Dataset<'_>) -> Result<NetworkFit, ModelError> {
+        self.check()?;
+        fit_network(data.x, data.y, self)
+    }
+}
+
+impl Predict for NetworkFit {
+    fn predict_one(&self, x: &[f64]) -> f64 {
+        self.net.predict_one(x)
+    }
+}
+
 /// Fits the network method on rows of selected inputs and the target.
-pub fn fit_network(
-    x: &[Vec<f64>],
-    y: &[f64],
-    s: &NetworkSettings,
-) -> Result<NetworkFit, ModelError> {
+fn fit_network(x: &[Vec<f64>], y: &[f64], s: &NetworkSettings) -> Result<NetworkFit, ModelError> {
     let d = x.first().map_or(0, Vec::len);
     if d == 0 {
         return Err(ModelError::Invalid(
@@ -215,7 +226,8 @@ mod tests {
             max_epochs: 30,
             ..Default::default()
         };
-        let f = fit_network(&x, &y, &s).unwrap();
+        let inputs = ["x1".to_string(), "x2".to_string()];
+        let f = s.fit(Dataset::new(&x, &y, &inputs)).unwrap();
         assert_eq!(f.trials.len(), 3);
         assert_eq!((f.training_rows, f.validation_rows), (48, 12));
         let min = f
@@ -228,6 +240,7 @@ mod tests {
         assert_eq!(f.net.hidden2, best.hidden2);
         assert!(min < 1e-3, "a linear target is easy: validation MSE {min}");
         // Same seed, same network.
-        assert_eq!(fit_network(&x, &y, &s).unwrap(), f);
+        assert_eq!(s.fit(Dataset::new(&x, &y, &inputs)).unwrap(), f);
+        assert_eq!(f.predict_one(&x[0]), f.net.predict_one(&x[0]));
     }
 }

@@ -3,7 +3,7 @@
 //! σ²(XᵀX)⁻¹ by a Cholesky factorisation, two-sided t-test p-values.
 
 use super::{
-    ModelError, design,
+    Dataset, Fit, ModelError, Predict, design,
     metrics::{Metrics, metrics},
 };
 use faer::Side;
@@ -27,9 +27,26 @@ pub struct OlsFit {
     pub train: Metrics,
 }
 
+/// Ordinary least squares with an intercept; no settings.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct OlsSettings;
+
+impl Fit for OlsSettings {
+    type Fitted = OlsFit;
+    fn fit(&self, data: Dataset<'_>) -> Result<OlsFit, ModelError> {
+        OlsFit::fit_rows(data.x, data.y, data.inputs)
+    }
+}
+
+impl Predict for OlsFit {
+    fn predict_one(&self, x: &[f64]) -> f64 {
+        OlsFit::predict_one(self, x)
+    }
+}
+
 impl OlsFit {
     /// Fits on rows of inputs (n × k) and the target.
-    pub fn fit(rows: &[Vec<f64>], y: &[f64], inputs: &[String]) -> Result<OlsFit, ModelError> {
+    fn fit_rows(rows: &[Vec<f64>], y: &[f64], inputs: &[String]) -> Result<OlsFit, ModelError> {
         let n = rows.len();
         let k = inputs.len();
         if y.len() != n || rows.iter().any(|r| r.len() != k) {
@@ -103,11 +120,14 @@ mod tests {
         // y = 2 + 3x exactly: coefficients exact, zero residual variance.
         let rows: Vec<Vec<f64>> = (0..6).map(|i| vec![i as f64]).collect();
         let y: Vec<f64> = (0..6).map(|i| 2.0 + 3.0 * i as f64).collect();
-        let f = OlsFit::fit(&rows, &y, &["x".into()]).unwrap();
+        let f = OlsSettings
+            .fit(Dataset::new(&rows, &y, &["x".into()]))
+            .unwrap();
         assert!((f.coef[0] - 2.0).abs() < 1e-12 && (f.coef[1] - 3.0).abs() < 1e-12);
         assert!(f.sigma2 < 1e-20);
         // Collinear inputs are refused.
         let rows2: Vec<Vec<f64>> = (0..6).map(|i| vec![i as f64, 2.0 * i as f64]).collect();
-        assert!(OlsFit::fit(&rows2, &y, &["a".into(), "b".into()]).is_err());
+        let two = ["a".to_string(), "b".to_string()];
+        assert!(OlsSettings.fit(Dataset::new(&rows2, &y, &two)).is_err());
     }
 }

@@ -3,7 +3,7 @@
 //! of variance λ_i/Σλ (eq. 4), the fewest components that explain at least a
 //! threshold of the variance.
 
-use super::ModelError;
+use super::{Dataset, Fit, ModelError};
 use faer::{Mat, Side};
 
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -22,8 +22,49 @@ pub struct PcaFit {
     pub kept: usize,
 }
 
+/// Settings of a principal component analysis.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PcaSettings {
+    /// Share of the variance the kept components explain, in (0, 1] (paper: 0.99).
+    pub threshold: f64,
+}
+
+impl Default for PcaSettings {
+    fn default() -> Self {
+        PcaSettings { threshold: 0.99 }
+    }
+}
+
+impl PcaSettings {
+    pub fn check(&self) -> Result<(), ModelError> {
+        let t = self.threshold;
+        if t > 0.0 && t <= 1.0 {
+            Ok(())
+        } else {
+            Err(ModelError::Setting {
+                name: "pca_threshold",
+                value: t.to_string(),
+                expected: "a share of variance in (0, 1]",
+            })
+        }
+    }
+}
+
+impl Fit for PcaSettings {
+    type Fitted = PcaFit;
+    /// The target is not used.
+    fn fit(&self, data: Dataset<'_>) -> Result<PcaFit, ModelError> {
+        self.check()?;
+        PcaFit::fit_rows(data.x, data.inputs, self.threshold)
+    }
+}
+
 impl PcaFit {
-    pub fn fit(rows: &[Vec<f64>], inputs: &[String], threshold: f64) -> Result<PcaFit, ModelError> {
+    fn fit_rows(
+        rows: &[Vec<f64>],
+        inputs: &[String],
+        threshold: f64,
+    ) -> Result<PcaFit, ModelError> {
         let (n, k) = (rows.len(), inputs.len());
         if n < 2 || k == 0 {
             return Err(ModelError::TooFewObservations {
@@ -115,7 +156,13 @@ mod tests {
         let rows: Vec<Vec<f64>> = (0..10)
             .map(|i| vec![i as f64, 2.0 * i as f64 + 1.0])
             .collect();
-        let p = PcaFit::fit(&rows, &["a".into(), "b".into()], 0.99).unwrap();
+        let inputs = ["a".to_string(), "b".to_string()];
+        let data = Dataset {
+            x: &rows,
+            y: &[],
+            inputs: &inputs,
+        };
+        let p = PcaSettings::default().fit(data).unwrap();
         assert!((p.eigenvalues[0] - 2.0).abs() < 1e-12 && p.eigenvalues[1].abs() < 1e-12);
         assert_eq!(p.kept, 1);
         let a = p.loadings[0][0].abs();

@@ -4,7 +4,8 @@
 //! the residuals of the pooled energy–temperature law against road skewness,
 //! and OLS on the six inputs of table 10. Definitions: docs/models.md.
 
-use super::{ModelError, data::correlation, metrics::median, ols::OlsFit};
+use super::ols::{OlsFit, OlsSettings};
+use super::{Dataset, Fit, ModelError, data::correlation, metrics::median};
 use crate::Axle;
 use crate::kpi::KpiRow;
 
@@ -162,11 +163,8 @@ pub fn analyse_axle(axle: Axle, rows: &[&KpiRow]) -> Result<AxleAnalysis, ModelE
         })
         .collect();
     let y: Vec<f64> = rows.iter().map(|r| r.wear_mean_pct).collect();
-    let law = OlsFit::fit(
-        &pooled,
-        &y,
-        &["energy_mj".into(), "energy_x_t_surface".into()],
-    )?;
+    let law_inputs = ["energy_mj".to_string(), "energy_x_t_surface".to_string()];
+    let law = OlsSettings.fit(Dataset::new(&pooled, &y, &law_inputs))?;
     let residuals: Vec<f64> = law
         .predict(&pooled)
         .iter()
@@ -181,7 +179,7 @@ pub fn analyse_axle(axle: Axle, rows: &[&KpiRow]) -> Result<AxleAnalysis, ModelE
         lines,
         slope_vs_t_surface,
         residual_vs_skewness: correlation(&residuals, &skew),
-        regression: OlsFit::fit(&x, &y, &names)?,
+        regression: OlsSettings.fit(Dataset::new(&x, &y, &names))?,
     })
 }
 
