@@ -5,8 +5,8 @@
 use crate::gpu::{GpuContext, GpuError, GpuTimings};
 use crate::ingest::road::Profile;
 use crate::kpi::condition_map::{ConditionMaps, condition_map, condition_maps_from_quanta};
-use crate::kpi::energy_map::EnergyMaps;
-use crate::kpi::energy_map_kernel::{energy_map, maps_from_quanta};
+use crate::kpi::energy_map::{energy_map, maps_from_quanta};
+use crate::kpi::energy_maps::EnergyMaps;
 use crate::kpi::road::{RoadCurves, RoadIndices, profile_indices, profile_indices_on};
 use crate::kpi::roughness_batch::{RoughnessBatch, Spectral, cpu_twins};
 use crate::kpi::telemetry::finish_wheel;

@@ -79,7 +79,7 @@ fn demo_season_extracts_to_complete_rows() {
     // energy (both maps bin every sample's energy once; f32 channels: 1e-9),
     // and the lateral map its lateral energy.
     let maps =
-        tirewear::kpi::energy_map::read_energy_maps(&dir.path().join("kpis.energy_maps.parquet"))
+        tirewear::kpi::energy_maps::read_energy_maps(&dir.path().join("kpis.energy_maps.parquet"))
             .unwrap();
     assert_eq!(maps.len(), rows.len());
     for r in &rows {
@@ -217,7 +217,7 @@ fn a_bad_energy_map_record_is_named() {
         Arc::new(Float64Array::from(vec![10.0, 5.0])),
     ];
     tirewear::kpi::table::write_batch(&path, &RecordBatch::try_new(schema, cols).unwrap()).unwrap();
-    let err = tirewear::kpi::energy_map::read_energy_maps(&path)
+    let err = tirewear::kpi::energy_maps::read_energy_maps(&path)
         .unwrap_err()
         .to_string();
     assert!(

@@ -286,7 +286,7 @@ fn a_planted_set_up_effect_is_named_by_its_car_and_axle() {
     let season = dir.path().join("clean-s9");
     let mut rows = tirewear::kpi::table::read_parquet(&season.join("kpis.parquet")).unwrap();
     let maps =
-        tirewear::kpi::energy_map::read_energy_maps(&season.join("kpis.energy_maps.parquet"))
+        tirewear::kpi::energy_maps::read_energy_maps(&season.join("kpis.energy_maps.parquet"))
             .unwrap();
     let mut cars: Vec<String> = rows.iter().map(|r| r.car.clone()).collect();
     cars.sort();
@@ -377,7 +377,7 @@ fn a_predictions_file_is_a_baseline_like_the_model_it_came_from() {
     let season = dir.path().join("clean-s4");
     let rows = tirewear::kpi::table::read_parquet(&season.join("kpis.parquet")).unwrap();
     let maps =
-        tirewear::kpi::energy_map::read_energy_maps(&season.join("kpis.energy_maps.parquet"))
+        tirewear::kpi::energy_maps::read_energy_maps(&season.join("kpis.energy_maps.parquet"))
             .unwrap();
     let sp = split(&rows, None).unwrap();
     let (model, _) = fit_method(Method::Physical, &sp, &FitSettings::default()).unwrap();
@@ -478,7 +478,8 @@ fn an_unlisted_slip_effect_is_found_among_the_generated_candidates() {
     for (r, p) in rows.iter_mut().zip(&planted) {
         r.wear_mean_pct += a * p;
     }
-    let maps = tirewear::kpi::energy_map::read_tire_maps(&season_dir.join("kpis.parquet")).unwrap();
+    let maps =
+        tirewear::kpi::energy_maps::read_tire_maps(&season_dir.join("kpis.parquet")).unwrap();
     assert!(maps.values().all(|m| m.conditions.is_some()));
     let gap = GapSettings {
         wlf: tirewear::gap::validate::read_wlf(&season_dir.join("compounds")).unwrap(),

@@ -6,8 +6,8 @@
 
 use naga::proc::Layouter;
 use naga::{Expression, Literal, Module, TypeInner};
-use tirewear::kpi::energy_map::{SLIDING_SPEED_BINS, T_INNER_BINS, T_SURFACE_BINS};
-use tirewear::kpi::energy_map_kernel as em;
+use tirewear::kpi::energy_map as em;
+use tirewear::kpi::energy_maps::{SLIDING_SPEED_BINS, T_INNER_BINS, T_SURFACE_BINS};
 use tirewear::kpi::roughness_batch::{FFT_N, MOMENT_SUMS, PsdProfile, RoughChunk, Segment};
 use tirewear::kpi::roughness_window::HANN_RMS;
 use tirewear::kpi::telemetry_reduce::{

@@ -223,7 +223,7 @@ pub(crate) fn run_gap(
     let stem = kpis.file_stem().and_then(|s| s.to_str()).unwrap_or("kpis");
     let maps_path = kpis.with_file_name(format!("{stem}.energy_maps.parquet"));
     let maps = if maps_path.exists() {
-        tirewear::kpi::energy_map::read_tire_maps(kpis)?
+        tirewear::kpi::energy_maps::read_tire_maps(kpis)?
     } else {
         tracing::warn!(
             "{} not found: candidate effects and shrinkage are skipped",

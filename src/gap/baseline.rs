@@ -19,7 +19,7 @@
 use super::candidates::LawRow;
 use crate::ingest::compound::Wlf;
 use crate::kpi::KpiRow;
-use crate::kpi::energy_map::EnergyMaps;
+use crate::kpi::energy_maps::EnergyMaps;
 use std::collections::BTreeMap;
 
 /// Temperature of the law's reference state (°C).

@@ -7,7 +7,7 @@
 use super::user_effects::UserEffect;
 use crate::kpi::KpiRow;
 use crate::kpi::condition_map::{CONDITIONS, Component};
-use crate::kpi::energy_map::EnergyMaps;
+use crate::kpi::energy_maps::EnergyMaps;
 use crate::model::data::candidate_inputs;
 use std::sync::Arc;
 

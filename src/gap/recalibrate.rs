@@ -20,7 +20,7 @@ use super::linear::weighted_fit;
 use super::scoring::relative_weights;
 use crate::ingest::compound::Wlf;
 use crate::kpi::KpiRow;
-use crate::kpi::energy_map::EnergyMaps;
+use crate::kpi::energy_maps::EnergyMaps;
 use std::collections::BTreeMap;
 
 /// Most rounds of backfitting (the planted law of the unit test settles in

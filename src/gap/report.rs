@@ -14,7 +14,7 @@ use super::selection::next_term;
 use super::slices::{Slice, slice_residuals};
 use crate::ingest::compound::Wlf;
 use crate::kpi::KpiRow;
-use crate::kpi::energy_map::EnergyMaps;
+use crate::kpi::energy_maps::EnergyMaps;
 use crate::model::ModelError;
 use crate::model::fit::split;
 use crate::model::saved::SavedModel;

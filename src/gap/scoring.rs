@@ -25,7 +25,7 @@ use super::linear::{dot, lstsq, orthonormal_basis, project_out, residual, weight
 use super::stats::{benjamini_hochberg, levels};
 use super::track_test::Severities;
 use crate::kpi::KpiRow;
-use crate::kpi::energy_map::EnergyMaps;
+use crate::kpi::energy_maps::EnergyMaps;
 use rand::SeedableRng;
 use rand::seq::SliceRandom;
 use rayon::prelude::*;

@@ -15,7 +15,7 @@ use super::candidates::KpiScale;
 use super::candidates::{Candidate, Feature};
 use super::error::GapError;
 use crate::kpi::KpiRow;
-use crate::kpi::energy_map::EnergyMaps;
+use crate::kpi::energy_maps::EnergyMaps;
 use evalexpr::{Context, DefaultNumericTypes, EvalexprError, EvalexprResult, Node, Value};
 use std::path::Path;
 use std::sync::Arc;

@@ -218,7 +218,7 @@ pub fn score_case(
     planted_kind: &Planted,
     seed: u64,
     rows: &[KpiRow],
-    maps: &BTreeMap<(String, String), crate::kpi::energy_map::EnergyMaps>,
+    maps: &BTreeMap<(String, String), crate::kpi::energy_maps::EnergyMaps>,
     planted: &BTreeMap<(String, String), f64>,
     d: &Diagnosis,
     gap: &GapSettings,
@@ -402,7 +402,7 @@ pub fn run_case(
         allow_external_paths: false,
     })?;
     let rows = crate::kpi::table::read_parquet(&kpis)?;
-    let maps = crate::kpi::energy_map::read_tire_maps(&kpis)?;
+    let maps = crate::kpi::energy_maps::read_tire_maps(&kpis)?;
     // The diagnosis sees the KPI tables and the compound files only.
     let gap = GapSettings {
         wlf: read_wlf(&dir.join("compounds"))?,

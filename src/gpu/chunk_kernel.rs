@@ -10,8 +10,8 @@
 use super::{GpuContext, GpuError, GpuTimings};
 use crate::engine::Reductions;
 use crate::kpi::condition_map::{ConditionMaps, condition_maps_from_quanta};
-use crate::kpi::energy_map::EnergyMaps;
-use crate::kpi::energy_map_kernel::{BINS, maps_from_quanta};
+use crate::kpi::energy_map::{BINS, maps_from_quanta};
+use crate::kpi::energy_maps::EnergyMaps;
 use crate::kpi::telemetry_reduce::{CHUNK, ReduceBatch, ReduceChunk, ReduceSample, SUMS};
 use std::sync::Mutex;
 use std::time::Instant;

@@ -139,7 +139,7 @@ impl GpuContext {
             &device,
             "energy_map",
             chunk_shader!("energy_map.wgsl"),
-            chunk_kernel::Output::PerWheel(2 * crate::kpi::energy_map_kernel::BINS),
+            chunk_kernel::Output::PerWheel(2 * crate::kpi::energy_map::BINS),
             chunk_kernel::Extra::None,
         )?;
         let condition_map = chunk_kernel::ChunkKernel::new(

@@ -11,11 +11,11 @@
 //! so that a value both engines hold exactly lands in the same bin on both
 //! (see [`ConditionBins`]). The bin table lives here only: the GPU engine uploads it (binding 2), so
 //! the shader holds no bin edges. Energies are summed as fixed-point quanta
-//! exactly as in `energy_map` (see `energy_map_kernel`), so both engines'
+//! exactly as in `energy_map` (see `energy_map`), so both engines'
 //! maps are deterministic and differ only by f32 against f64 per sample.
 
-use super::energy_map::Bins;
-use super::energy_map_kernel::{add_to_wheel, from_quanta, per_wheel_sums, to_quanta};
+use super::energy_map::{add_to_wheel, from_quanta, per_wheel_sums, to_quanta};
+use super::energy_maps::Bins;
 use super::telemetry_reduce::{ITEMS, ReduceBatch, ReduceChunk, ReduceSample, WG_SIZE};
 use bytemuck::{Pod, Zeroable};
 

@@ -1,292 +1,220 @@
-//! Friction-energy maps: the friction energy of one tire and run binned over
-//! (surface temperature × inner-liner temperature) and over (sliding speed ×
-//! surface temperature), and its lateral part over (surface × inner-liner
-//! temperature), on fixed bin edges, so that threshold effects can be
-//! tested later without re-reading telemetry. Values outside the edges go
-//! to the first or last bin.
+//! CPU twin of `shaders/energy_map.wgsl`: per chunk of one wheel, every
+//! sample's friction energy binned into both energy maps and its lateral
+//! part into the lateral map, as fixed-point quanta in a private histogram
+//! (phase 1) whose non-zero bins are then added to the wheel's map
+//! (phase 2). The shader keeps each 64-bit sum as a (lo, hi) pair of u32
+//! with an explicit carry; here a wrapping `u64` is the same number modulo
+//! 2^64. Integer sums are exact in any order, so the two engines differ only
+//! where an f32 energy (GPU) and an f64 one (here) round to different quanta
+//! or land on different sides of a bin edge.
 
-/// Surface-temperature bins: 20..140 °C, 5 K wide.
-pub const T_SURFACE_BINS: Bins = Bins {
-    lo: 20.0,
-    width: 5.0,
-    n: 24,
-};
-/// Inner-liner temperature bins: 40..160 °C, 5 K wide.
-pub const T_INNER_BINS: Bins = Bins {
-    lo: 40.0,
-    width: 5.0,
-    n: 24,
-};
-/// Sliding-speed bins: 0..10 m/s, 0.5 m/s wide.
-pub const SLIDING_SPEED_BINS: Bins = Bins {
-    lo: 0.0,
-    width: 0.5,
-    n: 20,
-};
+use super::energy_maps::{EnergyMaps, SLIDING_SPEED_BINS, T_INNER_BINS, T_SURFACE_BINS};
+use super::telemetry_reduce::{ITEMS, ReduceBatch, ReduceChunk, WG_SIZE};
+use rayon::prelude::*;
 
-/// Equal-width bins `[lo + i·width, lo + (i+1)·width)`, clamped at both ends.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Bins {
-    pub lo: f64,
-    pub width: f64,
-    pub n: usize,
+/// Bins of the (surface × inner) map. Must match `SURFACE_INNER_BINS` in the shader (checked by tests/shader_contract.rs).
+pub const SURFACE_INNER_BINS: usize = 576;
+/// First bin of the lateral map. Must match `LATERAL_BINS_AT` in the shader (checked by tests/shader_contract.rs).
+pub const LATERAL_BINS_AT: usize = 1056;
+/// Bins of the three maps. Must match `BINS` in the shader (checked by tests/shader_contract.rs).
+pub const BINS: usize = 1632;
+/// Fixed-point quanta per joule (2^24: a quantum is 6.0e-8 J; a bin holds up
+/// to 2^63 quanta, 5.5e11 J). Must match `ENERGY_QUANTA_PER_J` in the shader
+/// (checked by tests/shader_contract.rs).
+pub const ENERGY_QUANTA_PER_J: f64 = 16_777_216.0;
+
+const _: () = assert!(SURFACE_INNER_BINS == T_SURFACE_BINS.n * T_INNER_BINS.n);
+const _: () =
+    assert!(LATERAL_BINS_AT == SURFACE_INNER_BINS + SLIDING_SPEED_BINS.n * T_SURFACE_BINS.n);
+const _: () = assert!(BINS == LATERAL_BINS_AT + SURFACE_INNER_BINS);
+
+/// round(e · ENERGY_QUANTA_PER_J) in 64-bit two's complement (the shader's
+/// `to_quanta`: ties to even, magnitude rounded then negated).
+pub fn to_quanta(e: f64) -> u64 {
+    let m = round_ties_even(e.abs() * ENERGY_QUANTA_PER_J) as u64;
+    if e < 0.0 { m.wrapping_neg() } else { m }
 }
 
-impl Bins {
-    pub fn index(&self, x: f64) -> usize {
-        let i = (x - self.lo) / self.width;
-        // For i ≥ 0 truncation is floor (without SSE4.1 floor is a libcall);
-        // below 0 and NaN go to bin 0.
-        if i >= 0.0 {
-            (i as usize).min(self.n - 1)
-        } else {
-            0
-        }
-    }
-    pub fn lower_edge(&self, i: usize) -> f64 {
-        self.lo + self.width * i as f64
-    }
-    /// Mid-point of bin i: the value a bin stands for in sums over the map.
-    pub fn mid(&self, i: usize) -> f64 {
-        self.lower_edge(i) + 0.5 * self.width
-    }
+/// `x.round_ties_even()` for x ≥ 0 (and NaN) without the libcall that
+/// baseline x86-64 (no SSE4.1) makes of it: adding and subtracting 2^52
+/// rounds to an integer in the current (ties-to-even) mode; from 2^52 on
+/// every f64 is an integer already.
+fn round_ties_even(x: f64) -> f64 {
+    const TWO_52: f64 = 4_503_599_627_370_496.0;
+    if x < TWO_52 { (x + TWO_52) - TWO_52 } else { x }
 }
 
-/// The maps of one tire and run (J per bin, row-major).
-#[derive(Debug, Clone, PartialEq)]
-pub struct EnergyMaps {
-    /// [T_surface bin][T_inner bin].
-    pub surface_inner: Vec<f64>,
-    /// [sliding-speed bin][T_surface bin].
-    pub speed_surface: Vec<f64>,
-    /// Lateral friction energy −F_y·v_sy·Δt, [T_surface bin][T_inner bin]
-    /// (all zero in files written before it existed).
-    pub lateral_surface_inner: Vec<f64>,
-    /// The tire's condition energy maps, where its extraction wrote them
-    /// (`NAME.condition_maps.parquet`; attached by [`read_tire_maps`]).
-    pub conditions: Option<Box<crate::kpi::condition_map::ConditionMaps>>,
+/// A 64-bit two's-complement sum of quanta back in joules.
+pub fn from_quanta(q: u64) -> f64 {
+    q as i64 as f64 / ENERGY_QUANTA_PER_J
 }
 
-impl Default for EnergyMaps {
-    fn default() -> Self {
-        Self::new()
-    }
-}
-
-impl EnergyMaps {
-    pub fn new() -> Self {
-        EnergyMaps {
-            surface_inner: vec![0.0; T_SURFACE_BINS.n * T_INNER_BINS.n],
-            speed_surface: vec![0.0; SLIDING_SPEED_BINS.n * T_SURFACE_BINS.n],
-            lateral_surface_inner: vec![0.0; T_SURFACE_BINS.n * T_INNER_BINS.n],
-            conditions: None,
-        }
-    }
-
-    /// Adds lateral friction energy to the lateral map (the total maps take
-    /// it through [`EnergyMaps::add`]).
-    pub fn add_lateral(&mut self, t_surface: f64, t_inner: f64, lateral_j: f64) {
-        let s = T_SURFACE_BINS.index(t_surface);
-        self.lateral_surface_inner[s * T_INNER_BINS.n + T_INNER_BINS.index(t_inner)] += lateral_j;
-    }
-
-    /// Whether the lateral map was filled (files from before it are not).
-    pub fn has_lateral(&self) -> bool {
-        self.lateral_surface_inner.iter().any(|e| *e != 0.0)
-    }
-
-    pub fn add(&mut self, t_surface: f64, t_inner: f64, sliding_speed: f64, energy_j: f64) {
-        let s = T_SURFACE_BINS.index(t_surface);
-        self.surface_inner[s * T_INNER_BINS.n + T_INNER_BINS.index(t_inner)] += energy_j;
-        self.speed_surface[SLIDING_SPEED_BINS.index(sliding_speed) * T_SURFACE_BINS.n + s] +=
-            energy_j;
-    }
-
-    pub fn total(&self) -> f64 {
-        self.surface_inner.iter().sum()
-    }
-
-    /// Σ E·f(T_surface, T_inner) over the non-empty bins of the
-    /// surface × inner-liner map, at the bin mid-points (J).
-    pub fn weighted_surface_inner(&self, f: impl FnMut(f64, f64) -> f64) -> f64 {
-        weighted(&self.surface_inner, T_SURFACE_BINS, T_INNER_BINS, f)
-    }
-
-    /// Σ E_y·f(T_surface, T_inner) over the non-empty bins of the lateral
-    /// map, at the bin mid-points (J).
-    pub fn weighted_lateral_surface_inner(&self, f: impl FnMut(f64, f64) -> f64) -> f64 {
-        weighted(&self.lateral_surface_inner, T_SURFACE_BINS, T_INNER_BINS, f)
-    }
-
-    /// Σ E·f(sliding speed, T_surface) over the non-empty bins of the
-    /// sliding-speed × surface map, at the bin mid-points (J).
-    pub fn weighted_speed_surface(&self, f: impl FnMut(f64, f64) -> f64) -> f64 {
-        weighted(&self.speed_surface, SLIDING_SPEED_BINS, T_SURFACE_BINS, f)
-    }
-}
-
-/// Σ E·f(row mid-point, column mid-point) over the non-empty bins of a map.
-fn weighted(map: &[f64], rows: Bins, cols: Bins, mut f: impl FnMut(f64, f64) -> f64) -> f64 {
-    let mut s = 0.0;
-    for i in 0..rows.n {
-        for j in 0..cols.n {
-            let e = map[i * cols.n + j];
-            if e != 0.0 {
-                s += e * f(rows.mid(i), cols.mid(j));
+fn workgroup(batch: &ReduceBatch, chunk: &ReduceChunk, maps: &mut [u64]) {
+    let count = chunk.count as usize;
+    // Phase 0.
+    let mut bins = [0u64; BINS];
+    // Phase 1.
+    for lid in 0..WG_SIZE {
+        for k in 0..ITEMS {
+            let j = lid + k * WG_SIZE;
+            if j < count {
+                let p = &batch.samples[chunk.start as usize + j];
+                let f = |x: f32| x as f64;
+                let dt = f(p.dt) + f(p.dt_lo);
+                let v_sx = f(p.vx) - f(p.omega) * f(p.radius); // eq. 21
+                let v_sy = f(p.vy); // eq. 22
+                let power = -f(p.fx) * v_sx - f(p.fy) * v_sy; // eqs. 23–25
+                let s = T_SURFACE_BINS.index(f(p.t_surface));
+                let i = T_INNER_BINS.index(f(p.t_inner));
+                let v = SLIDING_SPEED_BINS.index((v_sx * v_sx + v_sy * v_sy).sqrt());
+                let a = s * T_INNER_BINS.n + i;
+                let q = to_quanta(power * dt);
+                bins[a] = bins[a].wrapping_add(q);
+                let b = SURFACE_INNER_BINS + v * T_SURFACE_BINS.n + s;
+                bins[b] = bins[b].wrapping_add(q);
+                let c = LATERAL_BINS_AT + a;
+                bins[c] = bins[c].wrapping_add(to_quanta(-f(p.fy) * v_sy * dt)); // eq. 24
             }
         }
     }
-    s
+    // Phase 2.
+    add_to_wheel(&bins, chunk.wheel as usize, maps);
 }
 
-/// Reads the energy-map side table written by `tirewear extract`
-/// (`NAME.energy_maps.parquet`: run, wheel, map, i, j, x_lo, y_lo, energy_j;
-/// maps `surface_inner`, `speed_surface`, `lateral_surface_inner`;
-/// non-empty bins only) back into maps keyed by (run, wheel). A bin outside
-/// the fixed grid, or an unknown map name, is an error naming the record.
-pub fn read_energy_maps(
-    path: &std::path::Path,
-) -> Result<std::collections::BTreeMap<(String, String), EnergyMaps>, crate::ingest::IngestError> {
-    use crate::ingest::IngestError;
-    use arrow_array::{Array, Float64Array, StringArray, UInt32Array};
-    use arrow_schema::DataType;
-    let perr = |e: parquet::errors::ParquetError| IngestError::Parquet {
-        path: path.to_path_buf(),
-        source: e,
-    };
-    let file = std::fs::File::open(path).map_err(|e| IngestError::io(path, e))?;
-    let reader = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file)
-        .map_err(perr)?
-        .build()
-        .map_err(perr)?;
-    let mut out: std::collections::BTreeMap<(String, String), EnergyMaps> = Default::default();
-    let mut record = 0usize;
-    for batch in reader {
-        let batch = batch.map_err(|e| perr(e.into()))?;
-        let col = |name: &str, ty: &DataType| {
-            crate::kpi::table::checked_column(path, &batch, name, ty, record)
-        };
-        let (run, wheel, map) = (
-            col("run", &DataType::Utf8)?,
-            col("wheel", &DataType::Utf8)?,
-            col("map", &DataType::Utf8)?,
-        );
-        let (i, j, e) = (
-            col("i", &DataType::UInt32)?,
-            col("j", &DataType::UInt32)?,
-            col("energy_j", &DataType::Float64)?,
-        );
-        let s = |a: &std::sync::Arc<dyn Array>| {
-            a.as_any()
-                .downcast_ref::<StringArray>()
-                .expect("cast")
-                .clone()
-        };
-        let u = |a: &std::sync::Arc<dyn Array>| {
-            a.as_any()
-                .downcast_ref::<UInt32Array>()
-                .expect("cast")
-                .clone()
-        };
-        let (run, wheel, map, i, j) = (s(&run), s(&wheel), s(&map), u(&i), u(&j));
-        let e = e
-            .as_any()
-            .downcast_ref::<Float64Array>()
-            .expect("cast")
-            .clone();
-        for k in 0..batch.num_rows() {
-            record += 1;
-            let m = out
-                .entry((run.value(k).to_string(), wheel.value(k).to_string()))
-                .or_default();
-            let (bi, bj) = (i.value(k) as usize, j.value(k) as usize);
-            let (data, (ni, nj)) = match map.value(k) {
-                "surface_inner" => (&mut m.surface_inner, (T_SURFACE_BINS.n, T_INNER_BINS.n)),
-                "lateral_surface_inner" => (
-                    &mut m.lateral_surface_inner,
-                    (T_SURFACE_BINS.n, T_INNER_BINS.n),
-                ),
-                "speed_surface" => (
-                    &mut m.speed_surface,
-                    (SLIDING_SPEED_BINS.n, T_SURFACE_BINS.n),
-                ),
-                other => {
-                    return Err(IngestError::invalid(
-                        path,
-                        format!("record {record}"),
-                        format!("unknown map '{other}'"),
-                    ));
+/// Phase 2 of a histogram kernel: a workgroup's non-zero bins added to its
+/// wheel's bins (`maps` holds `bins.len()` per wheel).
+pub(crate) fn add_to_wheel(bins: &[u64], wheel: usize, maps: &mut [u64]) {
+    let n = bins.len();
+    for (slot, &q) in maps[wheel * n..(wheel + 1) * n].iter_mut().zip(bins) {
+        if q != 0 {
+            *slot = slot.wrapping_add(q);
+        }
+    }
+}
+
+/// Runs a histogram kernel's workgroups over a batch: `per_wheel` sums of
+/// quanta per wheel, each chunk added by `workgroup` (rayon over chunks;
+/// the sums are exact, so the split does not change them).
+pub(crate) fn per_wheel_sums(
+    batch: &ReduceBatch,
+    per_wheel: usize,
+    workgroup: impl Fn(&ReduceChunk, &mut [u64]) + Sync,
+) -> Vec<u64> {
+    let n = batch.wheels() * per_wheel;
+    batch
+        .chunks
+        .par_iter()
+        .fold(
+            || vec![0u64; n],
+            |mut maps, c| {
+                workgroup(c, &mut maps);
+                maps
+            },
+        )
+        .reduce(
+            || vec![0u64; n],
+            |mut a, b| {
+                for (x, y) in a.iter_mut().zip(b) {
+                    *x = x.wrapping_add(y);
                 }
-            };
-            if bi >= ni || bj >= nj {
-                return Err(IngestError::invalid(
-                    path,
-                    format!("record {record}"),
-                    format!(
-                        "bin ({bi}, {bj}) outside the {ni}×{nj} grid of map '{}'",
-                        map.value(k)
-                    ),
-                ));
-            }
-            if !e.value(k).is_finite() {
-                return Err(IngestError::invalid(
-                    path,
-                    format!("record {record}"),
-                    format!("energy_j = {} is not finite", e.value(k)),
-                ));
-            }
-            data[bi * nj + bj] += e.value(k);
-        }
-    }
-    Ok(out)
+                a
+            },
+        )
 }
 
-/// Every tire's maps of one extraction: the energy maps beside a KPI table
-/// (`NAME.energy_maps.parquet`), with its condition maps attached where
-/// `NAME.condition_maps.parquet` exists (older extractions have none). Each
-/// side table must come from the same extraction as the KPI table. An
-/// absent energy-map table gives no maps.
-pub fn read_tire_maps(
-    kpis: &std::path::Path,
-) -> Result<std::collections::BTreeMap<(String, String), EnergyMaps>, crate::ingest::IngestError> {
-    use crate::kpi::table::check_same_extraction;
-    let stem = kpis.file_stem().and_then(|s| s.to_str()).unwrap_or("kpis");
-    let side = |suffix: &str| kpis.with_file_name(format!("{stem}.{suffix}"));
-    let energy = side("energy_maps.parquet");
-    if !energy.exists() {
-        return Ok(Default::default());
-    }
-    check_same_extraction(kpis, &energy)?;
-    let mut maps = read_energy_maps(&energy)?;
-    let conditions = side("condition_maps.parquet");
-    if conditions.exists() {
-        check_same_extraction(kpis, &conditions)?;
-        let mut cm = crate::kpi::condition_map::read_condition_maps(&conditions)?;
-        for (key, m) in maps.iter_mut() {
-            m.conditions = Some(Box::new(cm.remove(key).unwrap_or_default()));
-        }
-    }
-    Ok(maps)
+/// The CPU engine's kernel: every wheel's maps as `BINS` sums of quanta
+/// (rayon over chunks; exact, so the split does not change the result).
+pub fn energy_map(batch: &ReduceBatch) -> Vec<u64> {
+    per_wheel_sums(batch, BINS, |c, maps| workgroup(batch, c, maps))
+}
+
+/// Each wheel's maps (J per bin) from its `BINS` sums of quanta.
+pub fn maps_from_quanta(quanta: &[u64]) -> Vec<EnergyMaps> {
+    quanta
+        .chunks_exact(BINS)
+        .map(|q| {
+            let j = |r: &[u64]| r.iter().map(|&v| from_quanta(v)).collect();
+            EnergyMaps {
+                surface_inner: j(&q[..SURFACE_INNER_BINS]),
+                speed_surface: j(&q[SURFACE_INNER_BINS..LATERAL_BINS_AT]),
+                lateral_surface_inner: j(&q[LATERAL_BINS_AT..]),
+                conditions: None,
+            }
+        })
+        .collect()
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::kpi::telemetry_reduce::ReduceSample;
 
     #[test]
-    fn bins_clamp_and_split_by_hand() {
-        assert_eq!(T_SURFACE_BINS.index(19.0), 0);
-        assert_eq!(T_SURFACE_BINS.index(24.999), 0);
-        assert_eq!(T_SURFACE_BINS.index(25.0), 1);
-        assert_eq!(T_SURFACE_BINS.index(500.0), 23);
-        assert_eq!(T_SURFACE_BINS.index(f64::NAN), 0);
-        let mut m = EnergyMaps::new();
-        m.add(72.0, 101.0, 1.2, 10.0);
-        m.add(72.0, 131.0, 6.0, 5.0);
-        assert_eq!(m.surface_inner[10 * 24 + 12], 10.0);
-        assert_eq!(m.surface_inner[10 * 24 + 18], 5.0);
-        assert_eq!(m.speed_surface[2 * 24 + 10], 10.0);
-        assert_eq!(m.speed_surface[12 * 24 + 10], 5.0);
-        assert_eq!(m.total(), 15.0);
+    fn quanta_by_hand() {
+        assert_eq!(to_quanta(1.0), 1 << 24);
+        assert_eq!(to_quanta(-1.0), (1u64 << 24).wrapping_neg());
+        assert_eq!(to_quanta(-1.0).wrapping_add(to_quanta(1.0)), 0);
+        // Ties to even, as WGSL's round().
+        assert_eq!(to_quanta(2.5 / ENERGY_QUANTA_PER_J), 2);
+        assert_eq!(to_quanta(3.5 / ENERGY_QUANTA_PER_J), 4);
+        assert_eq!(to_quanta(0.49999 / ENERGY_QUANTA_PER_J), 0);
+        assert_eq!(to_quanta(1e40), u64::MAX); // saturates, as `as` does
+        for x in [0.0, 0.5, 1.5, 2.5, 1e15 + 0.5, 4.5e15, 1e300] {
+            assert_eq!(round_ties_even(x), x.round_ties_even(), "{x}");
+        }
+        assert_eq!(from_quanta(to_quanta(-1234.5)), -1234.5);
+        // Past 2^32 quanta (256 J) the high word carries.
+        assert_eq!(to_quanta(300.0), 300 << 24);
+        assert_eq!(
+            from_quanta(to_quanta(300.0).wrapping_add(to_quanta(-500.0))),
+            -200.0
+        );
+    }
+
+    #[test]
+    fn maps_by_hand_and_equal_to_per_sample_binning() {
+        // Two kinds of samples: (T_s 82, T_i 101, v_s 0.5 → bins s 12, i 12, v 1)
+        // with P = 1000 W, and (T_s 19 → bin 0, T_i 170 → last, v_s 12 → last) with P = 300 W.
+        let (dt, dt_lo) = ReduceSample::split_dt(0.01);
+        let a = ReduceSample {
+            vx: 50.5,
+            omega: 100.0,
+            radius: 0.5,
+            fx: -2000.0,
+            t_surface: 82.0,
+            t_inner: 101.0,
+            dt,
+            dt_lo,
+            ..Default::default()
+        };
+        let b = ReduceSample {
+            vy: 12.0,
+            fy: -25.0,
+            t_surface: 19.0,
+            t_inner: 170.0,
+            ..a
+        };
+        let b = ReduceSample {
+            vx: 0.0,
+            omega: 0.0,
+            fx: 0.0,
+            ..b
+        };
+        let mut wheel = vec![a; 1500];
+        wheel.extend(vec![b; 700]);
+        let mut batch = ReduceBatch::default();
+        batch.push_wheel(&wheel);
+        let m = &maps_from_quanta(&energy_map(&batch))[0];
+        let ea = 1000.0 * 0.01 * 1500.0;
+        let eb = 300.0 * 0.01 * 700.0;
+        assert!((m.surface_inner[12 * 24 + 12] - ea).abs() < 1e-9);
+        assert!((m.speed_surface[24 + 12] - ea).abs() < 1e-9);
+        assert!((m.surface_inner[23] - eb).abs() < 1e-9);
+        assert!((m.speed_surface[19 * 24] - eb).abs() < 1e-9);
+        assert!((m.total() - ea - eb).abs() < 1e-9);
+        // Lateral map: only b slides sideways (−F_y·v_sy = 25·12 = 300 W).
+        assert!((m.lateral_surface_inner[23] - eb).abs() < 1e-9);
+        assert_eq!(m.lateral_surface_inner[12 * 24 + 12], 0.0);
+        assert!((m.lateral_surface_inner.iter().sum::<f64>() - eb).abs() < 1e-9);
     }
 }

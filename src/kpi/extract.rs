@@ -9,7 +9,7 @@
 //! - `kpis.report.json`: what was skipped and why, cleaning counts, timings.
 
 use super::condition_map::ConditionMaps;
-use super::energy_map::{EnergyMaps, SLIDING_SPEED_BINS, T_INNER_BINS, T_SURFACE_BINS};
+use super::energy_maps::{EnergyMaps, SLIDING_SPEED_BINS, T_INNER_BINS, T_SURFACE_BINS};
 use super::road::{RoadCurves, RoadIndices, mean_indices};
 use super::table::{KpiRow, kpi_batch, quality, with_extraction_id, write_batch_to};
 use super::telemetry::{CleaningReport, finish_wheel, prepare_wheel, vehicle_indices};

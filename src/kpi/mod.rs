@@ -4,7 +4,7 @@
 
 pub mod condition_map;
 pub mod energy_map;
-pub mod energy_map_kernel;
+pub mod energy_maps;
 pub mod extract;
 pub mod fft_pass;
 pub mod road;

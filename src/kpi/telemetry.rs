@@ -14,8 +14,8 @@
 //!   zero, and no real channel is exactly zero throughout a run), fewer than
 //!   80 % of its samples are valid, or it lasts less than 10 s.
 
-use super::energy_map::EnergyMaps;
-use super::energy_map_kernel::{energy_map, maps_from_quanta};
+use super::energy_map::{energy_map, maps_from_quanta};
+use super::energy_maps::EnergyMaps;
 use super::telemetry_reduce::{
     ReduceBatch, ReduceRef, ReduceSample, SUMS, Sum, merge, moments, telemetry_reduce,
 };
