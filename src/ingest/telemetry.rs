@@ -170,6 +170,25 @@ series!(VehicleSeries, VehicleSample, VehicleBlock, speed_mps, [
     speed_mps: f32 = 1, t_track_c: f32 = 2, t_air_c: f32 = 3, distance_m: f64 = 4,
 ]);
 
+impl WheelSeries {
+    /// The eleven channels in field order (`proto/tirewear.proto`).
+    pub fn channels(&self) -> [&[f32]; 11] {
+        [
+            &self.vx_mps,
+            &self.vy_mps,
+            &self.omega_radps,
+            &self.rolling_radius_m,
+            &self.fx_n,
+            &self.fy_n,
+            &self.fz_n,
+            &self.t_surface_c,
+            &self.t_inner_c,
+            &self.pressure_pa,
+            &self.camber_deg,
+        ]
+    }
+}
+
 /// A block's times must be representable: a non-zero period when it has
 /// samples, and the last sample's time within u64 nanoseconds.
 fn check_block_times(n: usize, start: u64, period: u64) -> std::result::Result<(), String> {
@@ -1185,20 +1204,8 @@ mod tests {
 
     /// Every channel's bits (NaN payloads included), and the times.
     fn bits(s: &WheelSeries) -> (Vec<u64>, Vec<Vec<u32>>) {
-        let channels = [
-            &s.vx_mps,
-            &s.vy_mps,
-            &s.omega_radps,
-            &s.rolling_radius_m,
-            &s.fx_n,
-            &s.fy_n,
-            &s.fz_n,
-            &s.t_surface_c,
-            &s.t_inner_c,
-            &s.pressure_pa,
-            &s.camber_deg,
-        ];
-        let channels = channels
+        let channels = s
+            .channels()
             .iter()
             .map(|c| c.iter().map(|x| x.to_bits()).collect())
             .collect();

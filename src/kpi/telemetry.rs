@@ -192,19 +192,7 @@ pub fn prepare_wheel(s: &WheelSeries) -> Result<PreparedWheel, String> {
     if s.is_empty() {
         return Err("no samples".into());
     }
-    let channels: [&[f32]; 11] = [
-        &s.vx_mps,
-        &s.vy_mps,
-        &s.omega_radps,
-        &s.rolling_radius_m,
-        &s.fx_n,
-        &s.fy_n,
-        &s.fz_n,
-        &s.t_surface_c,
-        &s.t_inner_c,
-        &s.pressure_pa,
-        &s.camber_deg,
-    ];
+    let channels = s.channels();
     for ((name, _, _), c) in WHEEL_RANGES.iter().zip(channels) {
         if c.iter().all(|&v| v == 0.0) {
             return Err(format!("channel {name} is missing (every sample is 0)"));
