@@ -220,17 +220,13 @@ pub(crate) fn run_gap(
             .with_context(|| format!("{} against {baseline}", kpis.display()))?;
         Baseline::Model(Box::new(m))
     };
-    let stem = kpis.file_stem().and_then(|s| s.to_str()).unwrap_or("kpis");
-    let maps_path = kpis.with_file_name(format!("{stem}.energy_maps.parquet"));
-    let maps = if maps_path.exists() {
-        tirewear::kpi::energy_maps::read_tire_maps(kpis)?
-    } else {
+    let maps = tirewear::kpi::energy_maps::read_tire_maps(kpis)?;
+    if maps.is_empty() {
         tracing::warn!(
             "{} not found: candidate effects and shrinkage are skipped",
-            maps_path.display()
+            tirewear::kpi::table::side_table_path(kpis, "energy_maps.parquet").display()
         );
-        Default::default()
-    };
+    }
     let d = diagnose(&rows, &maps, &base, settings)
         .with_context(|| format!("diagnosing {}", kpis.display()))?;
     print!("{}", render_markdown(&d, 12));

@@ -249,9 +249,8 @@ pub fn read_energy_maps(
 pub fn read_tire_maps(
     kpis: &std::path::Path,
 ) -> Result<std::collections::BTreeMap<(String, String), EnergyMaps>, crate::ingest::IngestError> {
-    use crate::kpi::table::check_same_extraction;
-    let stem = kpis.file_stem().and_then(|s| s.to_str()).unwrap_or("kpis");
-    let side = |suffix: &str| kpis.with_file_name(format!("{stem}.{suffix}"));
+    use crate::kpi::table::{check_same_extraction, side_table_path};
+    let side = |suffix: &str| side_table_path(kpis, suffix);
     let energy = side("energy_maps.parquet");
     if !energy.exists() {
         return Ok(Default::default());

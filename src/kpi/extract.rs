@@ -11,7 +11,9 @@
 use super::condition_map::ConditionMaps;
 use super::energy_maps::{EnergyMaps, SLIDING_SPEED_BINS, T_INNER_BINS, T_SURFACE_BINS};
 use super::road::{RoadCurves, RoadIndices, mean_indices};
-use super::table::{KpiRow, kpi_batch, quality, with_extraction_id, write_batch_to};
+use super::table::{
+    KpiRow, kpi_batch, quality, side_table_path, with_extraction_id, write_batch_to,
+};
 use super::telemetry::{CleaningReport, finish_wheel, prepare_wheel, vehicle_indices};
 use super::telemetry_reduce::{ReduceBatch, merge};
 use super::viscoelastic::{ViscoelasticIndices, viscoelastic_indices};
@@ -89,11 +91,6 @@ impl ExtractSummary {
     pub fn samples_per_second(&self) -> f64 {
         self.telemetry_samples as f64 / self.seconds
     }
-}
-
-fn side_path(out: &Path, suffix: &str) -> PathBuf {
-    let stem = out.file_stem().and_then(|s| s.to_str()).unwrap_or("kpis");
-    out.with_file_name(format!("{stem}.{suffix}"))
 }
 
 /// Road indices of every track (mean over its usable profiles) and, for a
@@ -562,19 +559,19 @@ fn write_outputs(
         })
         .map_err(io(csv))?;
     }
-    let road = side_path(&opts.out, "road.parquet");
+    let road = side_table_path(&opts.out, "road.parquet");
     let batch = tagged(road_curves_batch(curves));
     set.add(&road, |f| write_batch_to(f, &batch))
         .map_err(io(&road))?;
-    let energy = side_path(&opts.out, "energy_maps.parquet");
+    let energy = side_table_path(&opts.out, "energy_maps.parquet");
     let batch = tagged(energy_maps_batch(maps.energy));
     set.add(&energy, |f| write_batch_to(f, &batch))
         .map_err(io(&energy))?;
-    let conditions = side_path(&opts.out, "condition_maps.parquet");
+    let conditions = side_table_path(&opts.out, "condition_maps.parquet");
     let batch = tagged(crate::kpi::condition_map::side_table(maps.conditions));
     set.add(&conditions, |f| write_batch_to(f, &batch))
         .map_err(io(&conditions))?;
-    let report = side_path(&opts.out, "report.json");
+    let report = side_table_path(&opts.out, "report.json");
     let text = serde_json::to_string_pretty(summary)
         .map_err(|e| IngestError::invalid(&report, "report", e.to_string()))?;
     set.add(&report, |f| std::io::Write::write_all(f, text.as_bytes()))

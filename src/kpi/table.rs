@@ -304,6 +304,14 @@ fn check_units(path: &Path, schema: &Schema) -> Result<(), IngestError> {
     Ok(())
 }
 
+/// A side table of the KPI database at `kpis` (`NAME.SUFFIX` beside
+/// `NAME.parquet`: `road.parquet`, `energy_maps.parquet`,
+/// `condition_maps.parquet`, `report.json`; docs/formats.md).
+pub fn side_table_path(kpis: &Path, suffix: &str) -> std::path::PathBuf {
+    let stem = kpis.file_stem().and_then(|s| s.to_str()).unwrap_or("kpis");
+    kpis.with_file_name(format!("{stem}.{suffix}"))
+}
+
 /// Reads a KPI Parquet file back (for `fit`, `predict`, `gap` and tests).
 /// Nulls, cells of the wrong type and columns in other units are errors
 /// naming the column (and row).
