@@ -899,8 +899,10 @@ pub fn decompress_only(path: &Path) -> Result<u64> {
     Ok(total)
 }
 
-/// Parallel path: every chunk through its own indexed reader over the memory map.
-/// `None` when the file has no usable summary or chunk index (read it linearly).
+/// Parallel path: the chunks found by the summary's index, each decompressed
+/// and decoded on its own (rayon) from the memory map, then appended in file
+/// order. `None` when the file has no usable summary or chunk index (read it
+/// linearly).
 /// The file's and every chunk's CRCs are checked (where the writer stored them).
 fn read_indexed(path: &Path) -> Result<Option<RunTelemetry>> {
     use rayon::prelude::*;
