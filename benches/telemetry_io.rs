@@ -76,14 +76,7 @@ fn bench_extract(c: &mut Criterion) {
         progress: false,
     })
     .unwrap();
-    let opts = tirewear::kpi::ExtractOptions {
-        season: season.clone(),
-        out: dir.path().join("kpis.parquet"),
-        csv: None,
-        engine: tirewear::kpi::Engine::Cpu,
-        progress: false,
-        allow_external_paths: false,
-    };
+    let opts = tirewear::kpi::ExtractOptions::new(&season, dir.path().join("kpis.parquet"));
     let mut g = c.benchmark_group("extract_season");
     g.sample_size(10);
     g.throughput(Throughput::Elements(s.samples));

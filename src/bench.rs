@@ -505,14 +505,10 @@ fn season_decode_lines(
     });
     report.lines.push(w.line("tirewear, 1 thread", d, None));
     let extract = || {
-        crate::kpi::extract(&crate::kpi::ExtractOptions {
-            season: season.to_path_buf(),
-            out: scratch.join("bench-kpis.parquet"),
-            csv: None,
-            engine: crate::kpi::Engine::Cpu,
-            progress: false,
-            allow_external_paths: false,
-        })
+        crate::kpi::extract(&crate::kpi::ExtractOptions::new(
+            season,
+            scratch.join("bench-kpis.parquet"),
+        ))
         .map(|s| s.rows)
     };
     let (e1, rows) = best(o.repeats, || one_thread(extract));

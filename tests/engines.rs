@@ -329,12 +329,8 @@ fn extract_on_gpu_equals_extract_on_cpu() {
         .map(|engine| {
             let out = dir.path().join(format!("{engine:?}.parquet"));
             let s = extract(&ExtractOptions {
-                season: dir.path().to_path_buf(),
-                out: out.clone(),
-                csv: None,
                 engine,
-                progress: false,
-                allow_external_paths: false,
+                ..ExtractOptions::new(dir.path(), &out)
             })
             .unwrap();
             assert_eq!(s.engine, engine);

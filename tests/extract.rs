@@ -28,12 +28,9 @@ fn sim(out: &Path, preset: Preset, rate: f64) {
 
 fn opts(season: &Path, out: &Path) -> ExtractOptions {
     ExtractOptions {
-        season: season.to_path_buf(),
-        out: out.join("kpis.parquet"),
         csv: Some(out.join("kpis.csv")),
         engine: Engine::Auto,
-        progress: false,
-        allow_external_paths: false,
+        ..ExtractOptions::new(season, out.join("kpis.parquet"))
     }
 }
 

@@ -426,7 +426,7 @@ fn mutate_text(text: &str, rng: &mut ChaCha8Rng) -> (Vec<u8>, String) {
 #[test]
 fn mutated_manifests_compounds_roads_and_wear_never_panic() {
     use tirewear::ingest::manifest::Season;
-    use tirewear::kpi::{Engine, ExtractOptions, extract, table};
+    use tirewear::kpi::{ExtractOptions, extract, table};
     let _one = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
     let dir = tempfile::tempdir().unwrap();
     let season_dir = dir.path().join("season");
@@ -452,14 +452,7 @@ fn mutated_manifests_compounds_roads_and_wear_never_panic() {
         targets.push(p.file.clone());
     }
     let bulk = m.road_profiles.clone();
-    let opts = ExtractOptions {
-        season: season_dir.clone(),
-        out: dir.path().join("out/kpis.parquet"),
-        csv: None,
-        engine: Engine::Cpu,
-        progress: false,
-        allow_external_paths: false,
-    };
+    let opts = ExtractOptions::new(&season_dir, dir.path().join("out/kpis.parquet"));
     let mut rng = ChaCha8Rng::seed_from_u64(4242);
     let (mut tried, mut refused, mut failures) = (0, 0, Vec::new());
     let root = season_dir.to_str().unwrap().to_string();

@@ -393,14 +393,7 @@ pub fn run_case(
         progress: false,
     })?;
     let kpis = dir.join("kpis.parquet");
-    crate::kpi::extract(&crate::kpi::ExtractOptions {
-        season: dir.clone(),
-        out: kpis.clone(),
-        csv: None,
-        engine: crate::kpi::Engine::Cpu,
-        progress: false,
-        allow_external_paths: false,
-    })?;
+    crate::kpi::extract(&crate::kpi::ExtractOptions::new(&dir, &kpis))?;
     let rows = crate::kpi::table::read_parquet(&kpis)?;
     let maps = crate::kpi::energy_maps::read_tire_maps(&kpis)?;
     // The diagnosis sees the KPI tables and the compound files only.

@@ -55,6 +55,22 @@ pub struct ExtractOptions {
     pub allow_external_paths: bool,
 }
 
+impl ExtractOptions {
+    /// Extracting `season` into the KPI database `out` on the CPU engine,
+    /// without CSV or progress bar, manifest paths kept inside the archive;
+    /// set the fields to change any of that.
+    pub fn new(season: impl Into<PathBuf>, out: impl Into<PathBuf>) -> Self {
+        ExtractOptions {
+            season: season.into(),
+            out: out.into(),
+            csv: None,
+            engine: Engine::Cpu,
+            progress: false,
+            allow_external_paths: false,
+        }
+    }
+}
+
 /// A run that produced no rows, and why.
 #[derive(Debug, Clone, serde::Serialize)]
 pub struct Skipped {

@@ -26,14 +26,10 @@ pub fn simulate_demo(dir: &Path) {
 /// The demo season simulated and extracted on the CPU engine into `dir/kpis.parquet`.
 pub fn demo_kpis(dir: &Path) -> Vec<KpiRow> {
     simulate_demo(dir);
-    tirewear::kpi::extract(&tirewear::kpi::ExtractOptions {
-        season: dir.to_path_buf(),
-        out: dir.join("kpis.parquet"),
-        csv: None,
-        engine: tirewear::kpi::Engine::Cpu,
-        progress: false,
-        allow_external_paths: false,
-    })
+    tirewear::kpi::extract(&tirewear::kpi::ExtractOptions::new(
+        dir,
+        dir.join("kpis.parquet"),
+    ))
     .unwrap();
     tirewear::kpi::table::read_parquet(&dir.join("kpis.parquet")).unwrap()
 }
