@@ -34,11 +34,11 @@ struct Chunk {
 }
 
 // Fixed-point energy sums (energy_map, condition_map). Must match
-// src/kpi/energy_map_kernel.rs (checked by tests/shader_contract.rs).
+// src/kpi/energy_map.rs (checked by tests/shader_contract.rs).
 const ENERGY_QUANTA_PER_J: f32 = 16777216.0; // 2^24: a quantum of 6e-8 J, sums up to 5.5e11 J
 
 // round(e · ENERGY_QUANTA_PER_J) as a 64-bit two's-complement (lo, hi)
-// (energy_map_kernel::to_quanta).
+// (energy_map::to_quanta).
 fn to_quanta(e: f32) -> vec2<u32> {
     let m = round(abs(e) * ENERGY_QUANTA_PER_J);
     let h = floor(m / 4294967296.0);

@@ -480,12 +480,17 @@ fn road_indices_on_every_engine_match_the_cpu_route() {
     short.z_mm.truncate(3000);
     short.location = "short".into();
     profiles.push(short);
+    // The CPU route's indices are checked against SurfaceTopography and numpy
+    // in tests/oracle_kpi.rs; here the engines' `road_indices` must give
+    // them back per profile, in order, with their labels (on the CPU engine
+    // that is the plumbing; on the GPU engine, the kernels within `tol`).
     let want: Vec<_> = profiles.iter().map(|p| profile_indices(p).0).collect();
     for (e, tol) in engines("road_indices_on_every_engine_match_the_cpu_route") {
         let got = e.road_indices(profiles.clone()).unwrap();
         assert_eq!(got.len(), profiles.len());
         let mut worst = 0.0f64;
-        for ((p, g, _), w) in got.iter().zip(&want) {
+        for (((p, g, _), w), q) in got.iter().zip(&want).zip(&profiles) {
+            assert_eq!((&p.track, &p.location), (&q.track, &q.location));
             let pairs = [
                 (g.macro_wavelength_mm, w.macro_wavelength_mm),
                 (g.micro_wavelength_mm, w.micro_wavelength_mm),

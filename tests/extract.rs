@@ -456,3 +456,59 @@ fn manifest_paths_stay_inside_the_archive() {
     o.allow_external_paths = true;
     assert_eq!(extract(&o).unwrap().skipped.len(), 0);
 }
+
+/// `tirewear bench --only decode --season DIR` measures the given archive:
+/// its lines name it, count every sample the simulator wrote (without
+/// sensor noise no sample is dropped), and nothing is skipped.
+#[test]
+fn bench_decode_lines_measure_a_given_season() {
+    use tirewear::bench::{BenchOptions, BenchParts, run_bench};
+    let dir = tempfile::tempdir().unwrap();
+    let season = dir.path().join("season");
+    let summary = simulate(&SimOptions {
+        preset: Preset::Tiny,
+        scale: 1.0,
+        seed: 3,
+        effects: vec![],
+        generated: None,
+        scatter: tirewear::sim::WearScatter::NONE,
+        encoding: Encoding::Sample,
+        rate_hz: Some(10.0),
+        out: season.clone(),
+        sensor_noise: false,
+        progress: false,
+    })
+    .unwrap();
+    let r = run_bench(&BenchOptions {
+        small: true,
+        gpu: false,
+        repeats: 1,
+        parts: BenchParts::Decode,
+        season: Some(season),
+    });
+    assert!(r.notes.is_empty(), "{:?}", r.notes);
+    let engines: Vec<&str> = r.lines.iter().map(|l| l.engine.as_str()).collect();
+    for e in [
+        "zstd only, 1 thread",
+        "tirewear, 1 thread",
+        "extract, 1 thread",
+    ] {
+        assert!(engines.contains(&e), "{engines:?}");
+    }
+    assert_eq!(r.lines.len(), 6, "{engines:?}");
+    for l in &r.lines {
+        assert_eq!(l.kernel, "decode, season");
+        assert!(
+            l.size.starts_with(&format!("{} runs, ", summary.runs)),
+            "{}",
+            l.size
+        );
+        // The simulator counts time steps; each logs four wheels.
+        let (samples, want) = (l.items_per_s * l.seconds, 4.0 * summary.samples as f64);
+        assert!(
+            (samples - want).abs() < 1e-6 * want,
+            "{samples} against {want}"
+        );
+        assert!(l.vs_memory_pass > 0.0 && l.vs_memory_pass.is_finite());
+    }
+}

@@ -91,31 +91,26 @@ pub(crate) trait Scalar: Copy + Default {
     fn extend_packed(v: &mut Vec<Self>, bytes: &[u8]);
 }
 
-impl Scalar for f32 {
-    const SIZE: usize = 4;
-    const WIRE: u32 = 5;
-    #[inline]
-    fn read_fixed(buf: &[u8]) -> Option<(Self, &[u8])> {
-        let (head, rest) = buf.split_first_chunk::<4>()?;
-        Some((f32::from_le_bytes(*head), rest))
-    }
-    fn extend_packed(v: &mut Vec<Self>, bytes: &[u8]) {
-        extend_le(v, bytes, f32::from_le_bytes);
-    }
+/// `Scalar` for a float type: its size and protobuf wire type (fixed32 = 5,
+/// fixed64 = 1), little-endian on the wire.
+macro_rules! scalar {
+    ($t:ty, $size:literal, $wire:literal) => {
+        impl Scalar for $t {
+            const SIZE: usize = $size;
+            const WIRE: u32 = $wire;
+            #[inline]
+            fn read_fixed(buf: &[u8]) -> Option<(Self, &[u8])> {
+                let (head, rest) = buf.split_first_chunk::<$size>()?;
+                Some((<$t>::from_le_bytes(*head), rest))
+            }
+            fn extend_packed(v: &mut Vec<Self>, bytes: &[u8]) {
+                extend_le(v, bytes, <$t>::from_le_bytes);
+            }
+        }
+    };
 }
-
-impl Scalar for f64 {
-    const SIZE: usize = 8;
-    const WIRE: u32 = 1;
-    #[inline]
-    fn read_fixed(buf: &[u8]) -> Option<(Self, &[u8])> {
-        let (head, rest) = buf.split_first_chunk::<8>()?;
-        Some((f64::from_le_bytes(*head), rest))
-    }
-    fn extend_packed(v: &mut Vec<Self>, bytes: &[u8]) {
-        extend_le(v, bytes, f64::from_le_bytes);
-    }
-}
+scalar!(f32, 4, 5);
+scalar!(f64, 8, 1);
 
 /// Appends little-endian elements: one reservation, then a loop the
 /// compiler turns into a copy on little-endian machines.

@@ -786,8 +786,8 @@ fn chunk_data<'b>(
     bytes: &'b [u8],
     ci: &mcap::records::ChunkIndex,
 ) -> Result<(&'b str, &'b [u8], usize, u32)> {
-    let rec = format!("chunk at offset {}", ci.chunk_start_offset);
-    let bad = |what: String| IngestError::invalid(path, rec.clone(), what);
+    // The label is formatted only on an error: this runs once per chunk.
+    let bad = |what: String| IngestError::invalid(path, chunk_label(ci.chunk_start_offset), what);
     let start = usize::try_from(ci.chunk_start_offset).unwrap_or(usize::MAX);
     let header = bytes
         .get(start..)
@@ -839,10 +839,15 @@ fn chunk_data<'b>(
     Ok((name, data, uncompressed_size as usize, crc))
 }
 
+/// How errors name a chunk.
+fn chunk_label(chunk_start_offset: u64) -> String {
+    format!("chunk at offset {chunk_start_offset}")
+}
+
 /// A chunk's records, decompressed and checked against the chunk's CRC.
 fn chunk_records(path: &Path, bytes: &[u8], ci: &mcap::records::ChunkIndex) -> Result<Vec<u8>> {
-    let rec = format!("chunk at offset {}", ci.chunk_start_offset);
-    let bad = |what: String| IngestError::invalid(path, rec.clone(), what);
+    // The label is formatted only on an error: this runs once per chunk.
+    let bad = |what: String| IngestError::invalid(path, chunk_label(ci.chunk_start_offset), what);
     let (name, data, size, crc) = chunk_data(path, bytes, ci)?;
     let out = match name {
         "" => data.to_vec(),
@@ -932,14 +937,14 @@ fn read_indexed(path: &Path) -> Result<Option<RunTelemetry>> {
         .par_iter()
         .map_init(Vec::new, |order, ci| {
             let records = chunk_records(path, bytes, ci)?;
-            let chunk = format!("chunk at offset {}", ci.chunk_start_offset);
-            chunk_messages(path, &chunk, &records, order)?;
+            let offset = ci.chunk_start_offset;
+            chunk_messages(path, offset, &records, order)?;
             let mut part = RunTelemetry::default();
             for m in order.iter() {
                 let (kind, topic) = kinds.get(&m.channel).ok_or_else(|| {
                     IngestError::invalid(
                         path,
-                        format!("{chunk}, message sequence {}", m.sequence),
+                        format!("{}, message sequence {}", chunk_label(offset), m.sequence),
                         format!("unknown channel {}", m.channel),
                     )
                 })?;
@@ -996,7 +1001,7 @@ struct ChunkMessage {
 /// channels are the ones used); a record that runs past the end is an error.
 fn chunk_messages(
     path: &Path,
-    chunk: &str,
+    chunk_offset: u64,
     records: &[u8],
     out: &mut Vec<ChunkMessage>,
 ) -> Result<()> {
@@ -1009,7 +1014,10 @@ fn chunk_messages(
         let bad = |what: String| {
             IngestError::invalid(
                 path,
-                format!("{chunk}, record at offset {at} of its records"),
+                format!(
+                    "{}, record at offset {at} of its records",
+                    chunk_label(chunk_offset)
+                ),
                 what,
             )
         };
@@ -1502,7 +1510,7 @@ mod chunk_tests {
         ]
         .concat();
         let mut out = Vec::new();
-        chunk_messages(Path::new("f.mcap"), "chunk", &records, &mut out).unwrap();
+        chunk_messages(Path::new("f.mcap"), 0, &records, &mut out).unwrap();
         let got: Vec<(u16, u32, u64, &[u8])> = out
             .iter()
             .map(|m| (m.channel, m.sequence, m.log_time, &records[m.data.clone()]))
@@ -1521,7 +1529,7 @@ mod chunk_tests {
         let mut records = message(1, 0, 5, b"xyz");
         records.truncate(records.len() - 1);
         let mut out = Vec::new();
-        let e = chunk_messages(Path::new("f.mcap"), "chunk at offset 8", &records, &mut out)
+        let e = chunk_messages(Path::new("f.mcap"), 8, &records, &mut out)
             .unwrap_err()
             .to_string();
         assert!(
@@ -1530,12 +1538,12 @@ mod chunk_tests {
         );
         assert!(e.contains("past the end"), "{e}");
         let short = record(0x05, &[0; 10]);
-        let e = chunk_messages(Path::new("f.mcap"), "chunk", &short, &mut out)
+        let e = chunk_messages(Path::new("f.mcap"), 0, &short, &mut out)
             .unwrap_err()
             .to_string();
         assert!(e.contains("shorter than its 22-byte header"), "{e}");
         // Eight bytes: not even a record's opcode and length.
-        let e = chunk_messages(Path::new("f.mcap"), "chunk", &[5; 8], &mut out).unwrap_err();
+        let e = chunk_messages(Path::new("f.mcap"), 0, &[5; 8], &mut out).unwrap_err();
         assert!(e.to_string().contains("past the end"), "{e}");
     }
 }

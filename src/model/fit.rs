@@ -35,9 +35,8 @@ pub struct FitSettings {
     /// Testing events; None = every third event (docs/models.md).
     pub test_events: Option<Vec<String>>,
     pub network: NetworkSettings,
-    /// Share of the inputs' variance the kept principal components explain
-    /// (0 < t ≤ 1; the paper's 0.99).
-    pub pca_threshold: f64,
+    /// The PCA + regression method's components (threshold 0.99, the paper's).
+    pub pca: PcaSettings,
 }
 
 impl Default for FitSettings {
@@ -45,7 +44,7 @@ impl Default for FitSettings {
         FitSettings {
             test_events: None,
             network: NetworkSettings::default(),
-            pca_threshold: 0.99,
+            pca: PcaSettings::default(),
         }
     }
 }
@@ -53,10 +52,7 @@ impl Default for FitSettings {
 impl FitSettings {
     /// Every setting in its range, or the first one that is not, named.
     pub fn check(&self) -> Result<(), ModelError> {
-        PcaSettings {
-            threshold: self.pca_threshold,
-        }
-        .check()?;
+        self.pca.check()?;
         self.network.check()
     }
 }
@@ -233,10 +229,7 @@ pub fn fit_method(
                 .filter(|c| !inputs.contains(c))
                 .collect();
             let x = matrix(&train, &inputs);
-            let pca = PcaSettings {
-                threshold: settings.pca_threshold,
-            }
-            .fit(Dataset::new(&x, &[], &inputs))?;
+            let pca = settings.pca.fit(Dataset::new(&x, &[], &inputs))?;
             let scores = pca.transform(&matrix(&train, &inputs));
             let names: Vec<String> = (1..=pca.kept).map(|i| format!("PC{i}")).collect();
             let regression = OlsSettings.fit(Dataset::new(&scores, &y, &names))?;
@@ -419,10 +412,10 @@ mod tests {
     #[test]
     fn settings_out_of_range_are_named() {
         assert_eq!(FitSettings::default().check(), Ok(()));
-        assert_eq!(FitSettings::default().pca_threshold, 0.99);
+        assert_eq!(FitSettings::default().pca.threshold, 0.99);
         for t in [0.0, -0.5, 1.5, f64::NAN] {
             let s = FitSettings {
-                pca_threshold: t,
+                pca: PcaSettings { threshold: t },
                 ..Default::default()
             };
             let e = s.check().unwrap_err().to_string();

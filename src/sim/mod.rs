@@ -65,6 +65,7 @@ pub struct SimSummary {
     pub events: usize,
     pub runs: usize,
     pub observations: usize,
+    /// Time steps simulated over all runs (each logs four wheels).
     pub samples: u64,
     pub bytes: u64,
     pub saturated_fraction: f64,
