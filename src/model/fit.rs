@@ -30,23 +30,13 @@ impl Method {
 }
 
 /// Settings of a fit.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, Default)]
 pub struct FitSettings {
     /// Testing events; None = every third event (docs/models.md).
     pub test_events: Option<Vec<String>>,
     pub network: NetworkSettings,
     /// The PCA + regression method's components (threshold 0.99, the paper's).
     pub pca: PcaSettings,
-}
-
-impl Default for FitSettings {
-    fn default() -> Self {
-        FitSettings {
-            test_events: None,
-            network: NetworkSettings::default(),
-            pca: PcaSettings::default(),
-        }
-    }
 }
 
 impl FitSettings {
