@@ -13,9 +13,9 @@
 // ENERGY_QUANTA_PER_J, to_quanta, carried.
 
 // Must match src/kpi/condition_map.rs (checked by tests/shader_contract.rs).
-const N_CONDITIONS: u32 = 11u;
-const CONDITION_BINS: u32 = 294u; // bins of one component over all conditions
-const MAP_BINS: u32 = 882u; // 3 components
+const N_CONDITIONS: u32 = 17u;
+const CONDITION_BINS: u32 = 468u; // bins of one component over all conditions
+const MAP_BINS: u32 = 1404u; // 3 components
 const SLIP_SPEED_FLOOR_MPS: f32 = 1.0;
 const LOAD_FLOOR_N: f32 = 100.0;
 
@@ -34,7 +34,7 @@ struct ConditionBins {
 @group(0) @binding(3) var<storage, read_write> maps: array<atomic<u32>>;
 
 var<workgroup> bin_lo: array<atomic<u32>, MAP_BINS>;
-var<workgroup> bin_hi: array<atomic<u32>, MAP_BINS>; // 7 KiB
+var<workgroup> bin_hi: array<atomic<u32>, MAP_BINS>; // 11 KiB with bin_lo (limit 16 KiB)
 
 // Equal-width bins clamped at both ends, NaN to bin 0; subtraction and
 // multiplication only (correctly rounded), as ConditionBins::index.
@@ -81,6 +81,12 @@ fn condition_values(p: Sample) -> array<f32, N_CONDITIONS> {
         p.pressure,
         p.camber,
         p.vx,
+        0.5 * (p.t_surface + p.t_inner),
+        p.t_surface_rate,
+        p.t_inner_rate,
+        p.load_rel,
+        p.time_s,
+        p.distance_m,
     );
 }
 

@@ -21,6 +21,12 @@ struct Sample {
     t_inner: f32,
     pressure: f32,
     camber: f32,
+    // Derived by the host (ReduceSample): only condition_map reads them.
+    t_surface_rate: f32, // K/s
+    t_inner_rate: f32, // K/s
+    load_rel: f32, // F_z / the wheel's mean F_z
+    time_s: f32, // since the wheel's first kept sample
+    distance_m: f32, // Σ v_x·Δt before this sample
     dt: f32,
     dt_lo: f32, // f64 remainder of dt, used by the CPU twins only
 }

@@ -139,6 +139,11 @@ pub fn telemetry_batch(samples: usize) -> ReduceBatch {
                     t_inner: 110.0,
                     pressure: 160_000.0,
                     camber: -2.0,
+                    t_surface_rate: 0.1 * (0.01 * t).cos(),
+                    t_inner_rate: 0.0,
+                    load_rel: 1.0 + 0.25 * (0.3 * t).sin(),
+                    time_s: i as f32 * 1e-3,
+                    distance_m: i as f32 * 0.045,
                     dt,
                     dt_lo,
                 }

@@ -105,6 +105,11 @@ fn full_length_run() -> Vec<ReduceSample> {
                 t_inner: (110.0 + 5.0 * (0.004 * t).sin()) as f32,
                 pressure: (160_000.0 + 5000.0 * (0.002 * t).sin()) as f32,
                 camber: (-2.0 + 0.5 * (0.3 * t).sin()) as f32,
+                t_surface_rate: (10.0 * 0.01 * (0.01 * t).cos()) as f32,
+                t_inner_rate: (5.0 * 0.004 * (0.004 * t).cos()) as f32,
+                load_rel: (1.0 + 0.25 * (0.3 * t).sin()) as f32,
+                time_s: t as f32,
+                distance_m: (45.0 * t) as f32,
                 ..sample(1e-3)
             }
         })

@@ -174,6 +174,11 @@ fn telemetry_reduce_matches_its_cpu_twin() {
             t_inner: f32,
             pressure: f32,
             camber: f32,
+            t_surface_rate: f32,
+            t_inner_rate: f32,
+            load_rel: f32,
+            time_s: f32,
+            distance_m: f32,
             dt: f32,
             dt_lo: f32,
         ]

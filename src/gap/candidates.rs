@@ -552,6 +552,7 @@ pub fn feature(
         }
         Feature::ConditionEnergy { condition, above } => maps
             .and_then(|m| m.conditions.as_deref())
+            .filter(|cm| cm.holds(condition))
             .map_or(f64::NAN, |cm| {
                 let bins = CONDITIONS[condition].bins;
                 let tol = 1e-9 * (1.0 + theta.abs());

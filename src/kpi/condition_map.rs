@@ -108,13 +108,53 @@ pub const CONDITIONS: [Condition; N_CONDITIONS] = [
         bins: bins(0.0, 4.0, 25),
         formula: "v_x (wheel centre, longitudinal)",
     },
+    // From format version 2 on.
+    Condition {
+        name: "t_bulk_c",
+        unit: "°C",
+        bins: bins(30.0, 5.0, 24),
+        formula: "(T_surface + T_inner) / 2 (bulk rubber)",
+    },
+    Condition {
+        name: "t_surface_rate_kps",
+        unit: "K/s",
+        bins: bins(-15.0, 1.0, 30),
+        formula: "(T_surface(j₁) − T_surface(j₀)) / (t(j₁) − t(j₀)), j₀ and j₁ the first and last kept samples within ±0.5 s",
+    },
+    Condition {
+        name: "t_inner_rate_kps",
+        unit: "K/s",
+        bins: bins(-1.5, 0.1, 30),
+        formula: "as t_surface_rate_kps, of T_inner",
+    },
+    Condition {
+        name: "relative_load",
+        unit: "1",
+        bins: bins(0.0, 0.1, 30),
+        formula: "F_z / mean F_z of the tire's kept samples in the run",
+    },
+    Condition {
+        name: "time_since_start_s",
+        unit: "s",
+        bins: bins(0.0, 120.0, 30),
+        formula: "t − t of the tire's first kept sample",
+    },
+    Condition {
+        name: "distance_since_start_m",
+        unit: "m",
+        bins: bins(0.0, 5000.0, 30),
+        formula: "Σ v_x·Δt over the tire's kept samples before this one",
+    },
 ];
 
+/// Conditions a format-version-1 side table holds (the first ones).
+pub const V1_CONDITIONS: usize = 11;
+
 /// Number of conditions. Must match `N_CONDITIONS` in the shader (checked by tests/shader_contract.rs).
-pub const N_CONDITIONS: usize = 11;
+pub const N_CONDITIONS: usize = 17;
 /// Bins of one energy component over all conditions. Must match
 /// `CONDITION_BINS` in the shader (checked by tests/shader_contract.rs).
-pub const CONDITION_BINS: usize = 294;
+pub const CONDITION_BINS: usize = 468;
 /// Energy components: total, longitudinal (−F_x·v_sx·Δt), lateral (−F_y·v_sy·Δt).
 pub const COMPONENTS: usize = 3;
 /// Bins of one wheel's maps. Must match `MAP_BINS` in the shader (checked by tests/shader_contract.rs).
@@ -212,6 +252,12 @@ pub fn condition_values(p: &ReduceSample) -> [f64; N_CONDITIONS] {
         f(p.pressure),
         f(p.camber),
         f(p.vx),
+        0.5 * (f(p.t_surface) + f(p.t_inner)),
+        f(p.t_surface_rate),
+        f(p.t_inner_rate),
+        f(p.load_rel),
+        f(p.time_s),
+        f(p.distance_m),
     ]
 }
 
@@ -261,12 +307,16 @@ pub fn condition_map(batch: &ReduceBatch) -> Vec<u64> {
 pub struct ConditionMaps {
     /// [component][CONDITION_BINS]: total, longitudinal, lateral.
     pub energy_j: [Vec<f64>; COMPONENTS],
+    /// How many of [`CONDITIONS`] (the first ones) the maps hold: all, or
+    /// [`V1_CONDITIONS`] when read from a format-version-1 side table.
+    pub held: usize,
 }
 
 impl Default for ConditionMaps {
     fn default() -> Self {
         ConditionMaps {
             energy_j: std::array::from_fn(|_| vec![0.0; CONDITION_BINS]),
+            held: N_CONDITIONS,
         }
     }
 }
@@ -285,6 +335,11 @@ impl ConditionMaps {
         let o = offsets()[condition];
         &self.energy_j[component as usize][o..o + CONDITIONS[condition].bins.n]
     }
+    /// Whether the maps hold a condition (an older side table lacks the
+    /// later ones: their map is absent, not zero).
+    pub fn holds(&self, condition: usize) -> bool {
+        condition < self.held
+    }
     /// Index of a condition by its side-table name.
     pub fn condition_index(name: &str) -> Option<usize> {
         CONDITIONS.iter().position(|c| c.name == name)
@@ -302,14 +357,16 @@ pub fn condition_maps_from_quanta(quanta: &[u64]) -> Vec<ConditionMaps> {
                     .map(|&v| from_quanta(v))
                     .collect()
             }),
+            held: N_CONDITIONS,
         })
         .collect()
 }
 
 /// Schema-metadata key of the side table's format version.
 pub const VERSION_KEY: &str = "tirewear.condition_maps.version";
-/// The side table's format version this build writes and reads.
-pub const VERSION: u32 = 1;
+/// The side table's format version this build writes. It also reads
+/// version 1, which holds the first [`V1_CONDITIONS`] conditions.
+pub const VERSION: u32 = 2;
 
 /// Side table of condition maps (`NAME.condition_maps.parquet`): one row per
 /// tire, run, condition and non-empty bin: run, wheel, condition, unit, bin,
@@ -397,13 +454,16 @@ pub fn read_condition_maps(
     let file = std::fs::File::open(path).map_err(|e| IngestError::io(path, e))?;
     let builder = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file)
         .map_err(perr)?;
-    match builder.schema().metadata().get(VERSION_KEY) {
-        Some(v) if v == &VERSION.to_string() => {}
+    let held = match builder.schema().metadata().get(VERSION_KEY) {
+        Some(v) if v == &VERSION.to_string() => N_CONDITIONS,
+        Some(v) if v == "1" => V1_CONDITIONS,
         Some(v) => {
             return Err(IngestError::invalid(
                 path,
                 "schema metadata",
-                format!("condition maps of format version {v}; this build reads version {VERSION}"),
+                format!(
+                    "condition maps of format version {v}; this build reads versions 1 to {VERSION}"
+                ),
             ));
         }
         None => {
@@ -413,7 +473,7 @@ pub fn read_condition_maps(
                 format!("no '{VERSION_KEY}': not a condition-map table"),
             ));
         }
-    }
+    };
     let reader = builder.build().map_err(perr)?;
     let offsets = offsets();
     let mut out: std::collections::BTreeMap<(String, String), ConditionMaps> = Default::default();
@@ -454,9 +514,18 @@ pub fn read_condition_maps(
             record += 1;
             let at = || format!("record {record}");
             let name = cond.value(k);
-            let c = ConditionMaps::condition_index(name).ok_or_else(|| {
-                IngestError::invalid(path, at(), format!("unknown condition '{name}'"))
-            })?;
+            let c = ConditionMaps::condition_index(name)
+                .filter(|&c| c < held)
+                .ok_or_else(|| {
+                    IngestError::invalid(
+                        path,
+                        at(),
+                        format!(
+                            "unknown condition '{name}' in a version-{} table",
+                            version_of(held)
+                        ),
+                    )
+                })?;
             let bins = CONDITIONS[c].bins;
             let b = bin.value(k) as usize;
             if b >= bins.n {
@@ -483,7 +552,10 @@ pub fn read_condition_maps(
             }
             let m = out
                 .entry((run.value(k).to_string(), wheel.value(k).to_string()))
-                .or_default();
+                .or_insert_with(|| ConditionMaps {
+                    held,
+                    ..Default::default()
+                });
             for (comp, col) in e.iter().enumerate() {
                 let v = col.value(k);
                 if !v.is_finite() {
@@ -498,6 +570,11 @@ pub fn read_condition_maps(
         }
     }
     Ok(out)
+}
+
+/// The format version whose tables hold `held` conditions.
+fn version_of(held: usize) -> u32 {
+    if held == V1_CONDITIONS { 1 } else { VERSION }
 }
 
 #[cfg(test)]
@@ -534,6 +611,11 @@ mod tests {
             t_inner: 104.0,
             pressure: 172_000.0,
             camber: -3.1,
+            t_surface_rate: 2.5,
+            t_inner_rate: -0.25,
+            load_rel: 1.35,
+            time_s: 700.0,
+            distance_m: 31_000.0,
             ..Default::default()
         };
         let v = condition_values(&p);
@@ -554,6 +636,15 @@ mod tests {
         assert_eq!(t[9].index(f64::NAN), 0);
         assert_eq!(t[9].index(-99.0), 0);
         assert_eq!(t[9].index(99.0), 31);
+        // Bulk (91 + 104)/2 = 97.5 °C → (97.5 − 30)/5 = 13.5 → 13; rates 2.5 K/s
+        // → 17.5 → 17 and −0.25 K/s → 12.5 → 12; load ×1.35 → 13.5 → 13; 700 s → 5.83
+        // → 5; 31 km → 6.2 → 6.
+        assert!(close(v[11], 97.5) && close(v[12], 2.5) && close(v[13], -0.25));
+        assert!(close(v[14], 1.35) && close(v[15], 700.0) && close(v[16], 31_000.0));
+        let want = [(11, 13), (12, 17), (13, 12), (14, 13), (15, 5), (16, 6)];
+        for (c, b) in want {
+            assert_eq!(t[c].index(v[c]), b, "{}", CONDITIONS[c].name);
+        }
     }
 
     #[test]
@@ -577,16 +668,33 @@ mod tests {
         };
         let back = read_condition_maps(&write("ok.parquet", &batch)).unwrap();
         assert_eq!(back[&("r1".to_string(), "FL".to_string())], m);
-        // Another format version.
-        let mut meta = batch.schema().metadata().clone();
-        meta.insert(VERSION_KEY.to_string(), "2".to_string());
-        let v2 = arrow_array::RecordBatch::try_new(
-            Arc::new(batch.schema().as_ref().clone().with_metadata(meta)),
-            batch.columns().to_vec(),
-        )
-        .unwrap();
-        let e = read_condition_maps(&write("v2.parquet", &v2)).unwrap_err();
-        assert!(e.to_string().contains("format version 2"), "{e}");
+        let with_version = |b: &arrow_array::RecordBatch, v: &str| {
+            let mut meta = b.schema().metadata().clone();
+            meta.insert(VERSION_KEY.to_string(), v.to_string());
+            arrow_array::RecordBatch::try_new(
+                Arc::new(b.schema().as_ref().clone().with_metadata(meta)),
+                b.columns().to_vec(),
+            )
+            .unwrap()
+        };
+        // A later format version is refused.
+        let e = read_condition_maps(&write("v3.parquet", &with_version(&batch, "3"))).unwrap_err();
+        assert!(e.to_string().contains("format version 3"), "{e}");
+        // Version 1 holds the first conditions only: a later one in it is
+        // an error, and its maps say which conditions they lack.
+        let e = read_condition_maps(&write("v1bad.parquet", &with_version(&batch, "1")))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("record 2") && e.contains("'distance_since_start_m' in a version-1"),
+            "{e}"
+        );
+        let v1 = with_version(&batch.slice(0, 1), "1");
+        let back = read_condition_maps(&write("v1.parquet", &v1)).unwrap();
+        let got = &back[&("r1".to_string(), "FL".to_string())];
+        assert_eq!(got.held, V1_CONDITIONS);
+        assert!(got.holds(V1_CONDITIONS - 1) && !got.holds(V1_CONDITIONS));
+        assert_eq!(got.energy_j[1][3], 10.0);
         // An unknown condition names its record.
         let mut cols = batch.columns().to_vec();
         cols[2] = Arc::new(arrow_array::StringArray::from(vec![

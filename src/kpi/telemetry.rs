@@ -211,8 +211,9 @@ pub fn prepare_wheel(s: &WheelSeries) -> Result<PreparedWheel, String> {
             report.kept, report.samples, report.time_backwards
         ));
     }
+    let derived = derived_conditions(s, &kept);
     let mut samples = Vec::with_capacity(kept.len());
-    for &(i, dt) in &kept {
+    for (&(i, dt), d) in kept.iter().zip(derived) {
         let (dt_hi, dt_lo) = ReduceSample::split_dt(dt);
         samples.push(ReduceSample {
             vx: s.vx_mps[i],
@@ -226,11 +227,78 @@ pub fn prepare_wheel(s: &WheelSeries) -> Result<PreparedWheel, String> {
             t_inner: s.t_inner_c[i],
             pressure: s.pressure_pa[i],
             camber: s.camber_deg[i],
+            t_surface_rate: d.t_surface_rate as f32,
+            t_inner_rate: d.t_inner_rate as f32,
+            load_rel: d.load_rel as f32,
+            time_s: d.time_s as f32,
+            distance_m: d.distance_m as f32,
             dt: dt_hi,
             dt_lo,
         });
     }
     Ok(PreparedWheel { samples, report })
+}
+
+/// Half-width of the window temperature rates are taken over (s). One
+/// sample is too short: a surface sensor's 0.8 K of noise at 20 Hz is
+/// 23 K/s over one step, 1.1 K/s over a second.
+pub const RATE_HALF_WINDOW_S: f64 = 0.5;
+
+/// The conditions of a kept sample that need the wheel's other samples
+/// (the condition maps bin them; docs/kpis.md gives the formulas).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct DerivedConditions {
+    /// (T(j₁) − T(j₀)) / (t(j₁) − t(j₀)), j₀ and j₁ the first and last kept
+    /// samples within ±[`RATE_HALF_WINDOW_S`]; 0 when they are the same (K/s).
+    pub t_surface_rate: f64,
+    pub t_inner_rate: f64,
+    /// F_z over the mean F_z of the kept samples (floored at `LOAD_FLOOR_N`).
+    pub load_rel: f64,
+    /// Time since the first kept sample (s).
+    pub time_s: f64,
+    /// Σ v_x·Δt over the kept samples before this one (m), Δt as the
+    /// cleaning rule gives it (a dropout counts one period).
+    pub distance_m: f64,
+}
+
+/// [`DerivedConditions`] of each kept sample (`kept` from the cleaning
+/// rule: strictly increasing times).
+pub fn derived_conditions(s: &WheelSeries, kept: &[(usize, f64)]) -> Vec<DerivedConditions> {
+    use super::condition_map::LOAD_FLOOR_N;
+    let Some(&(first, _)) = kept.first() else {
+        return Vec::new();
+    };
+    let time = |k: usize| s.time_ns[kept[k].0];
+    let half_ns = (RATE_HALF_WINDOW_S * 1e9) as u64;
+    let mean_fz = kept.iter().map(|&(i, _)| s.fz_n[i] as f64).sum::<f64>() / kept.len() as f64;
+    let load_ref = mean_fz.max(LOAD_FLOOR_N);
+    let rate = |c: &[f32], lo: usize, hi: usize| {
+        if hi == lo {
+            return 0.0;
+        }
+        let span_s = (time(hi) - time(lo)) as f64 / 1e9;
+        (c[kept[hi].0] as f64 - c[kept[lo].0] as f64) / span_s
+    };
+    let (mut lo, mut hi, mut distance) = (0usize, 0usize, 0.0f64);
+    let mut out = Vec::with_capacity(kept.len());
+    for (k, &(i, dt)) in kept.iter().enumerate() {
+        let t = time(k);
+        while time(lo) + half_ns < t {
+            lo += 1;
+        }
+        while hi + 1 < kept.len() && time(hi + 1) <= t + half_ns {
+            hi += 1;
+        }
+        out.push(DerivedConditions {
+            t_surface_rate: rate(&s.t_surface_c, lo, hi),
+            t_inner_rate: rate(&s.t_inner_c, lo, hi),
+            load_rel: s.fz_n[i] as f64 / load_ref,
+            time_s: (t - s.time_ns[first]) as f64 / 1e9,
+            distance_m: distance,
+        });
+        distance += s.vx_mps[i] as f64 * dt;
+    }
+    out
 }
 
 /// Table 4 indices from a wheel's merged sums.
@@ -347,6 +415,47 @@ mod tests {
         let lateral: f64 = maps.lateral_surface_inner.iter().sum();
         assert!((lateral - k.friction_energy_y_j).abs() < 1e-6);
         assert_eq!((rep.dropouts, rep.sample_periods), (0, 1));
+    }
+
+    #[test]
+    fn derived_conditions_by_hand() {
+        // 10 Hz; the surface heats 2 K per sample (20 K/s), the inner liner
+        // 0.1 K per sample (1 K/s); load alternates 3000 / 5000 N (mean 4000).
+        let mut s = constant_series(40, 100_000_000);
+        for i in 0..40 {
+            s.t_surface_c[i] = 60.0 + 2.0 * i as f32;
+            s.t_inner_c[i] = 90.0 + 0.1 * i as f32;
+            s.fz_n[i] = if i % 2 == 0 { 3000.0 } else { 5000.0 };
+        }
+        // Sample 20 is lost (a NaN): its neighbours stand for 0.2 s.
+        s.vx_mps[20] = f32::NAN;
+        let mut report = CleaningReport::default();
+        let kept = clean(&s, &s.channels(), &mut report);
+        assert_eq!(kept.len(), 39);
+        let d = derived_conditions(&s, &kept);
+        // Sample 10 (k = 10): window t ± 0.5 s = samples 5..=15, 1 s apart.
+        assert!((d[10].t_surface_rate - 20.0).abs() < 1e-4, "{:?}", d[10]);
+        assert!((d[10].t_inner_rate - 1.0).abs() < 1e-3, "{:?}", d[10]);
+        // First sample: window 0..=5, rate over 0.5 s, the same slope.
+        assert!((d[0].t_surface_rate - 20.0).abs() < 1e-4);
+        // Mean load of the 39 kept samples: the lost sample 20 is an even
+        // one (3000 N), so 19 × 3000 + 20 × 5000 = 157000 N over 39.
+        let mean = 157_000.0 / 39.0;
+        assert!((d[1].load_rel - 5000.0 / mean).abs() < 1e-12);
+        // Time and distance: kept index 25 is sample 26, 2.6 s in; before
+        // it 25 kept samples of 0.1 s at 50 m/s, one of them (19) standing
+        // for 0.2 s across the lost one: 26 × 0.1 × 50 = 130 m.
+        assert!((d[25].time_s - 2.6).abs() < 1e-12);
+        assert!(
+            (d[25].distance_m - 130.0).abs() < 1e-9,
+            "{}",
+            d[25].distance_m
+        );
+        assert_eq!(d[0].distance_m, 0.0);
+        // The prepared samples carry them.
+        let p = prepare_wheel(&s).unwrap();
+        assert_eq!(p.samples[25].distance_m, 130.0);
+        assert_eq!(p.samples[25].time_s, 2.6f32);
     }
 
     #[test]

@@ -56,6 +56,18 @@ pub struct ReduceSample {
     pub t_inner: f32,
     pub pressure: f32,
     pub camber: f32,
+    /// Derived by the host from the wheel's kept samples (docs/kpis.md,
+    /// "Condition energy maps"); only the condition maps read them.
+    /// dT_surface/dt over the kept samples within ±0.5 s (K/s).
+    pub t_surface_rate: f32,
+    /// dT_inner/dt over the kept samples within ±0.5 s (K/s).
+    pub t_inner_rate: f32,
+    /// F_z over the wheel's mean F_z in the run.
+    pub load_rel: f32,
+    /// Time since the wheel's first kept sample (s).
+    pub time_s: f32,
+    /// Σ v_x·Δt over the kept samples before this one (m).
+    pub distance_m: f32,
     /// Time this sample stands for (s), from the cleaning rule, as f32 …
     pub dt: f32,
     /// … and the rest of the f64 value (dt − dt as f32): the CPU adds it, so
