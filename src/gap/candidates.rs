@@ -53,11 +53,16 @@ pub enum Feature {
     /// index is a track-level term on the law's energy instead
     /// ([`candidate_feature`]).
     Kpi(&'static str),
-    /// Generated from the condition energy maps: the friction energy of the
-    /// samples whose condition `CONDITIONS[condition]` lies above θ (or
-    /// below, `above` false), θ a bin edge (MJ). Wear per joule that is
-    /// higher under some condition no named mechanism covers.
-    ConditionEnergy { condition: usize, above: bool },
+    /// Generated from the condition energy maps: the friction energy (the
+    /// total, or its longitudinal or lateral part) of the samples whose
+    /// condition `CONDITIONS[condition]` lies above θ (or below, `above`
+    /// false), θ a bin edge (MJ). Wear per joule that is higher under some
+    /// condition no named mechanism covers.
+    ConditionEnergy {
+        condition: usize,
+        above: bool,
+        component: Component,
+    },
     /// A user hypothesis from `effects.toml` (`Candidate::user`).
     User,
     /// Set-up: the law's own wear of the tires of one group (a car, a car's
@@ -375,12 +380,14 @@ pub const NAMED_CONDITIONS: [(&str, bool, Feature); 3] = [
     ("sliding_speed_mps", true, Feature::FastSlidingEnergy),
 ];
 
-/// Candidates generated from the condition energy maps: for every condition,
-/// the energy above θ and below θ (θ every other inner bin edge, scanned in
-/// the cross-validation like a mechanism's threshold), on both axles and on
+/// Candidates generated from the condition energy maps: for every condition
+/// and energy component (total, longitudinal, lateral), the energy above θ
+/// and below θ (θ every other inner bin edge, scanned in the
+/// cross-validation like a mechanism's threshold), on both axles and on
 /// each alone — except the points a named mechanism already covers
-/// ([`NAMED_CONDITIONS`]). Rows whose extraction wrote no condition maps
-/// give NaN terms, and the scoring passes these candidates over.
+/// ([`NAMED_CONDITIONS`], total energy). Rows whose extraction wrote no
+/// condition maps, or maps without that condition, give NaN terms, and the
+/// scoring passes these candidates over.
 fn condition_candidates() -> Vec<Candidate> {
     let mut out = Vec::new();
     for (c, cd) in CONDITIONS.iter().enumerate() {
@@ -388,30 +395,34 @@ fn condition_candidates() -> Vec<Candidate> {
             .step_by(2)
             .map(|k| cd.bins.lower_edge(k))
             .collect();
-        for above in [true, false] {
-            if NAMED_CONDITIONS
-                .iter()
-                .any(|(name, a, _)| *name == cd.name && *a == above)
-            {
-                continue;
-            }
-            let side = if above { "above" } else { "below" };
-            for axle in [None, Some("front"), Some("rear")] {
-                let name = format!("energy with {} {side} θ", cd.name);
-                out.push(Candidate {
-                    name: match axle {
-                        None => name,
-                        Some(a) => format!("{name}, {a} axle"),
-                    },
-                    feature: Feature::ConditionEnergy {
-                        condition: c,
-                        above,
-                    },
-                    thresholds: thresholds.clone(),
-                    axle,
-                    user: None,
-                    group: None,
-                });
+        for component in Component::ALL {
+            for above in [true, false] {
+                if component == Component::Total
+                    && NAMED_CONDITIONS
+                        .iter()
+                        .any(|(name, a, _)| *name == cd.name && *a == above)
+                {
+                    continue;
+                }
+                let side = if above { "above" } else { "below" };
+                let name = format!("{} with {} {side} θ", component.energy_name(), cd.name);
+                for axle in [None, Some("front"), Some("rear")] {
+                    out.push(Candidate {
+                        name: match axle {
+                            None => name.clone(),
+                            Some(a) => format!("{name}, {a} axle"),
+                        },
+                        feature: Feature::ConditionEnergy {
+                            condition: c,
+                            above,
+                            component,
+                        },
+                        thresholds: thresholds.clone(),
+                        axle,
+                        user: None,
+                        group: None,
+                    });
+                }
             }
         }
     }
@@ -550,13 +561,17 @@ pub fn feature(
         Feature::Kpi(c) => {
             r.friction_energy_j * mj * kpi_scale.standardised(r.number(c).unwrap_or(f64::NAN))
         }
-        Feature::ConditionEnergy { condition, above } => maps
+        Feature::ConditionEnergy {
+            condition,
+            above,
+            component,
+        } => maps
             .and_then(|m| m.conditions.as_deref())
             .filter(|cm| cm.holds(condition))
             .map_or(f64::NAN, |cm| {
                 let bins = CONDITIONS[condition].bins;
                 let tol = 1e-9 * (1.0 + theta.abs());
-                cm.map(Component::Total, condition)
+                cm.map(component, condition)
                     .iter()
                     .enumerate()
                     .filter(|(b, _)| {
@@ -797,6 +812,7 @@ mod tests {
                 Feature::ConditionEnergy {
                     condition: slip,
                     above,
+                    component: Component::Total,
                 },
                 &r,
                 Some(&m),
@@ -810,12 +826,32 @@ mod tests {
         assert!(close(f(true, -0.2), 3.0));
         assert!(close(f(false, -0.1), 1.0));
         assert!(close(f(false, -0.2), 0.0));
+        // A component's candidate sums that component's map: 0.5 MJ of the
+        // 2 MJ in bin 20 is lateral.
+        let mut lateral = m.clone();
+        if let Some(cm) = lateral.conditions.as_mut() {
+            cm.energy_j[2][o + 20] = 0.5e6;
+        }
+        let lat = Feature::ConditionEnergy {
+            condition: slip,
+            above: true,
+            component: Component::Lateral,
+        };
+        assert!(close(
+            feature(lat, &r, Some(&lateral), 0.1, KpiScale::NONE),
+            0.5
+        ));
+        assert!(close(
+            feature(lat, &r, Some(&lateral), 0.12, KpiScale::NONE),
+            0.0
+        ));
         // Without condition maps (an older extraction) the term is undefined.
         assert!(
             feature(
                 Feature::ConditionEnergy {
                     condition: slip,
-                    above: true
+                    above: true,
+                    component: Component::Total,
                 },
                 &r,
                 Some(&EnergyMaps::new()),
@@ -824,20 +860,21 @@ mod tests {
             )
             .is_nan()
         );
-        // The generated space: every condition both ways on three scopes,
-        // less the points the named mechanisms stand for.
+        // The generated space: every condition and component both ways on
+        // three scopes, less the points the named mechanisms stand for.
         let generated = condition_candidates();
         assert_eq!(
             generated.len(),
-            (2 * CONDITIONS.len() - NAMED_CONDITIONS.len()) * 3
+            (2 * 3 * CONDITIONS.len() - NAMED_CONDITIONS.len()) * 3
         );
         for (name, above, _) in NAMED_CONDITIONS {
             let c = ConditionMaps::condition_index(name).unwrap();
-            assert!(!generated.iter().any(|g| g.feature
-                == Feature::ConditionEnergy {
-                    condition: c,
-                    above
-                }));
+            let named = Feature::ConditionEnergy {
+                condition: c,
+                above,
+                component: Component::Total,
+            };
+            assert!(!generated.iter().any(|g| g.feature == named));
         }
     }
 

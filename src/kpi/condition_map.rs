@@ -322,11 +322,27 @@ impl Default for ConditionMaps {
 }
 
 /// An energy component of the condition maps.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
 pub enum Component {
     Total,
     Longitudinal,
     Lateral,
+}
+
+impl Component {
+    pub const ALL: [Component; COMPONENTS] = [
+        Component::Total,
+        Component::Longitudinal,
+        Component::Lateral,
+    ];
+    /// How candidate names call it: "energy", "longitudinal energy", "lateral energy".
+    pub fn energy_name(self) -> &'static str {
+        match self {
+            Component::Total => "energy",
+            Component::Longitudinal => "longitudinal energy",
+            Component::Lateral => "lateral energy",
+        }
+    }
 }
 
 impl ConditionMaps {
