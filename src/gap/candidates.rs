@@ -372,12 +372,15 @@ pub fn library(rows: &[&KpiRow]) -> Vec<Candidate> {
 }
 
 /// Named mechanisms that are points of the generated space: (condition,
-/// above) → the mechanism's candidate, which stands for it (one registry
-/// line per mechanism).
-pub const NAMED_CONDITIONS: [(&str, bool, Feature); 3] = [
+/// above) → the mechanism's candidate, which stands for it on every energy
+/// component (one registry line per mechanism). The generated space leaves
+/// those points out: a near copy of a mechanism (its lateral part, say)
+/// would otherwise enter as a second term beside it and fit its noise.
+pub const NAMED_CONDITIONS: [(&str, bool, Feature); 4] = [
     ("t_surface_c", true, Feature::HotSurfaceEnergy),
     ("t_inner_c", true, Feature::HotInnerEnergy),
     ("sliding_speed_mps", true, Feature::FastSlidingEnergy),
+    ("t_bulk_c", false, Feature::ColdTreadLateralEnergy),
 ];
 
 /// Candidates generated from the condition energy maps: for every condition
@@ -385,7 +388,7 @@ pub const NAMED_CONDITIONS: [(&str, bool, Feature); 3] = [
 /// and below θ (θ every other inner bin edge, scanned in the
 /// cross-validation like a mechanism's threshold), on both axles and on
 /// each alone — except the points a named mechanism already covers
-/// ([`NAMED_CONDITIONS`], total energy). Rows whose extraction wrote no
+/// ([`NAMED_CONDITIONS`], on every component). Rows whose extraction wrote no
 /// condition maps, or maps without that condition, give NaN terms, and the
 /// scoring passes these candidates over.
 fn condition_candidates() -> Vec<Candidate> {
@@ -397,10 +400,9 @@ fn condition_candidates() -> Vec<Candidate> {
             .collect();
         for component in Component::ALL {
             for above in [true, false] {
-                if component == Component::Total
-                    && NAMED_CONDITIONS
-                        .iter()
-                        .any(|(name, a, _)| *name == cd.name && *a == above)
+                if NAMED_CONDITIONS
+                    .iter()
+                    .any(|(name, a, _)| *name == cd.name && *a == above)
                 {
                     continue;
                 }
@@ -865,16 +867,18 @@ mod tests {
         let generated = condition_candidates();
         assert_eq!(
             generated.len(),
-            (2 * 3 * CONDITIONS.len() - NAMED_CONDITIONS.len()) * 3
+            (2 * CONDITIONS.len() - NAMED_CONDITIONS.len()) * 3 * 3
         );
         for (name, above, _) in NAMED_CONDITIONS {
             let c = ConditionMaps::condition_index(name).unwrap();
-            let named = Feature::ConditionEnergy {
-                condition: c,
-                above,
-                component: Component::Total,
-            };
-            assert!(!generated.iter().any(|g| g.feature == named));
+            for component in Component::ALL {
+                let named = Feature::ConditionEnergy {
+                    condition: c,
+                    above,
+                    component,
+                };
+                assert!(!generated.iter().any(|g| g.feature == named));
+            }
         }
     }
 

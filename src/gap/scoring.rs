@@ -573,15 +573,32 @@ pub fn rank(problem: &Problem, library: &[Candidate], settings: &ScoringSettings
     let mut scores = match settings.multiple_testing {
         MultipleTesting::MaxStatistic => adjust(scored, perms.len()),
         MultipleTesting::BenjaminiHochberg => {
-            let mut scores: Vec<Score> = scored.into_iter().map(|(s, _)| s).collect();
-            let adj = benjamini_hochberg(&scores.iter().map(|s| s.p).collect::<Vec<_>>());
-            for (s, a) in scores.iter_mut().zip(adj) {
-                s.p_adjusted = a;
-            }
-            scores
+            bh_per_family(scored.into_iter().map(|(s, _)| s).collect(), |s| {
+                s.feature.track_level()
+            })
         }
     };
     scores.sort_by(|a, b| b.cv_gain.total_cmp(&a.cv_gain));
+    scores
+}
+
+/// Benjamini–Hochberg within each of the two families — the within-track
+/// candidates (residuals permuted within tracks) and the track-level ones
+/// (tested on the tracks' severities) — as `adjust` does for the
+/// track-level family under max-t. The families are tested by different
+/// schemes on different data (tires against tracks), and pooled, the
+/// hundreds of generated within-track candidates would bury the handful of
+/// road candidates, whose p cannot go below 1/2000.
+fn bh_per_family(mut scores: Vec<Score>, track_level: impl Fn(&Score) -> bool) -> Vec<Score> {
+    for family in [false, true] {
+        let members: Vec<usize> = (0..scores.len())
+            .filter(|&i| track_level(&scores[i]) == family)
+            .collect();
+        let adj = benjamini_hochberg(&members.iter().map(|&i| scores[i].p).collect::<Vec<_>>());
+        for (&i, a) in members.iter().zip(adj) {
+            scores[i].p_adjusted = a;
+        }
+    }
     scores
 }
 
@@ -766,6 +783,41 @@ mod tests {
         for ((name, got), (n, w)) in adj.iter().zip(want) {
             assert_eq!(name, n);
             assert!((got - w).abs() < 1e-12, "{name}: {got} vs {w}");
+        }
+    }
+
+    #[test]
+    fn benjamini_hochberg_runs_within_each_family_by_hand() {
+        let score = |name: &str, p: f64| Score {
+            name: name.into(),
+            feature: Feature::Kpi("x"),
+            axle: None,
+            threshold: f64::NAN,
+            coefficient: 1.0,
+            cv_gain: 0.1,
+            cv_gain_across: 0.1,
+            p,
+            p_adjusted: f64::NAN,
+            front_share: f64::NAN,
+            kpi_scale: KpiScale::NONE,
+            acts_in: Vec::new(),
+        };
+        // Within tracks A 0.01, B 0.04: 0.01·2/1 = 0.02 and 0.04·2/2 = 0.04.
+        // Road R1 0.03, R2 0.02: R2 0.02·2/1 = 0.04, R1 0.03·2/2 = 0.03,
+        // and R2 takes the running minimum from above, 0.03. Pooled, A would
+        // be 0.01·4/1 = 0.04.
+        let scores = vec![
+            score("A", 0.01),
+            score("R1", 0.03),
+            score("B", 0.04),
+            score("R2", 0.02),
+        ];
+        let got: Vec<f64> = bh_per_family(scores, |s| s.name.starts_with('R'))
+            .iter()
+            .map(|s| s.p_adjusted)
+            .collect();
+        for (g, w) in got.iter().zip([0.02, 0.03, 0.04, 0.03]) {
+            assert!((g - w).abs() < 1e-12, "{got:?}");
         }
     }
 
