@@ -735,9 +735,9 @@ mod tests {
         assert!((s[0].front_share - 0.5).abs() < 0.1);
     }
 
-    #[test]
-    fn the_family_max_adjusts_by_hand() {
-        let score = |name: &str, p: f64| Score {
+    /// A generic candidate's score with only its name and p set.
+    fn named_score(name: &str, p: f64) -> Score {
+        Score {
             name: name.into(),
             feature: Feature::Kpi("x"),
             axle: None,
@@ -750,7 +750,12 @@ mod tests {
             front_share: f64::NAN,
             kpi_scale: KpiScale::NONE,
             acts_in: Vec::new(),
-        };
+        }
+    }
+
+    #[test]
+    fn the_family_max_adjusts_by_hand() {
+        let score = named_score;
         let draws = |observed: f64, stats: &[f64]| {
             Some(NullDraws {
                 observed,
@@ -788,20 +793,7 @@ mod tests {
 
     #[test]
     fn benjamini_hochberg_runs_within_each_family_by_hand() {
-        let score = |name: &str, p: f64| Score {
-            name: name.into(),
-            feature: Feature::Kpi("x"),
-            axle: None,
-            threshold: f64::NAN,
-            coefficient: 1.0,
-            cv_gain: 0.1,
-            cv_gain_across: 0.1,
-            p,
-            p_adjusted: f64::NAN,
-            front_share: f64::NAN,
-            kpi_scale: KpiScale::NONE,
-            acts_in: Vec::new(),
-        };
+        let score = named_score;
         // Within tracks A 0.01, B 0.04: 0.01·2/1 = 0.02 and 0.04·2/2 = 0.04.
         // Road R1 0.03, R2 0.02: R2 0.02·2/1 = 0.04, R1 0.03·2/2 = 0.03,
         // and R2 takes the running minimum from above, 0.03. Pooled, A would
