@@ -112,6 +112,8 @@ pub struct OutputSet {
     journal: PathBuf,
     /// (temporary path, destination), written and synced.
     files: Vec<(tempfile::TempPath, PathBuf)>,
+    /// (finished file, destination): renamed at commit, kept if dropped.
+    moves: Vec<(PathBuf, PathBuf)>,
 }
 
 impl OutputSet {
@@ -123,6 +125,7 @@ impl OutputSet {
         Ok(Self {
             journal: journal.to_path_buf(),
             files: Vec::new(),
+            moves: Vec::new(),
         })
     }
 
@@ -140,17 +143,27 @@ impl OutputSet {
         Ok(())
     }
 
+    /// Moves the finished, synced file `from` to `dest` at commit (a part
+    /// staged by an earlier process); dropped without commit, `from` stays.
+    pub fn add_move(&mut self, from: &Path, dest: &Path) {
+        self.moves.push((from.to_path_buf(), dest.to_path_buf()));
+    }
+
     /// Renames every file into place: the journal first, so a kill at any
     /// moment leaves either the old set (no journal) or a journal that the
     /// next writer completes.
     pub fn commit(self) -> io::Result<()> {
         let pairs: Vec<(PathBuf, PathBuf)> = self
-            .files
+            .moves
             .iter()
-            .map(|(t, d)| (t.to_path_buf(), d.clone()))
+            .cloned()
+            .chain(self.files.iter().map(|(t, d)| (t.to_path_buf(), d.clone())))
             .collect();
         let text = serde_json::to_vec(&pairs).map_err(io::Error::other)?;
         write_bytes(&self.journal, &text)?;
+        for (from, dest) in &self.moves {
+            std::fs::rename(from, dest)?;
+        }
         for (tmp, dest) in self.files {
             tmp.persist(&dest).map_err(|e| e.error)?;
         }

@@ -12,6 +12,7 @@ pub mod gpu;
 pub mod ingest;
 pub mod kpi;
 pub mod model;
+pub mod nightly;
 pub mod sim;
 pub mod wheel;
 

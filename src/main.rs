@@ -19,7 +19,9 @@ use clap::{Parser, Subcommand};
     long_about,
     after_help = "Exit codes: 0 done; 1 an error stopped the command (it names the file, \
 record and what was wrong); 2 bad command line; 3 extract wrote its outputs but skipped \
-some runs (listed, and in NAME.report.json); 101 internal error (a bug, please report). \
+some runs (listed, and in NAME.report.json), or process committed all runs but some that \
+failed (listed, and in DATASET/summary.json); 4 process found the dataset locked by another \
+process; 101 internal error (a bug, please report). \
 See docs/reliability.md."
 )]
 struct Cli {
@@ -45,6 +47,13 @@ enum Command {
     /// viscoelastic (table 5) indices and the mean wear; side tables of road
     /// spectra and friction-energy maps; a report of skipped runs.
     Extract(cli::extract::ExtractArgs),
+    /// Bring a KPI dataset up to date with season archives, every night:
+    /// only runs whose inputs changed are processed (content-hash keys), a
+    /// killed run resumes where it stopped, outputs are committed together,
+    /// and `--shard K/N` + `--commit` spread the work over machines
+    /// (Slurm, Kubernetes; docs/nightly.md). Exit 3: some runs failed, the
+    /// rest committed; exit 4: another process holds the dataset.
+    Process(cli::process::ProcessArgs),
     /// Fit wear models on a KPI database: the feed-forward network (LM),
     /// PCA + regression and the physical correlations + regression per axle,
     /// trained on some events and tested on others. Prints the paper's
@@ -84,8 +93,11 @@ enum Command {
 /// Exit codes (docs/reliability.md): 0 done; 1 an error stopped the command
 /// (the message names the file, record and what was wrong); 2 the command
 /// line is wrong (clap); 3 `extract` wrote its outputs but skipped some runs
-/// (listed, and in the report); 101 an internal error (a bug: please report).
+/// (listed, and in the report), or `process` committed all but some failed
+/// runs; 4 `process` found the dataset locked; 101 an internal error (a bug:
+/// please report).
 const EXIT_RUNS_SKIPPED: u8 = 3;
+const EXIT_LOCKED: u8 = 4;
 
 fn main() -> std::process::ExitCode {
     match run() {
@@ -113,6 +125,13 @@ fn run() -> Result<std::process::ExitCode> {
                 return Ok(std::process::ExitCode::from(EXIT_RUNS_SKIPPED));
             }
         }
+        Command::Process(a) => match cli::process::run(a, progress)? {
+            cli::process::Outcome::Done => {}
+            cli::process::Outcome::SomeFailed => {
+                return Ok(std::process::ExitCode::from(EXIT_RUNS_SKIPPED));
+            }
+            cli::process::Outcome::Locked => return Ok(std::process::ExitCode::from(EXIT_LOCKED)),
+        },
         Command::Fit(a) => cli::fit::run(a)?,
         Command::Predict(a) => cli::predict::run(a)?,
         Command::Gap(a) => cli::gap::run(a, progress)?,

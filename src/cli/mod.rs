@@ -8,4 +8,5 @@ pub(crate) mod extract;
 pub(crate) mod fit;
 pub(crate) mod gap;
 pub(crate) mod predict;
+pub(crate) mod process;
 pub(crate) mod simulate;

@@ -25,7 +25,7 @@ use crate::ingest::compound::Compound;
 use crate::ingest::manifest::{Run, Season};
 use crate::ingest::road::{Profile, read_profile_csv, read_profiles_parquet_each};
 use crate::ingest::telemetry::read_telemetry;
-use crate::ingest::wear::{check_against_manifest, read_wear_csv};
+use crate::ingest::wear::{WearReading, check_against_manifest, read_wear_csv};
 use arrow_array::{Float64Array, RecordBatch, StringArray, UInt32Array};
 use arrow_schema::{DataType, Field, Schema};
 use rayon::prelude::*;
@@ -35,9 +35,11 @@ use std::sync::Arc;
 use std::time::Instant;
 
 /// Which engine reduces the telemetry and roughness.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Engine {
+    /// The CPU engine (the library's default, as `ExtractOptions::new`).
+    #[default]
     Cpu,
     Gpu,
     /// The GPU when one is usable, else the CPU (with a message saying so).
@@ -112,7 +114,7 @@ impl ExtractSummary {
 /// Road indices of every track (mean over its usable profiles) and, for a
 /// track whose indices are missing or incomplete, why.
 #[derive(Default)]
-struct TrackRoads {
+pub(crate) struct TrackRoads {
     means: HashMap<String, RoadIndices>,
     notes: HashMap<String, String>,
 }
@@ -144,7 +146,7 @@ fn read_profiles(season: &Season, warnings: &mut Vec<String>) -> Result<Vec<Prof
 }
 
 /// Road indices of every track (mean over locations) and the curves of every profile.
-fn road_kpis(
+pub(crate) fn road_kpis(
     season: &Season,
     warnings: &mut Vec<String>,
     engine: &dyn ReduceEngine,
@@ -186,14 +188,14 @@ fn road_kpis(
     Ok((roads, results.into_iter().map(|(p, _, c)| (p, c)).collect()))
 }
 
-struct RunOutput {
-    rows: Vec<KpiRow>,
-    maps: Vec<(Wheel, EnergyMaps, ConditionMaps)>,
-    cleaning: Vec<(String, CleaningReport)>,
-    samples: u64,
-    bytes: u64,
-    decode_s: f64,
-    reduce_s: f64,
+pub(crate) struct RunOutput {
+    pub rows: Vec<KpiRow>,
+    pub maps: Vec<(Wheel, EnergyMaps, ConditionMaps)>,
+    pub cleaning: Vec<(String, CleaningReport)>,
+    pub samples: u64,
+    pub bytes: u64,
+    pub decode_s: f64,
+    pub reduce_s: f64,
 }
 
 #[allow(clippy::too_many_arguments)]
@@ -343,6 +345,91 @@ fn run_rows(
     Ok(out)
 }
 
+/// What every run of a season shares: its compounds, its wear readings
+/// reduced per tire, and the problems found while reading them.
+pub(crate) struct SeasonInputs {
+    /// Each compound, or why its file could not be used.
+    pub compounds: HashMap<String, Result<Compound, String>>,
+    /// (mean wear %, worn-through readings) per tire.
+    pub wear: BTreeMap<(String, Wheel), (f64, f64)>,
+    /// Runs whose wear readings contradict the manifest, and how.
+    pub wear_problems: HashMap<String, String>,
+    /// The raw readings of each run, in file order.
+    pub readings: HashMap<String, Vec<WearReading>>,
+    pub warnings: Vec<String>,
+}
+
+/// Reads a season's compounds and wear readings. A bad compound file fails
+/// the runs on that compound, not the season.
+pub(crate) fn season_inputs(season: &Season) -> Result<SeasonInputs, IngestError> {
+    let m = &season.manifest;
+    let mut warnings = Vec::new();
+    let compounds: HashMap<String, Result<Compound, String>> = m
+        .compounds
+        .iter()
+        .map(|c| {
+            let loaded = Compound::load(&season.path(&c.file))
+                .and_then(|k| k.check_id(&c.id, &season.path(&c.file)).map(|_| k))
+                .map_err(|e| e.to_string());
+            if let Err(e) = &loaded {
+                warnings.push(format!("compound {}: {e}", c.id));
+            }
+            (c.id.clone(), loaded)
+        })
+        .collect();
+    let mut wear_problems: HashMap<String, String> = HashMap::new();
+    let mut readings = Vec::new();
+    for f in &m.wear_readings {
+        let path = season.path(f);
+        let file_readings = read_wear_csv(&path)?;
+        for p in check_against_manifest(&path, &file_readings, m) {
+            match p.run {
+                Some(run) => {
+                    wear_problems.entry(run).or_insert(p.what);
+                }
+                None => warnings.push(p.what),
+            }
+        }
+        readings.extend(file_readings);
+    }
+    let worn = worn_through_readings(&readings);
+    let wear = mean_wear(&readings)
+        .into_iter()
+        .map(|(k, m)| {
+            let z = worn.get(&k).copied().unwrap_or(0.0);
+            (k, (m, z))
+        })
+        .collect();
+    let mut by_run: HashMap<String, Vec<WearReading>> = HashMap::new();
+    for r in readings {
+        by_run.entry(r.run.clone()).or_default().push(r);
+    }
+    Ok(SeasonInputs {
+        compounds,
+        wear,
+        wear_problems,
+        readings: by_run,
+        warnings,
+    })
+}
+
+/// One run's rows and maps, or why it was skipped; a panic met by its data
+/// skips it too.
+pub(crate) fn extract_run(
+    season: &Season,
+    run: &Run,
+    compounds: &HashMap<String, Result<Compound, String>>,
+    roads: &TrackRoads,
+    wear: &BTreeMap<(String, Wheel), (f64, f64)>,
+    wear_problems: &HashMap<String, String>,
+    engine: &dyn ReduceEngine,
+) -> Result<RunOutput, String> {
+    match wear_problems.get(&run.id) {
+        Some(p) => Err(p.clone()),
+        None => guarded(|| run_rows(season, run, compounds, roads, wear, engine)),
+    }
+}
+
 /// The engine to use: `gpu` needs an adapter; `auto` takes a hardware GPU
 /// and otherwise the CPU engine (a software adapter such as lavapipe is
 /// slower than the CPU engine it emulates), saying why.
@@ -386,45 +473,14 @@ pub fn extract(opts: &ExtractOptions) -> Result<ExtractSummary, IngestError> {
     };
     let season = Season::open_with(&opts.season, opts.allow_external_paths)?;
     let m = &season.manifest;
-    let mut warnings = Vec::new();
-    // A bad compound file fails the runs on that compound, not the season.
-    let compounds: HashMap<String, Result<Compound, String>> = m
-        .compounds
-        .iter()
-        .map(|c| {
-            let loaded = Compound::load(&season.path(&c.file))
-                .and_then(|k| k.check_id(&c.id, &season.path(&c.file)).map(|_| k))
-                .map_err(|e| e.to_string());
-            if let Err(e) = &loaded {
-                warnings.push(format!("compound {}: {e}", c.id));
-            }
-            (c.id.clone(), loaded)
-        })
-        .collect();
+    let SeasonInputs {
+        compounds,
+        wear,
+        wear_problems,
+        mut warnings,
+        ..
+    } = season_inputs(&season)?;
     let (roads, curves) = road_kpis(&season, &mut warnings, reducer)?;
-    let mut wear_problems: HashMap<String, String> = HashMap::new();
-    let mut readings = Vec::new();
-    for f in &m.wear_readings {
-        let path = season.path(f);
-        let file_readings = read_wear_csv(&path)?;
-        for p in check_against_manifest(&path, &file_readings, m) {
-            match p.run {
-                Some(run) => {
-                    wear_problems.entry(run).or_insert(p.what);
-                }
-                None => warnings.push(p.what),
-            }
-        }
-        readings.extend(file_readings);
-    }
-    let worn = worn_through_readings(&readings);
-    let wear: BTreeMap<(String, Wheel), (f64, f64)> = mean_wear(&readings)
-        .into_iter()
-        .map(|(k, m)| {
-            let z = worn.get(&k).copied().unwrap_or(0.0);
-            (k, (m, z))
-        })
-        .collect();
 
     let pb = if opts.progress {
         let pb = indicatif::ProgressBar::new(m.runs.len() as u64);
@@ -443,10 +499,15 @@ pub fn extract(opts: &ExtractOptions) -> Result<ExtractSummary, IngestError> {
         .runs
         .par_iter()
         .map(|run| {
-            let r = match wear_problems.get(&run.id) {
-                Some(p) => Err(p.clone()),
-                None => guarded(|| run_rows(&season, run, &compounds, &roads, &wear, reducer)),
-            };
+            let r = extract_run(
+                &season,
+                run,
+                &compounds,
+                &roads,
+                &wear,
+                &wear_problems,
+                reducer,
+            );
             pb.inc(1);
             (run, r)
         })
@@ -596,7 +657,7 @@ fn write_outputs(
 }
 
 /// Side table of road curves: track, location, curve ("psd" or "hdc"), x, y.
-fn road_curves_batch(curves: &[(Profile, RoadCurves)]) -> RecordBatch {
+pub(crate) fn road_curves_batch(curves: &[(Profile, RoadCurves)]) -> RecordBatch {
     let (mut t, mut l, mut k, mut x, mut y) = (vec![], vec![], vec![], vec![], vec![]);
     for (p, c) in curves {
         for (kind, xs, ys) in [
@@ -646,7 +707,7 @@ struct MapRows {
 }
 
 /// Side table of energy maps: run, wheel, map, i, j, x_lo, y_lo, energy_j (non-empty bins).
-fn energy_maps_batch(maps: &[(String, Wheel, EnergyMaps)]) -> RecordBatch {
+pub(crate) fn energy_maps_batch(maps: &[(String, Wheel, EnergyMaps)]) -> RecordBatch {
     let mut c = MapRows::default();
     for (run, w, m) in maps {
         for (name, data, xb, yb) in [

@@ -1,0 +1,82 @@
+//! One writer per dataset: an advisory lock on `DATASET/.lock`.
+//!
+//! A whole run or a commit takes it exclusively; shards take it shared, so
+//! they run side by side but never beside a commit. The lock is the kernel's
+//! (`flock`): it goes with the process, so a killed run leaves no stale lock.
+//! On a network file system it holds only where the file system supports
+//! `flock` across hosts (NFSv4, Lustre with `flock`); see docs/nightly.md.
+
+use super::NightlyError;
+use std::fs::{File, OpenOptions, TryLockError};
+use std::io::{Read, Seek, Write};
+use std::path::Path;
+
+/// Held until dropped.
+#[derive(Debug)]
+pub(crate) struct DatasetLock {
+    _file: File,
+}
+
+/// Takes the lock of `dataset` (exclusive or shared) without waiting; the
+/// error names the holder when it is held.
+pub(crate) fn acquire(dataset: &Path, exclusive: bool) -> Result<DatasetLock, NightlyError> {
+    let path = dataset.join(".lock");
+    let mut file = OpenOptions::new()
+        .read(true)
+        .write(true)
+        .create(true)
+        .truncate(false)
+        .open(&path)
+        .map_err(NightlyError::io(&path))?;
+    let taken = if exclusive {
+        file.try_lock()
+    } else {
+        file.try_lock_shared()
+    };
+    match taken {
+        Ok(()) => {}
+        Err(TryLockError::WouldBlock) => {
+            let mut holder = String::new();
+            let _ = file.read_to_string(&mut holder);
+            let holder = match holder.trim() {
+                "" => "a shard (shared lock)".to_string(),
+                h => h.to_string(),
+            };
+            return Err(NightlyError::Locked {
+                dataset: dataset.to_path_buf(),
+                holder,
+            });
+        }
+        Err(TryLockError::Error(e)) => return Err(NightlyError::io(&path)(e)),
+    }
+    if exclusive {
+        // Who holds it, for the message of a second invocation.
+        let who = format!(
+            "pid {} on {} since {} (unix time)",
+            std::process::id(),
+            hostname(),
+            std::time::SystemTime::now()
+                .duration_since(std::time::UNIX_EPOCH)
+                .map_or(0, |d| d.as_secs())
+        );
+        file.set_len(0)
+            .and_then(|_| file.rewind())
+            .and_then(|_| file.write_all(who.as_bytes()))
+            .map_err(NightlyError::io(&path))?;
+    }
+    Ok(DatasetLock { _file: file })
+}
+
+impl Drop for DatasetLock {
+    fn drop(&mut self) {
+        // An exclusive holder leaves no name behind; shared holders wrote none.
+        let _ = self._file.set_len(0);
+    }
+}
+
+fn hostname() -> String {
+    std::fs::read_to_string("/proc/sys/kernel/hostname")
+        .or_else(|_| std::fs::read_to_string("/etc/hostname"))
+        .map(|s| s.trim().to_string())
+        .unwrap_or_else(|_| "this host".into())
+}

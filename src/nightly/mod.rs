@@ -1,0 +1,905 @@
+//! `tirewear process`: brings a KPI dataset up to date with season archives,
+//! processing only the runs whose inputs changed (docs/nightly.md).
+//!
+//! A dataset folder holds:
+//! - `kpis/event=E/RUN.parquet`, `energy_maps/event=E/RUN.parquet`,
+//!   `condition_maps/event=E/RUN.parquet`: one committed part per run, a
+//!   partitioned Parquet dataset that DuckDB, Polars or Spark read as is;
+//! - `road/track=T.parquet`: the road curves of each track;
+//! - `kpis.parquet` and its side tables (`kpis.road.parquet`,
+//!   `kpis.energy_maps.parquet`, `kpis.condition_maps.parquet`): the parts
+//!   consolidated, what `fit` and `gap` read;
+//! - `dataset.json`: the committed runs with their keys and parts, written
+//!   last at each commit; `summary.json`: what the last invocation did;
+//! - `staging/`: finished parts not yet committed (a killed run's, or the
+//!   shards'), named by key and reused by the next run or `--commit`.
+//!
+//! Every commit goes through one journal (`atomic::OutputSet`): a kill at
+//! any moment leaves the old set or a journal the next run completes.
+
+mod error;
+mod keys;
+mod lock;
+
+pub use error::NightlyError;
+
+use crate::atomic::OutputSet;
+use crate::engine::{CpuEngine, ReduceEngine};
+use crate::ingest::manifest::{Run, Season};
+use crate::kpi::Engine;
+use crate::kpi::extract::{
+    RunOutput, SeasonInputs, energy_maps_batch, extract_run, open_engine, road_curves_batch,
+    road_kpis, season_inputs,
+};
+use crate::kpi::table::{kpi_batch, with_extraction_id, write_batch_to};
+use arrow_array::RecordBatch;
+use keys::{FileHashes, FileStamp};
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+use std::collections::{BTreeMap, BTreeSet};
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// Version of `dataset.json`.
+pub const DATASET_FORMAT_VERSION: u32 = 1;
+
+/// Which share of the work this invocation does.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Mode {
+    /// Process every run that needs it, then commit.
+    Whole,
+    /// Process only shard `index` (0-based) of `count`, stage its parts, no commit.
+    Shard { index: u32, count: u32 },
+    /// Commit the staged parts of the shards; process nothing.
+    Commit,
+}
+
+#[derive(Debug, Clone)]
+pub struct ProcessOptions {
+    /// Season archive folders (or manifests). With `Mode::Commit` they may
+    /// be left empty: the shards' or the last commit's list is used.
+    pub archives: Vec<PathBuf>,
+    pub dataset: PathBuf,
+    pub engine: Engine,
+    pub mode: Mode,
+    /// Plan only: say what would be processed, write nothing.
+    pub dry_run: bool,
+    /// Process every run again, whatever its key.
+    pub force: bool,
+    pub progress: bool,
+    pub allow_external_paths: bool,
+}
+
+impl ProcessOptions {
+    /// Processing `archives` into `dataset`, whole, on the CPU engine.
+    pub fn new(archives: Vec<PathBuf>, dataset: impl Into<PathBuf>) -> Self {
+        ProcessOptions {
+            archives,
+            dataset: dataset.into(),
+            engine: Engine::Cpu,
+            mode: Mode::Whole,
+            dry_run: false,
+            force: false,
+            progress: false,
+            allow_external_paths: false,
+        }
+    }
+
+    /// Refuses options that cannot work together.
+    pub fn check(&self) -> Result<(), NightlyError> {
+        if let Mode::Shard { index, count } = self.mode
+            && (count == 0 || index >= count)
+        {
+            return Err(NightlyError::Invalid(format!(
+                "shard {} of {count} does not exist (shards are numbered 1..={count})",
+                index + 1
+            )));
+        }
+        if self.archives.is_empty() && self.mode != Mode::Commit {
+            return Err(NightlyError::Invalid(
+                "no season archive given (only a commit can take the archives from the dataset)"
+                    .into(),
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// One committed run of the dataset.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+struct RunEntry {
+    run: String,
+    event: String,
+    track: String,
+    /// The archive's manifest name.
+    season: String,
+    key: String,
+    rows: usize,
+}
+
+/// The road curves of one track.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+struct RoadEntry {
+    track: String,
+    key: String,
+}
+
+/// `dataset.json`: the committed state.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
+struct DatasetManifest {
+    format_version: u32,
+    /// The id every consolidated file carries (`tirewear.extraction_id`).
+    dataset_id: String,
+    archives: Vec<PathBuf>,
+    /// Sorted by event, then run.
+    runs: Vec<RunEntry>,
+    /// Sorted by track.
+    roads: Vec<RoadEntry>,
+    /// Stamps of the input files, so unchanged files are not hashed again.
+    files: BTreeMap<String, FileStamp>,
+}
+
+/// A run that was not committed, and why.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct Failed {
+    pub run: String,
+    pub season: String,
+    pub reason: String,
+}
+
+/// What one invocation did (stdout and `DATASET/summary.json`).
+#[derive(Debug, Clone, Serialize, Deserialize, Default)]
+pub struct ProcessSummary {
+    pub mode: String,
+    pub dry_run: bool,
+    /// Runs in the archives (this shard's share for a shard).
+    pub planned: usize,
+    pub unchanged: usize,
+    /// Runs processed by this invocation.
+    pub processed: usize,
+    /// Runs whose parts an earlier (killed) invocation or a shard had staged.
+    pub reused_staged: usize,
+    /// Committed runs no longer in any archive, left out of the dataset.
+    pub removed: usize,
+    pub failed: Vec<Failed>,
+    /// The runs that would be processed (dry run) or were.
+    pub runs_processed: Vec<String>,
+    pub committed: bool,
+    pub dataset_id: String,
+    pub rows: usize,
+    pub seconds: f64,
+    /// Telemetry bytes decoded, and input bytes read only to hash them.
+    pub telemetry_bytes: u64,
+    pub hashed_bytes: u64,
+    pub engine: Engine,
+    pub device: String,
+    pub warnings: Vec<String>,
+}
+
+/// A run of an archive with its key.
+struct Planned {
+    season: usize,
+    run: Run,
+    track: String,
+    key: String,
+    road_key: String,
+}
+
+/// The three part kinds of a run, in the order they are written.
+const PART_KINDS: [&str; 3] = ["kpis", "energy_maps", "condition_maps"];
+
+/// A folder or file name for an id: bytes outside `[A-Za-z0-9_-]` (and a
+/// dot) percent-encoded, as Hive-style partitions expect.
+fn path_name(id: &str) -> String {
+    let mut s = String::with_capacity(id.len());
+    for b in id.bytes() {
+        if b.is_ascii_alphanumeric() || b == b'_' || b == b'-' {
+            s.push(b as char);
+        } else {
+            s.push_str(&format!("%{b:02X}"));
+        }
+    }
+    s
+}
+
+fn committed_part(dataset: &Path, kind: &str, e: &RunEntry) -> PathBuf {
+    dataset
+        .join(kind)
+        .join(format!("event={}", path_name(&e.event)))
+        .join(format!("{}.parquet", path_name(&e.run)))
+}
+
+fn committed_road(dataset: &Path, track: &str) -> PathBuf {
+    dataset
+        .join("road")
+        .join(format!("track={}.parquet", path_name(track)))
+}
+
+fn staged_part(dataset: &Path, kind: &str, key: &str) -> PathBuf {
+    dataset
+        .join("staging")
+        .join(format!("{key}.{kind}.parquet"))
+}
+
+fn staged_failure(dataset: &Path, key: &str) -> PathBuf {
+    dataset.join("staging").join(format!("{key}.failed.json"))
+}
+
+fn staged_road(dataset: &Path, key: &str) -> PathBuf {
+    dataset.join("staging").join(format!("{key}.road.parquet"))
+}
+
+/// Whether a run's parts are all staged (each was renamed into place whole).
+fn staged_complete(dataset: &Path, key: &str) -> bool {
+    PART_KINDS
+        .iter()
+        .all(|k| staged_part(dataset, k, key).exists())
+}
+
+/// Which shard a run belongs to: stable across nights and machines.
+fn shard_of(season: &str, run: &str, count: u32) -> u32 {
+    let h = blake3::hash(format!("{season}\u{0}{run}").as_bytes());
+    let b = h.as_bytes();
+    (u64::from_le_bytes(b[..8].try_into().expect("8 bytes")) % count as u64) as u32
+}
+
+fn read_manifest(dataset: &Path) -> Result<Option<DatasetManifest>, NightlyError> {
+    let path = dataset.join("dataset.json");
+    let text = match std::fs::read(&path) {
+        Ok(t) => t,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+        Err(e) => return Err(NightlyError::io(&path)(e)),
+    };
+    let m: DatasetManifest = serde_json::from_slice(&text).map_err(|e| {
+        NightlyError::Invalid(format!(
+            "{}: not a tirewear dataset manifest: {e}",
+            path.display()
+        ))
+    })?;
+    if m.format_version != DATASET_FORMAT_VERSION {
+        return Err(NightlyError::Invalid(format!(
+            "{}: format_version {} (this build reads {DATASET_FORMAT_VERSION})",
+            path.display(),
+            m.format_version
+        )));
+    }
+    Ok(Some(m))
+}
+
+/// Reads every record batch of a Parquet file.
+fn read_batches(path: &Path) -> Result<Vec<RecordBatch>, NightlyError> {
+    let file = std::fs::File::open(path).map_err(NightlyError::io(path))?;
+    let bad = |e: &dyn std::fmt::Display| {
+        NightlyError::Invalid(format!("{}: damaged part: {e}", path.display()))
+    };
+    let reader = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file)
+        .and_then(|b| b.build())
+        .map_err(|e| bad(&e))?;
+    reader.collect::<Result<Vec<_>, _>>().map_err(|e| bad(&e))
+}
+
+/// Removes temporary files of killed writers everywhere in the dataset.
+fn remove_orphans_everywhere(dir: &Path) -> Result<(), NightlyError> {
+    crate::atomic::remove_orphans(dir).map_err(NightlyError::io(dir))?;
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return Ok(());
+    };
+    for e in entries.flatten() {
+        if e.file_type().is_ok_and(|t| t.is_dir()) {
+            remove_orphans_everywhere(&e.path())?;
+        }
+    }
+    Ok(())
+}
+
+/// Brings `opts.dataset` up to date with `opts.archives`.
+pub fn process(opts: &ProcessOptions) -> Result<ProcessSummary, NightlyError> {
+    opts.check()?;
+    let start = Instant::now();
+    let dataset = &opts.dataset;
+    let _lock = if opts.dry_run {
+        None
+    } else {
+        std::fs::create_dir_all(dataset.join("staging")).map_err(NightlyError::io(dataset))?;
+        Some(lock::acquire(
+            dataset,
+            !matches!(opts.mode, Mode::Shard { .. }),
+        )?)
+    };
+    if !opts.dry_run && !matches!(opts.mode, Mode::Shard { .. }) {
+        // Finish a commit a kill interrupted, and sweep dead writers' files.
+        crate::atomic::recover(&dataset.join(".commit.json")).map_err(NightlyError::io(dataset))?;
+        remove_orphans_everywhere(dataset)?;
+    }
+    let old = read_manifest(dataset)?.unwrap_or_default();
+    let archives = if opts.archives.is_empty() {
+        shard_archives(dataset)?.unwrap_or_else(|| old.archives.clone())
+    } else {
+        opts.archives.clone()
+    };
+    if archives.is_empty() {
+        return Err(NightlyError::Invalid(format!(
+            "{}: no archives to commit (give them on the command line)",
+            dataset.display()
+        )));
+    }
+    let seasons = archives
+        .iter()
+        .map(|a| Season::open_with(a, opts.allow_external_paths).map_err(NightlyError::from))
+        .collect::<Result<Vec<_>, _>>()?;
+
+    // The engine decides the keys (f32 on the GPU, f64 on the CPU); it is
+    // opened before planning, but the device only used if there is work.
+    let (engine, gpu) = open_engine(opts.engine).map_err(|e| {
+        NightlyError::Invalid(format!(
+            "gpu engine: {e} (the cpu and auto engines need no GPU)"
+        ))
+    })?;
+    let reducer: &dyn ReduceEngine = match &gpu {
+        Some(g) => g,
+        None => &CpuEngine,
+    };
+
+    let mut files = FileHashes {
+        old: old.files.clone(),
+        ..Default::default()
+    };
+    let mut inputs = Vec::with_capacity(seasons.len());
+    let mut plan: Vec<Planned> = Vec::new();
+    let mut seen_runs: BTreeMap<String, String> = BTreeMap::new();
+    for (si, season) in seasons.iter().enumerate() {
+        let inp = season_inputs(season)?;
+        for run in &season.manifest.runs {
+            if let Some(other) = seen_runs.insert(run.id.clone(), season.manifest.name.clone()) {
+                return Err(NightlyError::Invalid(format!(
+                    "run {} is in both season {other} and season {}: run ids must be unique \
+                     across the archives of one dataset",
+                    run.id, season.manifest.name
+                )));
+            }
+            let track = season.event(&run.event).expect("validated").track.clone();
+            let readings = inp.readings.get(&run.id).map_or(&[][..], |v| v.as_slice());
+            let key = keys::run_key(season, run, readings, engine, &mut files)?;
+            let road_key = keys::road_key(season, &track, engine, &mut files)?;
+            plan.push(Planned {
+                season: si,
+                run: run.clone(),
+                track,
+                key,
+                road_key,
+            });
+        }
+        inputs.push(inp);
+    }
+
+    let committed: BTreeMap<&str, &RunEntry> =
+        old.runs.iter().map(|e| (e.run.as_str(), e)).collect();
+    let mut summary = ProcessSummary {
+        mode: match opts.mode {
+            Mode::Whole => "whole".into(),
+            Mode::Shard { index, count } => format!("shard {}/{count}", index + 1),
+            Mode::Commit => "commit".into(),
+        },
+        dry_run: opts.dry_run,
+        engine,
+        device: reducer.device(),
+        ..Default::default()
+    };
+    let in_archives: BTreeSet<&str> = plan.iter().map(|p| p.run.id.as_str()).collect();
+    summary.removed = if matches!(opts.mode, Mode::Shard { .. }) {
+        0
+    } else {
+        old.runs
+            .iter()
+            .filter(|e| !in_archives.contains(e.run.as_str()))
+            .count()
+    };
+    // What each run needs.
+    let mut to_process: Vec<&Planned> = Vec::new();
+    let mut ready: Vec<&Planned> = Vec::new();
+    for p in &plan {
+        if let Mode::Shard { index, count } = opts.mode
+            && shard_of(&seasons[p.season].manifest.name, &p.run.id, count) != index
+        {
+            continue;
+        }
+        summary.planned += 1;
+        let unchanged = committed
+            .get(p.run.id.as_str())
+            .is_some_and(|e| e.key == p.key);
+        if unchanged && !opts.force {
+            summary.unchanged += 1;
+        } else if !opts.force && staged_complete(dataset, &p.key) {
+            summary.reused_staged += 1;
+            ready.push(p);
+        } else if opts.mode == Mode::Commit {
+            let reason = std::fs::read_to_string(staged_failure(dataset, &p.key))
+                .ok()
+                .and_then(|t| serde_json::from_str::<Failed>(&t).ok())
+                .map_or_else(
+                    || "not processed: no shard staged its parts (run the shards, or process without --commit)".to_string(),
+                    |f| f.reason,
+                );
+            summary.failed.push(Failed {
+                run: p.run.id.clone(),
+                season: seasons[p.season].manifest.name.clone(),
+                reason,
+            });
+        } else {
+            to_process.push(p);
+        }
+    }
+    summary.runs_processed = to_process.iter().map(|p| p.run.id.clone()).collect();
+    if opts.dry_run {
+        summary.seconds = start.elapsed().as_secs_f64();
+        summary.hashed_bytes = files.bytes_hashed;
+        return Ok(summary);
+    }
+
+    // Process and stage.
+    let staged = stage_runs(opts, &seasons, &inputs, &to_process, reducer, &mut summary)?;
+    ready.extend(staged);
+    summary.processed = to_process.len();
+    summary.hashed_bytes = files.bytes_hashed;
+
+    if let Mode::Shard { index, count } = opts.mode {
+        summary.seconds = start.elapsed().as_secs_f64();
+        let record = ShardRecord {
+            archives: archives.clone(),
+            summary: summary.clone(),
+        };
+        let path = dataset
+            .join("staging")
+            .join(format!("shard-{}-of-{count}.json", index + 1));
+        let text = serde_json::to_vec_pretty(&record).expect("summary serialises");
+        crate::atomic::write_bytes(&path, &text).map_err(NightlyError::io(&path))?;
+        return Ok(summary);
+    }
+
+    // The new committed state: unchanged runs keep their entries.
+    let ready_keys: BTreeSet<&str> = ready.iter().map(|p| p.key.as_str()).collect();
+    let mut runs: Vec<(RunEntry, Option<&Planned>)> = Vec::new();
+    for p in &plan {
+        let old_entry = committed.get(p.run.id.as_str());
+        if ready_keys.contains(p.key.as_str()) {
+            runs.push((
+                RunEntry {
+                    run: p.run.id.clone(),
+                    event: p.run.event.clone(),
+                    track: p.track.clone(),
+                    season: seasons[p.season].manifest.name.clone(),
+                    key: p.key.clone(),
+                    rows: 0,
+                },
+                Some(p),
+            ));
+        } else if let Some(e) = old_entry.filter(|e| e.key == p.key) {
+            runs.push(((*e).clone(), None));
+        }
+    }
+    runs.sort_by(|a, b| (&a.0.event, &a.0.run).cmp(&(&b.0.event, &b.0.run)));
+    let mut roads: BTreeMap<String, RoadEntry> = BTreeMap::new();
+    for (e, _) in &runs {
+        let p = plan
+            .iter()
+            .find(|p| p.run.id == e.run)
+            .expect("planned run");
+        roads.insert(
+            e.track.clone(),
+            RoadEntry {
+                track: e.track.clone(),
+                key: p.road_key.clone(),
+            },
+        );
+    }
+    let mut new = DatasetManifest {
+        format_version: DATASET_FORMAT_VERSION,
+        dataset_id: String::new(),
+        archives: archives.clone(),
+        runs: runs.iter().map(|(e, _)| e.clone()).collect(),
+        roads: roads.into_values().collect(),
+        files: files.seen.clone(),
+    };
+    let mut id = blake3::Hasher::new();
+    for e in &new.runs {
+        id.update(e.key.as_bytes());
+    }
+    for r in &new.roads {
+        id.update(r.key.as_bytes());
+    }
+    new.dataset_id = id.finalize().to_hex()[..32].to_string();
+    if new.dataset_id == old.dataset_id && !opts.force {
+        // Nothing changed in the outputs; keep the stamps current only.
+        new.runs = old.runs.clone();
+        if new != old {
+            write_manifest(dataset, &new)?;
+        }
+    } else {
+        commit(dataset, &old, &mut new, &runs)?;
+        summary.committed = true;
+    }
+    // Also finishes the clean-up of a commit a kill interrupted.
+    remove_unnamed_parts(dataset, &new)?;
+    summary.dataset_id = new.dataset_id.clone();
+    summary.rows = new.runs.iter().map(|e| e.rows).sum();
+    clean_staging(dataset)?;
+    summary.seconds = start.elapsed().as_secs_f64();
+    let path = dataset.join("summary.json");
+    let text = serde_json::to_vec_pretty(&summary).expect("summary serialises");
+    crate::atomic::write_bytes(&path, &text).map_err(NightlyError::io(&path))?;
+    Ok(summary)
+}
+
+/// What a shard leaves for the commit: the archives and its summary.
+#[derive(Serialize, Deserialize)]
+struct ShardRecord {
+    archives: Vec<PathBuf>,
+    summary: ProcessSummary,
+}
+
+/// The archives the shards worked on, if any shard left a record.
+fn shard_archives(dataset: &Path) -> Result<Option<Vec<PathBuf>>, NightlyError> {
+    let dir = dataset.join("staging");
+    let Ok(entries) = std::fs::read_dir(&dir) else {
+        return Ok(None);
+    };
+    let mut names: Vec<PathBuf> = entries
+        .flatten()
+        .map(|e| e.path())
+        .filter(|p| {
+            p.file_name()
+                .and_then(|n| n.to_str())
+                .is_some_and(|n| n.starts_with("shard-") && n.ends_with(".json"))
+        })
+        .collect();
+    names.sort();
+    match names.first() {
+        None => Ok(None),
+        Some(p) => {
+            let text = std::fs::read(p).map_err(NightlyError::io(p))?;
+            let r: ShardRecord = serde_json::from_slice(&text)
+                .map_err(|e| NightlyError::Invalid(format!("{}: {e}", p.display())))?;
+            Ok(Some(r.archives))
+        }
+    }
+}
+
+/// Processes `runs` and stages their parts (and each touched track's road
+/// part); returns the runs whose parts are staged. A run that fails is
+/// recorded in the summary and staged as a failure for `--commit`.
+fn stage_runs<'a>(
+    opts: &ProcessOptions,
+    seasons: &[Season],
+    inputs: &[SeasonInputs],
+    runs: &[&'a Planned],
+    reducer: &dyn ReduceEngine,
+    summary: &mut ProcessSummary,
+) -> Result<Vec<&'a Planned>, NightlyError> {
+    let dataset = &opts.dataset;
+    let pb = if opts.progress {
+        let pb = indicatif::ProgressBar::new(runs.len() as u64);
+        pb.set_style(
+            indicatif::ProgressStyle::with_template(
+                "{spinner} processing runs [{bar:40}] {pos}/{len} ({eta} left)",
+            )
+            .expect("valid template")
+            .progress_chars("=> "),
+        );
+        pb
+    } else {
+        indicatif::ProgressBar::hidden()
+    };
+    let mut done = Vec::new();
+    for (si, season) in seasons.iter().enumerate() {
+        let mine: Vec<&Planned> = runs.iter().copied().filter(|p| p.season == si).collect();
+        if mine.is_empty() {
+            continue;
+        }
+        let inp = &inputs[si];
+        let mut warnings = inp.warnings.clone();
+        let (roads, curves) = road_kpis(season, &mut warnings, reducer)?;
+        summary.warnings.extend(warnings);
+        // Road parts of the tracks these runs are on.
+        let tracks: BTreeMap<&str, &str> = mine
+            .iter()
+            .map(|p| (p.track.as_str(), p.road_key.as_str()))
+            .collect();
+        for (track, key) in tracks {
+            let path = staged_road(dataset, key);
+            if path.exists() && !opts.force {
+                continue;
+            }
+            let own: Vec<_> = curves
+                .iter()
+                .filter(|(p, _)| p.track == track)
+                .cloned()
+                .collect();
+            let batch = road_curves_batch(&own);
+            crate::atomic::write_file(&path, |f| write_batch_to(f, &batch))
+                .map_err(NightlyError::io(&path))?;
+        }
+        let results: Vec<(&Planned, Result<(), String>, Vec<String>, u64)> = mine
+            .par_iter()
+            .map(|p| {
+                let out = extract_run(
+                    season,
+                    &p.run,
+                    &inp.compounds,
+                    &roads,
+                    &inp.wear,
+                    &inp.wear_problems,
+                    reducer,
+                );
+                let r = match out {
+                    Ok(o) => {
+                        let warnings = o
+                            .rows
+                            .iter()
+                            .filter(|r| r.wear_mean_pct.is_nan())
+                            .map(|r| {
+                                format!(
+                                    "run {} wheel {}: no wear readings, wear_mean_pct is NaN",
+                                    r.run, r.wheel
+                                )
+                            })
+                            .collect();
+                        let bytes = o.bytes;
+                        (
+                            write_run_parts(dataset, &p.key, &p.run.id, o),
+                            warnings,
+                            bytes,
+                        )
+                    }
+                    Err(reason) => (Err(reason), vec![], 0),
+                };
+                pb.inc(1);
+                (*p, r.0, r.1, r.2)
+            })
+            .collect();
+        for (p, r, w, bytes) in results {
+            summary.warnings.extend(w);
+            summary.telemetry_bytes += bytes;
+            match r {
+                Ok(()) => done.push(p),
+                Err(reason) => {
+                    tracing::warn!("run {} failed: {reason}", p.run.id);
+                    let f = Failed {
+                        run: p.run.id.clone(),
+                        season: season.manifest.name.clone(),
+                        reason,
+                    };
+                    let path = staged_failure(dataset, &p.key);
+                    let text = serde_json::to_vec(&f).expect("serialises");
+                    crate::atomic::write_bytes(&path, &text).map_err(NightlyError::io(&path))?;
+                    summary.failed.push(f);
+                }
+            }
+        }
+    }
+    pb.finish_and_clear();
+    Ok(done)
+}
+
+/// Stages a run's three parts; the KPI part last, since it marks the run
+/// staged only once all three exist.
+fn write_run_parts(dataset: &Path, key: &str, run: &str, o: RunOutput) -> Result<(), String> {
+    let mut energy = Vec::with_capacity(o.maps.len());
+    let mut conditions = Vec::with_capacity(o.maps.len());
+    for (w, e, c) in o.maps {
+        energy.push((run.to_string(), w, e));
+        conditions.push((run.to_string(), w, c));
+    }
+    let batches = [
+        ("energy_maps", energy_maps_batch(&energy)),
+        (
+            "condition_maps",
+            crate::kpi::condition_map::side_table(&conditions),
+        ),
+        ("kpis", kpi_batch(&o.rows)),
+    ];
+    for (kind, batch) in batches {
+        let path = staged_part(dataset, kind, key);
+        crate::atomic::write_file(&path, |f| write_batch_to(f, &batch))
+            .map_err(|e| format!("{}: {e}", path.display()))?;
+    }
+    Ok(())
+}
+
+fn write_manifest(dataset: &Path, m: &DatasetManifest) -> Result<(), NightlyError> {
+    let path = dataset.join("dataset.json");
+    let text = serde_json::to_vec_pretty(m).expect("manifest serialises");
+    crate::atomic::write_bytes(&path, &text).map_err(NightlyError::io(&path))
+}
+
+/// The schema of each consolidated table when it has no rows.
+fn empty_schema(kind: &str) -> arrow_schema::SchemaRef {
+    match kind {
+        "kpis" => kpi_batch(&[]).schema(),
+        "energy_maps" => energy_maps_batch(&[]).schema(),
+        "condition_maps" => crate::kpi::condition_map::side_table(&[]).schema(),
+        _ => road_curves_batch(&[]).schema(),
+    }
+}
+
+/// One table from its parts, in order, tagged with the dataset id.
+fn consolidate(
+    kind: &str,
+    parts: &[PathBuf],
+    dataset_id: &str,
+) -> Result<(RecordBatch, Vec<usize>), NightlyError> {
+    let schema = empty_schema(kind);
+    let mut batches = Vec::new();
+    let mut rows = Vec::with_capacity(parts.len());
+    for p in parts {
+        let bs = read_batches(p)?;
+        rows.push(bs.iter().map(|b| b.num_rows()).sum());
+        for b in bs {
+            // Parts carry no metadata; take the columns under the table's schema.
+            let b = RecordBatch::try_new(schema.clone(), b.columns().to_vec()).map_err(|e| {
+                NightlyError::Invalid(format!(
+                    "{}: part does not fit the {kind} table: {e}",
+                    p.display()
+                ))
+            })?;
+            batches.push(b);
+        }
+    }
+    let all = arrow_select::concat::concat_batches(&schema, &batches)
+        .map_err(|e| NightlyError::Invalid(format!("consolidating {kind}: {e}")))?;
+    Ok((with_extraction_id(all, dataset_id), rows))
+}
+
+/// Commits `new`: staged parts moved into place, consolidated tables
+/// rebuilt from the parts, `dataset.json` last, all behind one journal;
+/// then parts no longer named are removed.
+fn commit(
+    dataset: &Path,
+    old: &DatasetManifest,
+    new: &mut DatasetManifest,
+    runs: &[(RunEntry, Option<&Planned>)],
+) -> Result<(), NightlyError> {
+    let journal = dataset.join(".commit.json");
+    let mut set = OutputSet::new(&journal).map_err(NightlyError::io(&journal))?;
+    let mkdir = |p: &Path| -> Result<(), NightlyError> {
+        let dir = p.parent().expect("part paths have a folder");
+        std::fs::create_dir_all(dir).map_err(NightlyError::io(dir))
+    };
+    // Each table reads its parts where they are now: staged or committed.
+    for kind in PART_KINDS {
+        let mut sources = Vec::with_capacity(runs.len());
+        for (e, staged) in runs {
+            let dest = committed_part(dataset, kind, e);
+            match staged {
+                Some(p) => {
+                    let from = staged_part(dataset, kind, &p.key);
+                    mkdir(&dest)?;
+                    set.add_move(&from, &dest);
+                    sources.push(from);
+                }
+                None => sources.push(dest),
+            }
+        }
+        let (batch, rows) = consolidate(kind, &sources, &new.dataset_id)?;
+        if kind == "kpis" {
+            for (e, n) in new.runs.iter_mut().zip(rows) {
+                e.rows = n;
+            }
+        }
+        let dest = dataset.join(match kind {
+            "kpis" => "kpis.parquet".to_string(),
+            k => format!("kpis.{k}.parquet"),
+        });
+        set.add(&dest, |f| write_batch_to(f, &batch))
+            .map_err(NightlyError::io(&dest))?;
+    }
+    let old_roads: BTreeMap<&str, &str> = old
+        .roads
+        .iter()
+        .map(|r| (r.track.as_str(), r.key.as_str()))
+        .collect();
+    let mut road_sources = Vec::new();
+    for r in &new.roads {
+        let dest = committed_road(dataset, &r.track);
+        let staged = staged_road(dataset, &r.key);
+        if old_roads.get(r.track.as_str()) == Some(&r.key.as_str()) && dest.exists() {
+            road_sources.push(dest);
+        } else if staged.exists() {
+            mkdir(&dest)?;
+            set.add_move(&staged, &dest);
+            road_sources.push(staged);
+        } else {
+            tracing::warn!(
+                "track {}: no road part staged; its curves are left out of kpis.road.parquet",
+                r.track
+            );
+        }
+    }
+    let (batch, _) = consolidate("road", &road_sources, &new.dataset_id)?;
+    let dest = dataset.join("kpis.road.parquet");
+    set.add(&dest, |f| write_batch_to(f, &batch))
+        .map_err(NightlyError::io(&dest))?;
+    let path = dataset.join("dataset.json");
+    let text = serde_json::to_vec_pretty(&*new).expect("manifest serialises");
+    set.add(&path, |f| std::io::Write::write_all(f, &text))
+        .map_err(NightlyError::io(&path))?;
+    set.commit().map_err(NightlyError::io(&journal))
+}
+
+/// Removes committed parts that `m` no longer names (removed or renamed
+/// runs, a kill between commit and clean-up) and empty partition folders.
+fn remove_unnamed_parts(dataset: &Path, m: &DatasetManifest) -> Result<(), NightlyError> {
+    let mut keep: BTreeSet<PathBuf> = BTreeSet::new();
+    for e in &m.runs {
+        for kind in PART_KINDS {
+            keep.insert(committed_part(dataset, kind, e));
+        }
+    }
+    for r in &m.roads {
+        keep.insert(committed_road(dataset, &r.track));
+    }
+    for kind in PART_KINDS.iter().chain(&["road"]) {
+        sweep(&dataset.join(kind), &keep)?;
+    }
+    Ok(())
+}
+
+fn sweep(dir: &Path, keep: &BTreeSet<PathBuf>) -> Result<(), NightlyError> {
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return Ok(());
+    };
+    for e in entries.flatten() {
+        let p = e.path();
+        if e.file_type().is_ok_and(|t| t.is_dir()) {
+            sweep(&p, keep)?;
+            // Only succeeds when empty.
+            let _ = std::fs::remove_dir(&p);
+        } else if !keep.contains(&p) {
+            std::fs::remove_file(&p).map_err(NightlyError::io(&p))?;
+        }
+    }
+    Ok(())
+}
+
+/// Empties `staging/` after a commit (parts were moved; what is left is
+/// failures and shard records that the commit has read).
+fn clean_staging(dataset: &Path) -> Result<(), NightlyError> {
+    let dir = dataset.join("staging");
+    let Ok(entries) = std::fs::read_dir(&dir) else {
+        return Ok(());
+    };
+    for e in entries.flatten() {
+        let p = e.path();
+        std::fs::remove_file(&p).map_err(NightlyError::io(&p))?;
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn ids_become_safe_path_names() {
+        assert_eq!(path_name("r001"), "r001");
+        assert_eq!(path_name("a/b"), "a%2Fb");
+        assert_eq!(path_name(".."), "%2E%2E");
+        assert_eq!(path_name("x y"), "x%20y");
+    }
+
+    #[test]
+    fn shards_split_the_runs_stably_and_evenly() {
+        let count = 4;
+        let mut sizes = [0usize; 4];
+        for i in 0..4000 {
+            let run = format!("r{i:04}");
+            let s = shard_of("season", &run, count);
+            assert_eq!(s, shard_of("season", &run, count), "stable");
+            sizes[s as usize] += 1;
+        }
+        // A fair split puts 1000 ± 3·sqrt(750) ≈ 82 in each.
+        assert!(
+            sizes.iter().all(|&n| (900..=1100).contains(&n)),
+            "{sizes:?}"
+        );
+    }
+}

@@ -1,0 +1,323 @@
+//! `tirewear process`: incremental, resumable, sharded reprocessing.
+//!
+//! The independent route is `extract`: a processed dataset must hold the
+//! same KPI rows as one extraction of the same archive, whatever was
+//! changed, killed or sharded on the way there.
+
+use rand::{Rng, SeedableRng};
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use tirewear::kpi::{ExtractOptions, KpiRow, extract, table};
+use tirewear::nightly::{Mode, NightlyError, ProcessOptions, ProcessSummary, process};
+
+/// The tiny season (2 events, 4 runs) at 5 Hz.
+fn tiny(dir: &Path, seed: u64) {
+    tirewear::sim::simulate(&tirewear::sim::SimOptions {
+        preset: tirewear::sim::Preset::Tiny,
+        scale: 1.0,
+        seed,
+        effects: vec![],
+        generated: None,
+        scatter: tirewear::sim::WearScatter::NONE,
+        encoding: tirewear::ingest::telemetry::Encoding::Block,
+        rate_hz: Some(5.0),
+        out: dir.to_path_buf(),
+        sensor_noise: true,
+        progress: false,
+    })
+    .unwrap();
+}
+
+fn run(archive: &Path, dataset: &Path) -> ProcessSummary {
+    process(&ProcessOptions::new(vec![archive.to_path_buf()], dataset)).unwrap()
+}
+
+/// Rows keyed by (run, wheel), every number as its bits (NaN equals NaN).
+fn keyed(rows: Vec<KpiRow>) -> BTreeMap<(String, String), String> {
+    rows.into_iter()
+        .map(|r| ((r.run.clone(), r.wheel.clone()), format!("{r:?}")))
+        .collect()
+}
+
+/// The rows one plain extraction of `archive` gives.
+fn extracted(archive: &Path, scratch: &Path) -> BTreeMap<(String, String), String> {
+    let out = scratch.join("extract.parquet");
+    extract(&ExtractOptions::new(archive, &out)).unwrap();
+    keyed(table::read_parquet(&out).unwrap())
+}
+
+fn processed_rows(dataset: &Path) -> BTreeMap<(String, String), String> {
+    keyed(table::read_parquet(&dataset.join("kpis.parquet")).unwrap())
+}
+
+/// Every file under `dir` with its bytes, `summary.json` (timings) left out.
+fn tree(dir: &Path) -> BTreeMap<PathBuf, Vec<u8>> {
+    let mut out = BTreeMap::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for e in std::fs::read_dir(&d).unwrap().flatten() {
+            let p = e.path();
+            if p.is_dir() {
+                stack.push(p);
+            } else if p.file_name().unwrap() != "summary.json" {
+                out.insert(
+                    p.strip_prefix(dir).unwrap().to_path_buf(),
+                    std::fs::read(&p).unwrap(),
+                );
+            }
+        }
+    }
+    out
+}
+
+fn names(t: &BTreeMap<PathBuf, Vec<u8>>) -> Vec<String> {
+    t.keys().map(|p| p.display().to_string()).collect()
+}
+
+#[test]
+fn process_equals_extract_and_only_changed_runs_are_processed_again() {
+    let dir = tempfile::tempdir().unwrap();
+    let archive = dir.path().join("season");
+    let dataset = dir.path().join("dataset");
+    tiny(&archive, 11);
+
+    let s = run(&archive, &dataset);
+    assert_eq!((s.planned, s.processed, s.unchanged), (4, 4, 0));
+    assert!(s.committed && s.failed.is_empty());
+    assert_eq!(processed_rows(&dataset), extracted(&archive, dir.path()));
+    // One id ties the consolidated tables together, and fit/gap's check passes.
+    let kpis = dataset.join("kpis.parquet");
+    for side in ["road", "energy_maps", "condition_maps"] {
+        table::check_same_extraction(&kpis, &dataset.join(format!("kpis.{side}.parquet"))).unwrap();
+    }
+    assert_eq!(
+        table::read_extraction_id(&kpis).unwrap().as_deref(),
+        Some(s.dataset_id.as_str())
+    );
+    // The partitioned view: one part per run and kind, under event=….
+    let t = tree(&dataset);
+    let parts: Vec<String> = names(&t)
+        .into_iter()
+        .filter(|n| n.starts_with("kpis/event="))
+        .collect();
+    assert_eq!(parts.len(), 4, "{parts:?}");
+
+    // A rerun processes nothing and rewrites nothing.
+    let s = run(&archive, &dataset);
+    assert_eq!((s.planned, s.processed, s.unchanged), (4, 0, 4));
+    assert!(!s.committed);
+    assert_eq!(s.hashed_bytes, 0, "unchanged stamps: no file is read again");
+    assert_eq!(tree(&dataset), t);
+
+    // A changed wear reading reprocesses its run only.
+    let season = tirewear::ingest::manifest::Season::open(&archive).unwrap();
+    let wear_path = season.path(&season.manifest.wear_readings[0]);
+    let mut readings = tirewear::ingest::wear::read_wear_csv(&wear_path).unwrap();
+    let target = readings[0].run.clone();
+    readings[0].depth_mm -= 0.5;
+    tirewear::ingest::wear::write_wear_csv(&wear_path, &readings).unwrap();
+    let s = run(&archive, &dataset);
+    assert_eq!(s.runs_processed, vec![target.clone()]);
+    assert_eq!((s.processed, s.unchanged), (1, 3));
+    assert_eq!(processed_rows(&dataset), extracted(&archive, dir.path()));
+
+    // So does a changed telemetry file (another run's recording copied over it).
+    let runs = &season.manifest.runs;
+    let (a, b) = (&runs[1], &runs[2]);
+    std::fs::copy(season.path(&b.telemetry), season.path(&a.telemetry)).unwrap();
+    let s = run(&archive, &dataset);
+    assert_eq!(s.runs_processed, vec![a.id.clone()]);
+    assert_eq!(processed_rows(&dataset), extracted(&archive, dir.path()));
+
+    // A run removed from the archive leaves the dataset, parts and rows.
+    let mut m = season.manifest.clone();
+    let gone = m.runs.remove(3);
+    m.write(&season.manifest_path).unwrap();
+    let s = run(&archive, &dataset);
+    assert_eq!((s.processed, s.removed), (0, 1));
+    let rows = processed_rows(&dataset);
+    assert!(rows.keys().all(|(r, _)| *r != gone.id));
+    assert_eq!(rows.len(), 12);
+    let t = tree(&dataset);
+    assert_eq!(
+        names(&t).iter().filter(|n| n.starts_with("kpis/")).count(),
+        3
+    );
+    assert_eq!(
+        names(&t)
+            .iter()
+            .filter(|n| n.starts_with("staging/"))
+            .count(),
+        0,
+        "staging is emptied at commit"
+    );
+}
+
+#[test]
+fn dry_run_writes_nothing_and_force_reprocesses() {
+    let dir = tempfile::tempdir().unwrap();
+    let archive = dir.path().join("season");
+    let dataset = dir.path().join("dataset");
+    tiny(&archive, 12);
+    let mut opts = ProcessOptions::new(vec![archive.clone()], &dataset);
+    opts.dry_run = true;
+    let s = process(&opts).unwrap();
+    assert_eq!(s.runs_processed.len(), 4);
+    assert!(!dataset.exists(), "a dry run creates nothing");
+    run(&archive, &dataset);
+    let before = tree(&dataset);
+    opts.dry_run = false;
+    opts.force = true;
+    let s = process(&opts).unwrap();
+    assert_eq!(s.processed, 4);
+    assert_eq!(tree(&dataset), before, "same inputs, same bytes");
+}
+
+#[test]
+fn a_second_writer_is_refused_while_the_dataset_is_locked() {
+    let dir = tempfile::tempdir().unwrap();
+    let archive = dir.path().join("season");
+    let dataset = dir.path().join("dataset");
+    tiny(&archive, 13);
+    std::fs::create_dir_all(&dataset).unwrap();
+    // Another holder: a lock on its own open file, as another process has.
+    let holder = std::fs::OpenOptions::new()
+        .create(true)
+        .truncate(false)
+        .write(true)
+        .open(dataset.join(".lock"))
+        .unwrap();
+    holder.lock().unwrap();
+    std::fs::write(dataset.join(".lock"), "pid 42 on testhost").unwrap();
+    match process(&ProcessOptions::new(vec![archive.clone()], &dataset)) {
+        Err(NightlyError::Locked { holder, .. }) => assert!(holder.contains("pid 42"), "{holder}"),
+        other => panic!("expected Locked, got {other:?}"),
+    }
+    // Shards share the lock with each other, not with a whole run.
+    let mut shard = ProcessOptions::new(vec![archive.clone()], &dataset);
+    shard.mode = Mode::Shard { index: 0, count: 2 };
+    assert!(matches!(process(&shard), Err(NightlyError::Locked { .. })));
+    holder.unlock().unwrap();
+    let s = process(&ProcessOptions::new(vec![archive], &dataset)).unwrap();
+    assert_eq!(s.processed, 4);
+}
+
+#[test]
+fn shards_then_commit_equal_one_whole_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let archive = dir.path().join("season");
+    tiny(&archive, 14);
+    let whole = dir.path().join("whole");
+    run(&archive, &whole);
+    let sharded = dir.path().join("sharded");
+    let count = 3;
+    let mut processed = 0;
+    for index in 0..count {
+        let mut o = ProcessOptions::new(vec![archive.clone()], &sharded);
+        o.mode = Mode::Shard { index, count };
+        let s = process(&o).unwrap();
+        assert!(!s.committed);
+        processed += s.processed;
+    }
+    assert_eq!(processed, 4, "every run in exactly one shard");
+    assert!(
+        !sharded.join("kpis.parquet").exists(),
+        "shards commit nothing"
+    );
+    // The commit takes the archives from the shards' records.
+    let mut c = ProcessOptions::new(vec![], &sharded);
+    c.mode = Mode::Commit;
+    let s = process(&c).unwrap();
+    assert_eq!((s.processed, s.reused_staged), (0, 4));
+    assert_eq!(tree(&sharded), tree(&whole));
+
+    // A commit with a shard missing reports its runs and commits the rest.
+    let partial = dir.path().join("partial");
+    let mut o = ProcessOptions::new(vec![archive.clone()], &partial);
+    o.mode = Mode::Shard { index: 0, count: 2 };
+    let staged = process(&o).unwrap().processed;
+    let mut c = ProcessOptions::new(vec![archive.clone()], &partial);
+    c.mode = Mode::Commit;
+    let s = process(&c).unwrap();
+    assert_eq!(s.failed.len(), 4 - staged);
+    assert!(s.failed[0].reason.contains("no shard"), "{:?}", s.failed);
+    // The next whole run finishes the job.
+    let s = run(&archive, &partial);
+    assert_eq!(s.processed, 4 - staged);
+    assert_eq!(tree(&partial), tree(&whole));
+}
+
+#[test]
+fn a_failed_run_is_reported_and_the_rest_committed() {
+    let dir = tempfile::tempdir().unwrap();
+    let archive = dir.path().join("season");
+    let dataset = dir.path().join("dataset");
+    tiny(&archive, 15);
+    let season = tirewear::ingest::manifest::Season::open(&archive).unwrap();
+    let bad = &season.manifest.runs[2];
+    std::fs::write(season.path(&bad.telemetry), b"not an mcap file").unwrap();
+    let s = run(&archive, &dataset);
+    assert_eq!(s.failed.len(), 1);
+    assert_eq!(s.failed[0].run, bad.id);
+    assert!(s.committed);
+    assert_eq!(processed_rows(&dataset).len(), 12);
+    // Retried the next night, and still failing it changes nothing else.
+    let s = run(&archive, &dataset);
+    assert_eq!((s.processed, s.unchanged, s.failed.len()), (1, 3, 1));
+}
+
+/// SIGKILL at random moments, then a run to the end: the dataset is the
+/// uninterrupted run's, byte for byte, with no temporary file left.
+#[cfg(unix)]
+#[test]
+fn killed_at_random_moments_and_rerun_is_byte_identical() {
+    let dir = tempfile::tempdir().unwrap();
+    let archive = dir.path().join("season");
+    tiny(&archive, 16);
+    let exe = env!("CARGO_BIN_EXE_tirewear");
+    let cmd = |dataset: &Path| {
+        let mut c = std::process::Command::new(exe);
+        c.args([
+            "--quiet", "--log", "error", "process", "--engine", "cpu", "--out",
+        ])
+        .arg(dataset)
+        .arg(&archive)
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null());
+        c
+    };
+    let whole = dir.path().join("whole");
+    let t0 = std::time::Instant::now();
+    assert!(cmd(&whole).status().unwrap().success());
+    let full = t0.elapsed();
+    let reference = tree(&whole);
+
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(2026);
+    // Kills that left a dataset begun but not finished: the case under test.
+    let mut interrupted = 0;
+    for attempt in 0..6 {
+        let killed = dir.path().join(format!("killed{attempt}"));
+        // Several kills in a row on the same dataset, each at a random moment.
+        for _ in 0..3 {
+            let mut child = cmd(&killed).spawn().unwrap();
+            let wait = full.mul_f64(rng.random_range(0.0..1.2));
+            std::thread::sleep(wait);
+            let _ = child.kill();
+            child.wait().unwrap();
+            if killed.exists() && tree(&killed) != reference {
+                interrupted += 1;
+            }
+        }
+        assert!(cmd(&killed).status().unwrap().success());
+        let t = tree(&killed);
+        let leftovers: Vec<String> = names(&t)
+            .into_iter()
+            .filter(|n| n.contains(".tmp") || n.starts_with("staging/") || n.contains("commit"))
+            .collect();
+        assert!(leftovers.is_empty(), "left behind: {leftovers:?}");
+        assert_eq!(names(&t), names(&reference));
+        assert!(t == reference, "attempt {attempt}: bytes differ");
+    }
+    eprintln!("{interrupted} of 18 kills left an unfinished dataset");
+    assert!(interrupted >= 3, "only {interrupted} kills landed mid-run");
+}
