@@ -618,7 +618,7 @@ fn stage_runs<'a>(
             crate::atomic::write_file(&path, |f| write_batch_to(f, &batch))
                 .map_err(NightlyError::io(&path))?;
         }
-        let results: Vec<(&Planned, Result<(), String>, Vec<String>, u64)> = mine
+        let results: Vec<(&Planned, StagedRun)> = mine
             .par_iter()
             .map(|p| {
                 let out = extract_run(
@@ -630,36 +630,15 @@ fn stage_runs<'a>(
                     &inp.wear_problems,
                     reducer,
                 );
-                let r = match out {
-                    Ok(o) => {
-                        let warnings = o
-                            .rows
-                            .iter()
-                            .filter(|r| r.wear_mean_pct.is_nan())
-                            .map(|r| {
-                                format!(
-                                    "run {} wheel {}: no wear readings, wear_mean_pct is NaN",
-                                    r.run, r.wheel
-                                )
-                            })
-                            .collect();
-                        let bytes = o.bytes;
-                        (
-                            write_run_parts(dataset, &p.key, &p.run.id, o),
-                            warnings,
-                            bytes,
-                        )
-                    }
-                    Err(reason) => (Err(reason), vec![], 0),
-                };
+                let staged = stage_one(dataset, p, out);
                 pb.inc(1);
-                (*p, r.0, r.1, r.2)
+                (*p, staged)
             })
             .collect();
-        for (p, r, w, bytes) in results {
-            summary.warnings.extend(w);
-            summary.telemetry_bytes += bytes;
-            match r {
+        for (p, staged) in results {
+            summary.warnings.extend(staged.warnings);
+            summary.telemetry_bytes += staged.telemetry_bytes;
+            match staged.result {
                 Ok(()) => done.push(p),
                 Err(reason) => {
                     tracing::warn!("run {} failed: {reason}", p.run.id);
@@ -678,6 +657,39 @@ fn stage_runs<'a>(
     }
     pb.finish_and_clear();
     Ok(done)
+}
+
+/// One run's outcome: staged, or why not.
+struct StagedRun {
+    result: Result<(), String>,
+    warnings: Vec<String>,
+    telemetry_bytes: u64,
+}
+
+/// Stages the parts of a run that extracted, with its warnings.
+fn stage_one(dataset: &Path, p: &Planned, out: Result<RunOutput, String>) -> StagedRun {
+    match out {
+        Ok(o) => StagedRun {
+            warnings: o
+                .rows
+                .iter()
+                .filter(|r| r.wear_mean_pct.is_nan())
+                .map(|r| {
+                    format!(
+                        "run {} wheel {}: no wear readings, wear_mean_pct is NaN",
+                        r.run, r.wheel
+                    )
+                })
+                .collect(),
+            telemetry_bytes: o.bytes,
+            result: write_run_parts(dataset, &p.key, &p.run.id, o),
+        },
+        Err(reason) => StagedRun {
+            result: Err(reason),
+            warnings: vec![],
+            telemetry_bytes: 0,
+        },
+    }
 }
 
 /// Stages a run's three parts; the KPI part last, since it marks the run
