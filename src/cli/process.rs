@@ -36,6 +36,18 @@ pub(crate) struct ProcessArgs {
     /// Accept manifest paths outside the archive folders (see `extract`).
     #[arg(long)]
     allow_external_paths: bool,
+    /// After a commit that changed the dataset, also refit the models
+    /// (`fit`: DATASET/models/STAMP/) and rerun the gap diagnosis (`gap`:
+    /// DATASET/gap/STAMP/), STAMP being the UTC time (YYYY-MM-DDTHHMMZ).
+    #[arg(long, value_delimiter = ',', value_enum)]
+    then: Vec<Then>,
+}
+
+/// A step `--then` runs after a commit that changed the dataset.
+#[derive(Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub(crate) enum Then {
+    Fit,
+    Gap,
 }
 
 /// `K/N` with 1 <= K <= N, as (K - 1, N).
@@ -132,7 +144,7 @@ pub(crate) fn run(a: ProcessArgs, progress: bool) -> Result<Outcome> {
         (None, false) => Mode::Whole,
     };
     let opts = ProcessOptions {
-        archives: a.archives,
+        archives: a.archives.clone(),
         dataset: a.out,
         engine: a.engine.into(),
         mode,
@@ -144,6 +156,9 @@ pub(crate) fn run(a: ProcessArgs, progress: bool) -> Result<Outcome> {
     match tirewear::nightly::process(&opts) {
         Ok(s) => {
             print_summary(&s);
+            if s.committed && !a.then.is_empty() {
+                then_steps(&opts, &a.then)?;
+            }
             Ok(if s.failed.is_empty() {
                 Outcome::Done
             } else {
@@ -161,8 +176,81 @@ pub(crate) fn run(a: ProcessArgs, progress: bool) -> Result<Outcome> {
     }
 }
 
+/// Runs the `--then` steps on the committed dataset, into dated folders.
+fn then_steps(opts: &ProcessOptions, steps: &[Then]) -> Result<()> {
+    let kpis = opts.dataset.join("kpis.parquet");
+    let stamp = utc_stamp(std::time::SystemTime::now());
+    if steps.contains(&Then::Fit) {
+        println!();
+        super::fit::run_fit(
+            &kpis,
+            &tirewear::model::fit::Method::ALL,
+            &tirewear::model::fit::FitSettings::default(),
+            &opts.dataset.join("models").join(&stamp),
+        )?;
+    }
+    if steps.contains(&Then::Gap) {
+        // The compounds' WLF constants, from every archive's manifest.
+        let mut wlf = std::collections::BTreeMap::new();
+        for a in &opts.archives {
+            let season =
+                tirewear::ingest::manifest::Season::open_with(a, opts.allow_external_paths)?;
+            for c in &season.manifest.compounds {
+                let k = tirewear::ingest::compound::Compound::load(&season.path(&c.file))?;
+                wlf.insert(c.id.clone(), k.wlf);
+            }
+        }
+        let settings = tirewear::gap::report::GapSettings {
+            wlf,
+            ..Default::default()
+        };
+        println!();
+        super::gap::run_gap(
+            &kpis,
+            "physics",
+            &settings,
+            &opts.dataset.join("gap").join(&stamp),
+        )?;
+    }
+    Ok(())
+}
+
+/// `YYYY-MM-DDTHHMMZ` of a time (UTC), for dated output folders.
+fn utc_stamp(t: std::time::SystemTime) -> String {
+    let secs = t
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_secs()) as i64;
+    let (days, rem) = (secs.div_euclid(86_400), secs.rem_euclid(86_400));
+    // Days to a civil date (H. Hinnant's algorithm, proleptic Gregorian).
+    let z = days + 719_468;
+    let era = z.div_euclid(146_097);
+    let doe = z - era * 146_097;
+    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
+    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
+    let mp = (5 * doy + 2) / 153;
+    let day = doy - (153 * mp + 2) / 5 + 1;
+    let month = if mp < 10 { mp + 3 } else { mp - 9 };
+    let year = yoe + era * 400 + i64::from(month <= 2);
+    format!(
+        "{year:04}-{month:02}-{day:02}T{:02}{:02}Z",
+        rem / 3600,
+        rem % 3600 / 60
+    )
+}
+
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn utc_stamps_by_hand() {
+        let at =
+            |s: u64| super::utc_stamp(std::time::UNIX_EPOCH + std::time::Duration::from_secs(s));
+        assert_eq!(at(0), "1970-01-01T0000Z");
+        // `date -u -d @951782400` = 2000-02-29 00:00 (a leap day of a century year).
+        assert_eq!(at(951_782_400), "2000-02-29T0000Z");
+        // `date -u -d @1795437000` = 2026-11-23 12:30.
+        assert_eq!(at(1_795_437_000), "2026-11-23T1230Z");
+    }
+
     #[test]
     fn shard_arguments() {
         assert_eq!(super::parse_shard("1/4"), Ok((0, 4)));

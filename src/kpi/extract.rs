@@ -145,13 +145,17 @@ fn read_profiles(season: &Season, warnings: &mut Vec<String>) -> Result<Vec<Prof
     Ok(profiles)
 }
 
-/// Road indices of every track (mean over locations) and the curves of every profile.
+/// Road indices of every track (mean over locations) and the curves of
+/// every profile; with `only`, of those tracks alone.
 pub(crate) fn road_kpis(
     season: &Season,
+    only: Option<&std::collections::BTreeSet<&str>>,
     warnings: &mut Vec<String>,
     engine: &dyn ReduceEngine,
 ) -> Result<(TrackRoads, Vec<(Profile, RoadCurves)>), IngestError> {
-    let profiles = read_profiles(season, warnings)?;
+    let wanted = |track: &str| only.is_none_or(|o| o.contains(track));
+    let mut profiles = read_profiles(season, warnings)?;
+    profiles.retain(|p| wanted(&p.track));
     let results = engine.road_indices(profiles).map_err(|e| {
         IngestError::invalid(
             &season.root,
@@ -164,7 +168,7 @@ pub(crate) fn road_kpis(
         by_track.entry(p.track.clone()).or_default().push(*i);
     }
     let mut roads = TrackRoads::default();
-    for t in &season.manifest.tracks {
+    for t in season.manifest.tracks.iter().filter(|t| wanted(&t.id)) {
         let note = match by_track.get(&t.id) {
             Some(v) => {
                 let mean = mean_indices(v);
@@ -480,7 +484,7 @@ pub fn extract(opts: &ExtractOptions) -> Result<ExtractSummary, IngestError> {
         mut warnings,
         ..
     } = season_inputs(&season)?;
-    let (roads, curves) = road_kpis(&season, &mut warnings, reducer)?;
+    let (roads, curves) = road_kpis(&season, None, &mut warnings, reducer)?;
 
     let pb = if opts.progress {
         let pb = indicatif::ProgressBar::new(m.runs.len() as u64);

@@ -179,8 +179,11 @@ pub fn check_same_extraction(kpis: &Path, side: &Path) -> Result<(), IngestError
     }
 }
 
-/// Writes a record batch as zstd Parquet into an open file.
-pub fn write_batch_to(file: &mut std::fs::File, batch: &RecordBatch) -> std::io::Result<()> {
+/// Writes a record batch as zstd Parquet into an open file (or a buffer).
+pub fn write_batch_to(
+    file: impl std::io::Write + Send,
+    batch: &RecordBatch,
+) -> std::io::Result<()> {
     let props = parquet::file::properties::WriterProperties::builder()
         .set_compression(parquet::basic::Compression::ZSTD(Default::default()))
         .build();

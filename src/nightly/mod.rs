@@ -430,6 +430,12 @@ pub fn process(opts: &ProcessOptions) -> Result<ProcessSummary, NightlyError> {
         }
     }
     summary.runs_processed = to_process.iter().map(|p| p.run.id.clone()).collect();
+    tracing::debug!(
+        "planned {} runs in {:.2} s ({} to process)",
+        plan.len(),
+        start.elapsed().as_secs_f64(),
+        to_process.len()
+    );
     if opts.dry_run {
         summary.seconds = start.elapsed().as_secs_f64();
         summary.hashed_bytes = files.bytes_hashed;
@@ -440,6 +446,7 @@ pub fn process(opts: &ProcessOptions) -> Result<ProcessSummary, NightlyError> {
     let staged = stage_runs(opts, &seasons, &inputs, &to_process, reducer, &mut summary)?;
     ready.extend(staged);
     summary.processed = to_process.len();
+    tracing::debug!("staged at {:.2} s", start.elapsed().as_secs_f64());
     summary.hashed_bytes = files.bytes_hashed;
 
     if let Mode::Shard { index, count } = opts.mode {
@@ -518,6 +525,7 @@ pub fn process(opts: &ProcessOptions) -> Result<ProcessSummary, NightlyError> {
         commit(dataset, &old, &mut new, &runs)?;
         summary.committed = true;
     }
+    tracing::debug!("committed at {:.2} s", start.elapsed().as_secs_f64());
     // Also finishes the clean-up of a commit a kill interrupted.
     remove_unnamed_parts(dataset, &new)?;
     summary.dataset_id = new.dataset_id.clone();
@@ -597,7 +605,15 @@ fn stage_runs<'a>(
         }
         let inp = &inputs[si];
         let mut warnings = inp.warnings.clone();
-        let (roads, curves) = road_kpis(season, &mut warnings, reducer)?;
+        // Only the tracks these runs are on.
+        let needed: BTreeSet<&str> = mine.iter().map(|p| p.track.as_str()).collect();
+        let t = Instant::now();
+        let (roads, curves) = road_kpis(season, Some(&needed), &mut warnings, reducer)?;
+        tracing::debug!(
+            "road indices of {} in {:.2} s",
+            season.manifest.name,
+            t.elapsed().as_secs_f64()
+        );
         summary.warnings.extend(warnings);
         // Road parts of the tracks these runs are on.
         let tracks: BTreeMap<&str, &str> = mine
@@ -740,10 +756,13 @@ fn consolidate(
     dataset_id: &str,
 ) -> Result<(RecordBatch, Vec<usize>), NightlyError> {
     let schema = empty_schema(kind);
+    let read = parts
+        .par_iter()
+        .map(|p| read_batches(p).map(|bs| (p, bs)))
+        .collect::<Result<Vec<_>, _>>()?;
     let mut batches = Vec::new();
     let mut rows = Vec::with_capacity(parts.len());
-    for p in parts {
-        let bs = read_batches(p)?;
+    for (p, bs) in read {
         rows.push(bs.iter().map(|b| b.num_rows()).sum());
         for b in bs {
             // Parts carry no metadata; take the columns under the table's schema.
@@ -777,8 +796,9 @@ fn commit(
         std::fs::create_dir_all(dir).map_err(NightlyError::io(dir))
     };
     // Each table reads its parts where they are now: staged or committed.
+    let mut sources: Vec<(&str, Vec<PathBuf>)> = Vec::with_capacity(4);
     for kind in PART_KINDS {
-        let mut sources = Vec::with_capacity(runs.len());
+        let mut from_parts = Vec::with_capacity(runs.len());
         for (e, staged) in runs {
             let dest = committed_part(dataset, kind, e);
             match staged {
@@ -786,23 +806,12 @@ fn commit(
                     let from = staged_part(dataset, kind, &p.key);
                     mkdir(&dest)?;
                     set.add_move(&from, &dest);
-                    sources.push(from);
+                    from_parts.push(from);
                 }
-                None => sources.push(dest),
+                None => from_parts.push(dest),
             }
         }
-        let (batch, rows) = consolidate(kind, &sources, &new.dataset_id)?;
-        if kind == "kpis" {
-            for (e, n) in new.runs.iter_mut().zip(rows) {
-                e.rows = n;
-            }
-        }
-        let dest = dataset.join(match kind {
-            "kpis" => "kpis.parquet".to_string(),
-            k => format!("kpis.{k}.parquet"),
-        });
-        set.add(&dest, |f| write_batch_to(f, &batch))
-            .map_err(NightlyError::io(&dest))?;
+        sources.push((kind, from_parts));
     }
     let old_roads: BTreeMap<&str, &str> = old
         .roads
@@ -826,10 +835,32 @@ fn commit(
             );
         }
     }
-    let (batch, _) = consolidate("road", &road_sources, &new.dataset_id)?;
-    let dest = dataset.join("kpis.road.parquet");
-    set.add(&dest, |f| write_batch_to(f, &batch))
-        .map_err(NightlyError::io(&dest))?;
+    sources.push(("road", road_sources));
+    // The four tables are read and encoded side by side.
+    let id = new.dataset_id.clone();
+    let tables = sources
+        .par_iter()
+        .map(|(kind, parts)| {
+            let (batch, rows) = consolidate(kind, parts, &id)?;
+            let mut bytes = Vec::new();
+            write_batch_to(&mut bytes, &batch)
+                .map_err(|e| NightlyError::Invalid(format!("encoding {kind}: {e}")))?;
+            Ok((*kind, bytes, rows))
+        })
+        .collect::<Result<Vec<_>, NightlyError>>()?;
+    for (kind, bytes, rows) in tables {
+        if kind == "kpis" {
+            for (e, n) in new.runs.iter_mut().zip(rows) {
+                e.rows = n;
+            }
+        }
+        let dest = dataset.join(match kind {
+            "kpis" => "kpis.parquet".to_string(),
+            k => format!("kpis.{k}.parquet"),
+        });
+        set.add(&dest, |f| std::io::Write::write_all(f, &bytes))
+            .map_err(NightlyError::io(&dest))?;
+    }
     let path = dataset.join("dataset.json");
     let text = serde_json::to_vec_pretty(&*new).expect("manifest serialises");
     set.add(&path, |f| std::io::Write::write_all(f, &text))
