@@ -321,3 +321,80 @@ fn killed_at_random_moments_and_rerun_is_byte_identical() {
     eprintln!("{interrupted} of 18 kills left an unfinished dataset");
     assert!(interrupted >= 3, "only {interrupted} kills landed mid-run");
 }
+
+#[test]
+fn an_unreadable_archive_or_file_fails_only_its_own_runs() {
+    let dir = tempfile::tempdir().unwrap();
+    let (a, b) = (dir.path().join("a"), dir.path().join("b"));
+    tiny(&a, 17);
+    tiny(&b, 18);
+    // Two seasons in one dataset need distinct run ids: rename b's.
+    let season_b = tirewear::ingest::manifest::Season::open(&b).unwrap();
+    let mut m = season_b.manifest.clone();
+    for r in &mut m.runs {
+        r.id = format!("b-{}", r.id);
+    }
+    m.write(&season_b.manifest_path).unwrap();
+    let wear_b = season_b.path(&m.wear_readings[0]);
+    let mut readings = tirewear::ingest::wear::read_wear_csv(&wear_b).unwrap();
+    for r in &mut readings {
+        r.run = format!("b-{}", r.run);
+    }
+    tirewear::ingest::wear::write_wear_csv(&wear_b, &readings).unwrap();
+
+    let dataset = dir.path().join("dataset");
+    let both = || ProcessOptions::new(vec![a.clone(), b.clone()], &dataset);
+    let s = process(&both()).unwrap();
+    assert_eq!((s.processed, s.failed.len()), (8, 0), "{:?}", s.failed);
+    let before = processed_rows(&dataset);
+
+    // Archive b unreadable (its manifest gone): a's run still processed,
+    // b's committed rows kept, the failure named.
+    let manifest = season_b.manifest_path.clone();
+    std::fs::rename(&manifest, manifest.with_extension("away")).unwrap();
+    let season_a = tirewear::ingest::manifest::Season::open(&a).unwrap();
+    let wear_a = season_a.path(&season_a.manifest.wear_readings[0]);
+    let mut ra = tirewear::ingest::wear::read_wear_csv(&wear_a).unwrap();
+    ra[0].depth_mm -= 0.25;
+    tirewear::ingest::wear::write_wear_csv(&wear_a, &ra).unwrap();
+    let s = process(&both()).unwrap();
+    assert_eq!(s.processed, 1);
+    assert_eq!(s.removed, 0);
+    assert_eq!(s.failed.len(), 1);
+    assert!(s.failed[0].season.ends_with("b"), "{:?}", s.failed);
+    let rows = processed_rows(&dataset);
+    assert_eq!(rows.len(), 32);
+    let b_rows = |r: &BTreeMap<(String, String), String>| {
+        r.iter()
+            .filter(|((run, _), _)| run.starts_with("b-"))
+            .map(|(k, v)| (k.clone(), v.clone()))
+            .collect::<Vec<_>>()
+    };
+    assert_eq!(b_rows(&rows), b_rows(&before));
+    std::fs::rename(manifest.with_extension("away"), &manifest).unwrap();
+
+    // A telemetry file gone: that run fails, every other one is unchanged.
+    let gone = &season_a.manifest.runs[0];
+    std::fs::remove_file(season_a.path(&gone.telemetry)).unwrap();
+    let s = process(&both()).unwrap();
+    assert_eq!((s.processed, s.unchanged, s.failed.len()), (0, 7, 1));
+    assert_eq!(s.failed[0].run, gone.id);
+    assert!(
+        s.failed[0].reason.contains(&gone.telemetry),
+        "{}",
+        s.failed[0].reason
+    );
+
+    // A committed part deleted by hand is made again.
+    let part = std::fs::read_dir(dataset.join("kpis"))
+        .unwrap()
+        .flatten()
+        .flat_map(|e| std::fs::read_dir(e.path()).unwrap().flatten())
+        .map(|e| e.path())
+        .find(|p| p.file_name().unwrap().to_str().unwrap().starts_with("b-"))
+        .unwrap();
+    std::fs::remove_file(&part).unwrap();
+    let s = process(&both()).unwrap();
+    assert_eq!(s.processed, 1);
+    assert!(part.exists());
+}

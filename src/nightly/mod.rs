@@ -113,6 +113,9 @@ struct RunEntry {
     track: String,
     /// The archive's manifest name.
     season: String,
+    /// The archive as given on the command line: if it cannot be read on a
+    /// later night, its committed runs are kept, not dropped.
+    archive: PathBuf,
     key: String,
     rows: usize,
 }
@@ -323,10 +326,31 @@ pub fn process(opts: &ProcessOptions) -> Result<ProcessSummary, NightlyError> {
             dataset.display()
         )));
     }
-    let seasons = archives
-        .iter()
-        .map(|a| Season::open_with(a, opts.allow_external_paths).map_err(NightlyError::from))
-        .collect::<Result<Vec<_>, _>>()?;
+    // An archive that cannot be read fails its own runs, not the night; its
+    // committed runs stay as they are.
+    let mut seasons = Vec::with_capacity(archives.len());
+    let mut inputs = Vec::with_capacity(archives.len());
+    let mut archives_of_seasons = Vec::with_capacity(archives.len());
+    let mut unreadable: Vec<Failed> = Vec::new();
+    for a in &archives {
+        let opened = Season::open_with(a, opts.allow_external_paths)
+            .and_then(|s| season_inputs(&s).map(|i| (s, i)));
+        match opened {
+            Ok((s, i)) => {
+                seasons.push(s);
+                inputs.push(i);
+                archives_of_seasons.push(a.clone());
+            }
+            Err(e) => {
+                tracing::warn!("archive {} left as committed: {e}", a.display());
+                unreadable.push(Failed {
+                    run: "(every run of the archive)".into(),
+                    season: a.display().to_string(),
+                    reason: format!("{e}; its committed runs are kept as they were"),
+                });
+            }
+        }
+    }
 
     // The engine decides the keys (f32 on the GPU, f64 on the CPU); it is
     // opened before planning, but the device only used if there is work.
@@ -344,11 +368,11 @@ pub fn process(opts: &ProcessOptions) -> Result<ProcessSummary, NightlyError> {
         old: old.files.clone(),
         ..Default::default()
     };
-    let mut inputs = Vec::with_capacity(seasons.len());
     let mut plan: Vec<Planned> = Vec::new();
+    let mut key_failures: Vec<Failed> = Vec::new();
     let mut seen_runs: BTreeMap<String, String> = BTreeMap::new();
     for (si, season) in seasons.iter().enumerate() {
-        let inp = season_inputs(season)?;
+        let inp = &inputs[si];
         for run in &season.manifest.runs {
             if let Some(other) = seen_runs.insert(run.id.clone(), season.manifest.name.clone()) {
                 return Err(NightlyError::Invalid(format!(
@@ -359,8 +383,20 @@ pub fn process(opts: &ProcessOptions) -> Result<ProcessSummary, NightlyError> {
             }
             let track = season.event(&run.event).expect("validated").track.clone();
             let readings = inp.readings.get(&run.id).map_or(&[][..], |v| v.as_slice());
-            let key = keys::run_key(season, run, readings, engine, &mut files)?;
-            let road_key = keys::road_key(season, &track, engine, &mut files)?;
+            // A file that cannot be read fails its run (and is tried again).
+            let keyed = keys::run_key(season, run, readings, engine, &mut files)
+                .and_then(|k| keys::road_key(season, &track, engine, &mut files).map(|r| (k, r)));
+            let (key, road_key) = match keyed {
+                Ok(k) => k,
+                Err(e) => {
+                    key_failures.push(Failed {
+                        run: run.id.clone(),
+                        season: season.manifest.name.clone(),
+                        reason: e.to_string(),
+                    });
+                    continue;
+                }
+            };
             plan.push(Planned {
                 season: si,
                 run: run.clone(),
@@ -369,7 +405,6 @@ pub fn process(opts: &ProcessOptions) -> Result<ProcessSummary, NightlyError> {
                 road_key,
             });
         }
-        inputs.push(inp);
     }
 
     let committed: BTreeMap<&str, &RunEntry> =
@@ -385,7 +420,21 @@ pub fn process(opts: &ProcessOptions) -> Result<ProcessSummary, NightlyError> {
         device: reducer.device(),
         ..Default::default()
     };
-    let in_archives: BTreeSet<&str> = plan.iter().map(|p| p.run.id.as_str()).collect();
+    summary.failed.extend(unreadable.iter().cloned());
+    summary.failed.extend(key_failures.iter().cloned());
+    let kept_archives: BTreeSet<String> = unreadable.iter().map(|f| f.season.clone()).collect();
+    // Committed runs of unreadable archives, carried over unchanged.
+    let carried: Vec<&RunEntry> = old
+        .runs
+        .iter()
+        .filter(|e| kept_archives.contains(&e.archive.display().to_string()))
+        .collect();
+    let in_archives: BTreeSet<&str> = plan
+        .iter()
+        .map(|p| p.run.id.as_str())
+        .chain(seen_runs.keys().map(|r| r.as_str()))
+        .chain(carried.iter().map(|e| e.run.as_str()))
+        .collect();
     summary.removed = if matches!(opts.mode, Mode::Shard { .. }) {
         0
     } else {
@@ -404,9 +453,13 @@ pub fn process(opts: &ProcessOptions) -> Result<ProcessSummary, NightlyError> {
             continue;
         }
         summary.planned += 1;
-        let unchanged = committed
-            .get(p.run.id.as_str())
-            .is_some_and(|e| e.key == p.key);
+        // A committed part deleted by hand is made again.
+        let unchanged = committed.get(p.run.id.as_str()).is_some_and(|e| {
+            e.key == p.key
+                && PART_KINDS
+                    .iter()
+                    .all(|k| committed_part(dataset, k, e).exists())
+        });
         if unchanged && !opts.force {
             summary.unchanged += 1;
         } else if !opts.force && staged_complete(dataset, &p.key) {
@@ -475,6 +528,7 @@ pub fn process(opts: &ProcessOptions) -> Result<ProcessSummary, NightlyError> {
                     event: p.run.event.clone(),
                     track: p.track.clone(),
                     season: seasons[p.season].manifest.name.clone(),
+                    archive: archives_of_seasons[p.season].clone(),
                     key: p.key.clone(),
                     rows: 0,
                 },
@@ -484,20 +538,26 @@ pub fn process(opts: &ProcessOptions) -> Result<ProcessSummary, NightlyError> {
             runs.push(((*e).clone(), None));
         }
     }
+    runs.extend(carried.iter().map(|e| ((*e).clone(), None)));
     runs.sort_by(|a, b| (&a.0.event, &a.0.run).cmp(&(&b.0.event, &b.0.run)));
+    // Each track's road key: from this night's plan, else the last commit's.
+    let mut road_keys: BTreeMap<&str, &str> = old
+        .roads
+        .iter()
+        .map(|r| (r.track.as_str(), r.key.as_str()))
+        .collect();
+    road_keys.extend(plan.iter().map(|p| (p.track.as_str(), p.road_key.as_str())));
     let mut roads: BTreeMap<String, RoadEntry> = BTreeMap::new();
     for (e, _) in &runs {
-        let p = plan
-            .iter()
-            .find(|p| p.run.id == e.run)
-            .expect("planned run");
-        roads.insert(
-            e.track.clone(),
-            RoadEntry {
-                track: e.track.clone(),
-                key: p.road_key.clone(),
-            },
-        );
+        if let Some(key) = road_keys.get(e.track.as_str()) {
+            roads.insert(
+                e.track.clone(),
+                RoadEntry {
+                    track: e.track.clone(),
+                    key: key.to_string(),
+                },
+            );
+        }
     }
     let mut new = DatasetManifest {
         format_version: DATASET_FORMAT_VERSION,
@@ -515,7 +575,7 @@ pub fn process(opts: &ProcessOptions) -> Result<ProcessSummary, NightlyError> {
         id.update(r.key.as_bytes());
     }
     new.dataset_id = id.finalize().to_hex()[..32].to_string();
-    if new.dataset_id == old.dataset_id && !opts.force {
+    if new.dataset_id == old.dataset_id && ready.is_empty() && !opts.force {
         // Nothing changed in the outputs; keep the stamps current only.
         new.runs = old.runs.clone();
         if new != old {
