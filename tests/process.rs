@@ -398,3 +398,57 @@ fn an_unreadable_archive_or_file_fails_only_its_own_runs() {
     assert_eq!(s.processed, 1);
     assert!(part.exists());
 }
+
+/// The documented exit codes: 4 while another process holds the dataset,
+/// 3 when some runs failed and the rest were committed, 0 otherwise.
+#[test]
+fn exit_codes_of_the_binary() {
+    let dir = tempfile::tempdir().unwrap();
+    let archive = dir.path().join("season");
+    let dataset = dir.path().join("dataset");
+    tiny(&archive, 19);
+    let exe = env!("CARGO_BIN_EXE_tirewear");
+    let run = || {
+        std::process::Command::new(exe)
+            .args([
+                "--quiet", "--log", "error", "process", "--engine", "cpu", "--out",
+            ])
+            .arg(&dataset)
+            .arg(&archive)
+            .output()
+            .unwrap()
+    };
+    std::fs::create_dir_all(&dataset).unwrap();
+    let holder = std::fs::OpenOptions::new()
+        .create(true)
+        .truncate(false)
+        .write(true)
+        .open(dataset.join(".lock"))
+        .unwrap();
+    holder.lock().unwrap();
+    let out = run();
+    assert_eq!(out.status.code(), Some(4));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("locked by another tirewear process"), "{err}");
+    holder.unlock().unwrap();
+
+    let season = tirewear::ingest::manifest::Season::open(&archive).unwrap();
+    let bad = &season.manifest.runs[1];
+    std::fs::write(season.path(&bad.telemetry), b"garbage").unwrap();
+    let out = run();
+    assert_eq!(out.status.code(), Some(3));
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(text.contains(&format!("failed run {}", bad.id)), "{text}");
+    let summary: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dataset.join("summary.json")).unwrap()).unwrap();
+    assert_eq!(summary["failed"][0]["run"], bad.id.as_str());
+    assert_eq!(summary["processed"], 4);
+
+    let out = std::process::Command::new(exe)
+        .args(["process", "--shard", "5/4", "--out"])
+        .arg(&dataset)
+        .arg(&archive)
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2), "a bad --shard is a usage error");
+}
