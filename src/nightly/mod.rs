@@ -114,7 +114,9 @@ struct RunEntry {
     /// The archive's manifest name.
     season: String,
     /// The archive as given on the command line: if it cannot be read on a
-    /// later night, its committed runs are kept, not dropped.
+    /// later night, its committed runs are kept, not dropped. (Empty in
+    /// manifests written before it was recorded.)
+    #[serde(default)]
     archive: PathBuf,
     key: String,
     rows: usize,
@@ -809,28 +811,77 @@ fn empty_schema(kind: &str) -> arrow_schema::SchemaRef {
     }
 }
 
-/// One table from its parts, in order, tagged with the dataset id.
+/// Where a consolidated table takes one run's rows from.
+enum Source {
+    /// A part file (staged, or committed).
+    Part(PathBuf),
+    /// Rows `offset..offset + len` of the previous consolidated table.
+    Previous { offset: usize, len: usize },
+}
+
+/// The previous commit's consolidated table at `path` and the rows of each
+/// run in it, if it is that commit's (its id) and each run's rows are
+/// contiguous; otherwise None, and the parts are read instead.
+fn previous_table(
+    path: &Path,
+    dataset_id: &str,
+) -> Option<(RecordBatch, BTreeMap<String, (usize, usize)>)> {
+    use arrow_array::Array;
+    if dataset_id.is_empty() || crate::kpi::table::read_extraction_id(path).ok()?? != dataset_id {
+        return None;
+    }
+    let batches = read_batches(path).ok()?;
+    let schema = batches.first()?.schema();
+    let all = arrow_select::concat::concat_batches(&schema, &batches).ok()?;
+    let runs = all
+        .column_by_name("run")?
+        .as_any()
+        .downcast_ref::<arrow_array::StringArray>()?;
+    let mut ranges: BTreeMap<String, (usize, usize)> = BTreeMap::new();
+    let mut i = 0;
+    while i < runs.len() {
+        let run = runs.value(i);
+        let start = i;
+        while i < runs.len() && runs.value(i) == run {
+            i += 1;
+        }
+        if ranges.insert(run.to_string(), (start, i - start)).is_some() {
+            return None; // not contiguous: not a table this module wrote
+        }
+    }
+    Some((all, ranges))
+}
+
+/// One table from its sources, in order, tagged with the dataset id; also
+/// the number of rows each source gave.
 fn consolidate(
     kind: &str,
-    parts: &[PathBuf],
+    sources: &[Source],
+    previous: Option<&RecordBatch>,
     dataset_id: &str,
 ) -> Result<(RecordBatch, Vec<usize>), NightlyError> {
     let schema = empty_schema(kind);
-    let read = parts
+    let read = sources
         .par_iter()
-        .map(|p| read_batches(p).map(|bs| (p, bs)))
+        .map(|s| match s {
+            Source::Part(p) => read_batches(p).map(|bs| (Some(p), bs)),
+            Source::Previous { offset, len } => {
+                let prev = previous.expect("previous rows come with the previous table");
+                Ok((None, vec![prev.slice(*offset, *len)]))
+            }
+        })
         .collect::<Result<Vec<_>, _>>()?;
     let mut batches = Vec::new();
-    let mut rows = Vec::with_capacity(parts.len());
+    let mut rows = Vec::with_capacity(sources.len());
     for (p, bs) in read {
         rows.push(bs.iter().map(|b| b.num_rows()).sum());
         for b in bs {
             // Parts carry no metadata; take the columns under the table's schema.
             let b = RecordBatch::try_new(schema.clone(), b.columns().to_vec()).map_err(|e| {
-                NightlyError::Invalid(format!(
-                    "{}: part does not fit the {kind} table: {e}",
-                    p.display()
-                ))
+                let from = p.map_or("the previous table".to_string(), |p| {
+                    p.display().to_string()
+                });
+                NightlyError::Invalid(format!("{from}: rows do not fit the {kind} table: {e}"))
             })?;
             batches.push(b);
         }
@@ -838,6 +889,14 @@ fn consolidate(
     let all = arrow_select::concat::concat_batches(&schema, &batches)
         .map_err(|e| NightlyError::Invalid(format!("consolidating {kind}: {e}")))?;
     Ok((with_extraction_id(all, dataset_id), rows))
+}
+
+/// The consolidated table of a kind.
+fn table_path(dataset: &Path, kind: &str) -> PathBuf {
+    dataset.join(match kind {
+        "kpis" => "kpis.parquet".to_string(),
+        k => format!("kpis.{k}.parquet"),
+    })
 }
 
 /// Commits `new`: staged parts moved into place, consolidated tables
@@ -855,23 +914,32 @@ fn commit(
         let dir = p.parent().expect("part paths have a folder");
         std::fs::create_dir_all(dir).map_err(NightlyError::io(dir))
     };
-    // Each table reads its parts where they are now: staged or committed.
-    let mut sources: Vec<(&str, Vec<PathBuf>)> = Vec::with_capacity(4);
-    for kind in PART_KINDS {
-        let mut from_parts = Vec::with_capacity(runs.len());
+    // Each table takes an unchanged run's rows from the previous table (one
+    // file read instead of a part per run), a new run's from its staged part.
+    let previous: Vec<_> = PART_KINDS
+        .par_iter()
+        .map(|kind| previous_table(&table_path(dataset, kind), &old.dataset_id))
+        .collect();
+    let mut sources: Vec<(&str, Vec<Source>)> = Vec::with_capacity(4);
+    for (kind, prev) in PART_KINDS.iter().zip(&previous) {
+        let mut from = Vec::with_capacity(runs.len());
         for (e, staged) in runs {
             let dest = committed_part(dataset, kind, e);
-            match staged {
-                Some(p) => {
-                    let from = staged_part(dataset, kind, &p.key);
+            match (staged, prev) {
+                (Some(p), _) => {
+                    let part = staged_part(dataset, kind, &p.key);
                     mkdir(&dest)?;
-                    set.add_move(&from, &dest);
-                    from_parts.push(from);
+                    set.add_move(&part, &dest);
+                    from.push(Source::Part(part));
                 }
-                None => from_parts.push(dest),
+                (None, Some((_, ranges))) if ranges.contains_key(&e.run) => {
+                    let (offset, len) = ranges[&e.run];
+                    from.push(Source::Previous { offset, len });
+                }
+                (None, _) => from.push(Source::Part(dest)),
             }
         }
-        sources.push((kind, from_parts));
+        sources.push((kind, from));
     }
     let old_roads: BTreeMap<&str, &str> = old
         .roads
@@ -883,11 +951,11 @@ fn commit(
         let dest = committed_road(dataset, &r.track);
         let staged = staged_road(dataset, &r.key);
         if old_roads.get(r.track.as_str()) == Some(&r.key.as_str()) && dest.exists() {
-            road_sources.push(dest);
+            road_sources.push(Source::Part(dest));
         } else if staged.exists() {
             mkdir(&dest)?;
             set.add_move(&staged, &dest);
-            road_sources.push(staged);
+            road_sources.push(Source::Part(staged));
         } else {
             tracing::warn!(
                 "track {}: no road part staged; its curves are left out of kpis.road.parquet",
@@ -900,11 +968,21 @@ fn commit(
     let id = new.dataset_id.clone();
     let tables = sources
         .par_iter()
-        .map(|(kind, parts)| {
-            let (batch, rows) = consolidate(kind, parts, &id)?;
+        .enumerate()
+        .map(|(i, (kind, parts))| {
+            let t = Instant::now();
+            let prev = previous.get(i).and_then(|p| p.as_ref()).map(|(b, _)| b);
+            let (batch, rows) = consolidate(kind, parts, prev, &id)?;
+            let read_s = t.elapsed().as_secs_f64();
             let mut bytes = Vec::new();
             write_batch_to(&mut bytes, &batch)
                 .map_err(|e| NightlyError::Invalid(format!("encoding {kind}: {e}")))?;
+            tracing::debug!(
+                "{kind}: {} sources read in {read_s:.2} s, {} rows encoded in {:.2} s",
+                parts.len(),
+                batch.num_rows(),
+                t.elapsed().as_secs_f64() - read_s
+            );
             Ok((*kind, bytes, rows))
         })
         .collect::<Result<Vec<_>, NightlyError>>()?;
@@ -914,10 +992,7 @@ fn commit(
                 e.rows = n;
             }
         }
-        let dest = dataset.join(match kind {
-            "kpis" => "kpis.parquet".to_string(),
-            k => format!("kpis.{k}.parquet"),
-        });
+        let dest = table_path(dataset, kind);
         set.add(&dest, |f| std::io::Write::write_all(f, &bytes))
             .map_err(NightlyError::io(&dest))?;
     }
