@@ -811,6 +811,9 @@ fn empty_schema(kind: &str) -> arrow_schema::SchemaRef {
     }
 }
 
+/// Each run's rows (offset, count) in a consolidated table.
+type RunRanges = BTreeMap<String, (usize, usize)>;
+
 /// Where a consolidated table takes one run's rows from.
 enum Source {
     /// A part file (staged, or committed).
@@ -822,10 +825,7 @@ enum Source {
 /// The previous commit's consolidated table at `path` and the rows of each
 /// run in it, if it is that commit's (its id) and each run's rows are
 /// contiguous; otherwise None, and the parts are read instead.
-fn previous_table(
-    path: &Path,
-    dataset_id: &str,
-) -> Option<(RecordBatch, BTreeMap<String, (usize, usize)>)> {
+fn previous_table(path: &Path, dataset_id: &str) -> Option<(RecordBatch, RunRanges)> {
     use arrow_array::Array;
     if dataset_id.is_empty() || crate::kpi::table::read_extraction_id(path).ok()?? != dataset_id {
         return None;
@@ -837,7 +837,7 @@ fn previous_table(
         .column_by_name("run")?
         .as_any()
         .downcast_ref::<arrow_array::StringArray>()?;
-    let mut ranges: BTreeMap<String, (usize, usize)> = BTreeMap::new();
+    let mut ranges = RunRanges::new();
     let mut i = 0;
     while i < runs.len() {
         let run = runs.value(i);
