@@ -13,6 +13,7 @@ pub mod ingest;
 pub mod kpi;
 pub mod model;
 pub mod nightly;
+mod progress;
 pub mod sim;
 pub mod wheel;
 

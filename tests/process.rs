@@ -10,22 +10,21 @@ use std::path::{Path, PathBuf};
 use tirewear::kpi::{ExtractOptions, KpiRow, extract, table};
 use tirewear::nightly::{Mode, NightlyError, ProcessOptions, ProcessSummary, process};
 
-/// The tiny season (2 events, 4 runs) at 5 Hz.
-fn tiny(dir: &Path, seed: u64) {
-    tirewear::sim::simulate(&tirewear::sim::SimOptions {
-        preset: tirewear::sim::Preset::Tiny,
-        scale: 1.0,
-        seed,
-        effects: vec![],
-        generated: None,
-        scatter: tirewear::sim::WearScatter::NONE,
-        encoding: tirewear::ingest::telemetry::Encoding::Block,
-        rate_hz: Some(5.0),
-        out: dir.to_path_buf(),
-        sensor_noise: true,
-        progress: false,
-    })
-    .unwrap();
+mod common;
+
+use common::simulate_tiny as tiny;
+
+/// Holds the dataset's lock as another process would: its own open file.
+fn hold_lock(dataset: &Path) -> std::fs::File {
+    std::fs::create_dir_all(dataset).unwrap();
+    let holder = std::fs::OpenOptions::new()
+        .create(true)
+        .truncate(false)
+        .write(true)
+        .open(dataset.join(".lock"))
+        .unwrap();
+    holder.lock().unwrap();
+    holder
 }
 
 fn run(archive: &Path, dataset: &Path) -> ProcessSummary {
@@ -193,15 +192,7 @@ fn a_second_writer_is_refused_while_the_dataset_is_locked() {
     let archive = dir.path().join("season");
     let dataset = dir.path().join("dataset");
     tiny(&archive, 13);
-    std::fs::create_dir_all(&dataset).unwrap();
-    // Another holder: a lock on its own open file, as another process has.
-    let holder = std::fs::OpenOptions::new()
-        .create(true)
-        .truncate(false)
-        .write(true)
-        .open(dataset.join(".lock"))
-        .unwrap();
-    holder.lock().unwrap();
+    let holder = hold_lock(&dataset);
     std::fs::write(dataset.join(".lock"), "pid 42 on testhost").unwrap();
     match process(&ProcessOptions::new(vec![archive.clone()], &dataset)) {
         Err(NightlyError::Locked { holder, .. }) => assert!(holder.contains("pid 42"), "{holder}"),
@@ -432,14 +423,7 @@ fn exit_codes_of_the_binary() {
             .output()
             .unwrap()
     };
-    std::fs::create_dir_all(&dataset).unwrap();
-    let holder = std::fs::OpenOptions::new()
-        .create(true)
-        .truncate(false)
-        .write(true)
-        .open(dataset.join(".lock"))
-        .unwrap();
-    holder.lock().unwrap();
+    let holder = hold_lock(&dataset);
     let out = run();
     assert_eq!(out.status.code(), Some(4));
     let err = String::from_utf8_lossy(&out.stderr);

@@ -425,19 +425,7 @@ pub fn run_case(
 /// Runs the whole matrix; a season that fails is recorded with its error and the rest go on.
 pub fn validate(s: &ValidateSettings) -> Vec<Case> {
     let cases = matrix(s);
-    let pb = if s.progress {
-        let pb = indicatif::ProgressBar::new(cases.len() as u64);
-        pb.set_style(
-            indicatif::ProgressStyle::with_template(
-                "{spinner} validating seasons [{bar:40}] {pos}/{len} ({eta} left) {msg}",
-            )
-            .expect("valid template")
-            .progress_chars("=> "),
-        );
-        pb
-    } else {
-        indicatif::ProgressBar::hidden()
-    };
+    let pb = crate::progress::bar(s.progress, cases.len() as u64, "validating seasons");
     let mut out = Vec::new();
     for (planted, seed) in &cases {
         pb.set_message(planted.label());

@@ -486,19 +486,7 @@ pub fn extract(opts: &ExtractOptions) -> Result<ExtractSummary, IngestError> {
     } = season_inputs(&season)?;
     let (roads, curves) = road_kpis(&season, None, &mut warnings, reducer)?;
 
-    let pb = if opts.progress {
-        let pb = indicatif::ProgressBar::new(m.runs.len() as u64);
-        pb.set_style(
-            indicatif::ProgressStyle::with_template(
-                "{spinner} extracting runs [{bar:40}] {pos}/{len} ({eta} left)",
-            )
-            .expect("valid template")
-            .progress_chars("=> "),
-        );
-        pb
-    } else {
-        indicatif::ProgressBar::hidden()
-    };
+    let pb = crate::progress::bar(opts.progress, m.runs.len() as u64, "extracting runs");
     let results: Vec<(&Run, Result<RunOutput, String>)> = m
         .runs
         .par_iter()

@@ -646,19 +646,7 @@ fn stage_runs<'a>(
     summary: &mut ProcessSummary,
 ) -> Result<Vec<&'a Planned>, NightlyError> {
     let dataset = &opts.dataset;
-    let pb = if opts.progress {
-        let pb = indicatif::ProgressBar::new(runs.len() as u64);
-        pb.set_style(
-            indicatif::ProgressStyle::with_template(
-                "{spinner} processing runs [{bar:40}] {pos}/{len} ({eta} left)",
-            )
-            .expect("valid template")
-            .progress_chars("=> "),
-        );
-        pb
-    } else {
-        indicatif::ProgressBar::hidden()
-    };
+    let pb = crate::progress::bar(opts.progress, runs.len() as u64, "processing runs");
     let mut done = Vec::new();
     for (si, season) in seasons.iter().enumerate() {
         let mine: Vec<&Planned> = runs.iter().copied().filter(|p| p.season == si).collect();

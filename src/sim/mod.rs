@@ -150,7 +150,7 @@ pub fn simulate(opts: &SimOptions) -> Result<SimSummary, SimError> {
 
     // Runs, in parallel.
     let shapes: Vec<_> = plan.tracks.iter().map(|t| t.shape(1.0)).collect();
-    let progress = progress_bar(opts.progress, plan.runs.len() as u64);
+    let progress = crate::progress::bar(opts.progress, plan.runs.len() as u64, "simulating runs");
     let samples = AtomicU64::new(0);
     let results: Vec<Result<run::RunTruth, SimError>> = plan
         .runs
@@ -346,21 +346,6 @@ fn telemetry_rel(run: &str) -> String {
 
 fn tire_set_id(r: &preset::RunPlan, w: Wheel) -> String {
     format!("{}-{}", r.id, w.name())
-}
-
-fn progress_bar(show: bool, n: u64) -> indicatif::ProgressBar {
-    if !show {
-        return indicatif::ProgressBar::hidden();
-    }
-    let pb = indicatif::ProgressBar::new(n);
-    pb.set_style(
-        indicatif::ProgressStyle::with_template(
-            "{spinner} simulating runs [{bar:40}] {pos}/{len} ({eta} left)",
-        )
-        .expect("valid template")
-        .progress_chars("=> "),
-    );
-    pb
 }
 
 fn dir_size(p: &Path) -> u64 {

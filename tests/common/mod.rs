@@ -4,13 +4,12 @@
 use std::path::Path;
 use tirewear::kpi::KpiRow;
 
-/// Simulates the demo season (seed 7) at 5 Hz into `dir`: the findings do
-/// not need 20 Hz, and it keeps the tests quick.
-pub fn simulate_demo(dir: &Path) {
+/// Simulates a preset season at 5 Hz into `dir`, without planted effects.
+fn simulate_at_5_hz(preset: tirewear::sim::Preset, seed: u64, dir: &Path) {
     tirewear::sim::simulate(&tirewear::sim::SimOptions {
-        preset: tirewear::sim::Preset::Demo,
+        preset,
         scale: 1.0,
-        seed: 7,
+        seed,
         effects: vec![],
         generated: None,
         scatter: tirewear::sim::WearScatter::NONE,
@@ -21,6 +20,17 @@ pub fn simulate_demo(dir: &Path) {
         progress: false,
     })
     .unwrap();
+}
+
+/// Simulates the demo season (seed 7) at 5 Hz into `dir`: the findings do
+/// not need 20 Hz, and it keeps the tests quick.
+pub fn simulate_demo(dir: &Path) {
+    simulate_at_5_hz(tirewear::sim::Preset::Demo, 7, dir);
+}
+
+/// The tiny season (2 events, 4 runs) at 5 Hz.
+pub fn simulate_tiny(dir: &Path, seed: u64) {
+    simulate_at_5_hz(tirewear::sim::Preset::Tiny, seed, dir);
 }
 
 /// The demo season simulated and extracted on the CPU engine into `dir/kpis.parquet`.
