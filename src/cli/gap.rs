@@ -94,7 +94,7 @@ pub(crate) enum GapAction {
     /// physics baseline (the diagnosis never reads truth/), then score hit
     /// rate, shrinkage against the ideal and false discoveries. Writes
     /// OUT/validate.json and OUT/validate.md. The defaults run the matrix
-    /// of docs/gap.md (68 seasons, about 7 minutes on 2 cores).
+    /// of docs/gap.md (68 seasons, about 30 minutes on 2 cores).
     Validate {
         /// Effects to plant (comma-separated; `none` for none).
         #[arg(
