@@ -202,6 +202,22 @@ pub(crate) struct RunOutput {
     pub reduce_s: f64,
 }
 
+impl RunOutput {
+    /// One warning per tire of the run without wear readings.
+    pub(crate) fn missing_wear_warnings(&self) -> Vec<String> {
+        self.rows
+            .iter()
+            .filter(|r| r.wear_mean_pct.is_nan())
+            .map(|r| {
+                format!(
+                    "run {} wheel {}: no wear readings, wear_mean_pct is NaN",
+                    r.run, r.wheel
+                )
+            })
+            .collect()
+    }
+}
+
 #[allow(clippy::too_many_arguments)]
 fn run_rows(
     season: &Season,
@@ -515,14 +531,7 @@ pub fn extract(opts: &ExtractOptions) -> Result<ExtractSummary, IngestError> {
     for (run, r) in results {
         match r {
             Ok(o) => {
-                for row in &o.rows {
-                    if row.wear_mean_pct.is_nan() {
-                        warnings.push(format!(
-                            "run {} wheel {}: no wear readings, wear_mean_pct is NaN",
-                            row.run, row.wheel
-                        ));
-                    }
-                }
+                warnings.extend(o.missing_wear_warnings());
                 for (w, mp, c) in o.maps {
                     maps.push((run.id.clone(), w, mp));
                     conditions.push((run.id.clone(), w, c));

@@ -431,10 +431,10 @@ pub fn process(opts: &ProcessOptions) -> Result<ProcessSummary, NightlyError> {
         .iter()
         .filter(|e| kept_archives.contains(&e.archive.display().to_string()))
         .collect();
-    let in_archives: BTreeSet<&str> = plan
-        .iter()
-        .map(|p| p.run.id.as_str())
-        .chain(seen_runs.keys().map(|r| r.as_str()))
+    // Every run of a readable archive (planned or failed) and the carried ones.
+    let in_archives: BTreeSet<&str> = seen_runs
+        .keys()
+        .map(|r| r.as_str())
         .chain(carried.iter().map(|e| e.run.as_str()))
         .collect();
     summary.removed = if matches!(opts.mode, Mode::Shard { .. }) {
@@ -736,17 +736,7 @@ struct StagedRun {
 fn stage_one(dataset: &Path, p: &Planned, out: Result<RunOutput, String>) -> StagedRun {
     match out {
         Ok(o) => StagedRun {
-            warnings: o
-                .rows
-                .iter()
-                .filter(|r| r.wear_mean_pct.is_nan())
-                .map(|r| {
-                    format!(
-                        "run {} wheel {}: no wear readings, wear_mean_pct is NaN",
-                        r.run, r.wheel
-                    )
-                })
-                .collect(),
+            warnings: o.missing_wear_warnings(),
             telemetry_bytes: o.bytes,
             result: write_run_parts(dataset, &p.key, &p.run.id, o),
         },
