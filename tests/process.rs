@@ -404,6 +404,74 @@ fn an_unreadable_archive_or_file_fails_only_its_own_runs() {
     assert!(part.exists());
 }
 
+/// A committed part or consolidated table damaged after its commit (cut
+/// short, overwritten) costs only its run: the next run reports it by name,
+/// processes that run again and leaves the dataset byte-identical to the
+/// undamaged one. Before, it stopped every later commit.
+#[test]
+fn a_damaged_part_or_table_is_made_again() {
+    let dir = tempfile::tempdir().unwrap();
+    let archive = dir.path().join("season");
+    let dataset = dir.path().join("dataset");
+    tiny(&archive, 19);
+    run(&archive, &dataset);
+    let t = tree(&dataset);
+    let part = |kind: &str, i: usize| -> PathBuf {
+        let n = names(&t)
+            .into_iter()
+            .filter(|n| n.starts_with(&format!("{kind}/event=")))
+            .nth(i)
+            .unwrap();
+        dataset.join(n)
+    };
+    let cut = |p: &Path| {
+        let bytes = std::fs::read(p).unwrap();
+        std::fs::write(p, &bytes[..bytes.len() / 2]).unwrap();
+    };
+    let zero = |p: &Path| {
+        let len = std::fs::metadata(p).unwrap().len() as usize;
+        std::fs::write(p, vec![0u8; len]).unwrap();
+    };
+    let named = |s: &ProcessSummary, p: &Path| {
+        let p = p.display().to_string();
+        assert!(
+            s.warnings.iter().any(|w| w.starts_with(&p)),
+            "no warning names {p}: {:?}",
+            s.warnings
+        );
+    };
+
+    // Two runs' parts: one cut short, one overwritten with zeros.
+    let (kpi_part, map_part) = (part("kpis", 0), part("energy_maps", 2));
+    cut(&kpi_part);
+    zero(&map_part);
+    let s = run(&archive, &dataset);
+    assert_eq!((s.processed, s.unchanged, s.failed.len()), (2, 2, 0));
+    named(&s, &kpi_part);
+    named(&s, &map_part);
+    assert_eq!(tree(&dataset), t);
+
+    // The consolidated table alone: nothing to process, but it is rebuilt.
+    let kpis = dataset.join("kpis.parquet");
+    cut(&kpis);
+    let s = run(&archive, &dataset);
+    assert_eq!((s.processed, s.unchanged), (0, 4));
+    assert!(s.committed);
+    named(&s, &kpis);
+    assert_eq!(tree(&dataset), t);
+
+    // Both at once: the commit cannot splice from the table, and the
+    // damaged part is not read but made again.
+    let cond_part = part("condition_maps", 1);
+    cut(&kpis);
+    zero(&cond_part);
+    let s = run(&archive, &dataset);
+    assert_eq!((s.processed, s.unchanged, s.failed.len()), (1, 3, 0));
+    named(&s, &cond_part);
+    assert_eq!(tree(&dataset), t);
+    assert_eq!(processed_rows(&dataset), extracted(&archive, dir.path()));
+}
+
 /// The documented exit codes: 4 while another process holds the dataset,
 /// 3 when some runs failed and the rest were committed, 0 otherwise.
 #[test]

@@ -275,12 +275,74 @@ fn read_manifest(dataset: &Path) -> Result<Option<DatasetManifest>, NightlyError
 fn read_batches(path: &Path) -> Result<Vec<RecordBatch>, NightlyError> {
     let file = std::fs::File::open(path).map_err(NightlyError::io(path))?;
     let bad = |e: &dyn std::fmt::Display| {
-        NightlyError::Invalid(format!("{}: damaged part: {e}", path.display()))
+        NightlyError::Invalid(format!(
+            "{}: damaged part: {e} (delete it and it is made again on the next run)",
+            path.display()
+        ))
     };
     let reader = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file)
         .and_then(|b| b.build())
         .map_err(|e| bad(&e))?;
     reader.collect::<Result<Vec<_>, _>>().map_err(|e| bad(&e))
+}
+
+/// Whether every committed part of `e` can still be read: its Parquet
+/// footer parses and, for the KPI part, holds the rows the manifest
+/// recorded. A part that is missing or fails this is reported in
+/// `warnings` and its run is processed again. Only the footer is read (a
+/// few KiB, so the check stays cheap every night): damage inside a data
+/// page passes it, and shows only if the part itself must be read at the
+/// commit, whose error names the part (docs/nightly.md, "Damaged parts").
+fn parts_intact(dataset: &Path, e: &RunEntry, warnings: &mut Vec<String>) -> bool {
+    PART_KINDS.iter().all(|kind| {
+        let path = committed_part(dataset, kind, e);
+        let rows = (*kind == "kpis").then_some(e.rows);
+        match part_damage(&path, rows) {
+            None => true,
+            Some(why) => {
+                let w = format!("{}: {why}; run {} processed again", path.display(), e.run);
+                tracing::warn!("{w}");
+                warnings.push(w);
+                false
+            }
+        }
+    })
+}
+
+/// What is wrong with a committed part, if anything (see [`parts_intact`]).
+fn part_damage(path: &Path, rows: Option<usize>) -> Option<String> {
+    let file = match std::fs::File::open(path) {
+        Ok(f) => f,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Some("missing".into()),
+        Err(e) => return Some(format!("cannot be opened: {e}")),
+    };
+    let meta = match parquet::file::metadata::ParquetMetaDataReader::new().parse_and_finish(&file) {
+        Ok(m) => m,
+        Err(e) => return Some(format!("damaged (not a readable Parquet file: {e})")),
+    };
+    let found = meta.file_metadata().num_rows();
+    match rows {
+        Some(want) if found != want as i64 => Some(format!(
+            "damaged ({found} rows where the manifest recorded {want})"
+        )),
+        _ => None,
+    }
+}
+
+/// Whether the four consolidated tables can still be read (footers, as
+/// [`parts_intact`]); one that cannot is reported and rebuilt by a commit.
+fn tables_intact(dataset: &Path, warnings: &mut Vec<String>) -> bool {
+    let mut intact = true;
+    for kind in PART_KINDS.iter().chain(&["road"]) {
+        let path = table_path(dataset, kind);
+        if let Some(why) = part_damage(&path, None) {
+            let w = format!("{}: {why}; rebuilt from the parts", path.display());
+            tracing::warn!("{w}");
+            warnings.push(w);
+            intact = false;
+        }
+    }
+    intact
 }
 
 /// Removes temporary files of killed writers everywhere in the dataset.
@@ -455,13 +517,10 @@ pub fn process(opts: &ProcessOptions) -> Result<ProcessSummary, NightlyError> {
             continue;
         }
         summary.planned += 1;
-        // A committed part deleted by hand is made again.
-        let unchanged = committed.get(p.run.id.as_str()).is_some_and(|e| {
-            e.key == p.key
-                && PART_KINDS
-                    .iter()
-                    .all(|k| committed_part(dataset, k, e).exists())
-        });
+        // A committed part deleted or damaged since is made again.
+        let unchanged = committed
+            .get(p.run.id.as_str())
+            .is_some_and(|e| e.key == p.key && parts_intact(dataset, e, &mut summary.warnings));
         if unchanged && !opts.force {
             summary.unchanged += 1;
         } else if !opts.force && staged_complete(dataset, &p.key) {
@@ -577,7 +636,11 @@ pub fn process(opts: &ProcessOptions) -> Result<ProcessSummary, NightlyError> {
         id.update(r.key.as_bytes());
     }
     new.dataset_id = id.finalize().to_hex()[..32].to_string();
-    if new.dataset_id == old.dataset_id && ready.is_empty() && !opts.force {
+    if new.dataset_id == old.dataset_id
+        && ready.is_empty()
+        && !opts.force
+        && tables_intact(dataset, &mut summary.warnings)
+    {
         // Nothing changed in the outputs; keep the stamps current only.
         new.runs = old.runs.clone();
         if new != old {
