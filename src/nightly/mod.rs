@@ -292,7 +292,8 @@ fn read_batches(path: &Path) -> Result<Vec<RecordBatch>, NightlyError> {
 /// `warnings` and its run is processed again. Only the footer is read (a
 /// few KiB, so the check stays cheap every night): damage inside a data
 /// page passes it, and shows only if the part itself must be read at the
-/// commit, whose error names the part (docs/nightly.md, "Damaged parts").
+/// commit, whose error names the part (docs/nightly.md, "Damaged parts and
+/// tables").
 fn parts_intact(dataset: &Path, e: &RunEntry, warnings: &mut Vec<String>) -> bool {
     PART_KINDS.iter().all(|kind| {
         let path = committed_part(dataset, kind, e);
@@ -300,9 +301,12 @@ fn parts_intact(dataset: &Path, e: &RunEntry, warnings: &mut Vec<String>) -> boo
         match part_damage(&path, rows) {
             None => true,
             Some(why) => {
-                let w = format!("{}: {why}; run {} processed again", path.display(), e.run);
-                tracing::warn!("{w}");
-                warnings.push(w);
+                warn_damage(
+                    warnings,
+                    &path,
+                    &why,
+                    &format!("run {} processed again", e.run),
+                );
                 false
             }
         }
@@ -336,13 +340,18 @@ fn tables_intact(dataset: &Path, warnings: &mut Vec<String>) -> bool {
     for kind in PART_KINDS.iter().chain(&["road"]) {
         let path = table_path(dataset, kind);
         if let Some(why) = part_damage(&path, None) {
-            let w = format!("{}: {why}; rebuilt from the parts", path.display());
-            tracing::warn!("{w}");
-            warnings.push(w);
+            warn_damage(warnings, &path, &why, "rebuilt from the parts");
             intact = false;
         }
     }
     intact
+}
+
+/// Logs a damaged file and what is done about it, and keeps it for the summary.
+fn warn_damage(warnings: &mut Vec<String>, path: &Path, why: &str, remedy: &str) {
+    let w = format!("{}: {why}; {remedy}", path.display());
+    tracing::warn!("{w}");
+    warnings.push(w);
 }
 
 /// Removes temporary files of killed writers everywhere in the dataset.
