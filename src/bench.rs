@@ -35,6 +35,8 @@ pub enum BenchParts {
     Kernels,
     /// Telemetry decoding against zstd alone, on a simulated season.
     Decode,
+    /// The gap diagnosis of simulated seasons, against its 10 s target.
+    Gap,
 }
 
 /// One measured line.
@@ -219,11 +221,14 @@ pub fn run_bench(o: &BenchOptions) -> BenchReport {
         None
     };
 
-    if o.parts != BenchParts::Decode {
+    if matches!(o.parts, BenchParts::All | BenchParts::Kernels) {
         kernel_lines(o, gpu.as_ref(), &mut report);
     }
-    if o.parts != BenchParts::Kernels {
+    if matches!(o.parts, BenchParts::All | BenchParts::Decode) {
         decode_lines(o, &mut report);
+    }
+    if matches!(o.parts, BenchParts::All | BenchParts::Gap) {
+        gap_lines(o, &mut report);
     }
     report
 }
@@ -538,6 +543,109 @@ fn season_decode_lines(
     Ok(())
 }
 
+/// What a diagnosis of the demo season may take on this machine (issue
+/// target, docs/gap.md): the gap lines' reference time.
+const GAP_TARGET_S: f64 = 10.0;
+
+/// The gap diagnosis (`gap::report::diagnose`, physics baseline, default
+/// settings: 1999 permutations per candidate) of the demo season and of the
+/// season preset `gap validate` diagnoses (scale 0.5, 5 Hz), on one thread
+/// and on all, against the 10 s target (`vs ref` = 10 s / time). The
+/// simulation and extraction are not timed; reading the tables is.
+fn gap_lines(o: &BenchOptions, report: &mut BenchReport) {
+    use crate::sim::Preset;
+    let Ok(dir) = tempfile::tempdir() else {
+        report.notes.push("gap skipped: no temporary folder".into());
+        return;
+    };
+    // A clean season adds no term; a planted effect makes forward selection
+    // score every candidate again per term added (the slow path).
+    let seasons: Vec<(&'static str, Preset, f64, Option<f64>, &str)> = if o.small {
+        // The tiny season has too few tires for a diagnosis.
+        vec![("gap, demo", Preset::Demo, 1.0, None, "")]
+    } else {
+        vec![
+            ("gap, demo", Preset::Demo, 1.0, None, ""),
+            ("gap, demo+grain.", Preset::Demo, 1.0, None, "graining=1"),
+            ("gap, season 0.5", Preset::Season, 0.5, Some(5.0), ""),
+            (
+                "gap, seas.+grain.",
+                Preset::Season,
+                0.5,
+                Some(5.0),
+                "graining=1",
+            ),
+        ]
+    };
+    for (label, preset, scale, rate_hz, effect) in seasons {
+        let season = dir.path().join(label.replace([',', ' ', '+', '.'], "-"));
+        let sim = (preset, scale, rate_hz, effect);
+        if let Err(e) = season_gap_lines(o, label, sim, &season, report) {
+            report.notes.push(format!("{label} skipped: {e}"));
+        }
+    }
+}
+
+/// Simulates and extracts one season, then times its diagnosis.
+fn season_gap_lines(
+    o: &BenchOptions,
+    label: &'static str,
+    (preset, scale, rate_hz, effect): (crate::sim::Preset, f64, Option<f64>, &str),
+    season: &std::path::Path,
+    report: &mut BenchReport,
+) -> Result<(), String> {
+    use crate::gap::report::{Baseline, GapSettings, diagnose};
+    crate::sim::simulate(&crate::sim::SimOptions {
+        preset,
+        scale,
+        seed: 1,
+        effects: if effect.is_empty() {
+            vec![]
+        } else {
+            vec![effect.parse()?]
+        },
+        generated: None,
+        scatter: crate::sim::WearScatter::NONE,
+        encoding: crate::ingest::telemetry::Encoding::Block,
+        rate_hz,
+        out: season.to_path_buf(),
+        sensor_noise: true,
+        progress: false,
+    })
+    .map_err(|e| e.to_string())?;
+    let kpis = season.join("kpis.parquet");
+    crate::kpi::extract(&crate::kpi::ExtractOptions::new(season, &kpis))
+        .map_err(|e| e.to_string())?;
+    let settings = GapSettings {
+        wlf: crate::ingest::compound::read_wlf(&season.join("compounds"))
+            .map_err(|e| e.to_string())?,
+        ..GapSettings::default()
+    };
+    let run = || -> Result<usize, String> {
+        let rows = crate::kpi::table::read_parquet(&kpis).map_err(|e| e.to_string())?;
+        let maps = crate::kpi::energy_maps::read_tire_maps(&kpis).map_err(|e| e.to_string())?;
+        diagnose(&rows, &maps, &Baseline::Physics, &settings).map_err(|e| e.to_string())?;
+        Ok(rows.len())
+    };
+    let (t1, tires) = best(o.repeats, || one_thread(run));
+    let tires = tires?;
+    let w = Workload {
+        kernel: label,
+        size: format!("{tires} tire-runs"),
+        items: tires as f64,
+        unit: "tires/s",
+        bytes: 0.0,
+        memory_pass: Duration::from_secs_f64(GAP_TARGET_S),
+        reference: "target 10 s",
+    };
+    report.lines.push(w.line("tirewear, 1 thread", t1, None));
+    let (tn, _) = best(o.repeats, run);
+    report
+        .lines
+        .push(w.line(&format!("tirewear, {} threads", report.threads), tn, None));
+    Ok(())
+}
+
 /// The report as a table.
 pub fn render(r: &BenchReport) -> String {
     let mut s = String::new();
@@ -560,7 +668,11 @@ pub fn render(r: &BenchReport) -> String {
             l.engine,
             l.seconds * 1e3,
             l.items_per_s,
-            if l.unit == "samples/s" { "S/s" } else { "P/s" },
+            match l.unit.as_str() {
+                "samples/s" => "S/s",
+                "tires/s" => "T/s",
+                _ => "P/s",
+            },
             l.gb_per_s,
             l.vs_memory_pass
         );
@@ -568,7 +680,8 @@ pub fn render(r: &BenchReport) -> String {
     let _ = writeln!(
         s,
         "vs ref: the reference's time over this time (kernels: a memory pass over \
-         the same bytes; decode: zstd alone decompressing the same chunks)"
+         the same bytes; decode: zstd alone decompressing the same chunks; gap: \
+         its 10 s target)"
     );
     for n in &r.notes {
         let _ = writeln!(s, "note: {n}");

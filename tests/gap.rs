@@ -296,7 +296,7 @@ fn a_planted_set_up_effect_is_named_by_its_car_and_axle() {
         r.wear_mean_pct *= 1.3;
     }
     let gap = GapSettings {
-        wlf: tirewear::gap::validate::read_wlf(&season.join("compounds")).unwrap(),
+        wlf: tirewear::ingest::compound::read_wlf(&season.join("compounds")).unwrap(),
         ..s.gap.clone()
     };
     let d = diagnose(&rows, &maps, &Baseline::Physics, &gap).unwrap();
@@ -482,7 +482,7 @@ fn an_unlisted_slip_effect_is_found_among_the_generated_candidates() {
         tirewear::kpi::energy_maps::read_tire_maps(&season_dir.join("kpis.parquet")).unwrap();
     assert!(maps.values().all(|m| m.conditions.is_some()));
     let gap = GapSettings {
-        wlf: tirewear::gap::validate::read_wlf(&season_dir.join("compounds")).unwrap(),
+        wlf: tirewear::ingest::compound::read_wlf(&season_dir.join("compounds")).unwrap(),
         ..s.gap.clone()
     };
     let d = diagnose(&rows, &maps, &Baseline::Physics, &gap).unwrap();
@@ -511,4 +511,32 @@ fn an_unlisted_slip_effect_is_found_among_the_generated_candidates() {
         assert!(md.contains(&said), "{md}");
     }
     assert!(shrink > 0.6, "{shrink}");
+}
+
+/// `tirewear bench --only gap` times the diagnosis of the demo season
+/// (10 events × 2 cars × 4 runs × 4 wheels = 320 tire-runs) on one thread
+/// and on all, and states each time against the 10 s target.
+#[test]
+fn bench_gap_lines_time_the_demo_diagnosis_against_its_target() {
+    use tirewear::bench::{BenchOptions, BenchParts, run_bench};
+    let r = run_bench(&BenchOptions {
+        small: true,
+        gpu: false,
+        repeats: 1,
+        parts: BenchParts::Gap,
+        season: None,
+    });
+    assert!(r.notes.is_empty(), "{:?}", r.notes);
+    let engines: Vec<&str> = r.lines.iter().map(|l| l.engine.as_str()).collect();
+    assert_eq!(engines.len(), 2, "{engines:?}");
+    assert_eq!(engines[0], "tirewear, 1 thread");
+    for l in &r.lines {
+        assert_eq!(
+            (l.kernel.as_str(), l.size.as_str()),
+            ("gap, demo", "320 tire-runs")
+        );
+        assert_eq!(l.reference, "target 10 s");
+        assert!((l.vs_memory_pass * l.seconds - 10.0).abs() < 1e-9);
+        assert!((l.items_per_s * l.seconds - 320.0).abs() < 1e-9);
+    }
 }

@@ -14,8 +14,10 @@ pub(crate) struct BenchArgs {
     /// Repeats per measurement (the best is kept).
     #[arg(long, default_value_t = 3)]
     repeats: usize,
-    /// Measure only one part: `kernels` (the engines on synthetic buffers)
-    /// or `decode` (MCAP decoding against zstd alone on a simulated season).
+    /// Measure only one part: `kernels` (the engines on synthetic buffers),
+    /// `decode` (MCAP decoding against zstd alone on a simulated season) or
+    /// `gap` (the gap diagnosis of the demo season and of `gap validate`'s
+    /// season, against its 10 s target).
     #[arg(long, value_enum)]
     only: Option<BenchPart>,
     /// Season archive (folder with season.toml) to measure decoding and
@@ -31,6 +33,7 @@ pub(crate) struct BenchArgs {
 pub(crate) enum BenchPart {
     Kernels,
     Decode,
+    Gap,
 }
 
 #[derive(Clone, Copy, PartialEq, clap::ValueEnum)]
@@ -59,6 +62,7 @@ pub(crate) fn run(a: BenchArgs) -> Result<()> {
             None => BenchParts::All,
             Some(BenchPart::Kernels) => BenchParts::Kernels,
             Some(BenchPart::Decode) => BenchParts::Decode,
+            Some(BenchPart::Gap) => BenchParts::Gap,
         },
         season,
     });

@@ -68,7 +68,7 @@ pub(crate) fn run(a: DemoArgs, progress: bool) -> Result<()> {
     )?;
     println!();
     let settings = tirewear::gap::report::GapSettings {
-        wlf: tirewear::gap::validate::read_wlf(&out.join("compounds"))?,
+        wlf: tirewear::ingest::compound::read_wlf(&out.join("compounds"))?,
         ..Default::default()
     };
     run_gap(

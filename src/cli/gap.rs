@@ -320,7 +320,7 @@ pub(crate) fn run(a: GapArgs, progress: bool) -> Result<()> {
             .join("compounds")
     });
     if compounds.is_some() || dir.is_dir() {
-        settings.wlf = tirewear::gap::validate::read_wlf(&dir)
+        settings.wlf = tirewear::ingest::compound::read_wlf(&dir)
             .with_context(|| format!("reading compound files in {}", dir.display()))?;
     } else {
         tracing::warn!(

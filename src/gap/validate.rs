@@ -133,26 +133,6 @@ pub fn matrix(s: &ValidateSettings) -> Vec<(Planted, u64)> {
     out
 }
 
-/// WLF constants of every `*.toml` compound file in `dir`, by compound id.
-pub fn read_wlf(dir: &Path) -> Result<BTreeMap<String, crate::ingest::compound::Wlf>, GapError> {
-    let io = |e| GapError::Io {
-        path: dir.display().to_string(),
-        source: e,
-    };
-    let mut out = BTreeMap::new();
-    let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
-        .map_err(io)?
-        .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| p.extension().is_some_and(|x| x == "toml"))
-        .collect();
-    files.sort();
-    for f in files {
-        let c = crate::ingest::compound::Compound::load(&f)?;
-        out.insert(c.id, c.wlf);
-    }
-    Ok(out)
-}
-
 /// Planted wear (%) per (run, wheel) from `truth/wear_truth.csv`: the
 /// column `wear_<column>_pct` (None: zero).
 pub fn read_planted(
@@ -398,7 +378,7 @@ pub fn run_case(
     let maps = crate::kpi::energy_maps::read_tire_maps(&kpis)?;
     // The diagnosis sees the KPI tables and the compound files only.
     let gap = GapSettings {
-        wlf: read_wlf(&dir.join("compounds"))?,
+        wlf: crate::ingest::compound::read_wlf(&dir.join("compounds"))?,
         ..s.gap.clone()
     };
     let d = diagnose(&rows, &maps, &Baseline::Physics, &gap)?;
