@@ -4,20 +4,54 @@ use serde::{Deserialize, Serialize};
 use std::fmt;
 use std::str::FromStr;
 
-/// A wheel position on a four-wheeled car.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
+/// A wheel position on a four-wheeled car. (The default, FL, is only there
+/// so that rows can be built field by field.)
+#[derive(
+    Debug, Clone, Copy, Default, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize,
+)]
 pub enum Wheel {
+    #[default]
     FL,
     FR,
     RL,
     RR,
 }
 
-/// Front or rear axle.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+/// Front or rear axle: "front" and "rear" in every file tirewear writes
+/// (season archives' truth files before 2026-11-24 spelled them "Front" and
+/// "Rear", which still read). The default, front, is only there so that
+/// rows can be built field by field.
+#[derive(
+    Debug, Clone, Copy, Default, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize,
+)]
 pub enum Axle {
+    #[default]
+    #[serde(rename = "front", alias = "Front")]
     Front,
+    #[serde(rename = "rear", alias = "Rear")]
     Rear,
+}
+
+impl Axle {
+    pub const ALL: [Axle; 2] = [Axle::Front, Axle::Rear];
+
+    /// "front" or "rear", as the KPI table's `axle` column spells it.
+    pub fn name(self) -> &'static str {
+        match self {
+            Axle::Front => "front",
+            Axle::Rear => "rear",
+        }
+    }
+}
+
+impl FromStr for Axle {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        Axle::ALL
+            .into_iter()
+            .find(|a| a.name().eq_ignore_ascii_case(s))
+            .ok_or_else(|| format!("unknown axle '{s}' (expected front or rear)"))
+    }
 }
 
 impl Wheel {
@@ -84,9 +118,28 @@ impl FromStr for Wheel {
 
 impl fmt::Display for Axle {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(match self {
-            Axle::Front => "front",
-            Axle::Rear => "rear",
-        })
+        f.write_str(self.name())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn axles_are_written_lowercase_and_older_capitalised_files_still_read() {
+        assert_eq!(serde_json::to_string(&Axle::Rear).unwrap(), "\"rear\"");
+        for (text, axle) in [
+            ("\"front\"", Axle::Front),
+            ("\"Front\"", Axle::Front),
+            ("\"Rear\"", Axle::Rear),
+        ] {
+            assert_eq!(serde_json::from_str::<Axle>(text).unwrap(), axle);
+        }
+        assert_eq!("REAR".parse::<Axle>(), Ok(Axle::Rear));
+        assert!("middle".parse::<Axle>().unwrap_err().contains("'middle'"));
+        for w in Wheel::ALL {
+            assert_eq!(w.name().parse::<Wheel>(), Ok(w));
+        }
     }
 }

@@ -80,7 +80,7 @@ fn demo_season_extracts_to_complete_rows() {
             .unwrap();
     assert_eq!(maps.len(), rows.len());
     for r in &rows {
-        let m = &maps[&(r.run.clone(), r.wheel.clone())];
+        let m = &maps[&(r.run.clone(), r.wheel.to_string())];
         let close = |what: &str, got: f64, want: f64| {
             assert!(
                 (got - want).abs() <= 1e-9 * want.abs(),
@@ -111,7 +111,7 @@ fn demo_season_extracts_to_complete_rows() {
     assert_eq!(cmaps.len(), rows.len());
     use tirewear::kpi::condition_map::{CONDITIONS, Component};
     for r in &rows {
-        let m = &cmaps[&(r.run.clone(), r.wheel.clone())];
+        let m = &cmaps[&(r.run.clone(), r.wheel.to_string())];
         for (c, cd) in CONDITIONS.iter().enumerate() {
             for (comp, want) in [
                 (Component::Total, r.friction_energy_j),
@@ -146,7 +146,7 @@ fn demo_season_extracts_to_complete_rows() {
     for r in &rows {
         let t = truth
             .iter()
-            .find(|t| t.run == r.run && t.wheel == r.wheel)
+            .find(|t| t.run == r.run && t.wheel == r.wheel.name())
             .unwrap();
         if t.wear_total_pct > 80.0 {
             continue;

@@ -92,7 +92,7 @@ fn demo_fit_ranks_like_the_paper_and_models_round_trip() {
         .test
         .iter()
         .copied()
-        .filter(|r| r.axle == "rear")
+        .filter(|r| r.axle == tirewear::Axle::Rear)
         .collect();
     let y: Vec<f64> = rear_test.iter().map(|r| r.wear_mean_pct).collect();
     let p: Vec<f64> = rear_test

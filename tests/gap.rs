@@ -292,7 +292,10 @@ fn a_planted_set_up_effect_is_named_by_its_car_and_axle() {
     cars.sort();
     cars.dedup();
     let car = cars[cars.len() / 2].clone();
-    for r in rows.iter_mut().filter(|r| r.car == car && r.axle == "rear") {
+    for r in rows
+        .iter_mut()
+        .filter(|r| r.car == car && r.axle == tirewear::Axle::Rear)
+    {
         r.wear_mean_pct *= 1.3;
     }
     let gap = GapSettings {
@@ -344,7 +347,7 @@ fn a_planted_set_up_effect_is_named_by_its_car_and_axle() {
     let mut rows = tirewear::kpi::table::read_parquet(&season.join("kpis.parquet")).unwrap();
     for r in rows
         .iter_mut()
-        .filter(|r| r.car == cars[0] && r.wheel == "FR")
+        .filter(|r| r.car == cars[0] && r.wheel == tirewear::Wheel::FR)
     {
         r.wear_mean_pct *= 0.75;
     }
@@ -470,7 +473,7 @@ fn an_unlisted_slip_effect_is_found_among_the_generated_candidates() {
     let wear: Vec<f64> = rows.iter().map(|r| r.wear_mean_pct).collect();
     let planted: Vec<f64> = rows
         .iter()
-        .map(|r| extra[&(r.run.clone(), r.wheel.clone())])
+        .map(|r| extra[&(r.run.clone(), r.wheel.to_string())])
         .collect();
     assert!(var(&planted) > 0.0, "the condition occurs");
     // a²·var(planted) = var(wear)/3: about a quarter of the new variance.

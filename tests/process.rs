@@ -32,20 +32,20 @@ fn run(archive: &Path, dataset: &Path) -> ProcessSummary {
 }
 
 /// Rows keyed by (run, wheel), every number as its bits (NaN equals NaN).
-fn keyed(rows: Vec<KpiRow>) -> BTreeMap<(String, String), String> {
+fn keyed(rows: Vec<KpiRow>) -> BTreeMap<(String, tirewear::Wheel), String> {
     rows.into_iter()
-        .map(|r| ((r.run.clone(), r.wheel.clone()), format!("{r:?}")))
+        .map(|r| ((r.run.clone(), r.wheel), format!("{r:?}")))
         .collect()
 }
 
 /// The rows one plain extraction of `archive` gives.
-fn extracted(archive: &Path, scratch: &Path) -> BTreeMap<(String, String), String> {
+fn extracted(archive: &Path, scratch: &Path) -> BTreeMap<(String, tirewear::Wheel), String> {
     let out = scratch.join("extract.parquet");
     extract(&ExtractOptions::new(archive, &out)).unwrap();
     keyed(table::read_parquet(&out).unwrap())
 }
 
-fn processed_rows(dataset: &Path) -> BTreeMap<(String, String), String> {
+fn processed_rows(dataset: &Path) -> BTreeMap<(String, tirewear::Wheel), String> {
     keyed(table::read_parquet(&dataset.join("kpis.parquet")).unwrap())
 }
 
@@ -369,7 +369,7 @@ fn an_unreadable_archive_or_file_fails_only_its_own_runs() {
     assert!(s.failed[0].season.ends_with("b"), "{:?}", s.failed);
     let rows = processed_rows(&dataset);
     assert_eq!(rows.len(), 32);
-    let b_rows = |r: &BTreeMap<(String, String), String>| {
+    let b_rows = |r: &BTreeMap<(String, tirewear::Wheel), String>| {
         r.iter()
             .filter(|((run, _), _)| run.starts_with("b-"))
             .map(|(k, v)| (k.clone(), v.clone()))

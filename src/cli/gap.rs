@@ -205,7 +205,10 @@ pub(crate) fn run_gap(
         let p = tirewear::gap::report::Predictions::read(std::path::Path::new(baseline))?;
         let missing = rows
             .iter()
-            .filter(|r| !p.wear_pct.contains_key(&(r.run.clone(), r.wheel.clone())))
+            .filter(|r| {
+                !p.wear_pct
+                    .contains_key(&(r.run.clone(), r.wheel.to_string()))
+            })
             .count();
         if missing > 0 {
             tracing::warn!(

@@ -295,6 +295,7 @@ impl PhysicsBaseline {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::Axle;
 
     #[test]
     fn recovers_a_planted_law() {
@@ -303,16 +304,16 @@ mod tests {
         let rows: Vec<KpiRow> = (0..40)
             .map(|i| {
                 let (c, a, k) = if i % 2 == 0 {
-                    ("soft", "front", 1.5)
+                    ("soft", Axle::Front, 1.5)
                 } else {
-                    ("hard", "rear", 0.8)
+                    ("hard", Axle::Rear, 0.8)
                 };
                 let e = 5.0 + i as f64;
                 let t = 50.0 + (i % 7) as f64 * 6.0;
                 let sk = -1.0 + 0.1 * (i % 9) as f64;
                 KpiRow {
                     compound: c.into(),
-                    axle: a.into(),
+                    axle: a,
                     friction_energy_j: e * 1e6,
                     t_surface_avg_c: t,
                     skewness: sk,
@@ -363,7 +364,7 @@ mod tests {
                 let e = 4.0 + (i % 5) as f64;
                 KpiRow {
                     compound: "soft".into(),
-                    axle: "rear".into(),
+                    axle: Axle::Rear,
                     friction_energy_j: e * 1e6,
                     t_surface_avg_c: t,
                     wear_mean_pct: 2.0
@@ -396,7 +397,7 @@ mod tests {
         m.add(88.0, 110.0, 1.0, 1e6);
         let r = KpiRow {
             compound: "soft".into(),
-            axle: "front".into(),
+            axle: Axle::Front,
             skewness: -0.7,
             ..Default::default()
         };

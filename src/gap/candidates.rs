@@ -9,6 +9,7 @@ use crate::kpi::KpiRow;
 use crate::kpi::condition_map::{CONDITIONS, Component};
 use crate::kpi::energy_maps::EnergyMaps;
 use crate::model::data::candidate_inputs;
+use crate::{Axle, Wheel};
 use std::sync::Arc;
 
 /// How a candidate's term is computed for a row at threshold θ.
@@ -160,8 +161,8 @@ pub struct Candidate {
     pub name: String,
     pub feature: Feature,
     pub thresholds: Vec<f64>,
-    /// "front", "rear", or None for both axles.
-    pub axle: Option<&'static str>,
+    /// One axle, or None for both.
+    pub axle: Option<Axle>,
     /// The compiled expression of a user hypothesis.
     #[serde(skip)]
     pub user: Option<Arc<UserEffect>>,
@@ -174,13 +175,12 @@ pub struct Candidate {
 #[derive(Debug, Clone, PartialEq, Eq, serde::Serialize)]
 pub struct Group {
     pub car: Option<String>,
-    pub wheel: Option<String>,
+    pub wheel: Option<Wheel>,
 }
 
 impl Group {
     pub fn contains(&self, r: &KpiRow) -> bool {
-        self.car.as_ref().is_none_or(|c| *c == r.car)
-            && self.wheel.as_ref().is_none_or(|w| *w == r.wheel)
+        self.car.as_ref().is_none_or(|c| *c == r.car) && self.wheel.is_none_or(|w| w == r.wheel)
     }
 
     /// "car2", "car2, FL", "FL on every car".
@@ -286,7 +286,7 @@ pub fn library(rows: &[&KpiRow]) -> Vec<Candidate> {
     ];
     let mut out = Vec::new();
     for (name, feature, thresholds) in mechanisms {
-        for axle in [None, Some("front"), Some("rear")] {
+        for axle in [None, Some(Axle::Front), Some(Axle::Rear)] {
             out.push(Candidate {
                 name: match axle {
                     None => name.to_string(),
@@ -387,7 +387,7 @@ pub const NAMED_CONDITIONS: [(&str, bool, Feature); 4] = [
 /// and energy component (total, longitudinal, lateral), the energy above θ
 /// and below θ (θ every other inner bin edge, scanned in the
 /// cross-validation like a mechanism's threshold), on both axles and on
-/// each alone — except the points a named mechanism already covers
+/// each alone ([`condition_scopes`]) — except the points a named mechanism already covers
 /// ([`NAMED_CONDITIONS`], on every component). Rows whose extraction wrote no
 /// condition maps, or maps without that condition, give NaN terms, and the
 /// scoring passes these candidates over.
@@ -408,12 +408,9 @@ fn condition_candidates() -> Vec<Candidate> {
                 }
                 let side = if above { "above" } else { "below" };
                 let name = format!("{} with {} {side} θ", component.energy_name(), cd.name);
-                for axle in [None, Some("front"), Some("rear")] {
+                for (scope, axle, group) in condition_scopes() {
                     out.push(Candidate {
-                        name: match axle {
-                            None => name.clone(),
-                            Some(a) => format!("{name}, {a} axle"),
-                        },
+                        name: format!("{name}{scope}"),
                         feature: Feature::ConditionEnergy {
                             condition: c,
                             above,
@@ -422,12 +419,23 @@ fn condition_candidates() -> Vec<Candidate> {
                         thresholds: thresholds.clone(),
                         axle,
                         user: None,
-                        group: None,
+                        group,
                     });
                 }
             }
         }
     }
+    out
+}
+
+/// The scopes of a generated condition candidate: both axles, each axle,
+/// as (name suffix, axle, group).
+fn condition_scopes() -> Vec<(String, Option<Axle>, Option<Group>)> {
+    let out: Vec<(String, Option<Axle>, Option<Group>)> = vec![
+        (String::new(), None, None),
+        (", front axle".into(), Some(Axle::Front), None),
+        (", rear axle".into(), Some(Axle::Rear), None),
+    ];
     out
 }
 
@@ -443,11 +451,10 @@ fn setup_candidates(rows: &[&KpiRow]) -> Vec<Candidate> {
     let mut cars: Vec<&str> = rows.iter().map(|r| r.car.as_str()).collect();
     cars.sort();
     cars.dedup();
-    let wheels = ["FL", "FR", "RL", "RR"];
-    let mut groups: Vec<(Group, Option<&'static str>)> = Vec::new();
+    let mut groups: Vec<(Group, Option<Axle>)> = Vec::new();
     for car in &cars {
         let car = Some(car.to_string());
-        for axle in [None, Some("front"), Some("rear")] {
+        for axle in [None, Some(Axle::Front), Some(Axle::Rear)] {
             groups.push((
                 Group {
                     car: car.clone(),
@@ -456,21 +463,21 @@ fn setup_candidates(rows: &[&KpiRow]) -> Vec<Candidate> {
                 axle,
             ));
         }
-        for w in wheels {
+        for w in Wheel::ALL {
             groups.push((
                 Group {
                     car: car.clone(),
-                    wheel: Some(w.into()),
+                    wheel: Some(w),
                 },
                 None,
             ));
         }
     }
-    for w in wheels {
+    for w in Wheel::ALL {
         groups.push((
             Group {
                 car: None,
-                wheel: Some(w.into()),
+                wheel: Some(w),
             },
             None,
         ));
@@ -620,7 +627,8 @@ impl LawRow {
     }
 }
 
-/// A candidate's term for a row: zero on the other axle.
+/// A candidate's term for a row: zero on the other axle, and outside its
+/// group (a set-up group, or the wheel position of a condition candidate).
 ///
 /// Under the physics baseline a built-in mechanism's energy is charged at
 /// the law's own abrasion per joule for that tire (its compound, axle and
@@ -644,9 +652,10 @@ pub fn candidate_feature(
 ) -> f64 {
     match (c.axle, &c.user) {
         (Some(a), _) if r.axle != a => 0.0,
+        _ if c.group.as_ref().is_some_and(|g| !g.contains(r)) => 0.0,
         _ if c.feature == Feature::Group => match &c.group {
-            Some(g) if g.contains(r) => law.wear_pct,
-            _ => 0.0,
+            Some(_) => law.wear_pct,
+            None => 0.0,
         },
         (_, Some(u)) if u.adds_wear => law.abrasion * u.feature(r, maps, theta),
         (_, Some(u)) => u.feature(r, maps, theta),
@@ -740,7 +749,7 @@ mod tests {
         // 2.5 MJ (its raw friction energy is 3 MJ), on a road with Ra_micro
         // 0.02 mm and kurtosis 3.5, in 40 °C air.
         let r = KpiRow {
-            axle: "front".into(),
+            axle: Axle::Front,
             friction_energy_j: 3e6,
             ra_micro_mm: 0.02,
             kurtosis: 3.5,
@@ -863,7 +872,8 @@ mod tests {
             .is_nan()
         );
         // The generated space: every condition and component both ways on
-        // three scopes, less the points the named mechanisms stand for.
+        // three scopes (both axles, each axle), less the points the named
+        // mechanisms stand for.
         let generated = condition_candidates();
         assert_eq!(
             generated.len(),

@@ -192,9 +192,9 @@ mod tests {
         let mut maps = Vec::new();
         for i in 0..48 {
             let (compound, axle, k) = if i % 2 == 0 {
-                ("soft", "front", 1.5)
+                ("soft", crate::Axle::Front, 1.5)
             } else {
-                ("hard", "rear", 0.8)
+                ("hard", crate::Axle::Rear, 0.8)
             };
             let cool_mj = 4.0 + (i % 5) as f64;
             let warm_mj = 1.0 + (i % 4) as f64;
@@ -208,7 +208,7 @@ mod tests {
             let law = cool_mj * phi(62.5) + warm_mj * phi(77.5) + hot_mj * phi(92.5);
             rows.push(KpiRow {
                 compound: compound.into(),
-                axle: axle.into(),
+                axle,
                 track: format!("t{}", i % 6),
                 friction_energy_j: (cool_mj + warm_mj + hot_mj) * 1e6,
                 t_surface_avg_c: 70.0,

@@ -18,6 +18,7 @@ use crate::kpi::energy_maps::EnergyMaps;
 use crate::model::ModelError;
 use crate::model::fit::split;
 use crate::model::saved::SavedModel;
+use crate::{Axle, Wheel};
 use std::collections::BTreeMap;
 
 /// The simulation side of the gap.
@@ -209,8 +210,8 @@ fn bootstrap_terms(
 #[derive(Debug, Clone, serde::Serialize)]
 pub struct TermsWear {
     pub run: String,
-    pub wheel: String,
-    pub axle: String,
+    pub wheel: Wheel,
+    pub axle: Axle,
     /// All terms together (%).
     pub wear_pct: f64,
     /// Each term's part (%), in the order of `Diagnosis::steps[1..]`.
@@ -286,7 +287,7 @@ pub fn diagnose(
     }
     let rows = rows.as_slice();
     let s = split(rows, settings.test_events.as_deref())?;
-    let map_of = |r: &KpiRow| maps.get(&(r.run.clone(), r.wheel.clone()));
+    let map_of = |r: &KpiRow| maps.get(&(r.run.clone(), r.wheel.to_string()));
     let (name, physics) = match baseline {
         Baseline::Physics => {
             let train_maps: Vec<Option<&EnergyMaps>> = s.train.iter().map(|r| map_of(r)).collect();
@@ -304,7 +305,7 @@ pub fn diagnose(
             (Baseline::Model(m), _) => m.predict_row(r).unwrap_or(f64::NAN),
             (Baseline::Predictions(p), _) => p
                 .wear_pct
-                .get(&(r.run.clone(), r.wheel.clone()))
+                .get(&(r.run.clone(), r.wheel.to_string()))
                 .copied()
                 .unwrap_or(f64::NAN),
             (_, Some(p)) => p.predict(r, map_of(r)),
@@ -570,8 +571,8 @@ pub fn diagnose(
                     .collect();
                 TermsWear {
                     run: r.run.clone(),
-                    wheel: r.wheel.clone(),
-                    axle: r.axle.clone(),
+                    wheel: r.wheel,
+                    axle: r.axle,
                     wear_pct: by_term_pct.iter().sum(),
                     by_term_pct,
                     predicted_pct: (0..base.len()).map(|j| final_k[j] * base[j][i]).sum(),
@@ -622,8 +623,8 @@ fn slice_members(name: &str, rows: &[&KpiRow]) -> Vec<bool> {
     let part = |p: &str, r: &KpiRow| -> bool {
         if let Some((col, level)) = p.split_once(" = ") {
             let v = match col {
-                "axle" => &r.axle,
-                "wheel" => &r.wheel,
+                "axle" => r.axle.name(),
+                "wheel" => r.wheel.name(),
                 "track" => &r.track,
                 "event" => &r.event,
                 "compound" => &r.compound,

@@ -24,6 +24,7 @@ use super::candidates::{Candidate, Feature, KpiScale, LawRow, candidate_feature,
 use super::linear::{dot, lstsq, orthonormal_basis, project_out, residual, weighted};
 use super::stats::{benjamini_hochberg, levels};
 use super::track_test::Severities;
+use crate::Axle;
 use crate::kpi::KpiRow;
 use crate::kpi::energy_maps::EnergyMaps;
 use rand::SeedableRng;
@@ -89,7 +90,7 @@ pub struct Problem<'a> {
 pub struct Score {
     pub name: String,
     pub feature: Feature,
-    pub axle: Option<&'static str>,
+    pub axle: Option<Axle>,
     /// Threshold chosen on all rows scored (NaN for KPI candidates, or when
     /// no threshold gives a positive coefficient).
     pub threshold: f64,
@@ -263,10 +264,10 @@ pub(super) fn track_cells<'r>(
     rows: &[&'r KpiRow],
     b: &[f64],
     idx: &[usize],
-) -> (Vec<(&'r str, &'r str)>, Vec<Vec<f64>>) {
-    let mut cells: Vec<(&str, &str)> = idx
+) -> (Vec<(Axle, &'r str)>, Vec<Vec<f64>>) {
+    let mut cells: Vec<(Axle, &str)> = idx
         .iter()
-        .map(|&i| (rows[i].axle.as_str(), rows[i].track.as_str()))
+        .map(|&i| (rows[i].axle, rows[i].track.as_str()))
         .collect();
     cells.sort();
     cells.dedup();
@@ -374,14 +375,11 @@ fn cv_gain(
         // Each held-out (track, axle) cell gets its own scale when calibrating.
         let sse = |r: &[f64]| -> f64 {
             let mut total = 0.0;
-            for axle in ["front", "rear", ""] {
+            for axle in Axle::ALL {
                 let cell: Vec<f64> = test
                     .iter()
                     .zip(r)
-                    .filter(|(i, _)| match axle {
-                        "" => !matches!(rows[**i].axle.as_str(), "front" | "rear"),
-                        a => rows[**i].axle == a,
-                    })
+                    .filter(|(i, _)| rows[**i].axle == axle)
                     .map(|(_, v)| *v)
                     .collect();
                 if cell.is_empty() {
@@ -461,7 +459,7 @@ pub fn rank(problem: &Problem, library: &[Candidate], settings: &ScoringSettings
     let blocks: Vec<usize> = rows
         .iter()
         .zip(&track_of)
-        .map(|(r, t)| 2 * t + (r.axle == "rear") as usize)
+        .map(|(r, t)| 2 * t + (r.axle == Axle::Rear) as usize)
         .collect();
     let perms = block_permutations(&blocks, settings.permutations, settings.seed);
 
@@ -503,7 +501,10 @@ pub fn rank(problem: &Problem, library: &[Candidate], settings: &ScoringSettings
                     let c1 = k[k.len() - 1];
                     let wear = |i: usize| c1 * x[*t][i] / w[i];
                     let total: f64 = (0..n).map(wear).sum();
-                    let front: f64 = (0..n).filter(|&i| rows[i].axle == "front").map(wear).sum();
+                    let front: f64 = (0..n)
+                        .filter(|&i| rows[i].axle == Axle::Front)
+                        .map(wear)
+                        .sum();
                     // A term that changes sign across rows (a generic KPI,
                     // a two-sided hypothesis) has no share to speak of.
                     let share = if positive { front / total } else { f64::NAN };
@@ -678,7 +679,7 @@ mod tests {
                 rows.push(KpiRow {
                     event: format!("E{e:02}"),
                     track: format!("T{e}"),
-                    axle: if t % 2 == 0 { "front" } else { "rear" }.into(),
+                    axle: if t % 2 == 0 { Axle::Front } else { Axle::Rear },
                     run: format!("R{k}"),
                     friction_energy_j: m.total(),
                     friction_energy_y_j: 0.5 * m.total(),

@@ -87,7 +87,7 @@ mod tests {
     use super::*;
     use crate::gap::candidates::{Candidate, KpiScale};
 
-    fn score(name: &str, feature: Feature, axle: Option<&'static str>, cv: f64) -> Score {
+    fn score(name: &str, feature: Feature, axle: Option<crate::Axle>, cv: f64) -> Score {
         Score {
             name: name.into(),
             feature,
@@ -124,13 +124,13 @@ mod tests {
         let front = score(
             "graining, front",
             Feature::ColdTreadLateralEnergy,
-            Some("front"),
+            Some(crate::Axle::Front),
             0.8,
         );
         let rear = score(
             "graining, rear",
             Feature::ColdTreadLateralEnergy,
-            Some("rear"),
+            Some(crate::Axle::Rear),
             0.3,
         );
         let kpi = score("KPI distance_m", Feature::Kpi("distance_m"), None, 0.25);

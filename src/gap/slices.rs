@@ -52,8 +52,8 @@ fn singles(rows: &[&KpiRow]) -> Vec<Single> {
     let mut out = Vec::new();
     type Getter = fn(&KpiRow) -> &str;
     let text: [(&str, Getter); 6] = [
-        ("axle", |r| &r.axle),
-        ("wheel", |r| &r.wheel),
+        ("axle", |r| r.axle.name()),
+        ("wheel", |r| r.wheel.name()),
         ("track", |r| &r.track),
         ("event", |r| &r.event),
         ("compound", |r| &r.compound),

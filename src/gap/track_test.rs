@@ -30,6 +30,7 @@ use super::candidates::{Candidate, KpiScale, track_value};
 use super::linear::{lstsq, orthonormal_basis};
 use super::scoring::{max_f, projected, track_cells};
 use super::stats::levels;
+use crate::Axle;
 use crate::kpi::KpiRow;
 use rand::SeedableRng;
 use rand_distr::{Distribution, StandardNormal};
@@ -97,20 +98,20 @@ impl<'a> Severities<'a> {
         cols.extend(cell_cols.iter().map(|c| c.as_slice()));
         let k = lstsq(&cols, y, &all);
         // The scale of each (track, axle) cell; each axle's reference track is 0.
-        let scale = |track: &str, axle: &str| -> f64 {
+        let scale = |track: &str, axle: Axle| -> f64 {
             cells
                 .iter()
                 .position(|(a, t)| *a == axle && *t == track)
                 .map_or(0.0, |j| k[n_within + j])
         };
-        let design = |axle: Option<&str>| -> Option<Design> {
+        let design = |axle: Option<Axle>| -> Option<Design> {
             let nt = tracks.rows.len();
             let (mut sum, mut count) = (vec![0.0; nt], vec![0usize; nt]);
             let mut cov_sum = vec![vec![0.0; nt]; base.len()];
             for (i, r) in rows.iter().enumerate() {
                 if axle.is_none_or(|a| r.axle == a) {
                     let t = tracks.of_row[i];
-                    sum[t] += scale(&r.track, &r.axle);
+                    sum[t] += scale(&r.track, r.axle);
                     count[t] += 1;
                     for (j, c) in base.iter().enumerate() {
                         cov_sum[j][t] += c[i];
@@ -134,7 +135,11 @@ impl<'a> Severities<'a> {
                 q,
             })
         };
-        let designs = [design(None), design(Some("front")), design(Some("rear"))];
+        let designs = [
+            design(None),
+            design(Some(Axle::Front)),
+            design(Some(Axle::Rear)),
+        ];
         Severities { tracks, designs }
     }
 
@@ -145,8 +150,8 @@ impl<'a> Severities<'a> {
     pub fn p_value(&self, c: &Candidate, kpi_scale: KpiScale, draws: usize, seed: u64) -> f64 {
         let slot = match c.axle {
             None => 0,
-            Some("front") => 1,
-            Some(_) => 2,
+            Some(Axle::Front) => 1,
+            Some(Axle::Rear) => 2,
         };
         let Some(d) = &self.designs[slot] else {
             return 1.0;
@@ -201,7 +206,7 @@ mod tests {
             for k in 0..10 {
                 rows.push(KpiRow {
                     track: format!("T{t}"),
-                    axle: if k % 2 == 0 { "front" } else { "rear" }.into(),
+                    axle: if k % 2 == 0 { Axle::Front } else { Axle::Rear },
                     ra_micro_mm: ra,
                     skewness: [-0.5, 0.1, -0.9, -0.2, 0.0, -0.7, -0.3][t],
                     friction_energy_j: 1e6,

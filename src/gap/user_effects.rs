@@ -250,8 +250,8 @@ pub fn load(path: &Path) -> Result<Vec<Candidate>, GapError> {
             };
             let axle = match e.axle.as_deref() {
                 None | Some("both") => None,
-                Some("front") => Some("front"),
-                Some("rear") => Some("rear"),
+                Some("front") => Some(crate::Axle::Front),
+                Some("rear") => Some(crate::Axle::Rear),
                 Some(other) => {
                     return Err(err(format!("axle '{other}' (front, rear or both)")));
                 }
@@ -427,10 +427,10 @@ mod tests {
         .unwrap();
         assert_eq!(
             (c.len(), c[0].axle, c[0].thresholds.len()),
-            (1, Some("rear"), 2)
+            (1, Some(crate::Axle::Rear), 2)
         );
         let front = KpiRow {
-            axle: "front".into(),
+            axle: crate::Axle::Front,
             ..Default::default()
         };
         assert_eq!(

@@ -205,7 +205,7 @@ pub fn score_case(
 ) -> Result<Case, GapError> {
     let planted_of = |r: &KpiRow| {
         planted
-            .get(&(r.run.clone(), r.wheel.clone()))
+            .get(&(r.run.clone(), r.wheel.to_string()))
             .copied()
             .unwrap_or(0.0)
     };
@@ -222,7 +222,7 @@ pub fn score_case(
     let front: f64 = rows
         .iter()
         .zip(&p)
-        .filter(|(r, _)| r.axle == "front")
+        .filter(|(r, _)| r.axle == crate::Axle::Front)
         .map(|(_, v)| v)
         .sum();
     // Ideal: the same baseline calibrated on wear minus the planted part,
@@ -304,7 +304,7 @@ fn terms_correlation(d: &Diagnosis, planted: &BTreeMap<(String, String), f64>) -
         .iter()
         .map(|t| {
             let p = planted
-                .get(&(t.run.clone(), t.wheel.clone()))
+                .get(&(t.run.clone(), t.wheel.to_string()))
                 .copied()
                 .unwrap_or(0.0);
             (t.wear_pct, p)

@@ -3,17 +3,53 @@
 //! and the CSV header. Units and formulas: docs/kpis.md.
 
 use crate::ingest::IngestError;
+use crate::{Axle, Wheel};
 use arrow_array::{ArrayRef, Float64Array, RecordBatch, StringArray};
 use arrow_schema::{DataType, Field, Schema};
 use std::path::Path;
 use std::sync::Arc;
 
+/// The cell type of a text column: free text, or a typed position
+/// ([`Wheel`], [`Axle`]) spelled as in the file.
+pub trait TextCell: Sized {
+    fn text(&self) -> &str;
+    /// The cell read from a file; the error says what was wrong.
+    fn parse_text(s: &str) -> Result<Self, String>;
+}
+
+impl TextCell for String {
+    fn text(&self) -> &str {
+        self
+    }
+    fn parse_text(s: &str) -> Result<Self, String> {
+        Ok(s.to_string())
+    }
+}
+
+impl TextCell for Wheel {
+    fn text(&self) -> &str {
+        self.name()
+    }
+    fn parse_text(s: &str) -> Result<Self, String> {
+        s.parse()
+    }
+}
+
+impl TextCell for Axle {
+    fn text(&self) -> &str {
+        self.name()
+    }
+    fn parse_text(s: &str) -> Result<Self, String> {
+        s.parse()
+    }
+}
+
 macro_rules! kpi_table {
-    (text: [$($t:ident),* $(,)?], numbers: [$($n:ident),* $(,)?]) => {
+    (text: [$($t:ident: $tt:ty),* $(,)?], numbers: [$($n:ident),* $(,)?]) => {
         /// One row of the KPI database (see docs/kpis.md for every column).
         #[derive(Debug, Clone, Default, PartialEq, serde::Serialize)]
         pub struct KpiRow {
-            $(pub $t: String,)*
+            $(pub $t: $tt,)*
             $(pub $n: f64,)*
         }
 
@@ -37,17 +73,19 @@ macro_rules! kpi_table {
                 }
             }
 
-            /// Sets a text column by name; false if there is no such column.
-            pub fn set_text(&mut self, name: &str, v: &str) -> bool {
+            /// Sets a text column by name: Ok(false) if there is no such
+            /// column, an error if the value is not one the column holds
+            /// (an unknown wheel position or axle).
+            pub fn set_text(&mut self, name: &str, v: &str) -> Result<bool, String> {
                 match name {
-                    $(stringify!($t) => { self.$t = v.to_string(); true })*
-                    _ => false,
+                    $(stringify!($t) => { self.$t = <$tt as TextCell>::parse_text(v)?; Ok(true) })*
+                    _ => Ok(false),
                 }
             }
 
             fn arrays(rows: &[KpiRow]) -> Vec<ArrayRef> {
                 vec![
-                    $(Arc::new(StringArray::from_iter_values(rows.iter().map(|r| r.$t.as_str()))) as ArrayRef,)*
+                    $(Arc::new(StringArray::from_iter_values(rows.iter().map(|r| r.$t.text()))) as ArrayRef,)*
                     $(Arc::new(Float64Array::from_iter_values(rows.iter().map(|r| r.$n))) as ArrayRef,)*
                 ]
             }
@@ -56,7 +94,10 @@ macro_rules! kpi_table {
 }
 
 kpi_table!(
-    text: [event, track, car, run, wheel, axle, compound, tire_set, quality],
+    text: [
+        event: String, track: String, car: String, run: String, wheel: Wheel, axle: Axle,
+        compound: String, tire_set: String, quality: String,
+    ],
     numbers: [
         // Table 4: telemetry
         t_surface_avg_c, t_surface_std_c, t_inner_avg_c, t_inner_std_c, t_track_avg_c, t_air_avg_c,
@@ -386,7 +427,9 @@ pub fn read_parquet(path: &Path) -> Result<Vec<KpiRow>, IngestError> {
         for i in 0..batch.num_rows() {
             let mut r = KpiRow::default();
             for (n, a) in KpiRow::TEXT_COLUMNS.iter().zip(&texts) {
-                r.set_text(n, a.value(i));
+                r.set_text(n, a.value(i)).map_err(|e| {
+                    IngestError::invalid(path, format!("column '{n}', row {}", first_row + i), e)
+                })?;
             }
             for (n, a) in KpiRow::NUMBER_COLUMNS.iter().zip(&nums) {
                 r.set_number(n, a.value(i));
@@ -470,6 +513,57 @@ mod tests {
         fields[i] = field;
         cols[i] = col;
         RecordBatch::try_new(Arc::new(Schema::new(fields)), cols).unwrap()
+    }
+
+    #[test]
+    fn wheels_and_axles_are_typed_and_an_unknown_one_is_named() {
+        let rows = vec![
+            KpiRow {
+                run: "R1".into(),
+                wheel: Wheel::RR,
+                axle: Axle::Rear,
+                ..Default::default()
+            };
+            3
+        ];
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("k.parquet");
+        // Written as the documented spellings, and read back typed.
+        write_parquet(&path, &rows).unwrap();
+        let back = read_parquet(&path).unwrap();
+        assert_eq!((back[2].wheel, back[2].axle), (Wheel::RR, Axle::Rear));
+        let batch = kpi_batch(&rows);
+        let text = |name: &str| {
+            let c = batch.column_by_name(name).unwrap();
+            c.as_any()
+                .downcast_ref::<StringArray>()
+                .unwrap()
+                .value(0)
+                .to_string()
+        };
+        assert_eq!((text("wheel"), text("axle")), ("RR".into(), "rear".into()));
+        // A table from another tool with a position tirewear does not know.
+        for (name, values, says) in [
+            (
+                "wheel",
+                ["FL", "FR", "LF"],
+                "row 2: unknown wheel position 'LF'",
+            ),
+            (
+                "axle",
+                ["front", "middle", "rear"],
+                "row 1: unknown axle 'middle'",
+            ),
+        ] {
+            let col: ArrayRef = Arc::new(StringArray::from(values.to_vec()));
+            let field = Field::new(name, DataType::Utf8, false);
+            write_batch(&path, &with_column(&rows, name, field, col)).unwrap();
+            let err = read_parquet(&path).unwrap_err().to_string();
+            assert!(
+                err.contains("k.parquet") && err.contains(&format!("column '{name}', {says}")),
+                "{err}"
+            );
+        }
     }
 
     #[test]

@@ -242,18 +242,18 @@ pub fn fit_method(
             )
         }
         Method::Physical => {
-            fn axle<'r>(rows: &[&'r KpiRow], a: &str) -> Vec<&'r KpiRow> {
+            fn axle<'r>(rows: &[&'r KpiRow], a: Axle) -> Vec<&'r KpiRow> {
                 rows.iter().filter(|r| r.axle == a).copied().collect()
             }
-            let of = |a: Axle| analyse_axle(a, &axle(&train, &a.to_string()));
+            let of = |a: Axle| analyse_axle(a, &axle(&train, a));
             let (front, rear) = (of(Axle::Front)?, of(Axle::Rear)?);
             let mut table = Vec::new();
             for (name, a) in [("Front—", &front), ("Rear—", &rear)] {
                 let predict = |r: &KpiRow| a.regression.predict_one(&super::physical::inputs_of(r));
                 table.extend(indicators(
                     name,
-                    &axle(&train, &a.axle),
-                    &axle(&test, &a.axle),
+                    &axle(&train, a.axle),
+                    &axle(&test, a.axle),
                     PHYSICAL_INPUTS.len(),
                     predict,
                 )?);

@@ -45,7 +45,7 @@ pub struct TrackLine {
 /// The preliminary analysis of one axle and its regression on table 10.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct AxleAnalysis {
-    pub axle: String,
+    pub axle: Axle,
     pub lines: Vec<TrackLine>,
     /// Pearson correlation of per-track slopes with mean surface temperature,
     /// weighted by R1, over tracks with R2 ≥ 0.5 (figure 13).
@@ -175,7 +175,7 @@ pub fn analyse_axle(axle: Axle, rows: &[&KpiRow]) -> Result<AxleAnalysis, ModelE
     let x: Vec<Vec<f64>> = rows.iter().map(|r| inputs_of(r)).collect();
     let names: Vec<String> = PHYSICAL_INPUTS.iter().map(|s| s.to_string()).collect();
     Ok(AxleAnalysis {
-        axle: axle.to_string(),
+        axle,
         lines,
         slope_vs_t_surface,
         residual_vs_skewness: correlation(&residuals, &skew),

@@ -106,15 +106,9 @@ impl SavedModel {
             ModelBody::Pca {
                 pca, regression, ..
             } => regression.predict_one(&pca.transform(&[x])[0]),
-            ModelBody::Physical { front, rear } => match r.axle.as_str() {
-                "front" => front.regression.predict_one(&inputs_of(r)),
-                "rear" => rear.regression.predict_one(&inputs_of(r)),
-                other => {
-                    return Err(ModelError::Invalid(format!(
-                        "run {} wheel {}: axle '{other}' is neither front nor rear",
-                        r.run, r.wheel
-                    )));
-                }
+            ModelBody::Physical { front, rear } => match r.axle {
+                crate::Axle::Front => front.regression.predict_one(&inputs_of(r)),
+                crate::Axle::Rear => rear.regression.predict_one(&inputs_of(r)),
             },
         };
         if !p.is_finite() {
