@@ -1,18 +1,18 @@
 // Condition energy maps: each sample's friction energy (total, longitudinal,
 // lateral) binned by each per-sample condition (slip ratio, lateral slip, …),
 // one 1-D map per condition, accumulated into one set of maps per wheel.
-// The bin table comes from the host (binding 2: src/kpi/condition_map.rs is
+// The bin table comes from the host (binding 2: src/kpi/cpu/condition_map.rs is
 // its only definition); the conditions are computed here in the table's
 // order. Sums are exact 64-bit fixed-point quanta, as in energy_map.wgsl:
 // a private histogram per workgroup, then its non-zero bins added to the
 // wheel's maps.
-// CPU twin: src/kpi/condition_map.rs; chunks and samples are those of
+// CPU twin: src/kpi/cpu/condition_map.rs; chunks and samples are those of
 // telemetry_reduce.
 
 // shared.wgsl (prepended by the host): WG_SIZE, ITEMS, Sample, Chunk,
 // ENERGY_QUANTA_PER_J, to_quanta, carried.
 
-// Must match src/kpi/condition_map.rs (checked by tests/shader_contract.rs).
+// Must match src/kpi/cpu/condition_map.rs (checked by tests/shader_contract.rs).
 const N_CONDITIONS: u32 = 17u;
 const CONDITION_BINS: u32 = 468u; // bins of one component over all conditions
 const MAP_BINS: u32 = 1404u; // 3 components

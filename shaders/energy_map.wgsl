@@ -15,13 +15,13 @@
 // workgroup memory (phase 1), then adds its non-zero bins to the wheel's
 // map in the output buffer (phase 2): one global atomic per touched bin and
 // chunk instead of one partial map per chunk.
-// CPU twin: src/kpi/energy_map.rs; chunks and samples are those of
+// CPU twin: src/kpi/cpu/energy_map.rs; chunks and samples are those of
 // telemetry_reduce.
 
 // shared.wgsl (prepended by the host): WG_SIZE, ITEMS, CHUNK, Sample, Chunk,
 // ENERGY_QUANTA_PER_J, to_quanta, carried.
 
-// Must match src/kpi/energy_map.rs and src/kpi/energy_maps.rs (bin edges) (checked by tests/shader_contract.rs).
+// Must match src/kpi/cpu/energy_map.rs and src/kpi/energy_maps.rs (bin edges) (checked by tests/shader_contract.rs).
 const T_SURFACE_LO: f32 = 20.0;
 const T_SURFACE_WIDTH: f32 = 5.0;
 const T_SURFACE_N: u32 = 24u;

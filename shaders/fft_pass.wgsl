@@ -2,7 +2,7 @@
 // per butterfly; after the passes Ns = 1, 2, …, N/2 (ping-ponging between
 // two buffers) the forward DFT is in natural order. Longer than a
 // workgroup's memory, so each pass is a dispatch over global memory.
-// CPU twin: src/kpi/fft_pass.rs.
+// CPU twin: src/kpi/cpu/fft_pass.rs.
 
 // Must match src/kpi/roughness_batch.rs (FFT_N) (checked by tests/shader_contract.rs).
 const N: u32 = 4096u;

@@ -1,7 +1,7 @@
 // Height-difference correlation of road profiles: per chunk (profile, lag k),
-// Σ (z[i + k] − z[i])² over the chunk's i. CPU twin: src/kpi/roughness_hdc.rs.
+// Σ (z[i + k] − z[i])² over the chunk's i. CPU twin: src/kpi/cpu/roughness_hdc.rs.
 
-// Must match src/kpi/telemetry_reduce.rs (WG_SIZE, ITEMS) and RoughChunk (checked by tests/shader_contract.rs).
+// Must match src/kpi/cpu/telemetry_reduce.rs (WG_SIZE, ITEMS) and RoughChunk (checked by tests/shader_contract.rs).
 const WG_SIZE: u32 = 128u;
 const ITEMS: u32 = 8u;
 

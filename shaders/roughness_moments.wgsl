@@ -1,8 +1,8 @@
 // Height moments of road profiles: per chunk of one profile, Σd, Σ|d|, Σd²,
 // Σd³, Σd⁴ with d = z − ref(profile). Run with ref = the first height (for
-// the mean), then with ref = the mean. CPU twin: src/kpi/roughness_moments.rs.
+// the mean), then with ref = the mean. CPU twin: src/kpi/cpu/roughness_moments.rs.
 
-// Must match src/kpi/telemetry_reduce.rs (WG_SIZE, ITEMS) and (checked by tests/shader_contract.rs).
+// Must match src/kpi/cpu/telemetry_reduce.rs (WG_SIZE, ITEMS) and (checked by tests/shader_contract.rs).
 // src/kpi/roughness_batch.rs (MOMENT_SUMS, RoughChunk).
 const WG_SIZE: u32 = 128u;
 const ITEMS: u32 = 8u;

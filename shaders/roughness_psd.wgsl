@@ -1,6 +1,6 @@
 // Welch PSD of road profiles in the SurfaceTopography convention: per profile
 // and frequency k ≤ N/2, C_k = Δx²/L · mean over segments of |X_k|²
-// (L = N·Δx). One thread per (profile, k). CPU twin: src/kpi/roughness_psd.rs.
+// (L = N·Δx). One thread per (profile, k). CPU twin: src/kpi/cpu/roughness_psd.rs.
 
 // Must match src/kpi/roughness_batch.rs (FFT_N, PsdProfile) (checked by tests/shader_contract.rs).
 const N: u32 = 4096u;

@@ -1,7 +1,7 @@
 // Welch segments of road profiles: each segment of N heights, its mean
 // removed, times the periodic Hann window scaled to mean(w²) = 1, as complex
 // numbers for fft_pass. One workgroup per segment. CPU twin:
-// src/kpi/roughness_window.rs.
+// src/kpi/cpu/roughness_window.rs.
 
 // Must match src/kpi/roughness_batch.rs (FFT_N, Segment) and HANN_RMS (checked by tests/shader_contract.rs).
 const N: u32 = 4096u;

@@ -3,7 +3,7 @@
 // (src/gpu/mod.rs, `chunk_shader!`), so each record and helper is written
 // once. tests/shader_contract.rs checks every definition against Rust.
 
-// Must match src/kpi/telemetry_reduce.rs (checked by tests/shader_contract.rs).
+// Must match src/kpi/cpu/telemetry_reduce.rs (checked by tests/shader_contract.rs).
 const WG_SIZE: u32 = 128u;
 const ITEMS: u32 = 8u;
 const CHUNK: u32 = 1024u;
@@ -40,7 +40,7 @@ struct Chunk {
 }
 
 // Fixed-point energy sums (energy_map, condition_map). Must match
-// src/kpi/energy_map.rs (checked by tests/shader_contract.rs).
+// src/kpi/cpu/energy_map.rs (checked by tests/shader_contract.rs).
 const ENERGY_QUANTA_PER_J: f32 = 16777216.0; // 2^24: a quantum of 6e-8 J, sums up to 5.5e11 J
 
 // round(e · ENERGY_QUANTA_PER_J) as a 64-bit two's-complement (lo, hi)

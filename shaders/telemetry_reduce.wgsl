@@ -1,11 +1,11 @@
 // Telemetry reduction (paper table 4): per-sample slip, sliding velocities and
 // friction power, reduced per chunk of one wheel into SUMS partial sums.
-// CPU twin: src/kpi/telemetry_reduce.rs (same workgroup size, items per
+// CPU twin: src/kpi/cpu/telemetry_reduce.rs (same workgroup size, items per
 // thread, sum order and tree); partials are merged per wheel in f64 on the CPU.
 
 // shared.wgsl (prepended by the host): WG_SIZE, ITEMS, Sample, Chunk.
 
-// Must match src/kpi/telemetry_reduce.rs: SUMS, CARCASS_PRESSURE_PA (checked by tests/shader_contract.rs).
+// Must match src/kpi/cpu/telemetry_reduce.rs: SUMS, CARCASS_PRESSURE_PA (checked by tests/shader_contract.rs).
 const SUMS: u32 = 22u;
 const CARCASS_PRESSURE_PA: f32 = 40000.0;
 

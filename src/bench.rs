@@ -5,9 +5,9 @@
 
 use crate::engine::{CpuEngine, GpuEngine, ReduceEngine};
 use crate::ingest::road::Profile;
+use crate::kpi::cpu::telemetry_reduce::{ReduceBatch, ReduceSample};
 use crate::kpi::road::spectral;
 use crate::kpi::roughness_batch::batches;
-use crate::kpi::telemetry_reduce::{ReduceBatch, ReduceSample};
 use rayon::prelude::*;
 use std::fmt::Write;
 use std::time::{Duration, Instant};

@@ -4,13 +4,13 @@
 
 use crate::gpu::{GpuContext, GpuError, GpuTimings};
 use crate::ingest::road::Profile;
-use crate::kpi::condition_map::{ConditionMaps, condition_map, condition_maps_from_quanta};
-use crate::kpi::energy_map::{energy_map, maps_from_quanta};
+use crate::kpi::cpu::condition_map::{ConditionMaps, condition_map, condition_maps_from_quanta};
+use crate::kpi::cpu::energy_map::{energy_map, maps_from_quanta};
+use crate::kpi::cpu::telemetry_reduce::{ReduceBatch, SUMS, merge, telemetry_reduce};
 use crate::kpi::energy_maps::EnergyMaps;
 use crate::kpi::road::{RoadCurves, RoadIndices, profile_indices, profile_indices_on};
 use crate::kpi::roughness_batch::{RoughnessBatch, Spectral, cpu_twins};
 use crate::kpi::telemetry::finish_wheel;
-use crate::kpi::telemetry_reduce::{ReduceBatch, SUMS, merge, telemetry_reduce};
 use std::sync::Mutex;
 
 /// Why an engine could not compute: only the GPU engine can fail (its
@@ -323,7 +323,7 @@ pub fn compare_condition_maps(
     other: &dyn ReduceEngine,
     batch: &ReduceBatch,
 ) -> Result<f64, EngineError> {
-    use crate::kpi::condition_map::{CONDITIONS, Component};
+    use crate::kpi::cpu::condition_map::{CONDITIONS, Component};
     let (a, b) = (reference.condition_map(batch)?, other.condition_map(batch)?);
     let mut worst = 0.0f64;
     for (x, y) in a.iter().zip(&b) {

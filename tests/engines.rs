@@ -14,10 +14,10 @@ use tirewear::engine::{
     TELEMETRY_TOLERANCE, compare_condition_maps, compare_energy_maps, compare_roughness,
     compare_telemetry, gpu_for_tests,
 };
-use tirewear::kpi::condition_map::{CONDITIONS, Component, ConditionMaps};
+use tirewear::kpi::cpu::condition_map::{CONDITIONS, Component, ConditionMaps};
+use tirewear::kpi::cpu::telemetry_reduce::{ReduceBatch, ReduceSample, merge};
 use tirewear::kpi::table::read_parquet;
 use tirewear::kpi::telemetry::finish_wheel;
-use tirewear::kpi::telemetry_reduce::{ReduceBatch, ReduceSample, merge};
 use tirewear::kpi::{Engine, ExtractOptions, KpiRow, extract};
 
 /// Every engine this machine has, with the tolerance its results are held to

@@ -107,9 +107,9 @@ fn demo_season_extracts_to_complete_rows() {
     // its lateral part, as the telemetry reduction summed them (quanta of
     // 6e-8 J per sample: 1e-3 J of slack).
     let path = dir.path().join("kpis.condition_maps.parquet");
-    let cmaps = tirewear::kpi::condition_map::read_condition_maps(&path).unwrap();
+    let cmaps = tirewear::kpi::cpu::condition_map::read_condition_maps(&path).unwrap();
     assert_eq!(cmaps.len(), rows.len());
-    use tirewear::kpi::condition_map::{CONDITIONS, Component};
+    use tirewear::kpi::cpu::condition_map::{CONDITIONS, Component};
     for r in &rows {
         let m = &cmaps[&(r.run.clone(), r.wheel.to_string())];
         for (c, cd) in CONDITIONS.iter().enumerate() {

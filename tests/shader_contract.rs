@@ -6,13 +6,13 @@
 
 use naga::proc::Layouter;
 use naga::{Expression, Literal, Module, TypeInner};
-use tirewear::kpi::energy_map as em;
-use tirewear::kpi::energy_maps::{SLIDING_SPEED_BINS, T_INNER_BINS, T_SURFACE_BINS};
-use tirewear::kpi::roughness_batch::{FFT_N, MOMENT_SUMS, PsdProfile, RoughChunk, Segment};
-use tirewear::kpi::roughness_window::HANN_RMS;
-use tirewear::kpi::telemetry_reduce::{
+use tirewear::kpi::cpu::energy_map as em;
+use tirewear::kpi::cpu::roughness_window::HANN_RMS;
+use tirewear::kpi::cpu::telemetry_reduce::{
     CARCASS_PRESSURE_PA, CHUNK, ITEMS, ReduceChunk, ReduceRef, ReduceSample, SUMS, WG_SIZE,
 };
+use tirewear::kpi::energy_maps::{SLIDING_SPEED_BINS, T_INNER_BINS, T_SURFACE_BINS};
+use tirewear::kpi::roughness_batch::{FFT_N, MOMENT_SUMS, PsdProfile, RoughChunk, Segment};
 
 fn shader_text(name: &str) -> String {
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -238,7 +238,7 @@ fn energy_map_matches_its_cpu_twin() {
 
 #[test]
 fn condition_map_matches_its_cpu_twin() {
-    use tirewear::kpi::condition_map as cm;
+    use tirewear::kpi::cpu::condition_map as cm;
     let m = chunk_shader("condition_map.wgsl");
     assert_eq!(constant(&m, "WG_SIZE"), WG_SIZE as f64);
     assert_eq!(constant(&m, "ITEMS"), ITEMS as f64);

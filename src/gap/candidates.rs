@@ -6,7 +6,7 @@
 
 use super::user_effects::UserEffect;
 use crate::kpi::KpiRow;
-use crate::kpi::condition_map::{CONDITIONS, Component};
+use crate::kpi::cpu::condition_map::{CONDITIONS, Component};
 use crate::kpi::energy_maps::EnergyMaps;
 use crate::model::data::candidate_inputs;
 use crate::{Axle, Wheel};
@@ -809,7 +809,7 @@ mod tests {
     fn condition_candidates_sum_the_energy_beyond_the_threshold() {
         // Slip ratio bins are 0.02 wide from −0.3: 2 MJ in bin 20 ([0.10,
         // 0.12)), 1 MJ in bin 5 ([−0.20, −0.18)).
-        use crate::kpi::condition_map::ConditionMaps;
+        use crate::kpi::cpu::condition_map::ConditionMaps;
         let slip = ConditionMaps::condition_index("slip_ratio").unwrap();
         let mut cm = ConditionMaps::default();
         let o: usize = CONDITIONS[..slip].iter().map(|c| c.bins.n).sum();

@@ -9,10 +9,10 @@
 
 use super::{GpuContext, GpuError, GpuTimings};
 use crate::engine::Reductions;
-use crate::kpi::condition_map::{ConditionMaps, condition_maps_from_quanta};
-use crate::kpi::energy_map::{BINS, maps_from_quanta};
+use crate::kpi::cpu::condition_map::{ConditionMaps, condition_maps_from_quanta};
+use crate::kpi::cpu::energy_map::{BINS, maps_from_quanta};
+use crate::kpi::cpu::telemetry_reduce::{CHUNK, ReduceBatch, ReduceChunk, ReduceSample, SUMS};
 use crate::kpi::energy_maps::EnergyMaps;
-use crate::kpi::telemetry_reduce::{CHUNK, ReduceBatch, ReduceChunk, ReduceSample, SUMS};
 use std::sync::Mutex;
 use std::time::Instant;
 use wgpu::util::DeviceExt;

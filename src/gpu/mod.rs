@@ -132,28 +132,28 @@ impl GpuContext {
             &device,
             "telemetry_reduce",
             chunk_shader!("telemetry_reduce.wgsl"),
-            chunk_kernel::Output::PerChunk(crate::kpi::telemetry_reduce::SUMS),
+            chunk_kernel::Output::PerChunk(crate::kpi::cpu::telemetry_reduce::SUMS),
             chunk_kernel::Extra::Refs,
         )?;
         let energy_map = chunk_kernel::ChunkKernel::new(
             &device,
             "energy_map",
             chunk_shader!("energy_map.wgsl"),
-            chunk_kernel::Output::PerWheel(2 * crate::kpi::energy_map::BINS),
+            chunk_kernel::Output::PerWheel(2 * crate::kpi::cpu::energy_map::BINS),
             chunk_kernel::Extra::None,
         )?;
         let condition_map = chunk_kernel::ChunkKernel::new(
             &device,
             "condition_map",
             chunk_shader!("condition_map.wgsl"),
-            chunk_kernel::Output::PerWheel(2 * crate::kpi::condition_map::MAP_BINS),
+            chunk_kernel::Output::PerWheel(2 * crate::kpi::cpu::condition_map::MAP_BINS),
             chunk_kernel::Extra::ConditionTable,
         )?;
         let condition_table = {
             use wgpu::util::DeviceExt;
             device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
                 label: Some("condition table"),
-                contents: bytemuck::cast_slice(&crate::kpi::condition_map::condition_table()),
+                contents: bytemuck::cast_slice(&crate::kpi::cpu::condition_map::condition_table()),
                 usage: wgpu::BufferUsages::STORAGE,
             })
         };

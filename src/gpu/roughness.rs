@@ -5,7 +5,7 @@
 //! `MAX_BATCH_SEGMENTS`), every grid spread in 2-D past 65 535 workgroups.
 
 use super::{GpuContext, GpuError, GpuTimings};
-use crate::kpi::fft_pass::twiddles;
+use crate::kpi::cpu::fft_pass::twiddles;
 use crate::kpi::roughness_batch::{FFT_N, MOMENT_SUMS, RoughnessBatch, Spectral, assemble, means};
 use std::time::Instant;
 use wgpu::util::DeviceExt;

@@ -64,7 +64,7 @@ pub struct EnergyMaps {
     pub lateral_surface_inner: Vec<f64>,
     /// The tire's condition energy maps, where its extraction wrote them
     /// (`NAME.condition_maps.parquet`; attached by [`read_tire_maps`]).
-    pub conditions: Option<Box<crate::kpi::condition_map::ConditionMaps>>,
+    pub conditions: Option<Box<crate::kpi::cpu::condition_map::ConditionMaps>>,
 }
 
 impl Default for EnergyMaps {
@@ -260,7 +260,7 @@ pub fn read_tire_maps(
     let conditions = side("condition_maps.parquet");
     if conditions.exists() {
         check_same_extraction(kpis, &conditions)?;
-        let mut cm = crate::kpi::condition_map::read_condition_maps(&conditions)?;
+        let mut cm = crate::kpi::cpu::condition_map::read_condition_maps(&conditions)?;
         for (key, m) in maps.iter_mut() {
             m.conditions = Some(Box::new(cm.remove(key).unwrap_or_default()));
         }

@@ -8,14 +8,14 @@
 //!   condition energy maps (`condition_map::side_table`);
 //! - `kpis.report.json`: what was skipped and why, cleaning counts, timings.
 
-use super::condition_map::ConditionMaps;
+use super::cpu::condition_map::ConditionMaps;
+use super::cpu::telemetry_reduce::{ReduceBatch, merge};
 use super::energy_maps::{EnergyMaps, SLIDING_SPEED_BINS, T_INNER_BINS, T_SURFACE_BINS};
 use super::road::{RoadCurves, RoadIndices, mean_indices};
 use super::table::{
     KpiRow, kpi_batch, quality, side_table_path, with_extraction_id, write_batch_to,
 };
 use super::telemetry::{CleaningReport, finish_wheel, prepare_wheel, vehicle_indices};
-use super::telemetry_reduce::{ReduceBatch, merge};
 use super::viscoelastic::{ViscoelasticIndices, viscoelastic_indices};
 use super::wear::{mean_wear, worn_through_readings};
 use crate::Wheel;
@@ -646,7 +646,7 @@ fn write_outputs(
     set.add(&energy, |f| write_batch_to(f, &batch))
         .map_err(io(&energy))?;
     let conditions = side_table_path(&opts.out, "condition_maps.parquet");
-    let batch = tagged(crate::kpi::condition_map::side_table(maps.conditions));
+    let batch = tagged(crate::kpi::cpu::condition_map::side_table(maps.conditions));
     set.add(&conditions, |f| write_batch_to(f, &batch))
         .map_err(io(&conditions))?;
     let report = side_table_path(&opts.out, "report.json");

@@ -2,20 +2,13 @@
 //! road (table 3), telemetry (table 4) and viscoelastic (table 5) indices
 //! plus the mean wear. Formulas and units: docs/kpis.md.
 
-pub mod condition_map;
-pub mod energy_map;
+pub mod cpu;
 pub mod energy_maps;
 pub mod extract;
-pub mod fft_pass;
 pub mod road;
 pub mod roughness_batch;
-pub mod roughness_hdc;
-pub mod roughness_moments;
-pub mod roughness_psd;
-pub mod roughness_window;
 pub mod table;
 pub mod telemetry;
-pub mod telemetry_reduce;
 pub mod viscoelastic;
 pub mod wear;
 

@@ -7,8 +7,8 @@
 //! The GPU PSD needs segments of exactly [`WELCH_SEGMENT`] samples (a power
 //! of two); shorter profiles are reduced on the CPU by every engine.
 
+use super::cpu::telemetry_reduce::CHUNK;
 use super::road::{HDC_LAGS, WELCH_SEGMENT, hdc_lags};
-use super::telemetry_reduce::CHUNK;
 use bytemuck::{Pod, Zeroable};
 
 /// FFT length of the GPU PSD. Must match `N` in the roughness shaders (checked by tests/shader_contract.rs).
@@ -237,7 +237,7 @@ pub fn batches(profiles: &[(&[f64], f64)]) -> Vec<(Vec<usize>, RoughnessBatch)> 
 
 /// The CPU twins in the shaders' order (the reference of the GPU roughness).
 pub fn cpu_twins(batch: &RoughnessBatch) -> Vec<Spectral> {
-    use super::{
+    use super::cpu::{
         fft_pass::fft, roughness_hdc::roughness_hdc, roughness_moments::roughness_moments,
         roughness_psd::roughness_psd, roughness_window::roughness_window,
     };

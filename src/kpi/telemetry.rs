@@ -14,11 +14,11 @@
 //!   zero, and no real channel is exactly zero throughout a run), fewer than
 //!   80 % of its samples are valid, or it lasts less than 10 s.
 
-use super::energy_map::{energy_map, maps_from_quanta};
-use super::energy_maps::EnergyMaps;
-use super::telemetry_reduce::{
+use super::cpu::energy_map::{energy_map, maps_from_quanta};
+use super::cpu::telemetry_reduce::{
     ReduceBatch, ReduceRef, ReduceSample, SUMS, Sum, merge, moments, telemetry_reduce,
 };
+use super::energy_maps::EnergyMaps;
 use crate::ingest::telemetry::{VehicleSeries, WheelSeries};
 
 /// Gaps up to this long are bridged (the last power holds); longer ones are dropouts.
@@ -264,7 +264,7 @@ pub struct DerivedConditions {
 /// [`DerivedConditions`] of each kept sample (`kept` from the cleaning
 /// rule: strictly increasing times).
 pub fn derived_conditions(s: &WheelSeries, kept: &[(usize, f64)]) -> Vec<DerivedConditions> {
-    use super::condition_map::LOAD_FLOOR_N;
+    use super::cpu::condition_map::LOAD_FLOOR_N;
     let Some(&(first, _)) = kept.first() else {
         return Vec::new();
     };

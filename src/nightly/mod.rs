@@ -833,7 +833,7 @@ fn write_run_parts(dataset: &Path, key: &str, run: &str, o: RunOutput) -> Result
         ("energy_maps", energy_maps_batch(&energy)),
         (
             "condition_maps",
-            crate::kpi::condition_map::side_table(&conditions),
+            crate::kpi::cpu::condition_map::side_table(&conditions),
         ),
         ("kpis", kpi_batch(&o.rows)),
     ];
@@ -856,7 +856,7 @@ fn empty_schema(kind: &str) -> arrow_schema::SchemaRef {
     match kind {
         "kpis" => kpi_batch(&[]).schema(),
         "energy_maps" => energy_maps_batch(&[]).schema(),
-        "condition_maps" => crate::kpi::condition_map::side_table(&[]).schema(),
+        "condition_maps" => crate::kpi::cpu::condition_map::side_table(&[]).schema(),
         _ => road_curves_batch(&[]).schema(),
     }
 }

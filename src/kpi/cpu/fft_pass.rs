@@ -6,7 +6,7 @@
 //! reference the shader is compared with, and is itself checked against
 //! realfft in the tests.)
 
-use super::roughness_batch::FFT_N;
+use crate::kpi::roughness_batch::FFT_N;
 use rayon::prelude::*;
 
 /// e^{−2πik/N} for k < N/2.

@@ -8,8 +8,8 @@
 //! where an f32 energy (GPU) and an f64 one (here) round to different quanta
 //! or land on different sides of a bin edge.
 
-use super::energy_maps::{EnergyMaps, SLIDING_SPEED_BINS, T_INNER_BINS, T_SURFACE_BINS};
 use super::telemetry_reduce::{ITEMS, ReduceBatch, ReduceChunk, WG_SIZE};
+use crate::kpi::energy_maps::{EnergyMaps, SLIDING_SPEED_BINS, T_INNER_BINS, T_SURFACE_BINS};
 use rayon::prelude::*;
 
 /// Bins of the (surface × inner) map. Must match `SURFACE_INNER_BINS` in the shader (checked by tests/shader_contract.rs).
@@ -147,7 +147,7 @@ pub fn maps_from_quanta(quanta: &[u64]) -> Vec<EnergyMaps> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::kpi::telemetry_reduce::ReduceSample;
+    use crate::kpi::cpu::telemetry_reduce::ReduceSample;
 
     #[test]
     fn quanta_by_hand() {

@@ -103,7 +103,7 @@ pub struct ReduceRef {
 
 /// Mean contact pressure model (Pa): `telemetry::CARCASS_PRESSURE_PA` in
 /// the shader's f32 (tests/shader_contract.rs checks the shader's copy).
-pub const CARCASS_PRESSURE_PA: f32 = super::telemetry::CARCASS_PRESSURE_PA as f32;
+pub const CARCASS_PRESSURE_PA: f32 = crate::kpi::telemetry::CARCASS_PRESSURE_PA as f32;
 
 /// A batch of wheels: their samples back to back, cut into chunks.
 #[derive(Debug, Clone, Default)]

@@ -2,7 +2,7 @@
 //! the Welch average of |X_k|² over the profile's segments in the
 //! SurfaceTopography convention, C_k = Δx²/L·|X_k|² (L = N·Δx), as `road::psd`.
 
-use super::roughness_batch::{FFT_N, RoughnessBatch};
+use crate::kpi::roughness_batch::{FFT_N, RoughnessBatch};
 use rayon::prelude::*;
 
 pub fn roughness_psd(batch: &RoughnessBatch, spectra: &[[f64; 2]]) -> Vec<Vec<f64>> {

@@ -2,8 +2,8 @@
 //! Σ (z[i + k] − z[i])² over the chunk's i, each thread adding its items,
 //! then the tree (f64 here, f32 there).
 
-use super::roughness_batch::RoughnessBatch;
 use super::telemetry_reduce::{ITEMS, WG_SIZE};
+use crate::kpi::roughness_batch::RoughnessBatch;
 use rayon::prelude::*;
 
 pub fn roughness_hdc(batch: &RoughnessBatch) -> Vec<f64> {

@@ -2,7 +2,7 @@
 //! `FFT_N` heights, its mean removed, times the periodic Hann window scaled to
 //! mean(w²) = 1, as complex numbers (imaginary part 0) for `fft_pass`.
 
-use super::roughness_batch::{FFT_N, RoughnessBatch};
+use crate::kpi::roughness_batch::{FFT_N, RoughnessBatch};
 use rayon::prelude::*;
 
 /// √(3/8): the RMS of the periodic Hann window.

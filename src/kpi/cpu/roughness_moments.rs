@@ -3,8 +3,8 @@
 //! items, then the shared-memory tree (f64 here, f32 there). Run twice: with
 //! ref = the first height (for the mean), then with ref = the mean.
 
-use super::roughness_batch::{MOMENT_SUMS, RoughnessBatch};
 use super::telemetry_reduce::{ITEMS, WG_SIZE};
+use crate::kpi::roughness_batch::{MOMENT_SUMS, RoughnessBatch};
 use rayon::prelude::*;
 
 pub fn roughness_moments(batch: &RoughnessBatch, refs: &[f32]) -> Vec<[f64; MOMENT_SUMS]> {

@@ -15,8 +15,8 @@
 //! maps are deterministic and differ only by f32 against f64 per sample.
 
 use super::energy_map::{add_to_wheel, from_quanta, per_wheel_sums, to_quanta};
-use super::energy_maps::Bins;
 use super::telemetry_reduce::{ITEMS, ReduceBatch, ReduceChunk, ReduceSample, WG_SIZE};
+use crate::kpi::energy_maps::Bins;
 use bytemuck::{Pod, Zeroable};
 
 /// A per-sample condition: its name in the side table, unit, bins and formula.
