@@ -100,6 +100,12 @@ fn planted_graining_is_found_on_the_front_axle() {
         d.steps[1]
     );
     assert!(case.rmse_diagnosed_pct < case.rmse_baseline_pct, "{case:?}");
+    // Step 3 measures each flagged slice on the very tires step 1 flagged
+    // (quantile edges are not re-read from the slice's printed name).
+    assert!(!d.slices.is_empty());
+    for (slice, size) in d.slices.iter().zip(&d.steps[0].slices) {
+        assert_eq!(slice.n, size.n, "{}", slice.name);
+    }
 }
 
 /// Blistering planted at magnitude 1, threshold 125 °C inner liner: the

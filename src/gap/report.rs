@@ -365,10 +365,7 @@ pub fn diagnose(
     let mut track_level: Vec<bool> = (0..base.len())
         .map(|j| physics.is_some() && j + 1 == base.len())
         .collect();
-    let members: Vec<Vec<bool>> = slices
-        .iter()
-        .map(|s| slice_members(&s.name, &all_rows))
-        .collect();
+    let members: Vec<Vec<bool>> = slices.iter().map(|s| s.members.clone()).collect();
     let step_of = |added: String, score: Option<&Score>, res: &[f64]| Step {
         added,
         feature: score.map(|s| s.feature),
@@ -616,40 +613,6 @@ pub fn diagnose(
         candidates,
         steps,
     })
-}
-
-/// Rows of a slice named as in step 1 (`A & B`, each `col = level` or `col in Qk [lo, hi]`).
-fn slice_members(name: &str, rows: &[&KpiRow]) -> Vec<bool> {
-    let part = |p: &str, r: &KpiRow| -> bool {
-        if let Some((col, level)) = p.split_once(" = ") {
-            let v = match col {
-                "axle" => r.axle.name(),
-                "wheel" => r.wheel.name(),
-                "track" => &r.track,
-                "event" => &r.event,
-                "compound" => &r.compound,
-                _ => &r.car,
-            };
-            v == level
-        } else if let Some((col, rest)) = p.split_once(" in Q") {
-            let inner = rest
-                .split_once('[')
-                .map(|x| x.1.trim_end_matches(']'))
-                .unwrap_or("");
-            let (lo, hi) = inner.split_once(", ").unwrap_or(("nan", "nan"));
-            let (lo, hi): (f64, f64) = (
-                lo.parse().unwrap_or(f64::NAN),
-                hi.parse().unwrap_or(f64::NAN),
-            );
-            r.number(col)
-                .is_some_and(|x| x >= lo - 1e-4 && x <= hi + 1e-4)
-        } else {
-            false
-        }
-    };
-    rows.iter()
-        .map(|r| name.split(" & ").all(|p| part(p, r)))
-        .collect()
 }
 
 #[cfg(test)]

@@ -39,6 +39,10 @@ pub struct Slice {
     pub explained_share: f64,
     /// Other names of the same rows (e.g. road indices constant per track).
     pub aliases: Vec<String>,
+    /// Which of the rows tested are in the slice (steps 2 and 3 measure the
+    /// gap inside it).
+    #[serde(skip)]
+    pub members: Vec<bool>,
 }
 
 /// A named row predicate: (variable, level name, members).
@@ -144,6 +148,7 @@ fn test(name: String, members: &[bool], res: &Residuals) -> Option<Slice> {
         p,
         p_adjusted: f64::NAN,
         share_of_squared_gap: inside.iter().map(|r| r * r).sum::<f64>() / total_sq,
+        members: members.to_vec(),
     })
 }
 
