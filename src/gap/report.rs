@@ -3,14 +3,13 @@
 //! 2) and how far it shrinks as terms are added (step 3); written as JSON
 //! and Markdown.
 
-use super::acts::acts_in;
 use super::baseline::PhysicsBaseline;
 use super::candidates::{Candidate, Feature, LawRow, library};
 use super::linear::weighted_fit;
-use super::recalibrate::{Rows, Term, refit_law};
+use super::recalibrate::Rows;
 pub use super::render::render_markdown;
-use super::scoring::{Problem, Score, ScoringSettings, rank, relative_weights};
-use super::selection::next_term;
+use super::scoring::{Score, ScoringSettings, rank};
+use super::selection::{Selection, next_term};
 use super::slices::{Slice, slice_residuals};
 use crate::ingest::compound::Wlf;
 use crate::kpi::KpiRow;
@@ -343,18 +342,16 @@ pub fn diagnose(
 
     // Steps 2 and 3: candidates scored on the training rows, added to the
     // baseline's design in turn; each step's fit applies to every row.
-    let mut base: Vec<Vec<f64>> = match &physics {
+    let base: Vec<Vec<f64>> = match &physics {
         Some(p) => p.columns(&all_rows, &row_maps),
         None => vec![
             vec![1.0; all_rows.len()],
             all_rows.iter().map(|r| predict(r)).collect(),
         ],
     };
-    // The physics law's last column (its skewness derivative) is constant
-    // within tracks; so are road terms once selected.
     // What the law says about each row: the mechanisms' terms are charged
     // at its abrasion per joule (`candidate_feature`).
-    let mut law: Vec<LawRow> = all_rows
+    let law: Vec<LawRow> = all_rows
         .iter()
         .zip(&row_maps)
         .map(|(r, m)| match &physics {
@@ -362,10 +359,11 @@ pub fn diagnose(
             None => LawRow::raw(r),
         })
         .collect();
-    let mut track_level: Vec<bool> = (0..base.len())
+    // The physics law's last column (its skewness derivative) is constant
+    // within tracks; so are road terms once selected.
+    let track_level: Vec<bool> = (0..base.len())
         .map(|j| physics.is_some() && j + 1 == base.len())
         .collect();
-    let members: Vec<Vec<bool>> = slices.iter().map(|s| s.members.clone()).collect();
     let step_of = |added: String, score: Option<&Score>, res: &[f64]| Step {
         added,
         feature: score.map(|s| s.feature),
@@ -375,12 +373,12 @@ pub fn diagnose(
         p_adjusted: score.map_or(f64::NAN, |s| s.p_adjusted),
         training: size(&res[..n_train]),
         testing: (res.len() > n_train).then(|| size(&res[n_train..])),
-        slices: members
+        slices: slices
             .iter()
-            .map(|m| {
+            .map(|sl| {
                 let v: Vec<f64> = res
                     .iter()
-                    .zip(m)
+                    .zip(&sl.members)
                     .filter(|(_, k)| **k)
                     .map(|(r, _)| *r)
                     .collect();
@@ -389,90 +387,39 @@ pub fn diagnose(
             .collect(),
     };
     let mut steps = vec![step_of("baseline".into(), None, &all_res)];
-    let mut refitted_law: Option<PhysicsBaseline> = None;
     let mut candidates = Vec::new();
-    // The final model's coefficients (of `base`, whose last columns are the terms).
-    let mut final_k: Vec<f64> = Vec::new();
-    let mut n_terms = 0;
-    // The final fit's row weights (training rows).
-    let mut final_w: Vec<f64> = Vec::new();
+    let data = Rows {
+        rows: &all_rows,
+        maps: &row_maps,
+        y: &y,
+        n_train,
+    };
+    let mut sel = Selection::new(
+        data,
+        physics.as_ref(),
+        &settings.wlf,
+        base,
+        law,
+        track_level,
+    );
     if !maps.is_empty() {
         let mut lib = library(&all_rows[..n_train]);
         lib.extend(settings.user_effects.iter().cloned());
-        let train_idx: Vec<usize> = (0..n_train).collect();
-        let mut used: Vec<String> = Vec::new();
-        let mut terms: Vec<Term> = Vec::new();
-        let data = Rows {
-            rows: &all_rows,
-            maps: &row_maps,
-            y: &y,
-            n_train,
-        };
-        let mut w = if physics.is_some() {
-            relative_weights(
-                &base
-                    .iter()
-                    .map(|c| c[..n_train].to_vec())
-                    .collect::<Vec<_>>(),
-                &y[..n_train],
-            )
-        } else {
-            vec![1.0; n_train]
-        };
-        // Rounds: one per term added, plus one per term refused below.
+        // Rounds: one per term added, plus one per term refused.
         let mut round = 0;
         while steps.len() <= settings.max_terms && round < 2 * settings.max_terms + 2 {
             round += 1;
-            let problem = Problem {
-                rows: &all_rows[..n_train],
-                maps: &row_maps[..n_train],
-                y: &y[..n_train],
-                base: base.iter().map(|c| c[..n_train].to_vec()).collect(),
-                track_level: track_level.clone(),
-                law: &law[..n_train],
-                relative: physics.is_some(),
-            };
-            let ranked = rank(&problem, &lib, &settings.scoring);
+            let ranked = rank(&sel.problem(), &lib, &settings.scoring);
             if round == 1 {
                 candidates = ranked.clone();
-                // Where each of the leading candidates acts, over all rows.
                 let named: Vec<(&str, Vec<bool>)> = slices
                     .iter()
-                    .zip(&members)
-                    .map(|(s, m)| (s.name.as_str(), m.clone()))
+                    .map(|s| (s.name.as_str(), s.members.clone()))
                     .collect();
-                let before = weighted_fit(&base, &w, &y, &train_idx).1;
-                for c in candidates.iter_mut().take(ACTS_FOR) {
-                    let Some(cand) = lib.iter().find(|l| l.name == c.name) else {
-                        continue;
-                    };
-                    if c.coefficient == 0.0 {
-                        continue;
-                    }
-                    let column = Term {
-                        candidate: cand.clone(),
-                        threshold: c.threshold,
-                        kpi_scale: c.kpi_scale,
-                    }
-                    .column(&all_rows, &row_maps, &law);
-                    if column.iter().any(|v| !v.is_finite()) {
-                        continue;
-                    }
-                    // What the term changes: the prediction of baseline +
-                    // term minus the baseline's, both refitted as in step 3
-                    // (the baseline gives back what the term takes over).
-                    let mut with = base.clone();
-                    with.push(column);
-                    let change: Vec<f64> = weighted_fit(&with, &w, &y, &train_idx)
-                        .1
-                        .iter()
-                        .zip(&before)
-                        .map(|(a, b)| a - b)
-                        .collect();
-                    c.acts_in = acts_in(&change, &all_res, &named, 3);
-                }
+                let leading = ACTS_FOR.min(candidates.len());
+                sel.acts_in(&mut candidates[..leading], &lib, &named, &all_res);
             }
-            let Some(best) = next_term(&ranked, &candidates, &terms, &used, fdr) else {
+            let Some(best) = next_term(&ranked, &candidates, &sel.terms, &sel.used, fdr) else {
                 break;
             };
             tracing::debug!(
@@ -483,119 +430,14 @@ pub fn diagnose(
                 p_adjusted = best.p_adjusted,
                 "best significant candidate"
             );
-            let cand = lib
-                .iter()
-                .find(|c| c.name == best.name)
-                .map(|c| Candidate {
-                    thresholds: vec![best.threshold],
-                    ..c.clone()
-                })
-                .unwrap_or_else(|| best.as_candidate());
-            // Baseline and terms refitted together on the training events
-            // (relative scale for the physics law), without track scales:
-            // the model a user would run on a new event. The physics law is
-            // calibrated again around the terms (`recalibrate`).
-            let term = Term {
-                candidate: cand.clone(),
-                threshold: best.threshold,
-                kpi_scale: best.kpi_scale,
-            };
-            let with_term = |terms: &[Term]| [terms, std::slice::from_ref(&term)].concat();
-            let (k, fitted, law_refit) = match &physics {
-                Some(p) => {
-                    let r = refit_law(
-                        refitted_law.as_ref().unwrap_or(p),
-                        &with_term(&terms),
-                        &data,
-                        &settings.wlf,
-                    );
-                    (r.coefficients.clone(), r.fitted.clone(), Some(r))
-                }
-                None => {
-                    let mut with = base.clone();
-                    with.push(term.column(&all_rows, &row_maps, &law));
-                    let (k, fitted) = weighted_fit(&with, &w, &y, &train_idx);
-                    base = with;
-                    (k, fitted, None)
-                }
-            };
-            let res: Vec<f64> = y.iter().zip(&fitted).map(|(a, b)| a - b).collect();
-            // A mechanism that adds wear must keep a positive coefficient
-            // once refitted without track scales; if it turns negative it was
-            // fitting something else (a track-level effect, say): refused.
-            if cand.adds_wear_only() && k[k.len() - 1] <= 0.0 {
-                tracing::info!(
-                    term = %best.name,
-                    coefficient = k[k.len() - 1],
-                    "refused: the refitted coefficient of a wear mechanism is not positive"
-                );
-                if law_refit.is_none() {
-                    base.pop();
-                }
-                used.push(best.name.clone());
-                continue;
+            if let Some((refitted, res)) = sel.add(best, &lib) {
+                steps.push(step_of(best.name.clone(), Some(&refitted), &res));
             }
-            track_level.push(cand.feature.track_level());
-            terms.push(term);
-            n_terms = terms.len();
-            final_k = k.clone();
-            final_w = match &law_refit {
-                Some(r) => r.weights.clone(),
-                None => w.clone(),
-            };
-            if let Some(r) = law_refit {
-                base = r.columns;
-                law = r.law_rows;
-                w = r.weights;
-                refitted_law = Some(r.law);
-            }
-            let mut refitted = best.clone();
-            refitted.coefficient = k[k.len() - 1];
-            used.push(best.name.clone());
-            steps.push(step_of(best.name.clone(), Some(&refitted), &res));
         }
     }
-    let terms_wear = if n_terms == 0 {
-        Vec::new()
-    } else {
-        let first = base.len() - n_terms;
-        all_rows
-            .iter()
-            .enumerate()
-            .map(|(i, r)| {
-                let by_term_pct: Vec<f64> = (first..base.len())
-                    .map(|j| final_k[j] * base[j][i])
-                    .collect();
-                TermsWear {
-                    run: r.run.clone(),
-                    wheel: r.wheel,
-                    axle: r.axle,
-                    wear_pct: by_term_pct.iter().sum(),
-                    by_term_pct,
-                    predicted_pct: (0..base.len()).map(|j| final_k[j] * base[j][i]).sum(),
-                }
-            })
-            .collect()
-    };
-    let final_terms = if n_terms == 0 {
-        Vec::new()
-    } else {
-        let events: Vec<&str> = all_rows[..n_train]
-            .iter()
-            .map(|r| r.event.as_str())
-            .collect();
-        let ci = bootstrap_terms(&base, &final_w, &y, &events, n_terms, settings.scoring.seed);
-        steps[1..]
-            .iter()
-            .zip(ci)
-            .enumerate()
-            .map(|(t, (st, ci95))| FinalTerm {
-                name: st.added.clone(),
-                coefficient: final_k[base.len() - n_terms + t],
-                ci95,
-            })
-            .collect()
-    };
+    let terms_wear = terms_wear(&sel);
+    let final_terms = final_terms(&sel, &steps, settings.scoring.seed);
+    let refitted_law = sel.refitted_law;
     Ok(Diagnosis {
         terms_wear,
         final_terms,
@@ -613,6 +455,56 @@ pub fn diagnose(
         candidates,
         steps,
     })
+}
+
+/// Each tire's wear from the final model's terms (none without terms).
+fn terms_wear(sel: &Selection) -> Vec<TermsWear> {
+    let n_terms = sel.terms.len();
+    if n_terms == 0 {
+        return Vec::new();
+    }
+    let (base, k) = (&sel.base, &sel.final_k);
+    let first = base.len() - n_terms;
+    sel.data
+        .rows
+        .iter()
+        .enumerate()
+        .map(|(i, r)| {
+            let by_term_pct: Vec<f64> = (first..base.len()).map(|j| k[j] * base[j][i]).collect();
+            TermsWear {
+                run: r.run.clone(),
+                wheel: r.wheel,
+                axle: r.axle,
+                wear_pct: by_term_pct.iter().sum(),
+                by_term_pct,
+                predicted_pct: (0..base.len()).map(|j| k[j] * base[j][i]).sum(),
+            }
+        })
+        .collect()
+}
+
+/// The final model's terms with their event-bootstrap 95 % intervals.
+fn final_terms(sel: &Selection, steps: &[Step], seed: u64) -> Vec<FinalTerm> {
+    let n_terms = sel.terms.len();
+    if n_terms == 0 {
+        return Vec::new();
+    }
+    let (base, n_train) = (&sel.base, sel.data.n_train);
+    let events: Vec<&str> = sel.data.rows[..n_train]
+        .iter()
+        .map(|r| r.event.as_str())
+        .collect();
+    let ci = bootstrap_terms(base, &sel.final_w, sel.data.y, &events, n_terms, seed);
+    steps[1..]
+        .iter()
+        .zip(ci)
+        .enumerate()
+        .map(|(t, (st, ci95))| FinalTerm {
+            name: st.added.clone(),
+            coefficient: sel.final_k[base.len() - n_terms + t],
+            ci95,
+        })
+        .collect()
 }
 
 #[cfg(test)]

@@ -3,9 +3,209 @@
 //! gap worse (or kept out one that shrank it); the measurements are in
 //! docs/gap.md ("Step 3").
 
-use super::candidates::Feature;
-use super::recalibrate::Term;
-use super::scoring::Score;
+use super::acts::acts_in;
+use super::baseline::PhysicsBaseline;
+use super::candidates::{Candidate, Feature, LawRow};
+use super::linear::weighted_fit;
+use super::recalibrate::{Rows, Term, refit_law};
+use super::scoring::{Problem, Score, relative_weights};
+use crate::ingest::compound::Wlf;
+use std::collections::BTreeMap;
+
+/// Step 3's state between rounds: the design (the baseline's columns, then
+/// one per term), what the law says about each row, the training rows'
+/// weights, the terms in and the names entered or refused. One method per
+/// thing a round does: [`Selection::problem`] (step 2's input),
+/// [`Selection::acts_in`] (first round only), [`Selection::add`].
+pub(super) struct Selection<'a> {
+    pub data: Rows<'a>,
+    /// The physics baseline as calibrated without terms (None: a model or
+    /// predictions baseline, refitted by least squares).
+    physics: Option<&'a PhysicsBaseline>,
+    wlf: &'a BTreeMap<String, Wlf>,
+    /// Design columns over every row: the baseline's, then one per term.
+    pub base: Vec<Vec<f64>>,
+    law: Vec<LawRow>,
+    track_level: Vec<bool>,
+    /// Training rows' weights (relative scale under the physics law).
+    w: Vec<f64>,
+    pub terms: Vec<Term>,
+    pub used: Vec<String>,
+    /// The law calibrated again around the terms.
+    pub refitted_law: Option<PhysicsBaseline>,
+    /// The final model's coefficients (of `base`) and its training weights.
+    pub final_k: Vec<f64>,
+    pub final_w: Vec<f64>,
+}
+
+impl<'a> Selection<'a> {
+    pub fn new(
+        data: Rows<'a>,
+        physics: Option<&'a PhysicsBaseline>,
+        wlf: &'a BTreeMap<String, Wlf>,
+        base: Vec<Vec<f64>>,
+        law: Vec<LawRow>,
+        track_level: Vec<bool>,
+    ) -> Self {
+        let n_train = data.n_train;
+        let w = if physics.is_some() {
+            relative_weights(
+                &base
+                    .iter()
+                    .map(|c| c[..n_train].to_vec())
+                    .collect::<Vec<_>>(),
+                &data.y[..n_train],
+            )
+        } else {
+            vec![1.0; n_train]
+        };
+        Selection {
+            data,
+            physics,
+            wlf,
+            base,
+            law,
+            track_level,
+            w,
+            terms: Vec::new(),
+            used: Vec::new(),
+            refitted_law: None,
+            final_k: Vec::new(),
+            final_w: Vec::new(),
+        }
+    }
+
+    fn train_idx(&self) -> Vec<usize> {
+        (0..self.data.n_train).collect()
+    }
+
+    /// Step 2's input this round: the training rows and the design so far.
+    pub fn problem(&self) -> Problem<'_> {
+        let n = self.data.n_train;
+        Problem {
+            rows: &self.data.rows[..n],
+            maps: &self.data.maps[..n],
+            y: &self.data.y[..n],
+            base: self.base.iter().map(|c| c[..n].to_vec()).collect(),
+            track_level: self.track_level.clone(),
+            law: &self.law[..n],
+            relative: self.physics.is_some(),
+        }
+    }
+
+    /// Where each of `candidates` acts over all rows: the flagged slices
+    /// (`named`: name and members) whose mean gap (`residual`) the change
+    /// in prediction follows most, the baseline and the term refitted as
+    /// step 3 refits them (the baseline gives back what the term takes over).
+    pub fn acts_in(
+        &self,
+        candidates: &mut [Score],
+        lib: &[Candidate],
+        named: &[(&str, Vec<bool>)],
+        residual: &[f64],
+    ) {
+        let (y, train_idx) = (self.data.y, self.train_idx());
+        let before = weighted_fit(&self.base, &self.w, y, &train_idx).1;
+        for c in candidates {
+            let Some(cand) = lib.iter().find(|l| l.name == c.name) else {
+                continue;
+            };
+            if c.coefficient == 0.0 {
+                continue;
+            }
+            let column = Term {
+                candidate: cand.clone(),
+                threshold: c.threshold,
+                kpi_scale: c.kpi_scale,
+            }
+            .column(self.data.rows, self.data.maps, &self.law);
+            if column.iter().any(|v| !v.is_finite()) {
+                continue;
+            }
+            let mut with = self.base.clone();
+            with.push(column);
+            let change: Vec<f64> = weighted_fit(&with, &self.w, y, &train_idx)
+                .1
+                .iter()
+                .zip(&before)
+                .map(|(a, b)| a - b)
+                .collect();
+            c.acts_in = acts_in(&change, residual, named, 3);
+        }
+    }
+
+    /// Adds `best` (found in `lib` by name) as a term: the baseline and the
+    /// terms refitted together on the training events (relative scale for
+    /// the physics law), without track scales — the model a user would run
+    /// on a new event; the physics law calibrated again around the terms
+    /// (`recalibrate`). Returns the term's score with its refitted
+    /// coefficient and every row's residual, or None when it is refused: a
+    /// mechanism that adds wear must keep a positive coefficient once
+    /// refitted without track scales; if it turns negative it was fitting
+    /// something else (a track-level effect, say). Either way its name is
+    /// used.
+    pub fn add(&mut self, best: &Score, lib: &[Candidate]) -> Option<(Score, Vec<f64>)> {
+        let cand = lib
+            .iter()
+            .find(|c| c.name == best.name)
+            .map(|c| Candidate {
+                thresholds: vec![best.threshold],
+                ..c.clone()
+            })
+            .unwrap_or_else(|| best.as_candidate());
+        let term = Term {
+            candidate: cand.clone(),
+            threshold: best.threshold,
+            kpi_scale: best.kpi_scale,
+        };
+        self.used.push(best.name.clone());
+        let y = self.data.y;
+        // Under a statistical baseline the design with the term's column.
+        let (k, fitted, law_refit, with) = match self.physics {
+            Some(p) => {
+                let with_term = [self.terms.as_slice(), std::slice::from_ref(&term)].concat();
+                let start = self.refitted_law.as_ref().unwrap_or(p);
+                let r = refit_law(start, &with_term, &self.data, self.wlf);
+                (r.coefficients.clone(), r.fitted.clone(), Some(r), None)
+            }
+            None => {
+                let mut with = self.base.clone();
+                with.push(term.column(self.data.rows, self.data.maps, &self.law));
+                let (k, fitted) = weighted_fit(&with, &self.w, y, &self.train_idx());
+                (k, fitted, None, Some(with))
+            }
+        };
+        let coefficient = k[k.len() - 1];
+        if cand.adds_wear_only() && coefficient <= 0.0 {
+            tracing::info!(
+                term = %best.name,
+                coefficient,
+                "refused: the refitted coefficient of a wear mechanism is not positive"
+            );
+            return None;
+        }
+        let residual: Vec<f64> = y.iter().zip(&fitted).map(|(a, b)| a - b).collect();
+        self.track_level.push(cand.feature.track_level());
+        if let Some(with) = with {
+            self.base = with;
+        }
+        self.terms.push(term);
+        self.final_k = k;
+        match law_refit {
+            Some(r) => {
+                self.final_w = r.weights.clone();
+                self.base = r.columns;
+                self.law = r.law_rows;
+                self.w = r.weights;
+                self.refitted_law = Some(r.law);
+            }
+            None => self.final_w = self.w.clone(),
+        }
+        let mut refitted = best.clone();
+        refitted.coefficient = coefficient;
+        Some((refitted, residual))
+    }
+}
 
 /// The candidate of `ranked` (this round's step 2, sorted by CV gain) that
 /// enters next, if any. `first_round`: step 2 on the baseline alone;
