@@ -386,8 +386,8 @@ pub const NAMED_CONDITIONS: [(&str, bool, Feature); 4] = [
 /// Candidates generated from the condition energy maps: for every condition
 /// and energy component (total, longitudinal, lateral), the energy above θ
 /// and below θ (θ every other inner bin edge, scanned in the
-/// cross-validation like a mechanism's threshold), on both axles and on
-/// each alone ([`condition_scopes`]) — except the points a named mechanism already covers
+/// cross-validation like a mechanism's threshold), on both axles, on each
+/// alone and on each wheel position ([`condition_scopes`]) — except the points a named mechanism already covers
 /// ([`NAMED_CONDITIONS`], on every component). Rows whose extraction wrote no
 /// condition maps, or maps without that condition, give NaN terms, and the
 /// scoring passes these candidates over.
@@ -429,13 +429,21 @@ fn condition_candidates() -> Vec<Candidate> {
 }
 
 /// The scopes of a generated condition candidate: both axles, each axle,
-/// as (name suffix, axle, group).
+/// each wheel position on every car (a mechanism one corner's set-up or
+/// load case brings out), as (name suffix, axle, group).
 fn condition_scopes() -> Vec<(String, Option<Axle>, Option<Group>)> {
-    let out: Vec<(String, Option<Axle>, Option<Group>)> = vec![
+    let mut out: Vec<(String, Option<Axle>, Option<Group>)> = vec![
         (String::new(), None, None),
         (", front axle".into(), Some(Axle::Front), None),
         (", rear axle".into(), Some(Axle::Rear), None),
     ];
+    for w in Wheel::ALL {
+        let group = Group {
+            car: None,
+            wheel: Some(w),
+        };
+        out.push((format!(", {w} wheel"), Some(w.axle()), Some(group)));
+    }
     out
 }
 
@@ -872,12 +880,12 @@ mod tests {
             .is_nan()
         );
         // The generated space: every condition and component both ways on
-        // three scopes (both axles, each axle), less the points the named
-        // mechanisms stand for.
+        // seven scopes (both axles, each axle, each wheel), less the points
+        // the named mechanisms stand for.
         let generated = condition_candidates();
         assert_eq!(
             generated.len(),
-            (2 * CONDITIONS.len() - NAMED_CONDITIONS.len()) * 3 * 3
+            (2 * CONDITIONS.len() - NAMED_CONDITIONS.len()) * 3 * 7
         );
         for (name, above, _) in NAMED_CONDITIONS {
             let c = ConditionMaps::condition_index(name).unwrap();
@@ -890,6 +898,38 @@ mod tests {
                 assert!(!generated.iter().any(|g| g.feature == named));
             }
         }
+        // A wheel's candidate is the same energy on that wheel's tires (of
+        // every car), zero on the others — its axle partner included.
+        // KpiRow's default wheel is FL (front); the law's abrasion is 1.
+        let law = LawRow {
+            abrasion: 1.0,
+            energy_mj: 0.0,
+            wear_pct: 0.0,
+        };
+        let scoped = |suffix: &str| {
+            let name = format!("energy with slip_ratio above θ{suffix}");
+            generated
+                .iter()
+                .find(|c| c.name == name)
+                .expect("generated")
+        };
+        let on = |c: &Candidate, wheel: Wheel| {
+            let r = KpiRow {
+                wheel,
+                axle: wheel.axle(),
+                ..KpiRow::default()
+            };
+            candidate_feature(c, &r, Some(&m), 0.1, KpiScale::NONE, law)
+        };
+        for w in Wheel::ALL {
+            let c = scoped(&format!(", {w} wheel"));
+            for other in Wheel::ALL {
+                let want = if other == w { 2.0 } else { 0.0 };
+                assert!(close(on(c, other), want), "{} on {other}", c.name);
+            }
+        }
+        assert!(close(on(scoped(", front axle"), Wheel::FR), 2.0));
+        assert!(close(on(scoped(", front axle"), Wheel::RL), 0.0));
     }
 
     #[test]
