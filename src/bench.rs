@@ -447,21 +447,53 @@ fn simulate_for_decode(
     encoding: crate::ingest::telemetry::Encoding,
     out: &std::path::Path,
 ) -> Result<(), crate::sim::SimError> {
-    use crate::sim::{Preset, SimOptions, simulate};
-    let opts = SimOptions {
-        preset: if o.small { Preset::Tiny } else { Preset::Demo },
-        scale: 1.0,
-        seed: 1,
-        effects: vec![],
-        generated: None,
-        scatter: crate::sim::WearScatter::NONE,
-        encoding,
-        rate_hz: None,
-        out: out.to_path_buf(),
-        sensor_noise: true,
-        progress: false,
+    let preset = if o.small {
+        crate::sim::Preset::Tiny
+    } else {
+        crate::sim::Preset::Demo
     };
-    simulate(&opts).map(|_| ())
+    let season = BenchSeason {
+        preset,
+        scale: 1.0,
+        rate_hz: None,
+        effect: None,
+    };
+    crate::sim::simulate(&season.options(encoding, out)).map(|_| ())
+}
+
+/// A simulated season the bench measures (seed 1, sensor noise on).
+struct BenchSeason {
+    preset: crate::sim::Preset,
+    scale: f64,
+    rate_hz: Option<f64>,
+    /// A planted effect (`tirewear simulate --effect` syntax).
+    effect: Option<&'static str>,
+}
+
+impl BenchSeason {
+    fn options(
+        &self,
+        encoding: crate::ingest::telemetry::Encoding,
+        out: &std::path::Path,
+    ) -> crate::sim::SimOptions {
+        crate::sim::SimOptions {
+            preset: self.preset,
+            scale: self.scale,
+            seed: 1,
+            effects: self
+                .effect
+                .iter()
+                .map(|e| e.parse().expect("the bench's effects parse"))
+                .collect(),
+            generated: None,
+            scatter: crate::sim::WearScatter::NONE,
+            encoding,
+            rate_hz: self.rate_hz,
+            out: out.to_path_buf(),
+            sensor_noise: true,
+            progress: false,
+        }
+    }
 }
 
 /// The decode and extraction lines of one season.
@@ -558,29 +590,38 @@ fn gap_lines(o: &BenchOptions, report: &mut BenchReport) {
         report.notes.push("gap skipped: no temporary folder".into());
         return;
     };
+    let season = |preset, scale, rate_hz, effect| BenchSeason {
+        preset,
+        scale,
+        rate_hz,
+        effect,
+    };
     // A clean season adds no term; a planted effect makes forward selection
     // score every candidate again per term added (the slow path).
-    let seasons: Vec<(&'static str, Preset, f64, Option<f64>, &str)> = if o.small {
+    let graining = Some("graining=1");
+    let seasons = if o.small {
         // The tiny season has too few tires for a diagnosis.
-        vec![("gap, demo", Preset::Demo, 1.0, None, "")]
+        vec![("gap, demo", season(Preset::Demo, 1.0, None, None))]
     } else {
         vec![
-            ("gap, demo", Preset::Demo, 1.0, None, ""),
-            ("gap, demo+grain.", Preset::Demo, 1.0, None, "graining=1"),
-            ("gap, season 0.5", Preset::Season, 0.5, Some(5.0), ""),
+            ("gap, demo", season(Preset::Demo, 1.0, None, None)),
+            (
+                "gap, demo+grain.",
+                season(Preset::Demo, 1.0, None, graining),
+            ),
+            (
+                "gap, season 0.5",
+                season(Preset::Season, 0.5, Some(5.0), None),
+            ),
             (
                 "gap, seas.+grain.",
-                Preset::Season,
-                0.5,
-                Some(5.0),
-                "graining=1",
+                season(Preset::Season, 0.5, Some(5.0), graining),
             ),
         ]
     };
-    for (label, preset, scale, rate_hz, effect) in seasons {
-        let season = dir.path().join(label.replace([',', ' ', '+', '.'], "-"));
-        let sim = (preset, scale, rate_hz, effect);
-        if let Err(e) = season_gap_lines(o, label, sim, &season, report) {
+    for (label, s) in seasons {
+        let out = dir.path().join(label.replace([',', ' ', '+', '.'], "-"));
+        if let Err(e) = season_gap_lines(o, label, &s, &out, report) {
             report.notes.push(format!("{label} skipped: {e}"));
         }
     }
@@ -590,34 +631,16 @@ fn gap_lines(o: &BenchOptions, report: &mut BenchReport) {
 fn season_gap_lines(
     o: &BenchOptions,
     label: &'static str,
-    (preset, scale, rate_hz, effect): (crate::sim::Preset, f64, Option<f64>, &str),
-    season: &std::path::Path,
+    season: &BenchSeason,
+    out: &std::path::Path,
     report: &mut BenchReport,
 ) -> Result<(), String> {
     use crate::gap::report::{Baseline, GapSettings, diagnose};
-    crate::sim::simulate(&crate::sim::SimOptions {
-        preset,
-        scale,
-        seed: 1,
-        effects: if effect.is_empty() {
-            vec![]
-        } else {
-            vec![effect.parse()?]
-        },
-        generated: None,
-        scatter: crate::sim::WearScatter::NONE,
-        encoding: crate::ingest::telemetry::Encoding::Block,
-        rate_hz,
-        out: season.to_path_buf(),
-        sensor_noise: true,
-        progress: false,
-    })
-    .map_err(|e| e.to_string())?;
-    let kpis = season.join("kpis.parquet");
-    crate::kpi::extract(&crate::kpi::ExtractOptions::new(season, &kpis))
+    let encoding = crate::ingest::telemetry::Encoding::Block;
+    let kpis = crate::gap::validate::simulate_and_extract(&season.options(encoding, out))
         .map_err(|e| e.to_string())?;
     let settings = GapSettings {
-        wlf: crate::ingest::compound::read_wlf(&season.join("compounds"))
+        wlf: crate::ingest::compound::read_wlf(&out.join("compounds"))
             .map_err(|e| e.to_string())?,
         ..GapSettings::default()
     };

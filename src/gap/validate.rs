@@ -133,6 +133,16 @@ pub fn matrix(s: &ValidateSettings) -> Vec<(Planted, u64)> {
     out
 }
 
+/// Simulates a season into `opts.out` and extracts its KPI database there
+/// (`kpis.parquet`, CPU engine): the seasons `gap validate` and `tirewear
+/// bench --only gap` diagnose. Returns the KPI file's path.
+pub fn simulate_and_extract(opts: &crate::sim::SimOptions) -> Result<PathBuf, GapError> {
+    crate::sim::simulate(opts)?;
+    let kpis = opts.out.join("kpis.parquet");
+    crate::kpi::extract(&crate::kpi::ExtractOptions::new(&opts.out, &kpis))?;
+    Ok(kpis)
+}
+
 /// Planted wear (%) per (run, wheel) from `truth/wear_truth.csv`: the
 /// column `wear_<column>_pct` (None: zero).
 pub fn read_planted(
@@ -353,7 +363,7 @@ pub fn run_case(
     };
     let dir = s.work.join(name);
     let _ = std::fs::remove_dir_all(&dir);
-    crate::sim::simulate(&crate::sim::SimOptions {
+    let kpis = simulate_and_extract(&crate::sim::SimOptions {
         preset: s.preset,
         scale: s.scale,
         seed,
@@ -372,8 +382,6 @@ pub fn run_case(
         sensor_noise: true,
         progress: false,
     })?;
-    let kpis = dir.join("kpis.parquet");
-    crate::kpi::extract(&crate::kpi::ExtractOptions::new(&dir, &kpis))?;
     let rows = crate::kpi::table::read_parquet(&kpis)?;
     let maps = crate::kpi::energy_maps::read_tire_maps(&kpis)?;
     // The diagnosis sees the KPI tables and the compound files only.
