@@ -21,12 +21,14 @@
 
 use super::acts::ActsIn;
 use super::candidates::{Candidate, Feature, KpiScale, LawRow, candidate_feature, kpi_scale};
-use super::linear::{dot, lstsq, orthonormal_basis, project_out, residual, weighted};
+use super::linear::{BaseFit, dot, lstsq, orthonormal_basis, project_out, residual, weighted};
 use super::stats::{benjamini_hochberg, levels};
 use super::track_test::Severities;
 use crate::Axle;
 use crate::kpi::KpiRow;
 use crate::kpi::energy_maps::EnergyMaps;
+use faer::linalg::matmul::matmul;
+use faer::{Accum, Mat, Par};
 use rand::SeedableRng;
 use rand::seq::SliceRandom;
 use rayon::prelude::*;
@@ -164,6 +166,7 @@ fn folds(rows: &[&KpiRow]) -> Vec<Vec<usize>> {
 /// Best threshold on `train`: index, coefficients (term last) and SSE; None
 /// when no threshold gives an admissible coefficient.
 fn best_threshold(
+    fit: &BaseFit,
     base: &[&[f64]],
     x: &[Vec<f64>],
     y: &[f64],
@@ -172,19 +175,12 @@ fn best_threshold(
 ) -> Option<(usize, Vec<f64>)> {
     let mut best: Option<(usize, Vec<f64>, f64)> = None;
     for (t, xt) in x.iter().enumerate() {
-        if train.iter().all(|&i| xt[i] == 0.0) {
+        let Some((k, sse)) = fit.with_column(base, xt, y, train) else {
             continue;
-        }
-        let mut cols = base.to_vec();
-        cols.push(xt);
-        let k = lstsq(&cols, y, train);
+        };
         if positive_only && k[k.len() - 1] <= 0.0 {
             continue;
         }
-        let sse: f64 = train
-            .iter()
-            .map(|&i| residual(&cols, &k, y, i).powi(2))
-            .sum();
         if best.as_ref().is_none_or(|b| sse < b.2) {
             best = Some((t, k, sse));
         }
@@ -235,6 +231,67 @@ pub(super) fn max_f(
         best = best.max(red / rest);
     }
     best
+}
+
+/// The within-track null's residuals under every permutation, and what
+/// [`max_f`] needs of them that no candidate changes (the null's SSE), so
+/// that a candidate's statistics under all permutations are one matrix
+/// product (permutations × rows by rows × thresholds) instead of a
+/// permuted copy and a dot product per permutation and threshold: the
+/// permutation tests were 90 % of a diagnosis (docs/gap.md, "How long a
+/// diagnosis takes").
+struct PermutedNull {
+    /// Row p: the null's residuals e0 permuted by permutation p.
+    e: Mat<f64>,
+    /// Per permutation: |e|² − Σ_u (u·e)², u the null's orthonormal basis.
+    sse0: Vec<f64>,
+}
+
+impl PermutedNull {
+    /// From the null's residuals `e0` and orthonormal basis `q`.
+    fn new(e0: &[f64], q: &[Vec<f64>], perms: &[Vec<usize>]) -> PermutedNull {
+        let e = Mat::from_fn(perms.len(), e0.len(), |p, i| e0[perms[p][i]]);
+        let sse0 = perms
+            .par_iter()
+            .map(|perm| {
+                let ep: Vec<f64> = perm.iter().map(|&src| e0[src]).collect();
+                dot(&ep, &ep) - q.iter().map(|u| dot(u, &ep).powi(2)).sum::<f64>()
+            })
+            .collect();
+        PermutedNull { e, sse0 }
+    }
+
+    /// [`max_f`] of every permuted residual vector against the projected
+    /// terms `ft` (squared norms `nf`). The terms are orthogonal to the
+    /// null's basis, so f·e needs no projection of e.
+    fn max_f(&self, ft: &[Vec<f64>], nf: &[f64], positive_only: bool) -> Vec<f64> {
+        let (perms, n) = (self.e.nrows(), self.e.ncols());
+        let f = Mat::from_fn(n, ft.len(), |i, t| ft[t][i]);
+        let mut d = Mat::<f64>::zeros(perms, ft.len());
+        // Sequential: the candidates are already spread over the threads.
+        matmul(
+            d.as_mut(),
+            Accum::Replace,
+            self.e.as_ref(),
+            f.as_ref(),
+            1.0,
+            Par::Seq,
+        );
+        (0..perms)
+            .map(|p| {
+                let mut best = 0.0f64;
+                for (t, nn) in nf.iter().enumerate() {
+                    let dt = d[(p, t)];
+                    if *nn <= 0.0 || (positive_only && dt <= 0.0) {
+                        continue;
+                    }
+                    let red = dt * dt / nn;
+                    best = best.max(red / (self.sse0[p] - red).max(1e-300));
+                }
+                best
+            })
+            .collect()
+    }
 }
 
 /// Row weights 1/b of the relative scale, b the least-squares fit of `y` on
@@ -292,13 +349,19 @@ pub(super) fn track_cells<'r>(
     (kept, out)
 }
 
-/// One cross-validation fold of a null model: training rows, columns, coefficients.
-type Fold = (Vec<usize>, Vec<Vec<f64>>, Vec<f64>);
+/// One cross-validation fold of a null model: training rows, columns, and
+/// their fit on those rows.
+struct Fold {
+    train: Vec<usize>,
+    cols: Vec<Vec<f64>>,
+    fit: BaseFit,
+}
 
-/// A null model: its columns per fold (with the fold's coefficients) and on all rows.
+/// A null model: its columns and fit per fold and on all rows.
 struct Null {
     folds: Vec<Fold>,
     cols: Vec<Vec<f64>>,
+    fit: BaseFit,
     q: Vec<Vec<f64>>,
     e0: Vec<f64>,
 }
@@ -326,16 +389,25 @@ impl Null {
                 let train: Vec<usize> = all.iter().copied().filter(|i| !test.contains(i)).collect();
                 let cols = with_tracks(&train);
                 let refs: Vec<&[f64]> = cols.iter().map(|c| c.as_slice()).collect();
-                let k = lstsq(&refs, y, &train);
-                (train, cols, k)
+                let fit = BaseFit::new(&refs, y, &train);
+                Fold { train, cols, fit }
             })
             .collect();
         let cols = with_tracks(&all);
         let refs: Vec<&[f64]> = cols.iter().map(|c| c.as_slice()).collect();
         let q = orthonormal_basis(&refs, &all);
-        let k0 = lstsq(&refs, y, &all);
-        let e0 = all.iter().map(|&i| residual(&refs, &k0, y, i)).collect();
-        Null { folds, cols, q, e0 }
+        let fit = BaseFit::new(&refs, y, &all);
+        let e0 = all
+            .iter()
+            .map(|&i| residual(&refs, fit.k0(), y, i))
+            .collect();
+        Null {
+            folds,
+            cols,
+            fit,
+            q,
+            e0,
+        }
     }
 }
 
@@ -354,9 +426,10 @@ fn cv_gain(
     calibrate: bool,
 ) -> f64 {
     let (mut sse_with, mut sse_without) = (0.0, 0.0);
-    for (test, (train, cols, k0)) in groups.iter().zip(&null.folds) {
-        let base: Vec<&[f64]> = cols.iter().map(|c| c.as_slice()).collect();
-        let fit = best_threshold(&base, x, y, train, positive);
+    for (test, fold) in groups.iter().zip(&null.folds) {
+        let base: Vec<&[f64]> = fold.cols.iter().map(|c| c.as_slice()).collect();
+        let fit = best_threshold(&fold.fit, &base, x, y, &fold.train, positive);
+        let k0 = fold.fit.k0();
         let (r0, r1): (Vec<f64>, Vec<f64>) = test
             .iter()
             .map(|&i| {
@@ -462,6 +535,7 @@ pub fn rank(problem: &Problem, library: &[Candidate], settings: &ScoringSettings
         .map(|(r, t)| 2 * t + (r.axle == Axle::Rear) as usize)
         .collect();
     let perms = block_permutations(&blocks, settings.permutations, settings.seed);
+    let permuted = PermutedNull::new(&within.e0, &within.q, &perms);
 
     let scored: Vec<(Score, Option<NullDraws>)> = library
         .par_iter()
@@ -493,7 +567,7 @@ pub fn rank(problem: &Problem, library: &[Candidate], settings: &ScoringSettings
             };
             // Fit on all rows, and the permutation test.
             let cols: Vec<&[f64]> = null.cols.iter().map(|c| c.as_slice()).collect();
-            let fit = best_threshold(&cols, &x, y, &all, positive);
+            let fit = best_threshold(&null.fit, &cols, &x, y, &all, positive);
             let (threshold, coefficient, front_share) = match &fit {
                 Some((t, k)) => {
                     // The term's wear (%) is x/w: the share in wear, not on
@@ -520,21 +594,9 @@ pub fn rank(problem: &Problem, library: &[Candidate], settings: &ScoringSettings
             // for every within-track candidate (also where its own observed
             // one is 0), since the family's max over them is that null.
             let family = settings.multiple_testing == MultipleTesting::MaxStatistic;
-            let draws = (!track_level && (testable || family)).then(|| {
-                let mut e = vec![0.0; n];
-                let stats = perms
-                    .iter()
-                    .map(|perm| {
-                        for (dst, &src) in e.iter_mut().zip(perm.iter()) {
-                            *dst = null.e0[src];
-                        }
-                        max_f(&e, &null.q, &ft, &nf, positive)
-                    })
-                    .collect::<Vec<f64>>();
-                NullDraws {
-                    observed: if fit.is_none() { 0.0 } else { observed },
-                    stats,
-                }
+            let draws = (!track_level && (testable || family)).then(|| NullDraws {
+                observed: if fit.is_none() { 0.0 } else { observed },
+                stats: permuted.max_f(&ft, &nf, positive),
             });
             let p = if !testable {
                 1.0
@@ -751,6 +813,43 @@ mod tests {
             front_share: f64::NAN,
             kpi_scale: KpiScale::NONE,
             acts_in: Vec::new(),
+        }
+    }
+
+    #[test]
+    fn permuted_statistics_by_matrix_product_match_the_plain_loop() {
+        // Random residuals, a 3-column null and 5 thresholds' terms: every
+        // permutation's max-F through the matrix product equals `max_f` on
+        // the permuted copy (the route it replaces), to rounding.
+        use rand::Rng;
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+        let n = 60;
+        let mut col = || {
+            (0..n)
+                .map(|_| rng.random::<f64>() - 0.3)
+                .collect::<Vec<f64>>()
+        };
+        let base: Vec<Vec<f64>> = (0..3).map(|_| col()).collect();
+        let e0 = col();
+        let terms: Vec<Vec<f64>> = (0..5).map(|_| col()).collect();
+        let all: Vec<usize> = (0..n).collect();
+        let refs: Vec<&[f64]> = base.iter().map(|c| c.as_slice()).collect();
+        let q = orthonormal_basis(&refs, &all);
+        let (ft, nf) = projected(&q, &terms);
+        let blocks: Vec<usize> = (0..n).map(|i| i % 4).collect();
+        let perms = block_permutations(&blocks, 50, 3);
+        let permuted = PermutedNull::new(&e0, &q, &perms);
+        for positive in [false, true] {
+            let got = permuted.max_f(&ft, &nf, positive);
+            for (perm, g) in perms.iter().zip(&got) {
+                let e: Vec<f64> = perm.iter().map(|&s| e0[s]).collect();
+                let want = max_f(&e, &q, &ft, &nf, positive);
+                assert!(
+                    (g - want).abs() <= 1e-12 * want.max(1e-300),
+                    "{g} vs {want}"
+                );
+            }
+            assert!(got.iter().any(|&g| g > 0.0));
         }
     }
 
