@@ -637,7 +637,7 @@ fn season_gap_lines(
 ) -> Result<(), String> {
     use crate::gap::report::{Baseline, GapSettings, diagnose};
     let encoding = crate::ingest::telemetry::Encoding::Block;
-    let kpis = crate::gap::validate::simulate_and_extract(&season.options(encoding, out))
+    let kpis = crate::validate::simulate_and_extract(&season.options(encoding, out))
         .map_err(|e| e.to_string())?;
     let settings = GapSettings {
         wlf: crate::ingest::compound::read_wlf(&out.join("compounds"))

@@ -15,6 +15,7 @@ pub mod model;
 pub mod nightly;
 mod progress;
 pub mod sim;
+pub mod validate;
 pub mod wheel;
 
 pub use wheel::{Axle, Wheel};

@@ -80,7 +80,7 @@ fn demo_season_extracts_to_complete_rows() {
             .unwrap();
     assert_eq!(maps.len(), rows.len());
     for r in &rows {
-        let m = &maps[&(r.run.clone(), r.wheel.to_string())];
+        let m = &maps[&r.tire_run()];
         let close = |what: &str, got: f64, want: f64| {
             assert!(
                 (got - want).abs() <= 1e-9 * want.abs(),
@@ -111,7 +111,7 @@ fn demo_season_extracts_to_complete_rows() {
     assert_eq!(cmaps.len(), rows.len());
     use tirewear::kpi::cpu::condition_map::{CONDITIONS, Component};
     for r in &rows {
-        let m = &cmaps[&(r.run.clone(), r.wheel.to_string())];
+        let m = &cmaps[&r.tire_run()];
         for (c, cd) in CONDITIONS.iter().enumerate() {
             for (comp, want) in [
                 (Component::Total, r.friction_energy_j),

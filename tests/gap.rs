@@ -6,8 +6,8 @@
 use tirewear::gap::report::{Diagnosis, GapSettings};
 use tirewear::gap::scoring::ScoringSettings;
 use tirewear::gap::stats::{VarianceComponents, benjamini_hochberg, clustered_difference};
-use tirewear::gap::validate::{Case, Planted, ValidateSettings, run_case};
 use tirewear::sim::{Effect, EffectKind};
+use tirewear::validate::{Case, Planted, ValidateSettings, run_case};
 
 #[derive(serde::Deserialize)]
 struct Clustered {
@@ -453,7 +453,7 @@ fn an_unlisted_slip_effect_is_found_among_the_generated_candidates() {
     let mut extra = std::collections::HashMap::new();
     for run in &season.manifest.runs {
         let t = read_telemetry(&season.path(&run.telemetry)).unwrap();
-        for (w, name) in t.wheels.iter().zip(["FL", "FR", "RL", "RR"]) {
+        for (w, wheel) in t.wheels.iter().zip(tirewear::Wheel::ALL) {
             let mut e = 0.0;
             for i in 0..w.len().saturating_sub(1) {
                 let dt = (w.time_ns[i + 1] - w.time_ns[i]) as f64 * 1e-9;
@@ -468,7 +468,7 @@ fn an_unlisted_slip_effect_is_found_among_the_generated_candidates() {
                     e += (-f(w.fx_n[i]) * v_sx - f(w.fy_n[i]) * v_sy) * dt;
                 }
             }
-            extra.insert((run.id.clone(), name.to_string()), e * 1e-6);
+            extra.insert((run.id.clone(), wheel), e * 1e-6);
         }
     }
     let mut rows = tirewear::kpi::table::read_parquet(&season_dir.join("kpis.parquet")).unwrap();
@@ -477,10 +477,7 @@ fn an_unlisted_slip_effect_is_found_among_the_generated_candidates() {
         v.iter().map(|x| (x - m) * (x - m)).sum::<f64>() / v.len() as f64
     };
     let wear: Vec<f64> = rows.iter().map(|r| r.wear_mean_pct).collect();
-    let planted: Vec<f64> = rows
-        .iter()
-        .map(|r| extra[&(r.run.clone(), r.wheel.to_string())])
-        .collect();
+    let planted: Vec<f64> = rows.iter().map(|r| extra[&r.tire_run()]).collect();
     assert!(var(&planted) > 0.0, "the condition occurs");
     // a²·var(planted) = var(wear)/3: about a quarter of the new variance.
     let a = (var(&wear) / 3.0 / var(&planted)).sqrt();

@@ -159,12 +159,12 @@ pub(crate) enum GapAction {
 }
 
 pub(crate) fn run_validate(
-    settings: &tirewear::gap::validate::ValidateSettings,
+    settings: &tirewear::validate::ValidateSettings,
     out: &std::path::Path,
 ) -> Result<()> {
     let started = std::time::Instant::now();
-    let cases = tirewear::gap::validate::validate(settings);
-    let table = tirewear::gap::validate::render(&cases);
+    let cases = tirewear::validate::validate(settings);
+    let table = tirewear::validate::render(&cases);
     println!("{table}");
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     tirewear::atomic::write_bytes(
@@ -172,11 +172,15 @@ pub(crate) fn run_validate(
         serde_json::to_string_pretty(&cases)?.as_bytes(),
     )?;
     let md = format!(
-        "# Gap diagnosis on withheld effects\n\n{} seasons ({:?} preset, scale {}, {} Hz) in {:.0} s.\n\n{table}",
+        "# Gap diagnosis on withheld effects\n\n{} seasons ({:?} preset, scale {}, {} Hz; wear scatter σ per event {}, run {}, tire {}, gauge bias {} mm) in {:.0} s.\n\n{table}",
         cases.len(),
         settings.preset,
         settings.scale,
         settings.rate_hz,
+        settings.scatter.event_sd,
+        settings.scatter.run_sd,
+        settings.scatter.tire_sd,
+        settings.scatter.gauge_bias_sd_mm,
         started.elapsed().as_secs_f64()
     );
     tirewear::atomic::write_bytes(&out.join("validate.md"), md.as_bytes())?;
@@ -205,10 +209,7 @@ pub(crate) fn run_gap(
         let p = tirewear::gap::report::Predictions::read(std::path::Path::new(baseline))?;
         let missing = rows
             .iter()
-            .filter(|r| {
-                !p.wear_pct
-                    .contains_key(&(r.run.clone(), r.wheel.to_string()))
-            })
+            .filter(|r| !p.wear_pct.contains_key(&r.tire_run()))
             .count();
         if missing > 0 {
             tracing::warn!(
@@ -293,7 +294,7 @@ pub(crate) fn run(a: GapArgs, progress: bool) -> Result<()> {
                     })
             })
             .collect::<Result<Vec<_>>>()?;
-        let settings = tirewear::gap::validate::ValidateSettings {
+        let settings = tirewear::validate::ValidateSettings {
             effects,
             magnitudes,
             seeds,

@@ -1,4 +1,4 @@
-//! Errors of the gap diagnosis and its validation.
+//! Errors of the gap diagnosis.
 
 #[derive(Debug, thiserror::Error)]
 pub enum GapError {
@@ -6,14 +6,6 @@ pub enum GapError {
     Model(#[from] crate::model::ModelError),
     #[error(transparent)]
     Ingest(#[from] crate::ingest::IngestError),
-    #[error(transparent)]
-    Sim(#[from] crate::sim::SimError),
-    #[error("{file}, line {line}: {message}")]
-    Truth {
-        file: String,
-        line: usize,
-        message: String,
-    },
     #[error("{file}: {effect}: {message}")]
     Effects {
         file: String,

@@ -2,8 +2,8 @@
 //! lies: slices with false-discovery control), step 2 (which unmodelled
 //! effect: candidate mechanisms scored by grouped cross-validation and a
 //! permutation test), step 3 (forward selection: how far the gap shrinks),
-//! and the validation on seasons with planted effects. Definitions and
-//! measured results: docs/gap.md.
+//! then the findings in words. Its validation on simulated seasons lives
+//! apart, in `crate::validate`. Definitions and measured results: docs/gap.md.
 
 pub mod acts;
 pub mod baseline;
@@ -19,4 +19,3 @@ pub mod slices;
 pub mod stats;
 pub mod track_test;
 pub mod user_effects;
-pub mod validate;

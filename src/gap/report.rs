@@ -12,8 +12,8 @@ use super::scoring::{Score, ScoringSettings, rank};
 use super::selection::{Selection, next_term};
 use super::slices::{Slice, slice_residuals};
 use crate::ingest::compound::Wlf;
-use crate::kpi::KpiRow;
 use crate::kpi::energy_maps::EnergyMaps;
+use crate::kpi::{KpiRow, TireRun};
 use crate::model::ModelError;
 use crate::model::fit::split;
 use crate::model::saved::SavedModel;
@@ -37,7 +37,7 @@ pub enum Baseline {
 #[derive(Debug, Clone, Default)]
 pub struct Predictions {
     pub source: String,
-    pub wear_pct: BTreeMap<(String, String), f64>,
+    pub wear_pct: BTreeMap<TireRun, f64>,
 }
 
 impl Predictions {
@@ -68,17 +68,13 @@ impl Predictions {
                 source,
             })?;
             let bad = |what: String| IngestError::invalid(path, format!("line {line}"), what);
-            if r.wheel.parse::<crate::Wheel>().is_err() {
+            let Ok(wheel) = r.wheel.parse::<crate::Wheel>() else {
                 return Err(bad(format!("wheel '{}' is not FL, FR, RL or RR", r.wheel)));
-            }
+            };
             let Some(p) = r.predicted_wear_pct.filter(|p| p.is_finite()) else {
                 continue;
             };
-            if out
-                .wear_pct
-                .insert((r.run.clone(), r.wheel.clone()), p)
-                .is_some()
-            {
+            if out.wear_pct.insert((r.run.clone(), wheel), p).is_some() {
                 return Err(bad(format!(
                     "a second prediction for run {} wheel {}",
                     r.run, r.wheel
@@ -263,7 +259,7 @@ impl Default for GapSettings {
 /// candidate effects (step 2) and the forward selection (step 3).
 pub fn diagnose(
     rows: &[KpiRow],
-    maps: &BTreeMap<(String, String), EnergyMaps>,
+    maps: &BTreeMap<TireRun, EnergyMaps>,
     baseline: &Baseline,
     settings: &GapSettings,
 ) -> Result<Diagnosis, ModelError> {
@@ -286,7 +282,7 @@ pub fn diagnose(
     }
     let rows = rows.as_slice();
     let s = split(rows, settings.test_events.as_deref())?;
-    let map_of = |r: &KpiRow| maps.get(&(r.run.clone(), r.wheel.to_string()));
+    let map_of = |r: &KpiRow| maps.get(&r.tire_run());
     let (name, physics) = match baseline {
         Baseline::Physics => {
             let train_maps: Vec<Option<&EnergyMaps>> = s.train.iter().map(|r| map_of(r)).collect();
@@ -302,11 +298,9 @@ pub fn diagnose(
     let predict = |r: &KpiRow| -> f64 {
         match (baseline, &physics) {
             (Baseline::Model(m), _) => m.predict_row(r).unwrap_or(f64::NAN),
-            (Baseline::Predictions(p), _) => p
-                .wear_pct
-                .get(&(r.run.clone(), r.wheel.to_string()))
-                .copied()
-                .unwrap_or(f64::NAN),
+            (Baseline::Predictions(p), _) => {
+                p.wear_pct.get(&r.tire_run()).copied().unwrap_or(f64::NAN)
+            }
             (_, Some(p)) => p.predict(r, map_of(r)),
             _ => f64::NAN,
         }

@@ -143,10 +143,10 @@ fn weighted(map: &[f64], rows: Bins, cols: Bins, mut f: impl FnMut(f64, f64) -> 
 /// (`NAME.energy_maps.parquet`: run, wheel, map, i, j, x_lo, y_lo, energy_j;
 /// maps `surface_inner`, `speed_surface`, `lateral_surface_inner`;
 /// non-empty bins only) back into maps keyed by (run, wheel). A bin outside
-/// the fixed grid, or an unknown map name, is an error naming the record.
+/// the fixed grid, an unknown map name or wheel is an error naming the record.
 pub fn read_energy_maps(
     path: &std::path::Path,
-) -> Result<std::collections::BTreeMap<(String, String), EnergyMaps>, crate::ingest::IngestError> {
+) -> Result<std::collections::BTreeMap<super::TireRun, EnergyMaps>, crate::ingest::IngestError> {
     use crate::ingest::IngestError;
     use arrow_array::{Array, Float64Array, StringArray, UInt32Array};
     use arrow_schema::DataType;
@@ -159,7 +159,7 @@ pub fn read_energy_maps(
         .map_err(perr)?
         .build()
         .map_err(perr)?;
-    let mut out: std::collections::BTreeMap<(String, String), EnergyMaps> = Default::default();
+    let mut out: std::collections::BTreeMap<super::TireRun, EnergyMaps> = Default::default();
     let mut record = 0usize;
     for batch in reader {
         let batch = batch.map_err(|e| perr(e.into()))?;
@@ -196,9 +196,8 @@ pub fn read_energy_maps(
             .clone();
         for k in 0..batch.num_rows() {
             record += 1;
-            let m = out
-                .entry((run.value(k).to_string(), wheel.value(k).to_string()))
-                .or_default();
+            let w = super::wheel_cell(path, record, wheel.value(k))?;
+            let m = out.entry((run.value(k).to_string(), w)).or_default();
             let (bi, bj) = (i.value(k) as usize, j.value(k) as usize);
             let (data, (ni, nj)) = match map.value(k) {
                 "surface_inner" => (&mut m.surface_inner, (T_SURFACE_BINS.n, T_INNER_BINS.n)),
@@ -248,7 +247,7 @@ pub fn read_energy_maps(
 /// absent energy-map table gives no maps.
 pub fn read_tire_maps(
     kpis: &std::path::Path,
-) -> Result<std::collections::BTreeMap<(String, String), EnergyMaps>, crate::ingest::IngestError> {
+) -> Result<std::collections::BTreeMap<super::TireRun, EnergyMaps>, crate::ingest::IngestError> {
     use crate::kpi::table::{check_same_extraction, side_table_path};
     let side = |suffix: &str| side_table_path(kpis, suffix);
     let energy = side("energy_maps.parquet");

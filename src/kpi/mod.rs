@@ -14,3 +14,23 @@ pub mod wear;
 
 pub use extract::{Engine, ExtractOptions, ExtractSummary, extract};
 pub use table::KpiRow;
+
+/// A tire in a run, (run, wheel): the key of every per-tire table (KPI
+/// rows, energy and condition maps, predictions, truth).
+pub type TireRun = (String, crate::Wheel);
+
+/// Parses a side table's wheel cell, naming the file and record when it is
+/// not a wheel position.
+pub(crate) fn wheel_cell(
+    path: &std::path::Path,
+    record: usize,
+    text: &str,
+) -> Result<crate::Wheel, crate::ingest::IngestError> {
+    text.parse().map_err(|_| {
+        crate::ingest::IngestError::invalid(
+            path,
+            format!("record {record}"),
+            format!("wheel '{text}' is not FL, FR, RL or RR"),
+        )
+    })
+}

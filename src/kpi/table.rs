@@ -117,6 +117,13 @@ kpi_table!(
     ]
 );
 
+impl KpiRow {
+    /// The row's tire and run, the key of the per-tire side tables.
+    pub fn tire_run(&self) -> super::TireRun {
+        (self.run.clone(), self.wheel)
+    }
+}
+
 pub fn schema() -> Arc<Schema> {
     let mut fields: Vec<Field> = KpiRow::TEXT_COLUMNS
         .iter()

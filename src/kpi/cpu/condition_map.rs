@@ -458,8 +458,10 @@ pub fn side_table(maps: &[(String, crate::Wheel, ConditionMaps)]) -> arrow_array
 /// non-finite energy is an error naming the record.
 pub fn read_condition_maps(
     path: &std::path::Path,
-) -> Result<std::collections::BTreeMap<(String, String), ConditionMaps>, crate::ingest::IngestError>
-{
+) -> Result<
+    std::collections::BTreeMap<crate::kpi::TireRun, ConditionMaps>,
+    crate::ingest::IngestError,
+> {
     use crate::ingest::IngestError;
     use arrow_array::{Array, Float64Array, StringArray, UInt32Array};
     use arrow_schema::DataType;
@@ -492,7 +494,8 @@ pub fn read_condition_maps(
     };
     let reader = builder.build().map_err(perr)?;
     let offsets = offsets();
-    let mut out: std::collections::BTreeMap<(String, String), ConditionMaps> = Default::default();
+    let mut out: std::collections::BTreeMap<crate::kpi::TireRun, ConditionMaps> =
+        Default::default();
     let mut record = 0usize;
     for batch in reader {
         let batch = batch.map_err(|e| perr(e.into()))?;
@@ -566,8 +569,9 @@ pub fn read_condition_maps(
                     ),
                 ));
             }
+            let w = crate::kpi::wheel_cell(path, record, wheel.value(k))?;
             let m = out
-                .entry((run.value(k).to_string(), wheel.value(k).to_string()))
+                .entry((run.value(k).to_string(), w))
                 .or_insert_with(|| ConditionMaps {
                     held,
                     ..Default::default()
@@ -683,7 +687,7 @@ mod tests {
             path
         };
         let back = read_condition_maps(&write("ok.parquet", &batch)).unwrap();
-        assert_eq!(back[&("r1".to_string(), "FL".to_string())], m);
+        assert_eq!(back[&("r1".to_string(), crate::Wheel::FL)], m);
         let with_version = |b: &arrow_array::RecordBatch, v: &str| {
             let mut meta = b.schema().metadata().clone();
             meta.insert(VERSION_KEY.to_string(), v.to_string());
@@ -707,7 +711,7 @@ mod tests {
         );
         let v1 = with_version(&batch.slice(0, 1), "1");
         let back = read_condition_maps(&write("v1.parquet", &v1)).unwrap();
-        let got = &back[&("r1".to_string(), "FL".to_string())];
+        let got = &back[&("r1".to_string(), crate::Wheel::FL)];
         assert_eq!(got.held, V1_CONDITIONS);
         assert!(got.holds(V1_CONDITIONS - 1) && !got.holds(V1_CONDITIONS));
         assert_eq!(got.energy_j[1][3], 10.0);
@@ -721,6 +725,15 @@ mod tests {
         let e = read_condition_maps(&write("bad.parquet", &bad)).unwrap_err();
         assert!(
             e.to_string().contains("record 2") && e.to_string().contains("toe_deg"),
+            "{e}"
+        );
+        // So does a wheel that is not a wheel position.
+        let mut cols = batch.columns().to_vec();
+        cols[1] = Arc::new(arrow_array::StringArray::from(vec!["FL", "LF"]));
+        let bad = arrow_array::RecordBatch::try_new(batch.schema(), cols).unwrap();
+        let e = read_condition_maps(&write("badwheel.parquet", &bad)).unwrap_err();
+        assert!(
+            e.to_string().contains("record 2") && e.to_string().contains("wheel 'LF'"),
             "{e}"
         );
     }

@@ -1,0 +1,23 @@
+//! Errors of the validation: a season that cannot be simulated, extracted
+//! or diagnosed, or a truth file that cannot be read.
+
+#[derive(Debug, thiserror::Error)]
+pub enum ValidateError {
+    #[error(transparent)]
+    Model(#[from] crate::model::ModelError),
+    #[error(transparent)]
+    Ingest(#[from] crate::ingest::IngestError),
+    #[error(transparent)]
+    Sim(#[from] crate::sim::SimError),
+    #[error("{file}, line {line}: {message}")]
+    Truth {
+        file: String,
+        line: usize,
+        message: String,
+    },
+    #[error("{path}: {source}")]
+    Io {
+        path: String,
+        source: std::io::Error,
+    },
+}

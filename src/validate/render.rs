@@ -1,0 +1,259 @@
+//! The tables of `gap validate` (OUT/validate.md, docs/gap.md): per named
+//! effect and magnitude, against the targets, the seasons that miss one,
+//! the clean seasons' false discoveries and the generated effects.
+
+use super::Case;
+use crate::gap::candidates::significant;
+use crate::model::metrics::median;
+use std::collections::BTreeMap;
+use std::fmt::Write;
+
+/// The summary table (per effect and magnitude) and the clean seasons' false discoveries.
+pub fn render(cases: &[Case]) -> String {
+    let mut s = String::from(
+        "| effect | magnitude | seasons | variance share (median) | hit rate | hit incl. axle | shrinkage / ideal (median) | within 20 % of ideal |\n|---|---|---|---|---|---|---|---|\n",
+    );
+    let mut groups: BTreeMap<(String, String), Vec<&Case>> = BTreeMap::new();
+    for c in cases.iter().filter(|c| c.effect.is_some()) {
+        let e = c.effect.as_ref().expect("planted");
+        groups
+            .entry((e.kind.name().to_string(), format!("{:.2}", e.magnitude)))
+            .or_default()
+            .push(c);
+    }
+    for ((kind, mag), g) in &groups {
+        let n = g.len();
+        let rate = |f: &dyn Fn(&Case) -> bool| {
+            format!(
+                "{}/{n} ({:.0} %)",
+                g.iter().filter(|c| f(c)).count(),
+                100.0 * g.iter().filter(|c| f(c)).count() as f64 / n as f64
+            )
+        };
+        let _ = writeln!(
+            s,
+            "| {kind} | {mag} | {n} | {:.1} % | {} | {} | {:.2} | {} |",
+            100.0 * median(g.iter().map(|c| c.variance_share).collect()),
+            rate(&|c| c.hit),
+            rate(&|c| c.hit_axle),
+            median(g.iter().map(|c| c.shrinkage_ratio).collect()),
+            rate(&|c| (c.shrinkage_ratio - 1.0).abs() <= 0.2),
+        );
+    }
+    // The targets, over the seasons where the planted effect carries
+    // at least 10 % of the wear variance (whatever the magnitude).
+    let mut kinds: BTreeMap<String, Vec<&Case>> = BTreeMap::new();
+    for c in cases.iter().filter(|c| c.error.is_none()) {
+        if let Some(e) = &c.effect {
+            kinds.entry(e.kind.name().to_string()).or_default().push(c);
+        }
+    }
+    if !kinds.is_empty() {
+        s.push_str(
+            "\nTargets, over the seasons where the planted effect carries ≥ 10 % of the wear variance: hit rate ≥ 90 %, shrinkage within 20 % of the ideal.\n\n| effect | seasons ≥ 10 % | hit rate | hit incl. axle | shrinkage within 20 % |\n|---|---|---|---|---|\n",
+        );
+        for (kind, g) in &kinds {
+            let big: Vec<&&Case> = g.iter().filter(|c| c.variance_share >= 0.1).collect();
+            let n = big.len();
+            let count = |f: &dyn Fn(&Case) -> bool| big.iter().filter(|c| f(c)).count();
+            let pct = |k: usize| {
+                if n == 0 {
+                    "–".to_string()
+                } else {
+                    format!("{k}/{n} ({:.0} %)", 100.0 * k as f64 / n as f64)
+                }
+            };
+            let _ = writeln!(
+                s,
+                "| {kind} | {n} | {} | {} | {} |",
+                pct(count(&|c| c.hit)),
+                pct(count(&|c| c.hit_axle)),
+                pct(count(&|c| (c.shrinkage_ratio - 1.0).abs() <= 0.2)),
+            );
+        }
+    }
+    // Where it stops working, season by season: those at ≥ 10 % of the
+    // variance that miss a target.
+    let misses: Vec<&Case> = cases
+        .iter()
+        .filter(|c| c.error.is_none() && c.effect.is_some() && c.variance_share >= 0.1)
+        .filter(|c| !c.hit_axle || (c.shrinkage_ratio - 1.0).abs() > 0.2)
+        .collect();
+    if !misses.is_empty() {
+        s.push_str(
+            "\nSeasons at ≥ 10 % of the variance that miss a target (testing RMSE in %):\n\n| effect (magnitude, threshold) | seed | variance share | first term | front share (truth) | RMSE baseline / diagnosed / ideal | shrinkage / ideal |\n|---|---|---|---|---|---|---|\n",
+        );
+        for c in misses {
+            let e = c.effect.as_ref().expect("planted");
+            let _ = writeln!(
+                s,
+                "| {} ({}, {}) | {} | {:.1} % | {} | {:.2} ({:.2}) | {:.3} / {:.3} / {:.3} | {:.3} |",
+                e.kind.name(),
+                e.magnitude,
+                significant(e.threshold),
+                c.seed,
+                100.0 * c.variance_share,
+                c.first_term.as_deref().unwrap_or("none"),
+                c.first_front_share,
+                c.truth_front_share,
+                c.rmse_baseline_pct,
+                c.rmse_diagnosed_pct,
+                c.rmse_ideal_pct,
+                c.shrinkage_ratio,
+            );
+        }
+    }
+    render_generated(&mut s, cases);
+    let clean: Vec<&Case> = cases
+        .iter()
+        .filter(|c| c.effect.is_none() && c.generated.is_none())
+        .collect();
+    if !clean.is_empty() {
+        let fd = clean.iter().filter(|c| c.significant_terms > 0).count();
+        let _ = writeln!(
+            s,
+            "\nClean seasons: {fd} of {} report a significant effect ({:.0} %).",
+            clean.len(),
+            100.0 * fd as f64 / clean.len() as f64
+        );
+        for c in clean.iter().filter(|c| c.significant_terms > 0) {
+            let _ = writeln!(
+                s,
+                "- seed {}: {}",
+                c.seed,
+                c.first_term.as_deref().unwrap_or("?")
+            );
+        }
+    }
+    let failed: Vec<&Case> = cases.iter().filter(|c| c.error.is_some()).collect();
+    for c in failed {
+        let _ = writeln!(
+            s,
+            "- failed: {:?} seed {}: {}",
+            c.effect.as_ref().map(|e| e.to_string()),
+            c.seed,
+            c.error.as_deref().unwrap_or("")
+        );
+    }
+    s
+}
+
+/// The generated effects: the targets over those at ≥ 10 % of the
+/// variance (median shrinkage ≥ 0.8 of the ideal, hit ≥ 80 %), by form and
+/// scope, then season by season.
+fn render_generated(s: &mut String, cases: &[Case]) {
+    let generated: Vec<&Case> = cases
+        .iter()
+        .filter(|c| c.generated.is_some() && c.error.is_none())
+        .collect();
+    if generated.is_empty() {
+        return;
+    }
+    let big: Vec<&Case> = generated
+        .iter()
+        .copied()
+        .filter(|c| c.variance_share >= 0.1)
+        .collect();
+    let line = |s: &mut String, label: &str, g: &[&Case]| {
+        let n = g.len();
+        if n == 0 {
+            return;
+        }
+        let hits = g.iter().filter(|c| c.hit).count();
+        let _ = writeln!(
+            s,
+            "| {label} | {n} | {hits}/{n} ({:.0} %) | {:.2} | {:.2} | {} |",
+            100.0 * hits as f64 / n as f64,
+            median(g.iter().map(|c| c.terms_correlation).collect()),
+            median(g.iter().map(|c| c.shrinkage_ratio).collect()),
+            g.iter().filter(|c| c.significant_terms == 0).count(),
+        );
+    };
+    s.push_str(
+        "\nGenerated effects (targets over those at ≥ 10 % of the wear variance: hit ≥ 80 %, median shrinkage ≥ 0.8 of the ideal; hit: the terms' wear correlates ≥ 0.8 with the planted wear):\n\n| seasons | n | hit | correlation (median) | shrinkage / ideal (median) | no term |\n|---|---|---|---|---|---|\n",
+    );
+    line(s, "all generated", &generated);
+    line(s, "≥ 10 % of the variance", &big);
+    // By form, then by scope.
+    for part in 0..2 {
+        let mut groups: BTreeMap<String, Vec<&Case>> = BTreeMap::new();
+        for c in &big {
+            let g = c.generated.as_ref().expect("generated");
+            let (form, scope) = g.kind_label();
+            let key = if part == 0 { form } else { scope };
+            groups.entry(key.to_string()).or_default().push(c);
+        }
+        for (label, g) in &groups {
+            line(s, &format!("≥ 10 %: {label}"), g);
+        }
+    }
+    s.push_str(
+        "\n| effect | variance share | terms | correlation | RMSE baseline / diagnosed / ideal | shrinkage / ideal |\n|---|---|---|---|---|---|\n",
+    );
+    for c in &generated {
+        let g = c.generated.as_ref().expect("generated");
+        let _ = writeln!(
+            s,
+            "| {g} | {:.1} % | {} | {:.2} | {:.3} / {:.3} / {:.3} | {:.2} |",
+            100.0 * c.variance_share,
+            c.first_term
+                .as_deref()
+                .map_or("none".to_string(), |t| format!(
+                    "{} (of {})",
+                    t, c.significant_terms
+                )),
+            c.terms_correlation,
+            c.rmse_baseline_pct,
+            c.rmse_diagnosed_pct,
+            c.rmse_ideal_pct,
+            c.shrinkage_ratio,
+        );
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::sim::{Effect, EffectKind};
+
+    fn case(kind: EffectKind, seed: u64, share: f64, shrinkage: f64) -> Case {
+        Case {
+            effect: Some(Effect::with_defaults(kind, 2.0)),
+            seed,
+            variance_share: share,
+            truth_front_share: 0.32,
+            first_term: Some("road abrasion (energy × squared micro-roughness)".into()),
+            first_mechanism: Some(kind.name().into()),
+            first_front_share: 0.35,
+            significant_terms: 1,
+            hit: true,
+            hit_axle: true,
+            rmse_baseline_pct: 9.0,
+            rmse_diagnosed_pct: 9.0 - shrinkage * 7.0,
+            rmse_ideal_pct: 2.0,
+            shrinkage_ratio: shrinkage,
+            terms_correlation: f64::NAN,
+            generated: None,
+            error: None,
+        }
+    }
+
+    #[test]
+    fn the_seasons_that_miss_a_target_are_listed() {
+        let cases = [
+            case(EffectKind::RoadAbrasion, 1, 0.184, 0.799),
+            case(EffectKind::RoadAbrasion, 2, 0.254, 0.95),
+            // Under 10 % of the variance: no target, not listed.
+            case(EffectKind::RoadAbrasion, 3, 0.05, 0.3),
+        ];
+        let md = render(&cases);
+        assert!(
+            md.contains("| road-abrasion (2, 0.03000) | 1 | 18.4 % |"),
+            "{md}"
+        );
+        assert!(md.contains("| 9.000 / 3.407 / 2.000 | 0.799 |"), "{md}");
+        assert!(!md.contains("| road-abrasion (2, 0.03000) | 2 |"), "{md}");
+        assert!(!md.contains("| road-abrasion (2, 0.03000) | 3 |"), "{md}");
+        assert!(md.contains("| road-abrasion | 2 | 2/2 (100 %) | 2/2 (100 %) | 1/2 (50 %) |"));
+    }
+}

@@ -1,0 +1,212 @@
+//! Scoring one diagnosed season against its truth: the planted wear per
+//! tire, the ideal diagnosis (the law calibrated on wear minus the planted
+//! part), hit, shrinkage and the terms' correlation with the planted wear.
+
+use super::{Case, Planted, ValidateError};
+use crate::gap::report::{Baseline, Diagnosis, GapSettings, diagnose};
+use crate::kpi::{KpiRow, TireRun};
+use crate::sim::GeneratedEffect;
+use std::collections::BTreeMap;
+use std::path::Path;
+
+/// Planted wear (%) per (run, wheel) from `truth/wear_truth.csv`: the
+/// column `wear_<column>_pct` (None: zero).
+pub(super) fn read_planted(
+    truth: &Path,
+    column: Option<&str>,
+) -> Result<BTreeMap<TireRun, f64>, ValidateError> {
+    let file = truth.display().to_string();
+    let mut rd = csv::Reader::from_path(truth).map_err(|e| ValidateError::Truth {
+        file: file.clone(),
+        line: 0,
+        message: e.to_string(),
+    })?;
+    let headers = rd
+        .headers()
+        .map_err(|e| ValidateError::Truth {
+            file: file.clone(),
+            line: 1,
+            message: e.to_string(),
+        })?
+        .clone();
+    let col = |name: &str| {
+        headers
+            .iter()
+            .position(|h| h == name)
+            .ok_or_else(|| ValidateError::Truth {
+                file: file.clone(),
+                line: 1,
+                message: format!("no column '{name}'"),
+            })
+    };
+    let (run, wheel) = (col("run")?, col("wheel")?);
+    let effect = match column {
+        Some(k) => Some(col(&format!("wear_{}_pct", k.replace('-', "_")))?),
+        None => None,
+    };
+    let mut out = BTreeMap::new();
+    for (i, rec) in rd.records().enumerate() {
+        let rec = rec.map_err(|e| ValidateError::Truth {
+            file: file.clone(),
+            line: i + 2,
+            message: e.to_string(),
+        })?;
+        let v = match effect {
+            Some(c) => rec[c].parse::<f64>().map_err(|_| ValidateError::Truth {
+                file: file.clone(),
+                line: i + 2,
+                message: format!("'{}' is not a number", &rec[c]),
+            })?,
+            None => 0.0,
+        };
+        let w = rec[wheel].parse().map_err(|_| ValidateError::Truth {
+            file: file.clone(),
+            line: i + 2,
+            message: format!("wheel '{}' is not FL, FR, RL or RR", &rec[wheel]),
+        })?;
+        out.insert((rec[run].to_string(), w), v);
+    }
+    Ok(out)
+}
+
+fn variance(v: &[f64]) -> f64 {
+    let m = v.iter().sum::<f64>() / v.len() as f64;
+    v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (v.len() as f64 - 1.0)
+}
+
+/// Scores a diagnosis of `rows` against the planted wear.
+pub fn score_case(
+    planted_kind: &Planted,
+    seed: u64,
+    rows: &[KpiRow],
+    maps: &BTreeMap<TireRun, crate::kpi::energy_maps::EnergyMaps>,
+    planted: &BTreeMap<TireRun, f64>,
+    d: &Diagnosis,
+    gap: &GapSettings,
+) -> Result<Case, ValidateError> {
+    let planted_of = |r: &KpiRow| planted.get(&r.tire_run()).copied().unwrap_or(0.0);
+    let p: Vec<f64> = rows.iter().map(planted_of).collect();
+    // The variance share over the tires the diagnosis keeps: a worn-through
+    // tire's measured wear is capped while its planted wear is not.
+    let (p_kept, w_kept): (Vec<f64>, Vec<f64>) = rows
+        .iter()
+        .zip(&p)
+        .filter(|(r, _)| r.worn_through_readings <= 0.0)
+        .map(|(r, v)| (*v, r.wear_mean_pct))
+        .unzip();
+    let total: f64 = p.iter().sum();
+    let front: f64 = rows
+        .iter()
+        .zip(&p)
+        .filter(|(r, _)| r.axle == crate::Axle::Front)
+        .map(|(_, v)| v)
+        .sum();
+    // Ideal: the same baseline calibrated on wear minus the planted part,
+    // the planted part then added back exactly.
+    let cleaned: Vec<KpiRow> = rows
+        .iter()
+        .zip(&p)
+        .map(|(r, v)| KpiRow {
+            wear_mean_pct: r.wear_mean_pct - v,
+            ..r.clone()
+        })
+        .collect();
+    let ideal = diagnose(
+        &cleaned,
+        maps,
+        &Baseline::Physics,
+        &GapSettings {
+            max_terms: 0,
+            ..gap.clone()
+        },
+    )?;
+    let rmse_ideal = ideal.testing.map_or(f64::NAN, |t| t.rmse_pct);
+    let rmse_base = d.testing.map_or(f64::NAN, |t| t.rmse_pct);
+    let last = d.steps.last().expect("the baseline step");
+    let rmse_diag = last.testing.map_or(f64::NAN, |t| t.rmse_pct);
+    let first = d.steps.get(1);
+    let first_score = first.and_then(|st| d.candidates.iter().find(|c| c.name == st.added));
+    let first_mechanism = first_score
+        .and_then(|c| c.feature.mechanism())
+        .map(str::to_string);
+    let first_front_share = first_score.map_or(f64::NAN, |c| c.front_share);
+    let truth_front_share = front / total;
+    let effect = match planted_kind {
+        Planted::Named(e) => Some(e),
+        _ => None,
+    };
+    let terms_correlation = terms_correlation(d, planted);
+    let hit = match planted_kind {
+        Planted::Named(e) => first_mechanism.as_deref() == Some(e.kind.name()),
+        Planted::Generated(_) => terms_correlation >= 0.8,
+        Planted::Clean => false,
+    };
+    Ok(Case {
+        effect: effect.cloned(),
+        generated: match planted_kind {
+            Planted::Generated(g) => Some(g.clone()),
+            _ => None,
+        },
+        seed,
+        terms_correlation,
+        variance_share: if !matches!(planted_kind, Planted::Clean) {
+            variance(&p_kept) / variance(&w_kept)
+        } else {
+            0.0
+        },
+        truth_front_share,
+        first_term: first.map(|s| s.added.clone()),
+        first_mechanism,
+        first_front_share,
+        significant_terms: d.steps.len() - 1,
+        hit,
+        // A generated effect's scope is judged by the correlation itself.
+        hit_axle: hit
+            && (effect.is_none() || (first_front_share - truth_front_share).abs() <= 0.25),
+        rmse_baseline_pct: rmse_base,
+        rmse_diagnosed_pct: rmse_diag,
+        rmse_ideal_pct: rmse_ideal,
+        shrinkage_ratio: (rmse_base - rmse_diag) / (rmse_base - rmse_ideal),
+        error: None,
+    })
+}
+
+/// Pearson correlation of the wear the diagnosis's terms add with the
+/// planted wear, over the tires diagnosed (0 without terms or without
+/// variation in either).
+fn terms_correlation(d: &Diagnosis, planted: &BTreeMap<TireRun, f64>) -> f64 {
+    let (terms, truth): (Vec<f64>, Vec<f64>) = d
+        .terms_wear
+        .iter()
+        .map(|t| {
+            let p = planted
+                .get(&(t.run.clone(), t.wheel))
+                .copied()
+                .unwrap_or(0.0);
+            (t.wear_pct, p)
+        })
+        .unzip();
+    // Too few tires or a constant side (no terms entered) is no match.
+    let constant = |v: &[f64]| v.iter().all(|x| *x == v[0]);
+    if terms.len() < 3 || constant(&terms) || constant(&truth) {
+        return 0.0;
+    }
+    crate::model::data::correlation(&terms, &truth)
+}
+
+/// The generated effect as the simulator resolved it (`truth/settings.toml`).
+pub(super) fn read_generated(settings: &Path) -> Result<GeneratedEffect, ValidateError> {
+    let truth = |message: String| ValidateError::Truth {
+        file: settings.display().to_string(),
+        line: 0,
+        message,
+    };
+    let text = std::fs::read_to_string(settings).map_err(|e| truth(e.to_string()))?;
+    #[derive(serde::Deserialize)]
+    struct Settings {
+        generated: Option<GeneratedEffect>,
+    }
+    let s: Settings = toml::from_str(&text).map_err(|e| truth(e.to_string()))?;
+    s.generated
+        .ok_or_else(|| truth("no [generated] effect".into()))
+}
