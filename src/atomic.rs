@@ -27,7 +27,7 @@ const TMP_SUFFIX: &str = ".tmp";
 
 /// A file being written; it appears under its final name only on [`AtomicFile::commit`].
 /// Dropping it without committing removes the temporary file.
-pub struct AtomicFile {
+pub(crate) struct AtomicFile {
     tmp: tempfile::NamedTempFile,
     dest: PathBuf,
 }
@@ -64,7 +64,7 @@ impl AtomicFile {
 }
 
 /// Writes a whole file atomically through a buffered writer.
-pub fn write_with(
+pub(crate) fn write_with(
     dest: &Path,
     body: impl FnOnce(&mut BufWriter<&mut File>) -> io::Result<()>,
 ) -> io::Result<()> {
@@ -79,14 +79,17 @@ pub fn write_with(
 
 /// Writes a whole file atomically through the open file itself (for writers
 /// that need to seek, such as Parquet's).
-pub fn write_file(dest: &Path, body: impl FnOnce(&mut File) -> io::Result<()>) -> io::Result<()> {
+pub(crate) fn write_file(
+    dest: &Path,
+    body: impl FnOnce(&mut File) -> io::Result<()>,
+) -> io::Result<()> {
     let mut out = AtomicFile::create(dest)?;
     body(out.file())?;
     out.commit()
 }
 
 /// Rows as CSV (header from the field names) into a writer.
-pub fn csv_to<T: serde::Serialize>(w: impl Write, rows: &[T]) -> io::Result<()> {
+pub(crate) fn csv_to<T: serde::Serialize>(w: impl Write, rows: &[T]) -> io::Result<()> {
     let mut c = csv::Writer::from_writer(w);
     for r in rows {
         c.serialize(r)?;

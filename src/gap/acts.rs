@@ -19,7 +19,12 @@ pub struct ActsIn {
 
 /// The `top` slices (names with their members) where the term's change of
 /// the prediction `term` (per row) follows the residual `r` most.
-pub fn acts_in(term: &[f64], r: &[f64], slices: &[(&str, Vec<bool>)], top: usize) -> Vec<ActsIn> {
+pub(crate) fn acts_in(
+    term: &[f64],
+    r: &[f64],
+    slices: &[(&str, Vec<bool>)],
+    top: usize,
+) -> Vec<ActsIn> {
     let total_sq: f64 = r.iter().map(|v| v * v).sum();
     let mut out: Vec<ActsIn> = slices
         .iter()

@@ -23,7 +23,7 @@ use crate::kpi::energy_maps::EnergyMaps;
 use std::collections::BTreeMap;
 
 /// Temperature of the law's reference state (°C).
-pub const REFERENCE_C: f64 = 60.0;
+pub(crate) const REFERENCE_C: f64 = 60.0;
 const BETA_GRID: (f64, f64, usize) = (-0.05, 0.0025, 81); // −0.05 ..= 0.15 1/K
 const GAMMA_GRID: (f64, f64, usize) = (-0.2, 0.005, 141); // −0.2 ..= 0.5
 const SKEW_GRID: (f64, f64, usize) = (-0.5, 0.025, 41); // −0.5 ..= 0.5
@@ -102,7 +102,11 @@ pub fn group(r: &KpiRow) -> String {
 }
 
 /// Temperature-weighted friction energy Σ E_b·φ(T_b) (MJ).
-pub fn weighted_energy_mj(r: &KpiRow, maps: Option<&EnergyMaps>, phi: &TemperatureFactor) -> f64 {
+pub(crate) fn weighted_energy_mj(
+    r: &KpiRow,
+    maps: Option<&EnergyMaps>,
+    phi: &TemperatureFactor,
+) -> f64 {
     weighted_by(r, maps, &|t| phi.at(&r.compound, t))
 }
 

@@ -206,7 +206,7 @@ impl Candidate {
 }
 
 /// The road KPIs (paper table 3): one value per track.
-pub const ROAD_KPIS: [&str; 11] = [
+pub(crate) const ROAD_KPIS: [&str; 11] = [
     "macro_wavelength_mm",
     "micro_wavelength_mm",
     "hurst",
@@ -222,7 +222,7 @@ pub const ROAD_KPIS: [&str; 11] = [
 
 /// KPI columns the physics baseline already uses, and the one the road
 /// abrasion mechanism scales by: not generic candidates.
-pub const BASELINE_KPIS: [&str; 4] = [
+pub(crate) const BASELINE_KPIS: [&str; 4] = [
     "friction_energy_j",
     "t_surface_avg_c",
     "skewness",
@@ -376,7 +376,7 @@ pub fn library(rows: &[&KpiRow]) -> Vec<Candidate> {
 /// component (one registry line per mechanism). The generated space leaves
 /// those points out: a near copy of a mechanism (its lateral part, say)
 /// would otherwise enter as a second term beside it and fit its noise.
-pub const NAMED_CONDITIONS: [(&str, bool, Feature); 4] = [
+pub(crate) const NAMED_CONDITIONS: [(&str, bool, Feature); 4] = [
     ("t_surface_c", true, Feature::HotSurfaceEnergy),
     ("t_inner_c", true, Feature::HotInnerEnergy),
     ("sliding_speed_mps", true, Feature::FastSlidingEnergy),
@@ -449,7 +449,7 @@ fn condition_scopes() -> Vec<(String, Option<Axle>, Option<Group>)> {
 
 /// Events a set-up group must appear at: its factor is then tested on whole
 /// tracks or events left out, not on the days of one.
-pub const SETUP_MIN_EVENTS: usize = 3;
+pub(crate) const SETUP_MIN_EVENTS: usize = 3;
 
 /// Set-up candidates: each car, each car's axle and wheel, each wheel
 /// position over every car — those seen at [`SETUP_MIN_EVENTS`] events or
@@ -527,7 +527,7 @@ fn road_excess(ra_micro_mm: f64, theta: f64) -> f64 {
 /// [`candidate_feature`] charges it; `kpi_scale` standardises a generic
 /// KPI over the rows scored. NaN for the road-abrasion forms, which only
 /// exist as track-level terms.
-pub fn feature(
+pub(crate) fn feature(
     f: Feature,
     r: &KpiRow,
     maps: Option<&EnergyMaps>,
@@ -711,7 +711,7 @@ impl KpiScale {
 
 /// The [`KpiScale`] of a generic KPI candidate's column over `rows`;
 /// [`KpiScale::NONE`] otherwise.
-pub fn kpi_scale(c: &Candidate, rows: &[&KpiRow]) -> KpiScale {
+pub(crate) fn kpi_scale(c: &Candidate, rows: &[&KpiRow]) -> KpiScale {
     let Feature::Kpi(col) = c.feature else {
         return KpiScale::NONE;
     };
@@ -730,7 +730,7 @@ pub fn kpi_scale(c: &Candidate, rows: &[&KpiRow]) -> KpiScale {
 /// A track-level term factored as `row_factor · track_value`: the law's
 /// energy term of the row (zero off the candidate's axle) and its track's
 /// value at θ.
-pub fn row_factor(c: &Candidate, r: &KpiRow, law: LawRow) -> f64 {
+pub(crate) fn row_factor(c: &Candidate, r: &KpiRow, law: LawRow) -> f64 {
     match c.axle {
         Some(a) if r.axle != a => 0.0,
         _ => law.energy_mj,
@@ -738,7 +738,12 @@ pub fn row_factor(c: &Candidate, r: &KpiRow, law: LawRow) -> f64 {
 }
 
 /// The track's value of a track-level candidate at θ (see [`row_factor`]).
-pub fn track_value(c: &Candidate, track_row: &KpiRow, theta: f64, kpi_scale: KpiScale) -> f64 {
+pub(crate) fn track_value(
+    c: &Candidate,
+    track_row: &KpiRow,
+    theta: f64,
+    kpi_scale: KpiScale,
+) -> f64 {
     match c.feature {
         Feature::RoughRoadEnergy => road_excess(track_row.ra_micro_mm, theta),
         Feature::RoughRoadEnergySquared => road_excess(track_row.ra_micro_mm, theta).powi(2),

@@ -5,7 +5,7 @@
 
 /// Least-squares coefficients of `y` on `cols` over the rows `idx`, no
 /// intercept. A column that is zero on every row gets coefficient 0.
-pub fn lstsq(cols: &[&[f64]], y: &[f64], idx: &[usize]) -> Vec<f64> {
+pub(crate) fn lstsq(cols: &[&[f64]], y: &[f64], idx: &[usize]) -> Vec<f64> {
     let (g, b) = normal_equations(cols, y, idx);
     Cholesky::new(&g, cols.len()).solve(&b)
 }
@@ -107,7 +107,7 @@ impl Cholesky {
 /// each candidate, in every cross-validation fold) costs one pass over the
 /// rows, O(n·p), instead of a new fit, O(n·p²): with the tracks' scale
 /// columns p is about 20, and these fits were two thirds of a diagnosis.
-pub struct BaseFit {
+pub(crate) struct BaseFit {
     gram: Cholesky,
     /// Coefficients of the base fit.
     k0: Vec<f64>,
@@ -188,7 +188,7 @@ pub fn residual(cols: &[&[f64]], coef: &[f64], y: &[f64], i: usize) -> f64 {
 /// An orthonormal basis (over the rows `idx`, as dense vectors of length
 /// `idx.len()`) of the span of `cols`, by modified Gram–Schmidt; columns
 /// that add nothing are dropped.
-pub fn orthonormal_basis(cols: &[&[f64]], idx: &[usize]) -> Vec<Vec<f64>> {
+pub(crate) fn orthonormal_basis(cols: &[&[f64]], idx: &[usize]) -> Vec<Vec<f64>> {
     let mut q: Vec<Vec<f64>> = Vec::new();
     for c in cols {
         let mut v: Vec<f64> = idx.iter().map(|&i| c[i]).collect();
@@ -207,7 +207,7 @@ pub fn orthonormal_basis(cols: &[&[f64]], idx: &[usize]) -> Vec<Vec<f64>> {
 }
 
 /// `v` minus its projection on the orthonormal basis `q`.
-pub fn project_out(q: &[Vec<f64>], v: &mut [f64]) {
+pub(crate) fn project_out(q: &[Vec<f64>], v: &mut [f64]) {
     for u in q {
         let d = dot(u, v);
         v.iter_mut().zip(u).for_each(|(a, b)| *a -= d * b);
@@ -226,7 +226,7 @@ pub fn dot(a: &[f64], b: &[f64]) -> f64 {
 /// Coefficients of `y` on `cols` fitted on the rows `train` with the row
 /// weights `w` (the relative scale for the physics law), and the fitted
 /// values on every row (unweighted).
-pub fn weighted_fit(
+pub(crate) fn weighted_fit(
     cols: &[Vec<f64>],
     w: &[f64],
     y: &[f64],

@@ -29,7 +29,7 @@ const MAX_ROUNDS: usize = 10;
 
 /// A term selected by step 3, at its threshold.
 #[derive(Debug, Clone)]
-pub struct Term {
+pub(crate) struct Term {
     pub candidate: Candidate,
     pub threshold: f64,
     /// (mean, sd) standardising a generic KPI term.
@@ -71,7 +71,7 @@ pub struct Rows<'a> {
 
 /// The law and the terms fitted together.
 #[derive(Debug, Clone)]
-pub struct Refitted {
+pub(crate) struct Refitted {
     /// The law recalibrated around the terms.
     pub law: PhysicsBaseline,
     /// What that law says about each row (the terms' charges).
@@ -89,7 +89,7 @@ pub struct Refitted {
 }
 
 /// What `law` says about each row.
-pub fn law_rows(law: &PhysicsBaseline, d: &Rows) -> Vec<LawRow> {
+pub(crate) fn law_rows(law: &PhysicsBaseline, d: &Rows) -> Vec<LawRow> {
     d.rows
         .iter()
         .zip(d.maps)
@@ -142,7 +142,7 @@ fn settled(a: &PhysicsBaseline, b: &PhysicsBaseline) -> bool {
 /// terms' wear, refit the terms with it, until the calibration settles.
 /// The round with the smallest training SSE is kept (a law that hops
 /// between two neighbouring grid points does not settle).
-pub fn refit_law(
+pub(crate) fn refit_law(
     start: &PhysicsBaseline,
     terms: &[Term],
     d: &Rows,

@@ -67,7 +67,7 @@ pub enum MultipleTesting {
 }
 
 /// The rows scored and the design the candidates are added to.
-pub struct Problem<'a> {
+pub(crate) struct Problem<'a> {
     pub rows: &'a [&'a KpiRow],
     pub maps: &'a [Option<&'a EnergyMaps>],
     /// Measured mean wear (%).
@@ -299,7 +299,7 @@ impl PermutedNull {
 /// road's abrasiveness, irregular wear), so on the raw scale the rows with
 /// the most energy would dominate every fit and break the exchangeability
 /// that the permutation test needs.
-pub fn relative_weights(base: &[Vec<f64>], y: &[f64]) -> Vec<f64> {
+pub(crate) fn relative_weights(base: &[Vec<f64>], y: &[f64]) -> Vec<f64> {
     let refs: Vec<&[f64]> = base.iter().map(|c| c.as_slice()).collect();
     let all: Vec<usize> = (0..y.len()).collect();
     let k = lstsq(&refs, y, &all);
@@ -500,7 +500,11 @@ pub(super) fn projected(q: &[Vec<f64>], x: &[Vec<f64>]) -> (Vec<Vec<f64>>, Vec<f
 /// axle. A track-level candidate (road) is tested across tracks: its CV gain
 /// uses the null without track factors, its p-value the F test of the
 /// tracks' severities (`track_test`).
-pub fn rank(problem: &Problem, library: &[Candidate], settings: &ScoringSettings) -> Vec<Score> {
+pub(crate) fn rank(
+    problem: &Problem,
+    library: &[Candidate],
+    settings: &ScoringSettings,
+) -> Vec<Score> {
     let rows = problem.rows;
     let n = rows.len();
     let all: Vec<usize> = (0..n).collect();

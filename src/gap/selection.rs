@@ -231,7 +231,7 @@ impl<'a> Selection<'a> {
 ///   rests on a handful of track means, which an unmodelled within-track
 ///   effect also moves, and its own CV gain counts the tracks' severities
 ///   that a within-track term's held-out calibration removes.
-pub fn next_term<'a>(
+pub(crate) fn next_term<'a>(
     ranked: &'a [Score],
     first_round: &[Score],
     terms: &[Term],

@@ -14,7 +14,7 @@ use crate::kpi::KpiRow;
 use crate::model::data::candidate_inputs;
 
 /// Smallest slice tested.
-pub const MIN_SLICE: usize = 10;
+pub(crate) const MIN_SLICE: usize = 10;
 
 /// One slice of the residuals.
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
@@ -154,7 +154,7 @@ fn test(name: String, members: &[bool], res: &Residuals) -> Option<Slice> {
 
 /// Every slice tested, with BH-adjusted p-values; those with p_adjusted ≤
 /// `fdr` first, by the squared gap their offset accounts for, then the rest by p.
-pub fn slice_residuals(rows: &[&KpiRow], residual: &[f64], fdr: f64) -> (Vec<Slice>, usize) {
+pub(crate) fn slice_residuals(rows: &[&KpiRow], residual: &[f64], fdr: f64) -> (Vec<Slice>, usize) {
     let n = residual.len() as f64;
     let mean = residual.iter().sum::<f64>() / n;
     let sd = (residual.iter().map(|r| (r - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();

@@ -5,7 +5,9 @@
 use statrs::distribution::{ContinuousCDF, StudentsT};
 
 /// The distinct levels of `keys` (sorted) and each key's level index.
-pub fn levels<'a>(keys: impl Iterator<Item = &'a str> + Clone) -> (Vec<&'a str>, Vec<usize>) {
+pub(crate) fn levels<'a>(
+    keys: impl Iterator<Item = &'a str> + Clone,
+) -> (Vec<&'a str>, Vec<usize>) {
     let mut names: Vec<&str> = keys.clone().collect();
     names.sort();
     names.dedup();

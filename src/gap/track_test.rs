@@ -36,10 +36,10 @@ use rand::SeedableRng;
 use rand_distr::{Distribution, StandardNormal};
 
 /// Tracks fewer than this leave no degree of freedom for the test.
-pub const MIN_TRACKS: usize = 4;
+pub(crate) const MIN_TRACKS: usize = 4;
 
 /// The tracks of the rows scored: a representative row each, each row's track.
-pub struct Tracks<'a> {
+pub(crate) struct Tracks<'a> {
     pub rows: Vec<&'a KpiRow>,
     pub of_row: Vec<usize>,
 }
@@ -67,7 +67,7 @@ struct Design {
 }
 
 /// The track severities of a problem, for both axles and each axle alone.
-pub struct Severities<'a> {
+pub(crate) struct Severities<'a> {
     tracks: Tracks<'a>,
     /// Both axles, front, rear.
     designs: [Option<Design>; 3],

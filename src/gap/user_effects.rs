@@ -21,7 +21,7 @@ use std::path::Path;
 use std::sync::Arc;
 
 /// Variables a user expression may read besides the KPI columns.
-pub const BIN_VARIABLES: [&str; 4] = ["t_surface", "t_inner", "sliding_speed", "theta"];
+pub(crate) const BIN_VARIABLES: [&str; 4] = ["t_surface", "t_inner", "sliding_speed", "theta"];
 
 #[derive(Debug, serde::Deserialize)]
 #[serde(deny_unknown_fields)]

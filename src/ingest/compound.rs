@@ -39,13 +39,13 @@ pub struct MasterCurve {
 }
 
 /// Largest accepted WLF C1 (typical rubber: 8-20).
-pub const MAX_WLF_C1: f64 = 1000.0;
+pub(crate) const MAX_WLF_C1: f64 = 1000.0;
 /// Largest accepted WLF C2 in K (typical rubber: 50-200 K).
-pub const MAX_WLF_C2_K: f64 = 10_000.0;
+pub(crate) const MAX_WLF_C2_K: f64 = 10_000.0;
 /// Accepted range of the WLF reference temperature (degC).
-pub const T_REF_RANGE_C: (f64, f64) = (-150.0, 250.0);
+pub(crate) const T_REF_RANGE_C: (f64, f64) = (-150.0, 250.0);
 /// Largest accepted master-curve reference frequency (Hz).
-pub const MAX_REFERENCE_FREQUENCY_HZ: f64 = 1e12;
+pub(crate) const MAX_REFERENCE_FREQUENCY_HZ: f64 = 1e12;
 
 impl Wlf {
     /// log10 of the shift factor a_T at temperature `t_c` (paper eq. 30).

@@ -14,14 +14,14 @@ const SPACING_RTOL: f64 = 1e-6;
 /// Accepted sample spacing Δx (mm): 0.1 µm (a lab profilometer) to 5 mm.
 /// Checked before anything is sized from it (the macro/micro filter's
 /// kernel has about 0.4 mm / Δx taps).
-pub const DX_RANGE_MM: (f64, f64) = (1e-4, 5.0);
+pub(crate) const DX_RANGE_MM: (f64, f64) = (1e-4, 5.0);
 /// Accepted profile length (mm): from 4× the macro/micro cut-off (0.5 mm), so
 /// that the split means something, to 100 m.
-pub const LENGTH_RANGE_MM: (f64, f64) = (2.0, 1e5);
+pub(crate) const LENGTH_RANGE_MM: (f64, f64) = (2.0, 1e5);
 /// Most samples in one profile (256 MiB of heights).
-pub const MAX_PROFILE_SAMPLES: usize = 1 << 25;
+pub(crate) const MAX_PROFILE_SAMPLES: usize = 1 << 25;
 /// Largest accepted |z| (mm): road texture is millimetres; 1 m is a unit error.
-pub const MAX_ABS_Z_MM: f64 = 1000.0;
+pub(crate) const MAX_ABS_Z_MM: f64 = 1000.0;
 
 /// One measured profile.
 #[derive(Debug, Clone, PartialEq)]
@@ -150,7 +150,7 @@ pub fn read_profile_csv(path: &Path, track: &str, location: &str) -> Result<Prof
 }
 
 /// Writes one profile as CSV, atomically.
-pub fn write_profile_csv(path: &Path, p: &Profile) -> Result<()> {
+pub(crate) fn write_profile_csv(path: &Path, p: &Profile) -> Result<()> {
     crate::atomic::write_with(path, |w| {
         let mut c = csv::Writer::from_writer(w);
         for (i, &z) in p.z_mm.iter().enumerate() {
@@ -218,12 +218,12 @@ pub fn read_profiles_parquet(path: &Path) -> Result<Vec<Profile>> {
 }
 
 /// A profile, or its track and why it failed its checks.
-pub type ProfileResult = std::result::Result<Profile, (String, IngestError)>;
+pub(crate) type ProfileResult = std::result::Result<Profile, (String, IngestError)>;
 
 /// Like [`read_profiles_parquet`], but a profile that fails its checks is
 /// returned as an error of its own (with its track) and the others are kept;
 /// the whole call fails only when the file cannot be read as a profile table.
-pub fn read_profiles_parquet_each(path: &Path) -> Result<Vec<ProfileResult>> {
+pub(crate) fn read_profiles_parquet_each(path: &Path) -> Result<Vec<ProfileResult>> {
     let pq = |source| IngestError::Parquet {
         path: path.to_path_buf(),
         source,

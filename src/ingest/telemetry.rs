@@ -19,18 +19,18 @@ pub mod proto {
 }
 
 /// Binary `FileDescriptorSet` of `proto/tirewear.proto`, the data of every schema record.
-pub const FILE_DESCRIPTOR_SET: &[u8] =
+pub(crate) const FILE_DESCRIPTOR_SET: &[u8] =
     include_bytes!(concat!(env!("OUT_DIR"), "/tirewear_fds.bin"));
 
-pub const TIRE_SAMPLE: &str = "tirewear.v1.TireSample";
-pub const TIRE_BLOCK: &str = "tirewear.v1.TireBlock";
-pub const VEHICLE_SAMPLE: &str = "tirewear.v1.VehicleSample";
-pub const VEHICLE_BLOCK: &str = "tirewear.v1.VehicleBlock";
-pub const VEHICLE_TOPIC: &str = "/vehicle";
+pub(crate) const TIRE_SAMPLE: &str = "tirewear.v1.TireSample";
+pub(crate) const TIRE_BLOCK: &str = "tirewear.v1.TireBlock";
+pub(crate) const VEHICLE_SAMPLE: &str = "tirewear.v1.VehicleSample";
+pub(crate) const VEHICLE_BLOCK: &str = "tirewear.v1.VehicleBlock";
+pub(crate) const VEHICLE_TOPIC: &str = "/vehicle";
 
 /// Largest MCAP record we accept (bytes): a corrupted length field becomes an
 /// error instead of a huge allocation.
-pub const RECORD_LENGTH_LIMIT: usize = 256 << 20;
+pub(crate) const RECORD_LENGTH_LIMIT: usize = 256 << 20;
 
 /// Which message form a file uses.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -209,7 +209,7 @@ fn check_block_times(n: usize, start: u64, period: u64) -> std::result::Result<(
 /// Identifies a run inside its telemetry file (an MCAP metadata record named
 /// `tirewear.run`; informative, readers rely on the manifest).
 #[derive(Debug, Clone, PartialEq)]
-pub struct RunInfo {
+pub(crate) struct RunInfo {
     pub run: String,
     pub event: String,
     pub car: String,
@@ -218,7 +218,7 @@ pub struct RunInfo {
 
 /// Streams one run's telemetry into an MCAP file (zstd chunks, summary,
 /// chunk and message indexes), written atomically.
-pub struct TelemetryWriter {
+pub(crate) struct TelemetryWriter {
     path: PathBuf,
     out: Option<crate::atomic::AtomicFile>,
     mcap: mcap::Writer<BufWriter<File>>,
@@ -884,7 +884,7 @@ fn chunk_records(path: &Path, bytes: &[u8], ci: &mcap::records::ChunkIndex) -> R
 /// indexed MCAP file with zstd (or lz4) and nothing else — no CRC, no
 /// parsing — and returns the uncompressed bytes. `tirewear bench` times it
 /// against [`read_telemetry`] over the same files.
-pub fn decompress_only(path: &Path) -> Result<u64> {
+pub(crate) fn decompress_only(path: &Path) -> Result<u64> {
     let file = File::open(path).map_err(|e| IngestError::io(path, e))?;
     // SAFETY: as in `read_indexed`.
     let map = unsafe { memmap2::Mmap::map(&file) }.map_err(|e| IngestError::io(path, e))?;

@@ -31,9 +31,9 @@ pub struct WearReading {
 /// Largest wear-reading CSV read (bytes): about ten million readings.
 const MAX_WEAR_CSV_BYTES: u64 = 1 << 30;
 /// Largest accepted new-tire tread depth (mm); race tires have 2-8 mm.
-pub const MAX_NEW_DEPTH_MM: f64 = 100.0;
+pub(crate) const MAX_NEW_DEPTH_MM: f64 = 100.0;
 /// Largest accepted tread width (mm).
-pub const MAX_TREAD_WIDTH_MM: f64 = 2000.0;
+pub(crate) const MAX_TREAD_WIDTH_MM: f64 = 2000.0;
 
 /// Reads and checks a wear-reading CSV. Errors name the file and the line.
 pub fn read_wear_csv(path: &Path) -> Result<Vec<WearReading>> {
@@ -90,7 +90,7 @@ pub fn read_wear_csv(path: &Path) -> Result<Vec<WearReading>> {
 
 /// A disagreement between wear readings and the manifest.
 #[derive(Debug, Clone, PartialEq)]
-pub struct WearProblem {
+pub(crate) struct WearProblem {
     /// The manifest run it costs (None: the readings name no run of the manifest).
     pub run: Option<String>,
     /// What was wrong, naming the file and line.
@@ -101,7 +101,7 @@ pub struct WearProblem {
 /// the one the manifest mounts on that wheel, and one tire has one tread
 /// width. The first problem of each run is returned (lines counted from the
 /// header as line 1, as [`read_wear_csv`] reads them).
-pub fn check_against_manifest(
+pub(crate) fn check_against_manifest(
     path: &Path,
     readings: &[WearReading],
     manifest: &super::manifest::Manifest,

@@ -453,7 +453,9 @@ pub(crate) fn extract_run(
 /// The engine to use: `gpu` needs an adapter; `auto` takes a hardware GPU
 /// and otherwise the CPU engine (a software adapter such as lavapipe is
 /// slower than the CPU engine it emulates), saying why.
-pub fn open_engine(choice: Engine) -> Result<(Engine, Option<GpuEngine>), crate::gpu::GpuError> {
+pub(crate) fn open_engine(
+    choice: Engine,
+) -> Result<(Engine, Option<GpuEngine>), crate::gpu::GpuError> {
     match choice {
         Engine::Cpu => Ok((Engine::Cpu, None)),
         Engine::Gpu => Ok((Engine::Gpu, Some(GpuEngine::new()?))),

@@ -17,7 +17,7 @@ pub use table::KpiRow;
 
 /// A tire in a run, (run, wheel): the key of every per-tire table (KPI
 /// rows, energy and condition maps, predictions, truth).
-pub type TireRun = (String, crate::Wheel);
+pub(crate) type TireRun = (String, crate::Wheel);
 
 /// Parses a side table's wheel cell, naming the file and record when it is
 /// not a wheel position.

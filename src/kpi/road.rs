@@ -8,14 +8,14 @@ use realfft::RealFftPlanner;
 
 /// ISO 16610-21 Gaussian filter cut-off separating macro and micro texture
 /// (ISO 13473-1: micro texture is below 0.5 mm).
-pub const MACRO_MICRO_CUTOFF_MM: f64 = 0.5;
+pub(crate) const MACRO_MICRO_CUTOFF_MM: f64 = 0.5;
 /// Self-affine band of the Hurst fit (wavelengths, mm).
 pub const HURST_BAND_MM: (f64, f64) = (0.1, 5.0);
 /// Welch segment length (samples) of the PSD; shorter profiles use one segment.
 pub const WELCH_SEGMENT: usize = 4096;
 /// Number of log-spaced HDC lags and of log bins of the PSD side table.
-pub const HDC_LAGS: usize = 48;
-pub const PSD_BINS: usize = 48;
+pub(crate) const HDC_LAGS: usize = 48;
+pub(crate) const PSD_BINS: usize = 48;
 
 /// Height moments about the mean line with 1/N: (Ra, Rq, Sk, Ku) — paper eqs. 14-16.
 pub fn height_moments(z: &[f64]) -> (f64, f64, f64, f64) {
@@ -128,7 +128,7 @@ pub fn hdc(z: &[f64], dx_mm: f64) -> (Vec<f64>, Vec<f64>) {
 
 /// The HDC's lags (samples) for a profile of `n` samples: [`HDC_LAGS`]
 /// log-spaced integers from 1 to n/4, duplicates dropped.
-pub fn hdc_lags(n: usize) -> Vec<usize> {
+pub(crate) fn hdc_lags(n: usize) -> Vec<usize> {
     let max_lag = (n / 4).max(2);
     let mut lags: Vec<usize> = (0..HDC_LAGS)
         .map(|i| {
@@ -189,7 +189,7 @@ pub fn hurst_from_psd(q: &[f64], c: &[f64]) -> f64 {
 }
 
 /// Hurst exponent from the HDC: `C(Δ) ∝ Δ^2H` over the same band of lags.
-pub fn hurst_from_hdc(lag: &[f64], c: &[f64]) -> f64 {
+pub(crate) fn hurst_from_hdc(lag: &[f64], c: &[f64]) -> f64 {
     loglog_slope(lag, c, HURST_BAND_MM.0 / 10.0, HURST_BAND_MM.1 / 10.0) / 2.0
 }
 
@@ -316,7 +316,7 @@ pub fn profile_indices(p: &Profile) -> (RoadIndices, RoadCurves) {
 
 /// The engine part of a profile's indices on the CPU (f64): height moments,
 /// Welch PSD and HDC — what the GPU engine's roughness kernels compute.
-pub fn spectral(p: &Profile) -> Spectral {
+pub(crate) fn spectral(p: &Profile) -> Spectral {
     let (psd_q, psd_c) = psd(&p.z_mm, p.dx_mm);
     let (hdc_lag_mm, hdc_c) = hdc(&p.z_mm, p.dx_mm);
     Spectral {
@@ -330,7 +330,7 @@ pub fn spectral(p: &Profile) -> Spectral {
 
 /// A profile's indices and curves from the engine part; the ISO 16610-21
 /// split, λa and the Hurst fits are computed here, on the CPU.
-pub fn profile_indices_from(p: &Profile, s: Spectral) -> (RoadIndices, RoadCurves) {
+pub(crate) fn profile_indices_from(p: &Profile, s: Spectral) -> (RoadIndices, RoadCurves) {
     let z = &p.z_mm;
     let dx = p.dx_mm;
     let (ra, rq, sk, ku) = s.moments;
@@ -364,7 +364,7 @@ pub fn profile_indices_from(p: &Profile, s: Spectral) -> (RoadIndices, RoadCurve
 }
 
 /// Mean of every index over a track's locations.
-pub fn mean_indices(all: &[RoadIndices]) -> RoadIndices {
+pub(crate) fn mean_indices(all: &[RoadIndices]) -> RoadIndices {
     let n = all.len() as f64;
     let m = |f: fn(&RoadIndices) -> f64| all.iter().map(f).sum::<f64>() / n;
     RoadIndices {

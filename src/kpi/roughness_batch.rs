@@ -159,7 +159,7 @@ pub fn means(batch: &RoughnessBatch, refs: &[f32], partials: &[[f64; MOMENT_SUMS
 
 /// Assembles every profile's outputs from the kernels' results: moments from
 /// the second pass (ref = the mean, as f32), HDC sums, and the PSD rows.
-pub fn assemble(
+pub(crate) fn assemble(
     batch: &RoughnessBatch,
     centred: &[[f64; MOMENT_SUMS]],
     hdc_sums: &[f64],
@@ -236,7 +236,7 @@ pub fn batches(profiles: &[(&[f64], f64)]) -> Vec<(Vec<usize>, RoughnessBatch)> 
 }
 
 /// The CPU twins in the shaders' order (the reference of the GPU roughness).
-pub fn cpu_twins(batch: &RoughnessBatch) -> Vec<Spectral> {
+pub(crate) fn cpu_twins(batch: &RoughnessBatch) -> Vec<Spectral> {
     use super::cpu::{
         fft_pass::fft, roughness_hdc::roughness_hdc, roughness_moments::roughness_moments,
         roughness_psd::roughness_psd, roughness_window::roughness_window,

@@ -11,7 +11,7 @@ use std::sync::Arc;
 
 /// The cell type of a text column: free text, or a typed position
 /// ([`Wheel`], [`Axle`]) spelled as in the file.
-pub trait TextCell: Sized {
+pub(crate) trait TextCell: Sized {
     fn text(&self) -> &str;
     /// The cell read from a file; the error says what was wrong.
     fn parse_text(s: &str) -> Result<Self, String>;
@@ -190,10 +190,10 @@ fn parquet_err(path: &Path, e: impl Into<parquet::errors::ParquetError>) -> Inge
 
 /// Schema metadata key that ties the outputs of one extraction together
 /// (the KPI table, its side tables and its report carry the same value).
-pub const EXTRACTION_ID_KEY: &str = "tirewear.extraction_id";
+pub(crate) const EXTRACTION_ID_KEY: &str = "tirewear.extraction_id";
 
 /// `batch` with `extraction_id` in its schema metadata.
-pub fn with_extraction_id(batch: RecordBatch, extraction_id: &str) -> RecordBatch {
+pub(crate) fn with_extraction_id(batch: RecordBatch, extraction_id: &str) -> RecordBatch {
     let mut meta = batch.schema().metadata().clone();
     meta.insert(EXTRACTION_ID_KEY.to_string(), extraction_id.to_string());
     let schema = Arc::new(batch.schema().as_ref().clone().with_metadata(meta));
@@ -228,7 +228,7 @@ pub fn check_same_extraction(kpis: &Path, side: &Path) -> Result<(), IngestError
 }
 
 /// Writes a record batch as zstd Parquet into an open file (or a buffer).
-pub fn write_batch_to(
+pub(crate) fn write_batch_to(
     file: impl std::io::Write + Send,
     batch: &RecordBatch,
 ) -> std::io::Result<()> {
@@ -249,7 +249,7 @@ pub fn write_batch(path: &Path, batch: &RecordBatch) -> Result<(), IngestError> 
 }
 
 /// The KPI rows as one record batch (the Parquet table's schema).
-pub fn kpi_batch(rows: &[KpiRow]) -> RecordBatch {
+pub(crate) fn kpi_batch(rows: &[KpiRow]) -> RecordBatch {
     RecordBatch::try_new(schema(), KpiRow::arrays(rows)).expect("columns match the schema")
 }
 
@@ -265,10 +265,10 @@ pub fn write_csv(path: &Path, rows: &[KpiRow]) -> Result<(), IngestError> {
 
 /// Numeric columns added after the first KPI files were written: an older
 /// file without them reads them as 0.
-pub const LATER_COLUMNS: [&str; 1] = ["worn_through_readings"];
+pub(crate) const LATER_COLUMNS: [&str; 1] = ["worn_through_readings"];
 
 /// Text columns added later: an older file without them reads them as "".
-pub const LATER_TEXT_COLUMNS: [&str; 1] = ["quality"];
+pub(crate) const LATER_TEXT_COLUMNS: [&str; 1] = ["quality"];
 
 /// `quality` of a row whose every number is finite.
 pub const QUALITY_OK: &str = "ok";

@@ -24,8 +24,8 @@ use crate::ingest::telemetry::{VehicleSeries, WheelSeries};
 /// Gaps up to this long are bridged (the last power holds); longer ones are dropouts.
 pub const MAX_BRIDGED_GAP_S: f64 = 0.5;
 /// Least share of valid samples for a run to be accepted.
-pub const MIN_VALID_SHARE: f64 = 0.8;
-pub const MIN_DURATION_S: f64 = 10.0;
+pub(crate) const MIN_VALID_SHARE: f64 = 0.8;
+pub(crate) const MIN_DURATION_S: f64 = 10.0;
 /// Contact-patch model: mean contact pressure = inflation pressure + carcass share (Pa).
 pub const CARCASS_PRESSURE_PA: f64 = 40_000.0;
 
@@ -94,7 +94,7 @@ pub struct WheelIndices {
 
 /// Vehicle indices of one run.
 #[derive(Debug, Clone, Default, PartialEq, serde::Serialize)]
-pub struct VehicleIndices {
+pub(crate) struct VehicleIndices {
     pub t_track_avg_c: f64,
     pub t_air_avg_c: f64,
     /// Dist_TOT: last minus first of the distance channel (m).
@@ -181,13 +181,13 @@ fn clean(
 
 /// A wheel cleaned and ready for the engines: its kept samples as the
 /// kernels take them, and the cleaning report.
-pub struct PreparedWheel {
+pub(crate) struct PreparedWheel {
     pub samples: Vec<ReduceSample>,
     pub report: CleaningReport,
 }
 
 /// Cleans one wheel (the rule above).
-pub fn prepare_wheel(s: &WheelSeries) -> Result<PreparedWheel, String> {
+pub(crate) fn prepare_wheel(s: &WheelSeries) -> Result<PreparedWheel, String> {
     let mut report = CleaningReport::default();
     if s.is_empty() {
         return Err("no samples".into());
@@ -242,12 +242,12 @@ pub fn prepare_wheel(s: &WheelSeries) -> Result<PreparedWheel, String> {
 /// Half-width of the window temperature rates are taken over (s). One
 /// sample is too short: a surface sensor's 0.8 K of noise at 20 Hz is
 /// 23 K/s over one step, 1.1 K/s over a second.
-pub const RATE_HALF_WINDOW_S: f64 = 0.5;
+pub(crate) const RATE_HALF_WINDOW_S: f64 = 0.5;
 
 /// The conditions of a kept sample that need the wheel's other samples
 /// (the condition maps bin them; docs/kpis.md gives the formulas).
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
-pub struct DerivedConditions {
+pub(crate) struct DerivedConditions {
     /// (T(j₁) − T(j₀)) / (t(j₁) − t(j₀)), j₀ and j₁ the first and last kept
     /// samples within ±[`RATE_HALF_WINDOW_S`]; 0 when they are the same (K/s).
     pub t_surface_rate: f64,
@@ -263,7 +263,7 @@ pub struct DerivedConditions {
 
 /// [`DerivedConditions`] of each kept sample (`kept` from the cleaning
 /// rule: strictly increasing times).
-pub fn derived_conditions(s: &WheelSeries, kept: &[(usize, f64)]) -> Vec<DerivedConditions> {
+pub(crate) fn derived_conditions(s: &WheelSeries, kept: &[(usize, f64)]) -> Vec<DerivedConditions> {
     use super::cpu::condition_map::LOAD_FLOOR_N;
     let Some(&(first, _)) = kept.first() else {
         return Vec::new();
@@ -351,7 +351,7 @@ pub fn wheel_indices(
 }
 
 /// Vehicle indices; samples with a non-finite or out-of-range value are skipped.
-pub fn vehicle_indices(v: &VehicleSeries) -> Result<VehicleIndices, String> {
+pub(crate) fn vehicle_indices(v: &VehicleSeries) -> Result<VehicleIndices, String> {
     let ok = |x: f32, lo: f32, hi: f32| x.is_finite() && x >= lo && x <= hi;
     let (mut track, mut air) = (Moments::default(), Moments::default());
     let mut dist: Vec<f64> = Vec::new();

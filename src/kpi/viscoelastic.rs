@@ -6,7 +6,7 @@ use crate::ingest::compound::Compound;
 
 /// Table 5 indices of one tire and run.
 #[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize)]
-pub struct ViscoelasticIndices {
+pub(crate) struct ViscoelasticIndices {
     /// f = v_s / λ_Macro (Hz): mean sliding speed over the macro-texture wavelength.
     pub solicitation_frequency_hz: f64,
     /// T* (°C): the temperature at the master curve's reference frequency
@@ -32,7 +32,7 @@ impl ViscoelasticIndices {
 /// track's λ_Macro; `surface_c`: mean surface temperature. An error says why
 /// the indices are undefined (no road wavelength, a temperature where the WLF
 /// equation does not hold); the caller keeps the row with NaN and the reason.
-pub fn viscoelastic_indices(
+pub(crate) fn viscoelastic_indices(
     compound: &Compound,
     sliding_speed_mps: f64,
     macro_wavelength_mm: f64,

@@ -7,12 +7,12 @@ use crate::ingest::wear::WearReading;
 use std::collections::BTreeMap;
 
 /// Number of equally spaced virtual ribs across the tread.
-pub const VIRTUAL_RIBS: usize = 10;
+pub(crate) const VIRTUAL_RIBS: usize = 10;
 
 /// Mean wear (% of new depth) of every (run, wheel) in the readings.
 /// Between spots depth is linear in position; beyond the outermost spots
 /// the nearest spot's depth holds.
-pub fn mean_wear(readings: &[WearReading]) -> BTreeMap<(String, Wheel), f64> {
+pub(crate) fn mean_wear(readings: &[WearReading]) -> BTreeMap<(String, Wheel), f64> {
     let mut tires: BTreeMap<(String, Wheel), Vec<&WearReading>> = BTreeMap::new();
     for r in readings {
         tires.entry((r.run.clone(), r.wheel)).or_default().push(r);

@@ -6,11 +6,11 @@ use crate::kpi::KpiRow;
 use std::collections::BTreeSet;
 
 /// The target column.
-pub const TARGET: &str = "wear_mean_pct";
+pub(crate) const TARGET: &str = "wear_mean_pct";
 
 /// Numeric KPI columns that may be model inputs: the paper's tables 3, 4
 /// and 5 (the HDC Hurst cross-check and the data-quality columns are not).
-pub fn candidate_inputs() -> Vec<&'static str> {
+pub(crate) fn candidate_inputs() -> Vec<&'static str> {
     KpiRow::NUMBER_COLUMNS
         .iter()
         .copied()
@@ -32,7 +32,7 @@ pub fn candidate_inputs() -> Vec<&'static str> {
 /// those listed, or by default every third event in event-id order (the
 /// 3rd, 6th, ...), about a third of the events, as the paper kept a separate
 /// database of events (80 against 200 observations).
-pub fn split_by_events(
+pub(crate) fn split_by_events(
     rows: &[KpiRow],
     test_events: Option<&[String]>,
 ) -> (Vec<usize>, Vec<usize>, Vec<String>) {
@@ -72,7 +72,7 @@ pub fn correlation(a: &[f64], b: &[f64]) -> f64 {
 /// strongest first, after dropping those at or below `min_target_corr`); a
 /// candidate is kept if its |correlation| with every input already kept is
 /// at most `max_mutual_corr`. Constant candidates are dropped.
-pub fn select_inputs(
+pub(crate) fn select_inputs(
     columns: &[(&str, Vec<f64>)],
     target: Option<(&[f64], f64)>,
     max_mutual_corr: f64,

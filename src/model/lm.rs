@@ -57,7 +57,7 @@ fn sse(r: &[f64]) -> f64 {
 
 /// One solver in progress: call [`LmSolver::step`] once per epoch (so a
 /// caller can stop early on validation error), or [`levenberg_marquardt`].
-pub struct LmSolver {
+pub(crate) struct LmSolver {
     pub params: Vec<f64>,
     /// Sum of squared residuals at `params`.
     pub sse: f64,

@@ -10,7 +10,7 @@ use crate::Axle;
 use crate::kpi::KpiRow;
 
 /// Table 10: skewness Sk, kurtosis Ku, T_Surf Avg, FP_TOT, CP_Area, tan δ(T*).
-pub const PHYSICAL_INPUTS: [&str; 6] = [
+pub(crate) const PHYSICAL_INPUTS: [&str; 6] = [
     "skewness",
     "kurtosis",
     "t_surface_avg_c",
@@ -21,7 +21,7 @@ pub const PHYSICAL_INPUTS: [&str; 6] = [
 
 /// Tracks whose R2 is below this are left out of the slope correlation
 /// (the paper: R2 "is used to remove circuits with a lower number of acquisitions").
-pub const MIN_R2_CONSISTENT: f64 = 0.5;
+pub(crate) const MIN_R2_CONSISTENT: f64 = 0.5;
 
 /// One track's line `wear = a + b·E` (E in MJ) with its reliability indexes.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -66,7 +66,7 @@ fn line(x: &[f64], y: &[f64]) -> (f64, f64) {
 }
 
 /// Weighted Pearson correlation.
-pub fn weighted_correlation(x: &[f64], y: &[f64], w: &[f64]) -> f64 {
+pub(crate) fn weighted_correlation(x: &[f64], y: &[f64], w: &[f64]) -> f64 {
     let sw: f64 = w.iter().sum();
     let mx = x.iter().zip(w).map(|(a, w)| a * w).sum::<f64>() / sw;
     let my = y.iter().zip(w).map(|(a, w)| a * w).sum::<f64>() / sw;
@@ -80,7 +80,7 @@ pub fn weighted_correlation(x: &[f64], y: &[f64], w: &[f64]) -> f64 {
 }
 
 /// Per-track lines of wear against friction energy, with R1 and R2.
-pub fn track_lines(rows: &[&KpiRow]) -> Vec<TrackLine> {
+pub(crate) fn track_lines(rows: &[&KpiRow]) -> Vec<TrackLine> {
     let mut tracks: Vec<&str> = rows.iter().map(|r| r.track.as_str()).collect();
     tracks.sort();
     tracks.dedup();
@@ -128,7 +128,7 @@ pub fn track_lines(rows: &[&KpiRow]) -> Vec<TrackLine> {
 }
 
 /// Inputs of table 10 of one row.
-pub fn inputs_of(r: &KpiRow) -> Vec<f64> {
+pub(crate) fn inputs_of(r: &KpiRow) -> Vec<f64> {
     PHYSICAL_INPUTS
         .iter()
         .map(|c| r.number(c).expect("table-10 column"))
@@ -136,7 +136,7 @@ pub fn inputs_of(r: &KpiRow) -> Vec<f64> {
 }
 
 /// The whole analysis of one axle's training rows.
-pub fn analyse_axle(axle: Axle, rows: &[&KpiRow]) -> Result<AxleAnalysis, ModelError> {
+pub(crate) fn analyse_axle(axle: Axle, rows: &[&KpiRow]) -> Result<AxleAnalysis, ModelError> {
     let lines = track_lines(rows);
     let reliable: Vec<&TrackLine> = lines
         .iter()

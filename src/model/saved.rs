@@ -12,8 +12,8 @@ use super::physical::{AxleAnalysis, inputs_of};
 use crate::kpi::{KpiRow, table::unit};
 use std::path::Path;
 
-pub const MODEL_FORMAT: &str = "tirewear-model";
-pub const MODEL_VERSION: u32 = 1;
+pub(crate) const MODEL_FORMAT: &str = "tirewear-model";
+pub(crate) const MODEL_VERSION: u32 = 1;
 
 /// A column with its unit.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]

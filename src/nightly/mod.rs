@@ -41,7 +41,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 /// Version of `dataset.json`.
-pub const DATASET_FORMAT_VERSION: u32 = 1;
+pub(crate) const DATASET_FORMAT_VERSION: u32 = 1;
 
 /// Which share of the work this invocation does.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

@@ -89,7 +89,7 @@ fn round_sig(v: f64, digits: i32) -> f64 {
 }
 
 /// The three compounds of the presets.
-pub fn catalogue() -> Vec<CompoundModel> {
+pub(crate) fn catalogue() -> Vec<CompoundModel> {
     let make =
         |id: &str, name: &str, tg: f64, e_r: f64, mu: f64, t_opt: f64, wear: f64, td_peak: f64| {
             CompoundModel {

@@ -8,7 +8,7 @@ use super::vehicle::{AIR_DENSITY, CarParams, G};
 
 /// Speed and accelerations on the track's arc-length grid.
 #[derive(Debug, Clone, PartialEq)]
-pub struct LapProfile {
+pub(crate) struct LapProfile {
     pub ds_m: f64,
     pub v: Vec<f64>,
     /// Longitudinal acceleration (m/s²).
@@ -66,7 +66,7 @@ impl Envelope<'_> {
 }
 
 /// Solves the lap for `car` on `track` with tire-road friction coefficient `mu`.
-pub fn solve(track: &TrackShape, car: &CarParams, mu: f64) -> LapProfile {
+pub(crate) fn solve(track: &TrackShape, car: &CarParams, mu: f64) -> LapProfile {
     let env = Envelope { car, mu };
     let n = track.curvature.len();
     let ds = track.ds_m;

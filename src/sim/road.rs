@@ -18,7 +18,7 @@ pub enum Amplitudes {
 }
 
 /// Target 1-D PSD shape (arbitrary scale) at wavenumber q (rad/mm).
-pub fn psd_shape(q: f64, p: &RoadParams) -> f64 {
+pub(crate) fn psd_shape(q: f64, p: &RoadParams) -> f64 {
     let q_r = 2.0 * std::f64::consts::PI / p.rolloff_mm;
     let q_s = 2.0 * std::f64::consts::PI / p.cutoff_mm;
     if q > q_s {
@@ -81,7 +81,7 @@ pub fn shape_heights(z: &mut [f64], p: &RoadParams) {
 
 /// Fraction of the profile variance at wavelengths shorter than `lambda_mm`
 /// (from the target PSD): the micro-texture share of the height variance.
-pub fn variance_fraction_below(p: &RoadParams, n: usize, dx_mm: f64, lambda_mm: f64) -> f64 {
+pub(crate) fn variance_fraction_below(p: &RoadParams, n: usize, dx_mm: f64, lambda_mm: f64) -> f64 {
     let len = n as f64 * dx_mm;
     let q_split = 2.0 * std::f64::consts::PI / lambda_mm;
     let (mut below, mut total) = (0.0, 0.0);

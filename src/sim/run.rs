@@ -18,7 +18,7 @@ use rand::Rng;
 use rand_distr::{Distribution, Normal, Poisson};
 
 /// Everything a run needs that is shared with other runs.
-pub struct RunContext<'a> {
+pub(crate) struct RunContext<'a> {
     pub car: &'a CarParams,
     pub compound: &'a CompoundModel,
     pub lap: &'a LapProfile,
@@ -33,7 +33,7 @@ pub struct RunContext<'a> {
 
 /// The run's own settings.
 #[derive(Debug, Clone)]
-pub struct RunSettings {
+pub(crate) struct RunSettings {
     pub distance_m: f64,
     pub rate_hz: f64,
     pub start_ns: u64,
@@ -49,7 +49,7 @@ pub struct RunSettings {
 
 /// Noise-free integrals of one wheel over the run.
 #[derive(Debug, Clone, Default, PartialEq, serde::Serialize)]
-pub struct WheelTruth {
+pub(crate) struct WheelTruth {
     /// ∫ −F_x·v_sx dt (J).
     pub friction_energy_x_j: f64,
     /// ∫ −F_y·v_sy dt (J).
@@ -70,7 +70,7 @@ pub struct WheelTruth {
 
 /// Run-level truth.
 #[derive(Debug, Clone, Default)]
-pub struct RunTruth {
+pub(crate) struct RunTruth {
     pub wheels: [WheelTruth; 4],
     pub samples: u64,
     pub dropped_samples: u64,
@@ -138,7 +138,7 @@ impl PsiTable {
 }
 
 /// Simulates a run, passing each recorded sample to `sink(time_ns, tires, vehicle)`.
-pub fn simulate_run<E>(
+pub(crate) fn simulate_run<E>(
     ctx: &RunContext,
     set: &RunSettings,
     rng: &mut impl Rng,
@@ -322,10 +322,10 @@ pub fn simulate_run<E>(
 }
 
 /// Surface temperature (°C) above which the driver manages the tires.
-pub const MANAGE_ABOVE_C: f64 = 105.0;
+pub(crate) const MANAGE_ABOVE_C: f64 = 105.0;
 
 /// Reaction time (s) of the driver's tire management.
-pub const MANAGE_LAG_S: f64 = 3.0;
+pub(crate) const MANAGE_LAG_S: f64 = 3.0;
 
 /// The pace factor a driver aims for: with the hottest tire's surface
 /// above [`MANAGE_ABOVE_C`] they back off 2 % per kelvin over, at most 25 %,
@@ -333,7 +333,7 @@ pub const MANAGE_LAG_S: f64 = 3.0;
 /// [`MANAGE_LAG_S`]). Without it a hot tire's lower grip means more
 /// sliding, more heat, and a run-away that wore tires several times
 /// through their tread in long stints at two of the twelve tracks.
-pub fn tire_management(temps: &[TireTemps; 4]) -> f64 {
+pub(crate) fn tire_management(temps: &[TireTemps; 4]) -> f64 {
     let hottest = temps.iter().map(|t| t.surface_c).fold(f64::MIN, f64::max);
     (1.0 - 0.02 * (hottest - MANAGE_ABOVE_C).max(0.0)).max(0.75)
 }

@@ -6,7 +6,7 @@
 //! tens of seconds and more, steps are at most 0.05 s).
 
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
-pub struct ThermalParams {
+pub(crate) struct ThermalParams {
     /// Heat capacity of the surface node (J/K).
     pub c_surface: f64,
     /// Heat capacity of the inner-liner node (J/K).
@@ -42,7 +42,7 @@ impl Default for ThermalParams {
 
 /// Surface and inner-liner temperatures (°C).
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct TireTemps {
+pub(crate) struct TireTemps {
     pub surface_c: f64,
     pub inner_c: f64,
 }
@@ -88,7 +88,7 @@ impl ThermalParams {
 
 /// Gauge inflation pressure (Pa) at inner temperature `t_inner_c` for a tire
 /// set to `cold_gauge_pa` at `cold_c` (ideal gas at constant volume).
-pub fn hot_pressure_pa(cold_gauge_pa: f64, cold_c: f64, t_inner_c: f64) -> f64 {
+pub(crate) fn hot_pressure_pa(cold_gauge_pa: f64, cold_c: f64, t_inner_c: f64) -> f64 {
     const ATM: f64 = 101_325.0;
     (cold_gauge_pa + ATM) * (t_inner_c + 273.15) / (cold_c + 273.15) - ATM
 }

@@ -9,17 +9,17 @@ const B: f64 = 17.0;
 const C: f64 = 1.6;
 const E: f64 = 0.3;
 /// Largest normalised force handled on the rising branch; demands above it slide past the peak.
-pub const U_MAX: f64 = 0.995;
+pub(crate) const U_MAX: f64 = 0.995;
 const TABLE_N: usize = 2048;
 
 /// Normalised force F/(μ Fz) at combined slip σ.
-pub fn magic_formula(sigma: f64) -> f64 {
+pub(crate) fn magic_formula(sigma: f64) -> f64 {
     let bs = B * sigma;
     (C * (bs - E * (bs - bs.atan())).atan()).sin()
 }
 
 /// Slip σ at the force peak (solves C·atan(...) = π/2 by bisection once).
-pub fn sigma_peak() -> f64 {
+pub(crate) fn sigma_peak() -> f64 {
     static PEAK: OnceLock<f64> = OnceLock::new();
     *PEAK.get_or_init(|| {
         let (mut lo, mut hi) = (0.0, 1.0);
@@ -61,7 +61,7 @@ fn inverse_table() -> &'static [f64] {
 
 /// Combined slip σ that produces the normalised force `u` = F/(μ Fz) ≥ 0.
 /// Above [`U_MAX`] the tire is past its peak: σ grows steeply (sliding).
-pub fn slip_for_force(u: f64) -> f64 {
+pub(crate) fn slip_for_force(u: f64) -> f64 {
     let t = inverse_table();
     if u >= U_MAX {
         return t[TABLE_N] * (1.0 + 4.0 * (u - U_MAX));
@@ -84,7 +84,7 @@ pub struct GripParams {
 }
 
 /// Nominal load of the load-sensitivity law (N).
-pub const FZ_NOMINAL: f64 = 4000.0;
+pub(crate) const FZ_NOMINAL: f64 = 4000.0;
 
 impl GripParams {
     /// Peak friction μ at surface temperature `t_c`, load `fz`, on a road of grip factor `road`.
@@ -99,7 +99,7 @@ impl GripParams {
 /// Slip of one wheel for demanded forces: `(s_x, s_y)` with the paper's
 /// definitions `s_x = (v_x − ΩR)/v_x` (eq. 19), `s_y = v_y/v_x` (eq. 20).
 /// The friction force opposes sliding, so `s` points against the force.
-pub fn slips(fx: f64, fy: f64, fz: f64, mu: f64) -> (f64, f64, bool) {
+pub(crate) fn slips(fx: f64, fy: f64, fz: f64, mu: f64) -> (f64, f64, bool) {
     let f = fx.hypot(fy);
     if f <= 0.0 {
         return (0.0, 0.0, false);

@@ -5,8 +5,8 @@
 
 use crate::Wheel;
 
-pub const G: f64 = 9.81;
-pub const AIR_DENSITY: f64 = 1.2;
+pub(crate) const G: f64 = 9.81;
+pub(crate) const AIR_DENSITY: f64 = 1.2;
 
 #[derive(Debug, Clone, PartialEq)]
 pub struct CarParams {

@@ -13,15 +13,15 @@ use rand::Rng;
 use rand_distr::{Distribution, Normal};
 
 /// Spot positions across the tread, as fractions of the width from the inner edge.
-pub const SPOT_FRACTIONS: [f64; 7] = [0.04, 0.12, 0.28, 0.50, 0.70, 0.87, 0.96];
-pub const READINGS_PER_SPOT: u32 = 3;
-pub const NEW_DEPTH_MM: f64 = 4.0;
+pub(crate) const SPOT_FRACTIONS: [f64; 7] = [0.04, 0.12, 0.28, 0.50, 0.70, 0.87, 0.96];
+pub(crate) const READINGS_PER_SPOT: u32 = 3;
+pub(crate) const NEW_DEPTH_MM: f64 = 4.0;
 /// Standard deviation of one depth reading (mm).
-pub const READING_NOISE_MM: f64 = 0.04;
+pub(crate) const READING_NOISE_MM: f64 = 0.04;
 
 /// Road quantities the wear law uses (per track, from the synthesised profiles).
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
-pub struct RoadTruth {
+pub(crate) struct RoadTruth {
     pub skewness: f64,
     pub kurtosis: f64,
     pub rq_mm: f64,
@@ -109,7 +109,7 @@ impl TireWear {
 
 /// Mean wear of one tire and its parts, in % of the new tread depth.
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
-pub struct TireWear {
+pub(crate) struct TireWear {
     pub base_pct: f64,
     pub irregular_pct: f64,
     /// In `EffectKind::ALL` order.
@@ -147,12 +147,12 @@ impl TireWear {
 
 /// The compound's base abrasion on this road (mm of tread per J of
 /// temperature-weighted friction energy): the unit of every effect's magnitude.
-pub fn abrasion_mm_per_j(compound: &CompoundModel, road: &RoadTruth) -> f64 {
+pub(crate) fn abrasion_mm_per_j(compound: &CompoundModel, road: &RoadTruth) -> f64 {
     compound.wear_mm_per_mj * road.factor() / 1e6
 }
 
 /// Applies the wear law to one wheel's integrals.
-pub fn tire_wear(
+pub(crate) fn tire_wear(
     compound: &CompoundModel,
     road: &RoadTruth,
     wheel: Wheel,
@@ -195,7 +195,7 @@ pub fn tire_wear(
 }
 
 /// The depth readings of one tire: each spot read several times with noise.
-pub fn spot_readings(
+pub(crate) fn spot_readings(
     run: &str,
     wheel: Wheel,
     tire_set: &str,

@@ -141,7 +141,9 @@ pub fn matrix(s: &ValidateSettings) -> Vec<(Planted, u64)> {
 /// Simulates a season into `opts.out` and extracts its KPI database there
 /// (`kpis.parquet`, CPU engine): the seasons `gap validate` and `tirewear
 /// bench --only gap` diagnose. Returns the KPI file's path.
-pub fn simulate_and_extract(opts: &crate::sim::SimOptions) -> Result<PathBuf, ValidateError> {
+pub(crate) fn simulate_and_extract(
+    opts: &crate::sim::SimOptions,
+) -> Result<PathBuf, ValidateError> {
     crate::sim::simulate(opts)?;
     let kpis = opts.out.join("kpis.parquet");
     crate::kpi::extract(&crate::kpi::ExtractOptions::new(&opts.out, &kpis))?;

@@ -156,7 +156,7 @@ pub const N_CONDITIONS: usize = 17;
 /// `CONDITION_BINS` in the shader (checked by tests/shader_contract.rs).
 pub const CONDITION_BINS: usize = 468;
 /// Energy components: total, longitudinal (−F_x·v_sx·Δt), lateral (−F_y·v_sy·Δt).
-pub const COMPONENTS: usize = 3;
+pub(crate) const COMPONENTS: usize = 3;
 /// Bins of one wheel's maps. Must match `MAP_BINS` in the shader (checked by tests/shader_contract.rs).
 pub const MAP_BINS: usize = COMPONENTS * CONDITION_BINS;
 
@@ -190,7 +190,7 @@ pub struct ConditionBins {
 }
 
 /// The table the GPU engine uploads (f32 edges; the CPU twin bins in f64).
-pub fn condition_table() -> Vec<ConditionBins> {
+pub(crate) fn condition_table() -> Vec<ConditionBins> {
     let mut offset = 0;
     CONDITIONS
         .iter()
@@ -233,7 +233,7 @@ fn offsets() -> [usize; N_CONDITIONS] {
 
 /// The conditions of one sample, in [`CONDITIONS`] order (the shader's
 /// `condition_values`, in f64).
-pub fn condition_values(p: &ReduceSample) -> [f64; N_CONDITIONS] {
+pub(crate) fn condition_values(p: &ReduceSample) -> [f64; N_CONDITIONS] {
     let f = |x: f32| x as f64;
     let v_sx = f(p.vx) - f(p.omega) * f(p.radius); // eq. 21
     let v_sy = f(p.vy); // eq. 22
@@ -363,7 +363,7 @@ impl ConditionMaps {
 }
 
 /// Each wheel's condition maps (J per bin) from its `MAP_BINS` sums of quanta.
-pub fn condition_maps_from_quanta(quanta: &[u64]) -> Vec<ConditionMaps> {
+pub(crate) fn condition_maps_from_quanta(quanta: &[u64]) -> Vec<ConditionMaps> {
     quanta
         .chunks_exact(MAP_BINS)
         .map(|q| ConditionMaps {
@@ -379,17 +379,19 @@ pub fn condition_maps_from_quanta(quanta: &[u64]) -> Vec<ConditionMaps> {
 }
 
 /// Schema-metadata key of the side table's format version.
-pub const VERSION_KEY: &str = "tirewear.condition_maps.version";
+pub(crate) const VERSION_KEY: &str = "tirewear.condition_maps.version";
 /// The side table's format version this build writes. It also reads
 /// version 1, which holds the first [`V1_CONDITIONS`] conditions.
-pub const VERSION: u32 = 2;
+pub(crate) const VERSION: u32 = 2;
 
 /// Side table of condition maps (`NAME.condition_maps.parquet`): one row per
 /// tire, run, condition and non-empty bin: run, wheel, condition, unit, bin,
 /// lo, hi (the bin's edges; the first and last bins also hold the values
 /// below and above), energy_j, energy_x_j, energy_y_j. Versioned in the
 /// schema metadata ([`VERSION_KEY`]).
-pub fn side_table(maps: &[(String, crate::Wheel, ConditionMaps)]) -> arrow_array::RecordBatch {
+pub(crate) fn side_table(
+    maps: &[(String, crate::Wheel, ConditionMaps)],
+) -> arrow_array::RecordBatch {
     use arrow_array::{Float64Array, StringArray, UInt32Array};
     use arrow_schema::{DataType, Field, Schema};
     use std::sync::Arc;

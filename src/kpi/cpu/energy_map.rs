@@ -30,7 +30,7 @@ const _: () = assert!(BINS == LATERAL_BINS_AT + SURFACE_INNER_BINS);
 
 /// round(e · ENERGY_QUANTA_PER_J) in 64-bit two's complement (the shader's
 /// `to_quanta`: ties to even, magnitude rounded then negated).
-pub fn to_quanta(e: f64) -> u64 {
+pub(crate) fn to_quanta(e: f64) -> u64 {
     let m = round_ties_even(e.abs() * ENERGY_QUANTA_PER_J) as u64;
     if e < 0.0 { m.wrapping_neg() } else { m }
 }
@@ -45,7 +45,7 @@ fn round_ties_even(x: f64) -> f64 {
 }
 
 /// A 64-bit two's-complement sum of quanta back in joules.
-pub fn from_quanta(q: u64) -> f64 {
+pub(crate) fn from_quanta(q: u64) -> f64 {
     q as i64 as f64 / ENERGY_QUANTA_PER_J
 }
 
@@ -129,7 +129,7 @@ pub fn energy_map(batch: &ReduceBatch) -> Vec<u64> {
 }
 
 /// Each wheel's maps (J per bin) from its `BINS` sums of quanta.
-pub fn maps_from_quanta(quanta: &[u64]) -> Vec<EnergyMaps> {
+pub(crate) fn maps_from_quanta(quanta: &[u64]) -> Vec<EnergyMaps> {
     quanta
         .chunks_exact(BINS)
         .map(|q| {

@@ -37,7 +37,7 @@ pub fn fft_pass(src: &[[f64; 2]], dst: &mut [[f64; 2]], ns: usize, tw: &[[f64; 2
 }
 
 /// All passes: the forward DFT of every segment.
-pub fn fft(mut data: Vec<[f64; 2]>) -> Vec<[f64; 2]> {
+pub(crate) fn fft(mut data: Vec<[f64; 2]>) -> Vec<[f64; 2]> {
     let tw = twiddles();
     let mut other = vec![[0.0; 2]; data.len()];
     let mut ns = 1;
