@@ -20,7 +20,9 @@
 //!   coefficients count. Details and measured behaviour: docs/gap.md.
 
 use super::acts::ActsIn;
-use super::candidates::{Candidate, Feature, KpiScale, LawRow, candidate_feature, kpi_scale};
+use super::candidates::{
+    Candidate, Feature, Group, KpiScale, LawRow, candidate_feature, kpi_scale,
+};
 use super::linear::{BaseFit, dot, lstsq, orthonormal_basis, project_out, residual, weighted};
 use super::stats::{benjamini_hochberg, levels};
 use super::track_test::Severities;
@@ -90,9 +92,17 @@ pub(crate) struct Problem<'a> {
 /// How a candidate scored.
 #[derive(Debug, Clone, serde::Serialize)]
 pub struct Score {
+    /// The candidate at its chosen scope (a scanned candidate's library
+    /// name with the scope's suffix).
     pub name: String,
+    /// The library candidate's name (`name` without a scope's suffix).
+    #[serde(skip)]
+    pub candidate: String,
     pub feature: Feature,
     pub axle: Option<Axle>,
+    /// The chosen scope's group of tires (a wheel position, say).
+    #[serde(skip)]
+    pub group: Option<Group>,
     /// Threshold chosen on all rows scored (NaN for KPI candidates, or when
     /// no threshold gives a positive coefficient).
     pub threshold: f64,
@@ -124,8 +134,9 @@ pub struct Score {
 }
 
 impl Score {
-    /// The scored term as a candidate at its chosen threshold (without a
-    /// user hypothesis's expression: take that from the library).
+    /// The scored term as a candidate at its chosen threshold and scope
+    /// (without a user hypothesis's expression: [`Score::resolve`] takes
+    /// that from the library).
     pub fn as_candidate(&self) -> Candidate {
         Candidate {
             name: self.name.clone(),
@@ -133,8 +144,18 @@ impl Score {
             thresholds: vec![self.threshold],
             axle: self.axle,
             user: None,
-            group: None,
+            group: self.group.clone(),
+            scopes: Vec::new(),
         }
+    }
+
+    /// The library's candidate at the chosen scope (its threshold grid
+    /// kept), or [`Score::as_candidate`] when the library does not hold it.
+    pub fn resolve(&self, lib: &[Candidate]) -> Candidate {
+        lib.iter()
+            .find(|l| l.name == self.candidate)
+            .and_then(|l| l.resolved().into_iter().find(|r| r.name == self.name))
+            .unwrap_or_else(|| self.as_candidate())
     }
 }
 
@@ -545,14 +566,18 @@ pub(crate) fn rank(
         .par_iter()
         .filter_map(|c| {
             let scale = kpi_scale(c, rows);
-            let x: Vec<Vec<f64>> = c
-                .thresholds
+            // Every scope's every threshold: column s·T + t. The scan and
+            // the max-F run over all of them, so the test pays for both.
+            let scopes = c.resolved();
+            let n_thresholds = c.thresholds.len();
+            let x: Vec<Vec<f64>> = scopes
                 .iter()
-                .map(|&t| {
+                .flat_map(|sc| c.thresholds.iter().map(move |&t| (sc, t)))
+                .map(|(sc, t)| {
                     (0..n)
                         .map(|i| {
                             let law = problem.law[i];
-                            w[i] * candidate_feature(c, rows[i], problem.maps[i], t, scale, law)
+                            w[i] * candidate_feature(sc, rows[i], problem.maps[i], t, scale, law)
                         })
                         .collect()
                 })
@@ -586,9 +611,14 @@ pub(crate) fn rank(
                     // A term that changes sign across rows (a generic KPI,
                     // a two-sided hypothesis) has no share to speak of.
                     let share = if positive { front / total } else { f64::NAN };
-                    (c.thresholds[*t], c1, share)
+                    (c.thresholds[*t % n_thresholds], c1, share)
                 }
                 None => (f64::NAN, 0.0, f64::NAN),
+            };
+            // The chosen scope (a candidate without scopes is its own).
+            let scope = match &fit {
+                Some((t, _)) => &scopes[*t / n_thresholds],
+                None => c,
             };
             let (ft, nf) = projected(&null.q, &x);
             let observed = max_f(&null.e0, &null.q, &ft, &nf, positive);
@@ -617,9 +647,11 @@ pub(crate) fn rank(
                 (1 + exceed) as f64 / (1 + perms.len()) as f64
             };
             let score = Score {
-                name: c.name.clone(),
+                name: scope.name.clone(),
+                candidate: c.name.clone(),
                 feature: c.feature,
-                axle: c.axle,
+                axle: scope.axle,
+                group: scope.group.clone(),
                 threshold: if matches!(c.feature, Feature::Kpi(_)) {
                     f64::NAN
                 } else {
@@ -806,8 +838,10 @@ mod tests {
     fn named_score(name: &str, p: f64) -> Score {
         Score {
             name: name.into(),
+            candidate: name.into(),
             feature: Feature::Kpi("x"),
             axle: None,
+            group: None,
             threshold: f64::NAN,
             coefficient: 1.0,
             cv_gain: 0.1,

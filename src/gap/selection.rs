@@ -107,14 +107,11 @@ impl<'a> Selection<'a> {
         let (y, train_idx) = (self.data.y, self.train_idx());
         let before = weighted_fit(&self.base, &self.w, y, &train_idx).1;
         for c in candidates {
-            let Some(cand) = lib.iter().find(|l| l.name == c.name) else {
-                continue;
-            };
             if c.coefficient == 0.0 {
                 continue;
             }
             let column = Term {
-                candidate: cand.clone(),
+                candidate: c.resolve(lib),
                 threshold: c.threshold,
                 kpi_scale: c.kpi_scale,
             }
@@ -145,14 +142,10 @@ impl<'a> Selection<'a> {
     /// something else (a track-level effect, say). Either way its name is
     /// used.
     pub fn add(&mut self, best: &Score, lib: &[Candidate]) -> Option<(Score, Vec<f64>)> {
-        let cand = lib
-            .iter()
-            .find(|c| c.name == best.name)
-            .map(|c| Candidate {
-                thresholds: vec![best.threshold],
-                ..c.clone()
-            })
-            .unwrap_or_else(|| best.as_candidate());
+        let cand = Candidate {
+            thresholds: vec![best.threshold],
+            ..best.resolve(lib)
+        };
         let term = Term {
             candidate: cand.clone(),
             threshold: best.threshold,
@@ -249,7 +242,7 @@ pub(crate) fn next_term<'a>(
             && !used.contains(&s.name)
             && (first_round
                 .iter()
-                .any(|c| c.name == s.name && significant(c))
+                .any(|c| c.candidate == s.candidate && significant(c))
                 || found_before(s.feature, terms))
     };
     let within = ranked
@@ -290,8 +283,10 @@ mod tests {
     fn score(name: &str, feature: Feature, axle: Option<crate::Axle>, cv: f64) -> Score {
         Score {
             name: name.into(),
+            candidate: name.into(),
             feature,
             axle,
+            group: None,
             threshold: 85.0,
             coefficient: 1.0,
             cv_gain: cv,
@@ -313,6 +308,7 @@ mod tests {
                 axle: s.axle,
                 user: None,
                 group: None,
+                scopes: Vec::new(),
             },
             threshold: s.threshold,
             kpi_scale: KpiScale::NONE,

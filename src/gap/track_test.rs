@@ -226,6 +226,7 @@ mod tests {
             axle: None,
             user: None,
             group: None,
+            scopes: Vec::new(),
         };
         s.p_value(&road, KpiScale::NONE, draws, seed)
     }

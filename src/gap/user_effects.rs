@@ -271,6 +271,7 @@ pub fn load(path: &Path) -> Result<Vec<Candidate>, GapError> {
                 thresholds,
                 axle,
                 user: Some(Arc::new(user)),
+                scopes: Vec::new(),
             })
         })
         .collect()
