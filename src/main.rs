@@ -117,6 +117,8 @@ fn run() -> Result<std::process::ExitCode> {
         .with_env_filter(filter)
         .with_writer(std::io::stderr)
         .init();
+    // Before any thread starts (rayon's pool, the engines).
+    cli::allocator::tune();
     let progress = !cli.quiet && std::io::IsTerminal::is_terminal(&std::io::stderr());
     match cli.command {
         Command::Simulate(a) => cli::simulate::run(a, progress)?,

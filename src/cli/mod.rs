@@ -2,6 +2,7 @@
 //! runs. The library (`tirewear`) knows nothing of the command line; `main`
 //! only parses and maps the outcome to an exit code.
 
+pub(crate) mod allocator;
 pub(crate) mod bench;
 pub(crate) mod demo;
 pub(crate) mod extract;
