@@ -14,6 +14,7 @@ pub mod kpi;
 pub mod model;
 pub mod nightly;
 mod progress;
+pub mod report;
 pub mod sim;
 pub mod validate;
 pub mod wheel;

@@ -82,6 +82,12 @@ enum Command {
     /// the same buffer. Prints a table and saves it as JSON; run it on two
     /// machines to compare them.
     Bench(cli::bench::BenchArgs),
+    /// Write DIR/report.html: one self-contained page (inline SVG figures,
+    /// nothing fetched) with the season, the physical correlations (wear
+    /// against friction energy per track), the models' predictions against
+    /// the measurements and the sim-to-real gap, from what `extract`, `fit`
+    /// and `gap` wrote in the season folder (docs/report.md).
+    Report(cli::report::ReportArgs),
     /// Try tirewear: simulate the demo season, extract its KPI database, fit
     /// the three wear models and diagnose the gap between the physics law and
     /// the measured wear. The default season has no planted effect; plant one
@@ -138,6 +144,7 @@ fn run() -> Result<std::process::ExitCode> {
         Command::Predict(a) => cli::predict::run(a)?,
         Command::Gap(a) => cli::gap::run(a, progress)?,
         Command::Bench(a) => cli::bench::run(a)?,
+        Command::Report(a) => cli::report::run(a)?,
         Command::Demo(a) => cli::demo::run(a, progress)?,
     }
     Ok(std::process::ExitCode::SUCCESS)

@@ -3,6 +3,7 @@
 use super::extract::run_extract;
 use super::fit::run_fit;
 use super::gap::run_gap;
+use super::report::run_report;
 use super::simulate::{parse_effects, run_simulation};
 use anyhow::Result;
 use std::path::PathBuf;
@@ -77,5 +78,7 @@ pub(crate) fn run(a: DemoArgs, progress: bool) -> Result<()> {
         &settings,
         &out.join("gap"),
     )?;
+    println!();
+    run_report(&out, &out.join("report.html"))?;
     Ok(())
 }

@@ -10,4 +10,5 @@ pub(crate) mod fit;
 pub(crate) mod gap;
 pub(crate) mod predict;
 pub(crate) mod process;
+pub(crate) mod report;
 pub(crate) mod simulate;

@@ -1,0 +1,32 @@
+//! `tirewear report`: its arguments and what it runs.
+
+use anyhow::Result;
+use std::path::{Path, PathBuf};
+
+#[derive(clap::Args)]
+pub(crate) struct ReportArgs {
+    /// Season folder after `tirewear extract` (its `kpis.parquet`), and
+    /// optionally `fit` (`models/`) and `gap` (`gap/gap.json`).
+    dir: PathBuf,
+    /// Where to write the page (default DIR/report.html).
+    #[arg(long)]
+    out: Option<PathBuf>,
+}
+
+/// Writes the report of `dir` to `out` and says where it is.
+pub(crate) fn run_report(dir: &Path, out: &Path) -> Result<()> {
+    let s = tirewear::report::write_report(dir, out)?;
+    println!(
+        "wrote {} ({} figures; sections: {})",
+        s.path.display(),
+        s.figures,
+        s.sections.join(", ")
+    );
+    Ok(())
+}
+
+/// Runs `tirewear report`.
+pub(crate) fn run(a: ReportArgs) -> Result<()> {
+    let out = a.out.unwrap_or_else(|| a.dir.join("report.html"));
+    run_report(&a.dir, &out)
+}

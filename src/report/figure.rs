@@ -1,0 +1,255 @@
+//! The report's figures: inline SVG drawn by `plotters` (text stays text,
+//! so no font file is read and the browser renders the labels).
+
+use super::error::ReportError;
+use plotters::prelude::*;
+use plotters::style::Palette99;
+
+/// Width and height of every figure (px); the page scales them to fit.
+const SIZE: (u32, u32) = (640, 420);
+
+/// One group of points drawn alike (a track, an axle, a data split).
+pub(crate) struct Points {
+    pub label: String,
+    /// Index into the palette, so a group keeps its colour across figures.
+    pub color: usize,
+    pub xy: Vec<(f64, f64)>,
+    /// Filled or hollow marks (training against testing).
+    pub filled: bool,
+}
+
+/// A straight line from `from` to `to` (a fit, the 1:1 line).
+pub(crate) struct Segment {
+    pub color: Option<usize>,
+    pub from: (f64, f64),
+    pub to: (f64, f64),
+}
+
+/// Axis titles with units.
+pub(crate) struct Axes<'a> {
+    pub title: &'a str,
+    pub x: &'a str,
+    pub y: &'a str,
+}
+
+fn color(i: Option<usize>) -> RGBColor {
+    match i {
+        Some(i) => {
+            let c = Palette99::pick(i).to_rgba();
+            RGBColor(c.0, c.1, c.2)
+        }
+        None => RGBColor(70, 110, 160),
+    }
+}
+
+fn draw_error<E: std::error::Error + Send + Sync>(e: DrawingAreaErrorKind<E>) -> ReportError {
+    ReportError::Figure(e.to_string())
+}
+
+/// The range of `values` with 5 % of padding; (0, 1) when there are none.
+pub(crate) fn padded(values: impl Iterator<Item = f64>, from_zero: bool) -> (f64, f64) {
+    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+    for v in values.filter(|v| v.is_finite()) {
+        lo = lo.min(v);
+        hi = hi.max(v);
+    }
+    if !lo.is_finite() {
+        return (0.0, 1.0);
+    }
+    if from_zero {
+        lo = lo.min(0.0);
+        hi = hi.max(0.0);
+    }
+    let pad = if hi > lo { 0.05 * (hi - lo) } else { 0.5 };
+    (lo - pad, hi + pad)
+}
+
+/// A scatter of point groups with lines over them, as an SVG element.
+pub(crate) fn scatter(
+    axes: &Axes,
+    points: &[Points],
+    lines: &[Segment],
+    from_zero: bool,
+) -> Result<String, ReportError> {
+    // Lines count too: a fit's end may lie beyond the marks.
+    let ends = || lines.iter().flat_map(|l| [l.from, l.to]);
+    let xs = points
+        .iter()
+        .flat_map(|p| p.xy.iter().map(|q| q.0))
+        .chain(ends().map(|q| q.0));
+    let ys = points
+        .iter()
+        .flat_map(|p| p.xy.iter().map(|q| q.1))
+        .chain(ends().map(|q| q.1));
+    let (x0, x1) = padded(xs, from_zero);
+    let (y0, y1) = padded(ys, from_zero);
+    let mut svg = String::new();
+    {
+        let root = SVGBackend::with_string(&mut svg, SIZE).into_drawing_area();
+        root.fill(&WHITE).map_err(draw_error)?;
+        let mut chart = ChartBuilder::on(&root)
+            .caption(axes.title, ("sans-serif", 18))
+            .margin(12)
+            .x_label_area_size(44)
+            .y_label_area_size(60)
+            .build_cartesian_2d(x0..x1, y0..y1)
+            .map_err(draw_error)?;
+        chart
+            .configure_mesh()
+            .x_desc(axes.x)
+            .y_desc(axes.y)
+            .label_style(("sans-serif", 13))
+            .axis_desc_style(("sans-serif", 14))
+            .light_line_style(RGBColor(235, 235, 235))
+            .draw()
+            .map_err(draw_error)?;
+        for l in lines {
+            let c = color(l.color);
+            chart
+                .draw_series(LineSeries::new([l.from, l.to], c.stroke_width(2)))
+                .map_err(draw_error)?;
+        }
+        for p in points {
+            let c = color(Some(p.color));
+            let style = if p.filled {
+                c.filled()
+            } else {
+                c.stroke_width(1)
+            };
+            chart
+                .draw_series(p.xy.iter().map(|&q| Circle::new(q, 3, style)))
+                .map_err(draw_error)?
+                .label(p.label.as_str())
+                .legend(move |(x, y)| Circle::new((x + 8, y), 4, style));
+        }
+        if points.len() > 1 {
+            chart
+                .configure_series_labels()
+                .background_style(WHITE.mix(0.85))
+                .border_style(BLACK)
+                .position(SeriesLabelPosition::UpperLeft)
+                .draw()
+                .map_err(draw_error)?;
+        }
+        root.present().map_err(draw_error)?;
+    }
+    Ok(svg)
+}
+
+/// One bar of [`bars`]: its value and optional interval (lo, hi).
+pub(crate) struct Bar {
+    pub value: f64,
+    pub interval: Option<(f64, f64)>,
+    /// A palette index; None: the neutral colour.
+    pub color: Option<usize>,
+}
+
+/// Bars at x = 1, 2, … (labels in the table beside the figure), each with
+/// its interval as a whisker, and a zero line.
+pub(crate) fn bars(axes: &Axes, bars: &[Bar]) -> Result<String, ReportError> {
+    let values = bars.iter().flat_map(|b| {
+        let (lo, hi) = b.interval.unwrap_or((b.value, b.value));
+        [b.value, lo, hi]
+    });
+    let (y0, y1) = padded(values, true);
+    let x1 = bars.len() as f64 + 0.5;
+    let mut svg = String::new();
+    {
+        let root = SVGBackend::with_string(&mut svg, SIZE).into_drawing_area();
+        root.fill(&WHITE).map_err(draw_error)?;
+        let mut chart = ChartBuilder::on(&root)
+            .caption(axes.title, ("sans-serif", 18))
+            .margin(12)
+            .x_label_area_size(44)
+            .y_label_area_size(60)
+            .build_cartesian_2d(0.5..x1, y0..y1)
+            .map_err(draw_error)?;
+        chart
+            .configure_mesh()
+            .x_desc(axes.x)
+            .y_desc(axes.y)
+            .x_labels(bars.len().clamp(1, 20))
+            .x_label_formatter(&|v| format!("{:.0}", v))
+            .label_style(("sans-serif", 13))
+            .axis_desc_style(("sans-serif", 14))
+            .light_line_style(RGBColor(235, 235, 235))
+            .draw()
+            .map_err(draw_error)?;
+        chart
+            .draw_series(bars.iter().enumerate().map(|(i, b)| {
+                let x = i as f64 + 1.0;
+                Rectangle::new(
+                    [(x - 0.3, 0.0), (x + 0.3, b.value)],
+                    color(b.color).mix(0.8).filled(),
+                )
+            }))
+            .map_err(draw_error)?;
+        for (i, b) in bars.iter().enumerate() {
+            if let Some((lo, hi)) = b.interval {
+                let x = i as f64 + 1.0;
+                let whisker = [(x, lo), (x, hi)];
+                chart
+                    .draw_series(LineSeries::new(whisker, BLACK.stroke_width(2)))
+                    .map_err(draw_error)?;
+            }
+        }
+        chart
+            .draw_series(LineSeries::new([(0.5, 0.0), (x1, 0.0)], BLACK))
+            .map_err(draw_error)?;
+        root.present().map_err(draw_error)?;
+    }
+    Ok(svg)
+}
+
+/// Lines through points at x = 0, 1, … (steps), one per series, with marks.
+pub(crate) fn steps(
+    axes: &Axes,
+    series: &[(String, usize, Vec<f64>)],
+) -> Result<String, ReportError> {
+    let n = series.iter().map(|s| s.2.len()).max().unwrap_or(1);
+    let (y0, y1) = padded(series.iter().flat_map(|s| s.2.iter().copied()), true);
+    let mut svg = String::new();
+    {
+        let root = SVGBackend::with_string(&mut svg, SIZE).into_drawing_area();
+        root.fill(&WHITE).map_err(draw_error)?;
+        let mut chart = ChartBuilder::on(&root)
+            .caption(axes.title, ("sans-serif", 18))
+            .margin(12)
+            .x_label_area_size(44)
+            .y_label_area_size(60)
+            .build_cartesian_2d(-0.3..(n as f64 - 0.7), y0..y1)
+            .map_err(draw_error)?;
+        chart
+            .configure_mesh()
+            .x_desc(axes.x)
+            .y_desc(axes.y)
+            .x_labels(n.clamp(1, 20))
+            .x_label_formatter(&|v| format!("{:.0}", v))
+            .label_style(("sans-serif", 13))
+            .axis_desc_style(("sans-serif", 14))
+            .light_line_style(RGBColor(235, 235, 235))
+            .draw()
+            .map_err(draw_error)?;
+        for (label, c, ys) in series {
+            let c = color(Some(*c));
+            let pts: Vec<(f64, f64)> = ys.iter().enumerate().map(|(i, &y)| (i as f64, y)).collect();
+            chart
+                .draw_series(LineSeries::new(pts.clone(), c.stroke_width(2)))
+                .map_err(draw_error)?
+                .label(label.as_str())
+                .legend(move |(x, y)| PathElement::new([(x, y), (x + 16, y)], c.stroke_width(2)));
+            chart
+                .draw_series(pts.into_iter().map(|q| Circle::new(q, 4, c.filled())))
+                .map_err(draw_error)?;
+        }
+        chart
+            .configure_series_labels()
+            .background_style(WHITE.mix(0.85))
+            .border_style(BLACK)
+            .position(SeriesLabelPosition::UpperRight)
+            .draw()
+            .map_err(draw_error)?;
+        root.present().map_err(draw_error)?;
+    }
+    Ok(svg)
+}

@@ -1,0 +1,159 @@
+//! `report.html`: one self-contained page per season with the paper's
+//! figures (docs/report.md). Reads what `extract`, `fit` and `gap` wrote in
+//! a season folder — `kpis.parquet` (required), `kpis.report.json`,
+//! `models/*.json`, `gap/gap.json` (each optional: a section whose input is
+//! missing says which command writes it) — and draws every figure as inline
+//! SVG, its numbers beside it as a table or an inline CSV download. Nothing
+//! is fetched: no script, font, style or image from anywhere.
+
+pub mod error;
+mod figure;
+mod html;
+mod sections;
+
+pub use error::ReportError;
+use std::path::{Path, PathBuf};
+
+/// What was written.
+#[derive(Debug, Clone)]
+pub struct ReportSummary {
+    pub path: PathBuf,
+    /// Section titles, in page order.
+    pub sections: Vec<String>,
+    pub figures: usize,
+}
+
+/// The season folder's inputs, read once.
+pub(crate) struct Inputs {
+    pub dir: PathBuf,
+    pub rows: Vec<crate::kpi::KpiRow>,
+    pub extraction: Option<serde_json::Value>,
+    pub models: Vec<(PathBuf, crate::model::saved::SavedModel)>,
+    pub gap: Option<serde_json::Value>,
+}
+
+fn read_json(path: &Path) -> Result<Option<serde_json::Value>, ReportError> {
+    if !path.exists() {
+        return Ok(None);
+    }
+    let text = std::fs::read_to_string(path).map_err(|source| ReportError::Io {
+        path: path.into(),
+        source,
+    })?;
+    serde_json::from_str(&text)
+        .map(Some)
+        .map_err(|e| ReportError::Input {
+            path: path.into(),
+            message: format!("not valid JSON: {e}"),
+        })
+}
+
+impl Inputs {
+    pub fn read(dir: &Path) -> Result<Inputs, ReportError> {
+        let kpis = dir.join("kpis.parquet");
+        if !kpis.exists() {
+            return Err(ReportError::Input {
+                path: kpis,
+                message: "missing: run `tirewear extract` on the season first".into(),
+            });
+        }
+        let rows = crate::kpi::table::read_parquet(&kpis).map_err(|e| ReportError::Input {
+            path: kpis.clone(),
+            message: e.to_string(),
+        })?;
+        let mut models = Vec::new();
+        for method in ["physical", "pca", "ffnn"] {
+            let path = dir.join("models").join(format!("{method}.json"));
+            if path.exists() {
+                let m = crate::model::saved::SavedModel::load(&path).map_err(|e| {
+                    ReportError::Input {
+                        path: path.clone(),
+                        message: e.to_string(),
+                    }
+                })?;
+                models.push((path, m));
+            }
+        }
+        Ok(Inputs {
+            dir: dir.into(),
+            rows,
+            extraction: read_json(&dir.join("kpis.report.json"))?,
+            models,
+            gap: read_json(&dir.join("gap").join("gap.json"))?,
+        })
+    }
+}
+
+/// One section of the page: its title and HTML, and how many figures.
+pub(crate) struct Section {
+    pub title: String,
+    pub html: String,
+    pub figures: usize,
+}
+
+const STYLE: &str = "body{font-family:sans-serif;max-width:1100px;margin:auto;padding:1em;color:#222}\
+h1{font-size:1.6em}h2{border-bottom:1px solid #ccc;margin-top:2em}\
+figure{margin:1em 0;page-break-inside:avoid}figure svg{max-width:100%;height:auto}\
+figcaption{font-size:.9em;color:#444;margin:.3em 0}\
+table{border-collapse:collapse;font-size:.85em;margin:.5em 0}\
+td,th{border:1px solid #ddd;padding:2px 6px;text-align:left}th{background:#f4f4f4}\
+td.n{text-align:right;font-variant-numeric:tabular-nums}a.csv{font-size:.85em}\
+p.missing{color:#a33}@media print{a.csv{display:none}}";
+
+/// The whole page.
+pub(crate) fn render(inputs: &Inputs) -> Result<(String, Vec<Section>), ReportError> {
+    let sections = vec![
+        sections::season(inputs),
+        sections::physical(inputs)?,
+        sections::models(inputs)?,
+        sections::gap(inputs)?,
+    ];
+    let name = inputs
+        .dir
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "season".into());
+    let mut page = format!(
+        "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">\
+<meta name=\"viewport\" content=\"width=device-width, initial-scale=1\">\
+<title>tirewear report: {0}</title><style>{STYLE}</style></head><body>\n\
+<h1>Tire-wear report: {0}</h1>\n<p>Written by tirewear {1} from the season folder's \
+outputs. Figures mirror the paper's; definitions in docs/report.md and docs/kpis.md.</p>\n<nav><ol>",
+        html::escape(&name),
+        env!("CARGO_PKG_VERSION")
+    );
+    for (i, s) in sections.iter().enumerate() {
+        page += &format!(
+            "<li><a href=\"#s{}\">{}</a></li>",
+            i + 1,
+            html::escape(&s.title)
+        );
+    }
+    page += "</ol></nav>\n";
+    for (i, s) in sections.iter().enumerate() {
+        page += &format!(
+            "<section id=\"s{}\"><h2>{}. {}</h2>\n{}</section>\n",
+            i + 1,
+            i + 1,
+            html::escape(&s.title),
+            s.html
+        );
+    }
+    page += "</body></html>\n";
+    Ok((page, sections))
+}
+
+/// Writes `out` (atomically) from the season folder `dir`.
+pub fn write_report(dir: &Path, out: &Path) -> Result<ReportSummary, ReportError> {
+    let inputs = Inputs::read(dir)?;
+    let (page, sections) = render(&inputs)?;
+    crate::atomic::write_bytes(out, page.as_bytes()).map_err(|source| ReportError::Io {
+        path: out.into(),
+        source,
+    })?;
+    Ok(ReportSummary {
+        path: out.into(),
+        figures: sections.iter().map(|s| s.figures).sum(),
+        sections: sections.into_iter().map(|s| s.title).collect(),
+    })
+}

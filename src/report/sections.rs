@@ -1,0 +1,547 @@
+//! The report's sections, one function each, in page order.
+
+use super::figure::{self, Axes, Bar, Points, Segment};
+use super::html::{csv_link, escape, figure as fig, num, table};
+use super::{Inputs, ReportError, Section};
+use crate::Axle;
+use crate::kpi::KpiRow;
+use serde_json::Value;
+use std::collections::BTreeSet;
+
+/// A row whose wear is measured, not censored: readings present and the
+/// tread not worn through anywhere (there the wear is only a lower bound),
+/// the rows the models are fitted on.
+fn measured(r: &KpiRow) -> bool {
+    r.wear_mean_pct.is_finite() && r.worn_through_readings <= 0.0
+}
+
+fn missing(text: &str) -> String {
+    format!("<p class=\"missing\">{}</p>\n", escape(text))
+}
+
+/// Section 1: what the season holds, and what was left out and why.
+pub(super) fn season(inputs: &Inputs) -> Section {
+    let rows = &inputs.rows;
+    let count = |f: &dyn Fn(&KpiRow) -> &str| rows.iter().map(f).collect::<BTreeSet<_>>().len();
+    let mut html = table(
+        &["", "count"],
+        &[
+            vec!["events".into(), count(&|r| r.event.as_str()).to_string()],
+            vec!["tracks".into(), count(&|r| r.track.as_str()).to_string()],
+            vec!["cars".into(), count(&|r| r.car.as_str()).to_string()],
+            vec![
+                "compounds".into(),
+                count(&|r| r.compound.as_str()).to_string(),
+            ],
+            vec!["runs".into(), count(&|r| r.run.as_str()).to_string()],
+            vec!["tire-runs (KPI rows)".into(), rows.len().to_string()],
+            vec![
+                "tire-runs with wear readings".into(),
+                rows.iter()
+                    .filter(|r| r.wear_mean_pct.is_finite())
+                    .count()
+                    .to_string(),
+            ],
+        ],
+    );
+    match &inputs.extraction {
+        Some(report) => {
+            let skipped: Vec<Vec<String>> = report["skipped"]
+                .as_array()
+                .into_iter()
+                .flatten()
+                .map(|s| {
+                    vec![
+                        s["run"].as_str().unwrap_or("").to_string(),
+                        s["reason"].as_str().unwrap_or("").to_string(),
+                    ]
+                })
+                .collect();
+            html += &format!(
+                "<h3>Skipped runs ({})</h3>\n{}",
+                skipped.len(),
+                if skipped.is_empty() {
+                    "<p>None: every run of the manifest was extracted.</p>".to_string()
+                } else {
+                    table(&["run", "reason"], &skipped)
+                }
+            );
+        }
+        None => html += &missing("kpis.report.json is missing: skipped runs unknown."),
+    }
+    if let Some(gap) = &inputs.gap {
+        let censored: Vec<Vec<String>> = gap["censored"]
+            .as_array()
+            .into_iter()
+            .flatten()
+            .filter_map(|v| v.as_str())
+            .map(|s| vec![s.to_string(), "tread worn through: wear censored".into()])
+            .collect();
+        html += &format!(
+            "<h3>Censored tires ({})</h3>\n{}",
+            censored.len(),
+            if censored.is_empty() {
+                "<p>None.</p>".to_string()
+            } else {
+                table(&["run/wheel", "reason"], &censored)
+            }
+        );
+    }
+    Section {
+        title: "Season".into(),
+        html,
+        figures: 0,
+    }
+}
+
+/// Least squares y = a + b·x: (a, b, R²); None under 3 points or no spread in x.
+pub(crate) fn line_fit(xy: &[(f64, f64)]) -> Option<(f64, f64, f64)> {
+    let n = xy.len() as f64;
+    if xy.len() < 3 {
+        return None;
+    }
+    let mx = xy.iter().map(|p| p.0).sum::<f64>() / n;
+    let my = xy.iter().map(|p| p.1).sum::<f64>() / n;
+    let sxx: f64 = xy.iter().map(|p| (p.0 - mx).powi(2)).sum();
+    let sxy: f64 = xy.iter().map(|p| (p.0 - mx) * (p.1 - my)).sum();
+    let syy: f64 = xy.iter().map(|p| (p.1 - my).powi(2)).sum();
+    if sxx <= 0.0 {
+        return None;
+    }
+    let b = sxy / sxx;
+    let a = my - b * mx;
+    let r2 = if syy > 0.0 {
+        sxy * sxy / (sxx * syy)
+    } else {
+        f64::NAN
+    };
+    Some((a, b, r2))
+}
+
+/// Section 2 (paper 4.3): mean wear against total friction energy, per track and axle.
+pub(super) fn physical(inputs: &Inputs) -> Result<Section, ReportError> {
+    let tracks: Vec<&str> = inputs
+        .rows
+        .iter()
+        .map(|r| r.track.as_str())
+        .collect::<BTreeSet<_>>()
+        .into_iter()
+        .collect();
+    let mut html = String::from(
+        "<p>Each mark is one tire and run: its mean wear (% of the new tread depth) \
+against its total friction energy E = ∫ |F·v_s| dt (MJ), one colour per track, with \
+each track's least-squares line; tires worn through (censored wear) are left out. The paper's physical correlation: on one track, wear \
+grows about linearly with the energy; the tracks' slopes differ with the road and the \
+temperatures.</p>\n",
+    );
+    let (mut figures, mut fits, mut csv) = (0, Vec::new(), Vec::new());
+    for axle in Axle::ALL {
+        let mut points = Vec::new();
+        let mut lines = Vec::new();
+        for (k, track) in tracks.iter().enumerate() {
+            let xy: Vec<(f64, f64)> = inputs
+                .rows
+                .iter()
+                .filter(|r| r.axle == axle && r.track == *track)
+                .filter(|r| measured(r) && r.friction_energy_j.is_finite())
+                .map(|r| (r.friction_energy_j / 1e6, r.wear_mean_pct))
+                .collect();
+            if xy.is_empty() {
+                continue;
+            }
+            for r in inputs
+                .rows
+                .iter()
+                .filter(|r| r.axle == axle && r.track == *track)
+            {
+                csv.push(vec![
+                    r.track.clone(),
+                    axle.to_string(),
+                    r.run.clone(),
+                    r.wheel.to_string(),
+                    num(r.friction_energy_j / 1e6, 4),
+                    num(r.wear_mean_pct, 4),
+                    (!measured(r)).to_string(),
+                ]);
+            }
+            if let Some((a, b, r2)) = line_fit(&xy) {
+                let lo = xy.iter().map(|p| p.0).fold(f64::INFINITY, f64::min);
+                let hi = xy.iter().map(|p| p.0).fold(f64::NEG_INFINITY, f64::max);
+                lines.push(Segment {
+                    color: Some(k),
+                    from: (lo, a + b * lo),
+                    to: (hi, a + b * hi),
+                });
+                fits.push(vec![
+                    track.to_string(),
+                    axle.to_string(),
+                    xy.len().to_string(),
+                    num(b, 3),
+                    num(a, 2),
+                    num(r2, 3),
+                ]);
+            }
+            points.push(Points {
+                label: track.to_string(),
+                color: k,
+                xy,
+                filled: true,
+            });
+        }
+        let title = format!("Wear against friction energy, {axle} axle");
+        let svg = figure::scatter(
+            &Axes {
+                title: &title,
+                x: "total friction energy E (MJ)",
+                y: "mean wear (% of new tread)",
+            },
+            &points,
+            &lines,
+            true,
+        )?;
+        html += &fig(
+            &svg,
+            &format!(
+                "{title}: one mark per tire-run, one colour and line (least squares) per track."
+            ),
+            "",
+        );
+        figures += 1;
+    }
+    let header = ["track", "axle", "n", "slope (%/MJ)", "intercept (%)", "R²"];
+    html += &table(&header, &fits);
+    html += &csv_link(
+        "wear_vs_energy.csv",
+        &[
+            "track",
+            "axle",
+            "run",
+            "wheel",
+            "friction_energy_mj",
+            "wear_mean_pct",
+            "left_out",
+        ],
+        &csv,
+    );
+    Ok(Section {
+        title: "Physical correlations".into(),
+        html,
+        figures,
+    })
+}
+
+/// R² and RMSE of (measured, predicted) pairs.
+pub(crate) fn fit_quality(pairs: &[(f64, f64)]) -> (f64, f64) {
+    let n = pairs.len() as f64;
+    if pairs.is_empty() {
+        return (f64::NAN, f64::NAN);
+    }
+    let mean = pairs.iter().map(|p| p.0).sum::<f64>() / n;
+    let sse: f64 = pairs.iter().map(|p| (p.0 - p.1).powi(2)).sum();
+    let sst: f64 = pairs.iter().map(|p| (p.0 - mean).powi(2)).sum();
+    let r2 = if sst > 0.0 { 1.0 - sse / sst } else { f64::NAN };
+    (r2, (sse / n).sqrt())
+}
+
+/// Section 3 (tables 8, 9, 11): each fitted model's predictions against the
+/// measurements, training and testing events apart.
+pub(super) fn models(inputs: &Inputs) -> Result<Section, ReportError> {
+    let mut html = String::new();
+    let mut figures = 0;
+    if inputs.models.is_empty() {
+        html += &missing("No models/*.json in the folder: run `tirewear fit` to add this section.");
+    }
+    let mut summary = Vec::new();
+    for (path, m) in &inputs.models {
+        let (mut train, mut test, mut csv) = (Vec::new(), Vec::new(), Vec::new());
+        for r in inputs.rows.iter().filter(|r| measured(r)) {
+            let Ok(p) = m.predict_row(r) else { continue };
+            if !p.is_finite() {
+                continue;
+            }
+            let split = if m.training_events.contains(&r.event) {
+                train.push((r.wear_mean_pct, p));
+                "training"
+            } else if m.testing_events.contains(&r.event) {
+                test.push((r.wear_mean_pct, p));
+                "testing"
+            } else {
+                continue;
+            };
+            csv.push(vec![
+                r.run.clone(),
+                r.wheel.to_string(),
+                split.into(),
+                num(r.wear_mean_pct, 4),
+                num(p, 4),
+            ]);
+        }
+        let (r2_train, rmse_train) = fit_quality(&train);
+        let (r2_test, rmse_test) = fit_quality(&test);
+        let all = train.iter().chain(&test);
+        let lo = all
+            .clone()
+            .map(|p| p.0.min(p.1))
+            .fold(f64::INFINITY, f64::min);
+        let hi = all.map(|p| p.0.max(p.1)).fold(f64::NEG_INFINITY, f64::max);
+        let method = m.method();
+        let title = format!("Predicted against measured wear: {method}");
+        let swap = |v: &[(f64, f64)]| v.to_vec();
+        let svg = figure::scatter(
+            &Axes {
+                title: &title,
+                x: "measured mean wear (%)",
+                y: "predicted mean wear (%)",
+            },
+            &[
+                Points {
+                    label: "training".into(),
+                    color: 0,
+                    xy: swap(&train),
+                    filled: true,
+                },
+                Points {
+                    label: "testing".into(),
+                    color: 1,
+                    xy: swap(&test),
+                    filled: false,
+                },
+            ],
+            &[Segment {
+                color: None,
+                from: (lo, lo),
+                to: (hi, hi),
+            }],
+            false,
+        )?;
+        let name = path
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        html += &fig(
+            &svg,
+            &format!(
+                "{title} ({name}): filled marks training events, hollow testing events, grey the 1:1 \
+line. Training R² {} RMSE {} %, testing R² {} RMSE {} %.",
+                num(r2_train, 3),
+                num(rmse_train, 2),
+                num(r2_test, 3),
+                num(rmse_test, 2)
+            ),
+            &csv_link(
+                &format!("predictions_{method}.csv"),
+                &["run", "wheel", "split", "measured_pct", "predicted_pct"],
+                &csv,
+            ),
+        );
+        figures += 1;
+        summary.push(vec![
+            method.to_string(),
+            train.len().to_string(),
+            num(r2_train, 3),
+            num(rmse_train, 2),
+            test.len().to_string(),
+            num(r2_test, 3),
+            num(rmse_test, 2),
+        ]);
+    }
+    if !summary.is_empty() {
+        html += &table(
+            &[
+                "method",
+                "training n",
+                "training R²",
+                "training RMSE (%)",
+                "testing n",
+                "testing R²",
+                "testing RMSE (%)",
+            ],
+            &summary,
+        );
+    }
+    Ok(Section {
+        title: "Wear models".into(),
+        html,
+        figures,
+    })
+}
+
+/// A threshold in at most four decimals, trailing zeros dropped.
+fn short(v: f64) -> String {
+    let s = num(v, 4);
+    if s.contains('.') {
+        s.trim_end_matches('0').trim_end_matches('.').to_string()
+    } else {
+        s
+    }
+}
+
+fn f(v: &Value) -> f64 {
+    v.as_f64().unwrap_or(f64::NAN)
+}
+
+/// Section 4, the sim-to-real gap: where (slices with intervals), which effect
+/// (candidate ranking) and how far it shrinks (RMSE after each step).
+pub(super) fn gap(inputs: &Inputs) -> Result<Section, ReportError> {
+    let Some(g) = &inputs.gap else {
+        return Ok(Section {
+            title: "Sim-to-real gap".into(),
+            html: missing("No gap/gap.json in the folder: run `tirewear gap` to add this section."),
+            figures: 0,
+        });
+    };
+    let mut html = format!(
+        "<p>Baseline: {}. Training events {} (RMSE {} %), testing events {} (RMSE {} %).</p>\n",
+        escape(g["baseline"].as_str().unwrap_or("?")),
+        g["training_events"].as_array().map_or(0, |a| a.len()),
+        num(f(&g["training"]["rmse_pct"]), 2),
+        g["testing_events"].as_array().map_or(0, |a| a.len()),
+        num(f(&g["testing"]["rmse_pct"]), 2),
+    );
+    let mut figures = 0;
+    // Where: the flagged slices' mean residual with its 95 % interval.
+    let slices: Vec<&Value> = g["slices"].as_array().into_iter().flatten().collect();
+    if slices.is_empty() {
+        html += "<p>No slice of the season differs from the rest beyond chance: the \
+model's residuals show no place where it and the measurements disagree.</p>\n";
+    } else {
+        let bars: Vec<Bar> = slices
+            .iter()
+            .map(|s| {
+                let ci = s["ci_pct"].as_array();
+                Bar {
+                    value: f(&s["difference_pct"]),
+                    interval: ci.map(|c| (f(&c[0]), f(&c[1]))),
+                    color: None,
+                }
+            })
+            .collect();
+        let svg = figure::bars(
+            &Axes {
+                title: "Where the model and the track disagree",
+                x: "flagged slice (table)",
+                y: "gap against the rest, measured − predicted (%)",
+            },
+            &bars,
+        )?;
+        let rows: Vec<Vec<String>> = slices
+            .iter()
+            .enumerate()
+            .map(|(i, s)| {
+                vec![
+                    (i + 1).to_string(),
+                    s["name"].as_str().unwrap_or("").to_string(),
+                    s["n"].to_string(),
+                    num(f(&s["mean_residual_pct"]), 2),
+                    num(f(&s["difference_pct"]), 2),
+                    num(f(&s["p_adjusted"]), 4),
+                ]
+            })
+            .collect();
+        html += &fig(
+            &svg,
+            "Flagged slices: how much more (or less) the tires of each slice wear than the \
+model predicts, against the rest of the season (difference of mean residuals, % of the \
+new tread), with its 95 % interval; the slices are numbered as in the table.",
+            &table(
+                &[
+                    "#",
+                    "slice",
+                    "n",
+                    "mean residual (%)",
+                    "difference (%)",
+                    "p adj.",
+                ],
+                &rows,
+            ),
+        );
+        figures += 1;
+    }
+    // Which: the candidates, best first.
+    let candidates: Vec<Vec<String>> = g["candidates"]
+        .as_array()
+        .into_iter()
+        .flatten()
+        .take(10)
+        .map(|c| {
+            vec![
+                c["name"].as_str().unwrap_or("").to_string(),
+                short(f(&c["threshold"])),
+                num(f(&c["cv_gain"]), 3),
+                num(f(&c["p_adjusted"]), 4),
+            ]
+        })
+        .collect();
+    html += "<h3>Candidate effects (ten best by held-out gain)</h3>\n";
+    html += &table(
+        &["candidate", "threshold", "CV gain", "p adj."],
+        &candidates,
+    );
+    // How far: RMSE after each step.
+    let steps: Vec<&Value> = g["steps"].as_array().into_iter().flatten().collect();
+    if !steps.is_empty() {
+        let series =
+            |key: &str| -> Vec<f64> { steps.iter().map(|s| f(&s[key]["rmse_pct"])).collect() };
+        let svg = figure::steps(
+            &Axes {
+                title: "How far the gap shrinks",
+                x: "step (0: baseline; then each added term)",
+                y: "RMSE (% of new tread)",
+            },
+            &[
+                ("training".into(), 0, series("training")),
+                ("testing".into(), 1, series("testing")),
+            ],
+        )?;
+        let rows: Vec<Vec<String>> = steps
+            .iter()
+            .enumerate()
+            .map(|(i, s)| {
+                vec![
+                    i.to_string(),
+                    s["added"].as_str().unwrap_or("").to_string(),
+                    num(f(&s["training"]["rmse_pct"]), 3),
+                    num(f(&s["testing"]["rmse_pct"]), 3),
+                ]
+            })
+            .collect();
+        html += &fig(
+            &svg,
+            "Shrink table: the RMSE of the baseline, then after each term the selection \
+added, on the training and the testing events.",
+            &table(
+                &["step", "added", "training RMSE (%)", "testing RMSE (%)"],
+                &rows,
+            ),
+        );
+        figures += 1;
+    }
+    if g["final_terms"].as_array().is_some_and(|t| t.is_empty()) {
+        html += "<p>No term was added: nothing the candidates describe explains the gap \
+beyond chance.</p>\n";
+    }
+    Ok(Section {
+        title: "Sim-to-real gap".into(),
+        html,
+        figures,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn line_fit_and_fit_quality_by_hand() {
+        // y = 1 + 2x exactly: a 1, b 2, R² 1.
+        let (a, b, r2) = line_fit(&[(0.0, 1.0), (1.0, 3.0), (2.0, 5.0)]).unwrap();
+        assert!((a - 1.0).abs() < 1e-12 && (b - 2.0).abs() < 1e-12 && (r2 - 1.0).abs() < 1e-12);
+        // (0,0) (1,2) (2,1): mean x 1, y 1; sxx 2, sxy 1, syy 2: b 0.5, a 0.5, R² 0.25.
+        let (a, b, r2) = line_fit(&[(0.0, 0.0), (1.0, 2.0), (2.0, 1.0)]).unwrap();
+        assert!((a - 0.5).abs() < 1e-12 && (b - 0.5).abs() < 1e-12 && (r2 - 0.25).abs() < 1e-12);
+        assert!(line_fit(&[(1.0, 1.0), (1.0, 2.0), (1.0, 3.0)]).is_none());
+        // measured (1, 2, 3), predicted (1, 2, 5): SSE 4, SST 2: R² −1, RMSE √(4/3).
+        let (r2, rmse) = fit_quality(&[(1.0, 1.0), (2.0, 2.0), (3.0, 5.0)]);
+        assert!((r2 + 1.0).abs() < 1e-12 && (rmse - (4.0f64 / 3.0).sqrt()).abs() < 1e-12);
+    }
+}

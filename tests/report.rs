@@ -1,0 +1,162 @@
+//! `tirewear report`: the demo season's page, its structure and its numbers.
+
+mod common;
+
+use tirewear::model::fit::{FitSettings, Method, fit_method, split};
+use tirewear::model::saved::save_all;
+
+/// The values of attribute `name` in `html`.
+fn attributes<'a>(html: &'a str, name: &str) -> Vec<&'a str> {
+    let key = format!("{name}=\"");
+    html.match_indices(&key)
+        .map(|(i, _)| {
+            let rest = &html[i + key.len()..];
+            &rest[..rest.find('"').expect("closed attribute")]
+        })
+        .collect()
+}
+
+/// Percent-decodes a `data:` URL's payload.
+fn percent_decode(s: &str) -> String {
+    let b = s.as_bytes();
+    let mut out = Vec::new();
+    let mut i = 0;
+    while i < b.len() {
+        if b[i] == b'%' {
+            out.push(u8::from_str_radix(&s[i + 1..i + 3], 16).unwrap());
+            i += 3;
+        } else {
+            out.push(b[i]);
+            i += 1;
+        }
+    }
+    String::from_utf8(out).unwrap()
+}
+
+#[test]
+fn the_demo_report_has_every_section_its_figures_and_no_external_url() {
+    let dir = tempfile::tempdir().unwrap();
+    let rows = common::demo_kpis(dir.path());
+    // Fit the PCA model (quick) and diagnose the gap, as `tirewear demo` does.
+    let settings = FitSettings::default();
+    let s = split(&rows, None).unwrap();
+    let (pca, _) = fit_method(Method::Pca, &s, &settings).unwrap();
+    save_all(std::slice::from_ref(&pca), &dir.path().join("models")).unwrap();
+    let kpis = dir.path().join("kpis.parquet");
+    let maps = tirewear::kpi::energy_maps::read_tire_maps(&kpis).unwrap();
+    let gap_settings = tirewear::gap::report::GapSettings {
+        wlf: tirewear::ingest::compound::read_wlf(&dir.path().join("compounds")).unwrap(),
+        ..Default::default()
+    };
+    let d = tirewear::gap::report::diagnose(
+        &rows,
+        &maps,
+        &tirewear::gap::report::Baseline::Physics,
+        &gap_settings,
+    )
+    .unwrap();
+    std::fs::create_dir_all(dir.path().join("gap")).unwrap();
+    std::fs::write(
+        dir.path().join("gap/gap.json"),
+        serde_json::to_string(&d).unwrap(),
+    )
+    .unwrap();
+
+    let out = dir.path().join("report.html");
+    let summary = tirewear::report::write_report(dir.path(), &out).unwrap();
+    let html = std::fs::read_to_string(&out).unwrap();
+
+    // Every section, in order.
+    let want = [
+        "Season",
+        "Physical correlations",
+        "Wear models",
+        "Sim-to-real gap",
+    ];
+    assert_eq!(summary.sections, want);
+    for (i, title) in want.iter().enumerate() {
+        assert!(
+            html.contains(&format!("<h2>{}. {title}</h2>", i + 1)),
+            "{title}"
+        );
+    }
+    // Figures: two axles of wear against energy, one model, and the gap's
+    // shrink chart (plus the slices' bars when a slice is flagged).
+    let svgs: Vec<&str> = html.split("<svg").skip(1).collect();
+    assert_eq!(svgs.len(), summary.figures);
+    let flagged = !d.slices.is_empty();
+    assert_eq!(summary.figures, 4 + flagged as usize);
+    for svg in &svgs {
+        let svg = &svg[..svg.find("</svg>").expect("closed svg")];
+        // Axis titles carry their unit in parentheses: both axes.
+        let labelled = svg
+            .split("<text")
+            .skip(1)
+            .filter(|t| t.contains('(') && t.contains(')'))
+            .count();
+        assert!(labelled >= 2, "a figure without both axis titles");
+        assert!(svg.contains("<circle") || svg.contains("<rect"));
+    }
+    // Nothing fetched: no script, stylesheet link or source; every link
+    // inside the page or a data: URL.
+    for bad in ["<script", "<link", "<img", "<iframe", "@import", "url("] {
+        assert!(!html.contains(bad), "{bad}");
+    }
+    assert!(attributes(&html, "src").is_empty());
+    for href in attributes(&html, "href") {
+        assert!(href.starts_with('#') || href.starts_with("data:"), "{href}");
+    }
+
+    // The numbers: the model's R² and RMSE in the caption are the fit's own
+    // indicators, computed by the fitting code (another route).
+    for (label, split_name) in [("Training", "Training"), ("Testing", "testing")] {
+        let m = &pca
+            .indicators
+            .iter()
+            .find(|i| i.label == label)
+            .unwrap()
+            .metrics;
+        let text = format!("{split_name} R² {:.3} RMSE {:.2} %", m.r2, m.rmse);
+        assert!(html.contains(&text), "{text}");
+    }
+    // The per-track line of one track and axle against the closed form of
+    // least squares (slope = Σ(x−x̄)(y−ȳ) / Σ(x−x̄)²) on the rows.
+    let track = rows[0].track.clone();
+    let xy: Vec<(f64, f64)> = rows
+        .iter()
+        .filter(|r| r.track == track && r.axle == tirewear::Axle::Front)
+        .filter(|r| r.wear_mean_pct.is_finite() && r.worn_through_readings <= 0.0)
+        .map(|r| (r.friction_energy_j / 1e6, r.wear_mean_pct))
+        .collect();
+    let n = xy.len() as f64;
+    let (mx, my) = (
+        xy.iter().map(|p| p.0).sum::<f64>() / n,
+        xy.iter().map(|p| p.1).sum::<f64>() / n,
+    );
+    let slope = xy.iter().map(|p| (p.0 - mx) * (p.1 - my)).sum::<f64>()
+        / xy.iter().map(|p| (p.0 - mx).powi(2)).sum::<f64>();
+    let cell = format!(
+        "<td class=\"t\">{track}</td><td class=\"t\">front</td><td class=\"n\">{}</td><td class=\"n\">{slope:.3}</td>",
+        xy.len()
+    );
+    assert!(html.contains(&cell), "{cell}");
+    // The CSV behind the figure holds every tire-run.
+    let csv = attributes(&html, "href")
+        .into_iter()
+        .find(|h| h.starts_with("data:") && percent_decode(h).contains("friction_energy_mj"))
+        .map(percent_decode)
+        .unwrap();
+    assert_eq!(csv.lines().count(), rows.len() + 1);
+}
+
+#[test]
+fn a_folder_without_kpis_is_an_error_naming_the_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let e = tirewear::report::write_report(dir.path(), &dir.path().join("r.html")).unwrap_err();
+    let msg = e.to_string();
+    assert!(
+        msg.contains("kpis.parquet") && msg.contains("tirewear extract"),
+        "{msg}"
+    );
+    assert!(!dir.path().join("r.html").exists());
+}
