@@ -696,6 +696,66 @@ pub(crate) fn road_curves_batch(curves: &[(Profile, RoadCurves)]) -> RecordBatch
     .expect("columns match the schema")
 }
 
+/// One point of a road curve read back from `NAME.road.parquet`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RoadCurvePoint {
+    pub track: String,
+    pub location: String,
+    /// `psd` (x: wavenumber q in rad/mm, y: C(q) in mm⁴) or `hdc` (x: lag in
+    /// mm, y: height-difference correlation in mm²).
+    pub curve: String,
+    pub x: f64,
+    pub y: f64,
+}
+
+/// Reads the road-curve side table (`NAME.road.parquet`, as
+/// [`road_curves_batch`] writes it); a missing column or a null is an
+/// error naming the file, column and row.
+pub fn read_road_curves(path: &std::path::Path) -> Result<Vec<RoadCurvePoint>, IngestError> {
+    let perr = |e: parquet::errors::ParquetError| IngestError::Parquet {
+        path: path.to_path_buf(),
+        source: e,
+    };
+    let file = std::fs::File::open(path).map_err(|e| IngestError::io(path, e))?;
+    let reader = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file)
+        .map_err(perr)?
+        .build()
+        .map_err(perr)?;
+    let mut out = Vec::new();
+    for batch in reader {
+        let batch = batch.map_err(|e| perr(e.into()))?;
+        let col = |name: &str, ty: &DataType| {
+            super::table::checked_column(path, &batch, name, ty, out.len())
+        };
+        let text = |name: &str| -> Result<StringArray, IngestError> {
+            Ok(col(name, &DataType::Utf8)?
+                .as_any()
+                .downcast_ref::<StringArray>()
+                .expect("cast to Utf8")
+                .clone())
+        };
+        let number = |name: &str| -> Result<Float64Array, IngestError> {
+            Ok(col(name, &DataType::Float64)?
+                .as_any()
+                .downcast_ref::<Float64Array>()
+                .expect("cast to Float64")
+                .clone())
+        };
+        let (t, l, c) = (text("track")?, text("location")?, text("curve")?);
+        let (x, y) = (number("x")?, number("y")?);
+        for k in 0..batch.num_rows() {
+            out.push(RoadCurvePoint {
+                track: t.value(k).to_string(),
+                location: l.value(k).to_string(),
+                curve: c.value(k).to_string(),
+                x: x.value(k),
+                y: y.value(k),
+            });
+        }
+    }
+    Ok(out)
+}
+
 /// Columns of the energy-map side table.
 #[derive(Default)]
 struct MapRows {

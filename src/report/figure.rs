@@ -253,3 +253,118 @@ pub(crate) fn steps(
     }
     Ok(svg)
 }
+
+/// Curves on log-log axes (positive values only), one colour each (the
+/// points' `filled` is not used).
+pub(crate) fn log_curves(axes: &Axes, series: &[Points]) -> Result<String, ReportError> {
+    let positive = |v: &&(f64, f64)| v.0 > 0.0 && v.1 > 0.0 && v.0.is_finite() && v.1.is_finite();
+    let all = || series.iter().flat_map(|s| s.xy.iter().filter(positive));
+    let range = |vals: Vec<f64>| -> (f64, f64) {
+        let lo = vals.iter().copied().fold(f64::INFINITY, f64::min);
+        let hi = vals.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        if lo.is_finite() && hi > lo {
+            (lo / 1.2, hi * 1.2)
+        } else {
+            (1.0, 10.0)
+        }
+    };
+    let (x0, x1) = range(all().map(|p| p.0).collect());
+    let (y0, y1) = range(all().map(|p| p.1).collect());
+    let mut svg = String::new();
+    {
+        let root = SVGBackend::with_string(&mut svg, SIZE).into_drawing_area();
+        root.fill(&WHITE).map_err(draw_error)?;
+        let mut chart = ChartBuilder::on(&root)
+            .caption(axes.title, ("sans-serif", 18))
+            .margin(12)
+            .x_label_area_size(44)
+            .y_label_area_size(70)
+            .build_cartesian_2d((x0..x1).log_scale(), (y0..y1).log_scale())
+            .map_err(draw_error)?;
+        chart
+            .configure_mesh()
+            .x_desc(axes.x)
+            .y_desc(axes.y)
+            .label_style(("sans-serif", 13))
+            .axis_desc_style(("sans-serif", 14))
+            .x_label_formatter(&|v| format!("{v:.0e}"))
+            .y_label_formatter(&|v| format!("{v:.0e}"))
+            .light_line_style(RGBColor(235, 235, 235))
+            .draw()
+            .map_err(draw_error)?;
+        for s in series {
+            let c = color(Some(s.color));
+            let pts: Vec<(f64, f64)> = s.xy.iter().filter(positive).copied().collect();
+            chart
+                .draw_series(LineSeries::new(pts, c.stroke_width(2)))
+                .map_err(draw_error)?
+                .label(s.label.as_str())
+                .legend(move |(x, y)| PathElement::new([(x, y), (x + 16, y)], c.stroke_width(2)));
+        }
+        chart
+            .configure_series_labels()
+            .background_style(WHITE.mix(0.85))
+            .border_style(BLACK)
+            .position(SeriesLabelPosition::LowerLeft)
+            .draw()
+            .map_err(draw_error)?;
+        root.present().map_err(draw_error)?;
+    }
+    Ok(svg)
+}
+
+/// A grid of cells coloured by value (white at 0 to dark blue at the
+/// largest): `cells[i][j]` spans x `x_edges[i]..x_edges[i+1]` and y
+/// `y_edges[j]..y_edges[j+1]`. The caption states the scale.
+pub(crate) fn heatmap(
+    axes: &Axes,
+    x_edges: &[f64],
+    y_edges: &[f64],
+    cells: &[Vec<f64>],
+) -> Result<String, ReportError> {
+    let max = cells.iter().flatten().copied().fold(0.0f64, f64::max);
+    let (x0, x1) = (x_edges[0], x_edges[x_edges.len() - 1]);
+    let (y0, y1) = (y_edges[0], y_edges[y_edges.len() - 1]);
+    let mut svg = String::new();
+    {
+        let root = SVGBackend::with_string(&mut svg, SIZE).into_drawing_area();
+        root.fill(&WHITE).map_err(draw_error)?;
+        let mut chart = ChartBuilder::on(&root)
+            .caption(axes.title, ("sans-serif", 18))
+            .margin(12)
+            .x_label_area_size(44)
+            .y_label_area_size(60)
+            .build_cartesian_2d(x0..x1, y0..y1)
+            .map_err(draw_error)?;
+        chart
+            .configure_mesh()
+            .x_desc(axes.x)
+            .y_desc(axes.y)
+            .label_style(("sans-serif", 13))
+            .axis_desc_style(("sans-serif", 14))
+            .disable_mesh()
+            .draw()
+            .map_err(draw_error)?;
+        let shade = |v: f64| {
+            // sqrt: the maps' energy is concentrated; the tails stay visible.
+            let t = if max > 0.0 { (v / max).sqrt() } else { 0.0 };
+            let mix = |a: f64, b: f64| (a + (b - a) * t).round() as u8;
+            RGBColor(mix(255.0, 20.0), mix(255.0, 50.0), mix(255.0, 120.0))
+        };
+        chart
+            .draw_series(cells.iter().enumerate().flat_map(|(i, col)| {
+                col.iter()
+                    .enumerate()
+                    .filter(|(_, v)| **v > 0.0)
+                    .map(move |(j, &v)| {
+                        Rectangle::new(
+                            [(x_edges[i], y_edges[j]), (x_edges[i + 1], y_edges[j + 1])],
+                            shade(v).filled(),
+                        )
+                    })
+            }))
+            .map_err(draw_error)?;
+        root.present().map_err(draw_error)?;
+    }
+    Ok(svg)
+}

@@ -30,6 +30,10 @@ pub(crate) struct Inputs {
     pub extraction: Option<serde_json::Value>,
     pub models: Vec<(PathBuf, crate::model::saved::SavedModel)>,
     pub gap: Option<serde_json::Value>,
+    /// `kpis.road.parquet`: PSD and HDC curves per track and location.
+    pub road: Vec<crate::kpi::extract::RoadCurvePoint>,
+    /// `kpis.energy_maps.parquet`: each tire-run's friction-energy maps.
+    pub maps: std::collections::BTreeMap<crate::kpi::TireRun, crate::kpi::energy_maps::EnergyMaps>,
 }
 
 fn read_json(path: &Path) -> Result<Option<serde_json::Value>, ReportError> {
@@ -74,7 +78,30 @@ impl Inputs {
                 models.push((path, m));
             }
         }
+        let side = |suffix: &str| crate::kpi::table::side_table_path(&kpis, suffix);
+        let input = |path: PathBuf| {
+            move |e: crate::ingest::IngestError| ReportError::Input {
+                path,
+                message: e.to_string(),
+            }
+        };
+        let road_path = side("road.parquet");
+        let road = if road_path.exists() {
+            crate::kpi::extract::read_road_curves(&road_path).map_err(input(road_path.clone()))?
+        } else {
+            Vec::new()
+        };
+        let maps_path = side("energy_maps.parquet");
+        let maps = if maps_path.exists() {
+            crate::kpi::table::check_same_extraction(&kpis, &maps_path)
+                .map_err(input(maps_path.clone()))?;
+            crate::kpi::energy_maps::read_energy_maps(&maps_path).map_err(input(maps_path))?
+        } else {
+            Default::default()
+        };
         Ok(Inputs {
+            road,
+            maps,
             dir: dir.into(),
             rows,
             extraction: read_json(&dir.join("kpis.report.json"))?,
@@ -104,6 +131,8 @@ p.missing{color:#a33}@media print{a.csv{display:none}}";
 pub(crate) fn render(inputs: &Inputs) -> Result<(String, Vec<Section>), ReportError> {
     let sections = vec![
         sections::season(inputs),
+        sections::road(inputs)?,
+        sections::telemetry(inputs)?,
         sections::physical(inputs)?,
         sections::models(inputs)?,
         sections::gap(inputs)?,

@@ -94,6 +94,241 @@ pub(super) fn season(inputs: &Inputs) -> Section {
     }
 }
 
+/// The curve of one track: the mean over its locations where they share the
+/// x grid, else its first location's.
+fn track_curve(inputs: &Inputs, track: &str, curve: &str) -> Vec<(f64, f64)> {
+    let mut by_location: std::collections::BTreeMap<&str, Vec<(f64, f64)>> = Default::default();
+    for p in inputs
+        .road
+        .iter()
+        .filter(|p| p.track == track && p.curve == curve)
+    {
+        by_location
+            .entry(p.location.as_str())
+            .or_default()
+            .push((p.x, p.y));
+    }
+    let mut curves = by_location.into_values();
+    let Some(first) = curves.next() else {
+        return Vec::new();
+    };
+    let rest: Vec<Vec<(f64, f64)>> = curves.collect();
+    let same_grid = rest
+        .iter()
+        .all(|c| c.len() == first.len() && c.iter().zip(&first).all(|(a, b)| a.0 == b.0));
+    if !same_grid {
+        return first;
+    }
+    let k = 1.0 + rest.len() as f64;
+    first
+        .iter()
+        .enumerate()
+        .map(|(i, &(x, y))| (x, (y + rest.iter().map(|c| c[i].1).sum::<f64>()) / k))
+        .collect()
+}
+
+/// Section 2 (table 3): the tracks' road texture, PSD and height-difference
+/// correlation on log-log axes, and their roughness indices.
+pub(super) fn road(inputs: &Inputs) -> Result<Section, ReportError> {
+    let tracks = track_names(inputs);
+    let mut html = String::new();
+    let mut figures = 0;
+    if inputs.road.is_empty() {
+        html +=
+            &missing("No kpis.road.parquet beside the KPI table: extract again to add the curves.");
+    } else {
+        for (curve, title, x, y, what) in [
+            (
+                "psd",
+                "Road texture: power spectral density",
+                "wavenumber q (rad/mm)",
+                "C(q) (mm⁴)",
+                "the 1-D power spectral density of the road profile (Welch), mean over the \
+track's measured locations; the slope of its self-affine part is −(1 + 2H), H the Hurst \
+exponent in the legend",
+            ),
+            (
+                "hdc",
+                "Road texture: height-difference correlation",
+                "lag (mm)",
+                "C_HDC (mm²)",
+                "the height-difference correlation ⟨(z(x + λ) − z(x))²⟩ against the lag λ, \
+mean over the track's locations; its slope on log-log axes is 2H",
+            ),
+        ] {
+            let series: Vec<Points> = tracks
+                .iter()
+                .enumerate()
+                .map(|(k, t)| {
+                    let h = inputs
+                        .rows
+                        .iter()
+                        .find(|r| r.track == *t)
+                        .map_or(
+                            f64::NAN,
+                            |r| if curve == "psd" { r.hurst } else { r.hurst_hdc },
+                        );
+                    Points {
+                        label: format!("{t} (H {})", num(h, 2)),
+                        color: k,
+                        xy: track_curve(inputs, t, curve),
+                        filled: false,
+                    }
+                })
+                .filter(|s| !s.xy.is_empty())
+                .collect();
+            let svg = figure::log_curves(&Axes { title, x, y }, &series)?;
+            let csv: Vec<Vec<String>> = inputs
+                .road
+                .iter()
+                .filter(|p| p.curve == curve)
+                .map(|p| {
+                    vec![
+                        p.track.clone(),
+                        p.location.clone(),
+                        format!("{:e}", p.x),
+                        format!("{:e}", p.y),
+                    ]
+                })
+                .collect();
+            html += &fig(
+                &svg,
+                &format!("{title}: {what}. One colour per track."),
+                &csv_link(
+                    &format!("road_{curve}.csv"),
+                    &["track", "location", x, y],
+                    &csv,
+                ),
+            );
+            figures += 1;
+        }
+    }
+    let rows: Vec<Vec<String>> = tracks
+        .iter()
+        .filter_map(|t| inputs.rows.iter().find(|r| r.track == *t))
+        .map(|r| {
+            vec![
+                r.track.clone(),
+                num(r.hurst, 3),
+                num(r.hurst_hdc, 3),
+                num(r.ra_micro_mm * 1e3, 1),
+                num(r.ra_macro_mm, 3),
+                num(r.rq_mm, 3),
+                num(r.skewness, 2),
+                num(r.kurtosis, 2),
+                num(r.macro_wavelength_mm, 2),
+            ]
+        })
+        .collect();
+    html += "<h3>Roughness indices per track (table 3)</h3>\n";
+    html += &table(
+        &[
+            "track",
+            "Hurst H (PSD)",
+            "Hurst H (HDC)",
+            "Ra micro (µm)",
+            "Ra macro (mm)",
+            "Rq (mm)",
+            "skewness",
+            "kurtosis",
+            "macro wavelength (mm)",
+        ],
+        &rows,
+    );
+    Ok(Section {
+        title: "Road".into(),
+        html,
+        figures,
+    })
+}
+
+/// Section 3 (table 4): where on the tread's temperatures the friction
+/// energy was dissipated, per axle.
+pub(super) fn telemetry(inputs: &Inputs) -> Result<Section, ReportError> {
+    use crate::kpi::energy_maps::{T_INNER_BINS, T_SURFACE_BINS};
+    let mut html = String::new();
+    let mut figures = 0;
+    if inputs.maps.is_empty() {
+        html += &missing(
+            "No kpis.energy_maps.parquet beside the KPI table: extract again to add the maps.",
+        );
+    }
+    let edges = |b: crate::kpi::energy_maps::Bins| -> Vec<f64> {
+        (0..=b.n).map(|i| b.lower_edge(i)).collect()
+    };
+    let mut csv = Vec::new();
+    for axle in Axle::ALL.into_iter().filter(|_| !inputs.maps.is_empty()) {
+        let mut cells = vec![vec![0.0; T_INNER_BINS.n]; T_SURFACE_BINS.n];
+        let mut tires = 0;
+        for ((_, wheel), m) in &inputs.maps {
+            if wheel.axle() != axle {
+                continue;
+            }
+            tires += 1;
+            for (i, col) in cells.iter_mut().enumerate() {
+                for (j, c) in col.iter_mut().enumerate() {
+                    *c += m.surface_inner[i * T_INNER_BINS.n + j] / 1e6;
+                }
+            }
+        }
+        let total: f64 = cells.iter().flatten().sum();
+        let max = cells.iter().flatten().copied().fold(0.0f64, f64::max);
+        for (i, col) in cells.iter().enumerate() {
+            for (j, &e) in col.iter().enumerate().filter(|(_, e)| **e > 0.0) {
+                csv.push(vec![
+                    axle.to_string(),
+                    num(T_SURFACE_BINS.lower_edge(i), 1),
+                    num(T_INNER_BINS.lower_edge(j), 1),
+                    num(e, 4),
+                ]);
+            }
+        }
+        let title = format!("Friction energy by tread temperature, {axle} axle");
+        let svg = figure::heatmap(
+            &Axes {
+                title: &title,
+                x: "surface temperature (°C)",
+                y: "inner-liner temperature (°C)",
+            },
+            &edges(T_SURFACE_BINS),
+            &edges(T_INNER_BINS),
+            &cells,
+        )?;
+        html += &fig(
+            &svg,
+            &format!(
+                "{title}: the friction energy of the season's {tires} {axle} tire-runs ({} MJ in all) by the surface and inner-liner temperature at which it was dissipated, 5 K bins (the first and last bins also hold what lies beyond them); white 0, darkest {} MJ, shade ∝ √energy.",
+                num(total, 1),
+                num(max, 2)
+            ),
+            "",
+        );
+        figures += 1;
+    }
+    if !csv.is_empty() {
+        html += &csv_link(
+            "energy_maps_by_axle.csv",
+            &["axle", "t_surface_lo_c", "t_inner_lo_c", "energy_mj"],
+            &csv,
+        );
+    }
+    Ok(Section {
+        title: "Telemetry".into(),
+        html,
+        figures,
+    })
+}
+
+fn track_names(inputs: &Inputs) -> Vec<String> {
+    inputs
+        .rows
+        .iter()
+        .map(|r| r.track.clone())
+        .collect::<BTreeSet<_>>()
+        .into_iter()
+        .collect()
+}
+
 /// Least squares y = a + b·x: (a, b, R²); None under 3 points or no spread in x.
 pub(crate) fn line_fit(xy: &[(f64, f64)]) -> Option<(f64, f64, f64)> {
     let n = xy.len() as f64;
