@@ -16,7 +16,7 @@ log="$(mktemp)"
 # The DOM after load: the page parsed and every section is there.
 timeout 120 chromium "${flags[@]}" --dump-dom "file://$report" > "$shot.dom.html" 2> "$log" || {
   cat "$log"; echo "chromium could not load $report"; exit 1; }
-for s in s1 s2 s3 s4 s5 s6; do
+for s in s1 s2 s3 s4 s5 s6 s7; do
   grep -q "<section id=\"$s\"" "$shot.dom.html" || { echo "section $s missing in the loaded page"; exit 1; }
 done
 timeout 120 chromium "${flags[@]}" --window-size=1280,4000 --screenshot="$shot" "file://$report" >/dev/null 2>> "$log"

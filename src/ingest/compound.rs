@@ -242,21 +242,24 @@ fn interp(xs: &[f64], ys: &[f64], x: f64, map: impl Fn(f64) -> f64) -> f64 {
     map(ys[i]) * (1.0 - w) + map(ys[i + 1]) * w
 }
 
-/// WLF constants of every `*.toml` compound file in `dir`, by compound id
-/// (the physics baseline's temperature factor per compound).
-pub fn read_wlf(dir: &Path) -> Result<std::collections::BTreeMap<String, Wlf>> {
+/// Every `*.toml` compound file in `dir`, in file-name order.
+pub fn read_compounds(dir: &Path) -> Result<Vec<Compound>> {
     let mut files: Vec<std::path::PathBuf> = std::fs::read_dir(dir)
         .map_err(|e| IngestError::io(dir, e))?
         .filter_map(|e| e.ok().map(|e| e.path()))
         .filter(|p| p.extension().is_some_and(|x| x == "toml"))
         .collect();
     files.sort();
-    let mut out = std::collections::BTreeMap::new();
-    for f in files {
-        let c = Compound::load(&f)?;
-        out.insert(c.id, c.wlf);
-    }
-    Ok(out)
+    files.iter().map(|f| Compound::load(f)).collect()
+}
+
+/// WLF constants of every `*.toml` compound file in `dir`, by compound id
+/// (the physics baseline's temperature factor per compound).
+pub fn read_wlf(dir: &Path) -> Result<std::collections::BTreeMap<String, Wlf>> {
+    Ok(read_compounds(dir)?
+        .into_iter()
+        .map(|c| (c.id, c.wlf))
+        .collect())
 }
 
 #[cfg(test)]

@@ -368,3 +368,99 @@ pub(crate) fn heatmap(
     }
     Ok(svg)
 }
+
+/// Curves on a linear x and a logarithmic y axis (`log_y`) or linear y, one
+/// colour each, with marks over them (e.g. the runs' operating points on a
+/// master curve). Non-positive values are left out on a log axis.
+pub(crate) fn curves_with_marks(
+    axes: &Axes,
+    curves: &[Points],
+    marks: &[Points],
+    log_y: bool,
+) -> Result<String, ReportError> {
+    let ok = |v: &&(f64, f64)| v.0.is_finite() && v.1.is_finite() && (!log_y || v.1 > 0.0);
+    let all = || {
+        curves
+            .iter()
+            .chain(marks)
+            .flat_map(|s| s.xy.iter().filter(ok))
+    };
+    let (x0, x1) = padded(all().map(|p| p.0), false);
+    let mut svg = String::new();
+    {
+        let root = SVGBackend::with_string(&mut svg, SIZE).into_drawing_area();
+        root.fill(&WHITE).map_err(draw_error)?;
+        let mut builder = ChartBuilder::on(&root);
+        builder
+            .caption(axes.title, ("sans-serif", 18))
+            .margin(12)
+            .x_label_area_size(44)
+            .y_label_area_size(70);
+        macro_rules! draw {
+            ($chart:expr) => {{
+                let mut chart = $chart;
+                chart
+                    .configure_mesh()
+                    .x_desc(axes.x)
+                    .y_desc(axes.y)
+                    .label_style(("sans-serif", 13))
+                    .axis_desc_style(("sans-serif", 14))
+                    .light_line_style(RGBColor(235, 235, 235))
+                    .draw()
+                    .map_err(draw_error)?;
+                for s in curves {
+                    let c = color(Some(s.color));
+                    let pts: Vec<(f64, f64)> = s.xy.iter().filter(ok).copied().collect();
+                    chart
+                        .draw_series(LineSeries::new(pts, c.stroke_width(2)))
+                        .map_err(draw_error)?
+                        .label(s.label.as_str())
+                        .legend(move |(x, y)| {
+                            PathElement::new([(x, y), (x + 16, y)], c.stroke_width(2))
+                        });
+                }
+                for s in marks {
+                    let c = color(Some(s.color));
+                    chart
+                        .draw_series(
+                            s.xy.iter()
+                                .filter(ok)
+                                .map(|&q| Circle::new(q, 3, c.stroke_width(1))),
+                        )
+                        .map_err(draw_error)?;
+                }
+                chart
+                    .configure_series_labels()
+                    .background_style(WHITE.mix(0.85))
+                    .border_style(BLACK)
+                    .position(SeriesLabelPosition::UpperRight)
+                    .draw()
+                    .map_err(draw_error)?;
+            }};
+        }
+        if log_y {
+            let ys: Vec<f64> = all().map(|p| p.1).collect();
+            let lo = ys.iter().copied().fold(f64::INFINITY, f64::min);
+            let hi = ys.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+            let (y0, y1) = if lo.is_finite() && hi > lo {
+                (lo / 1.3, hi * 1.3)
+            } else {
+                (1.0, 10.0)
+            };
+            draw!(
+                builder
+                    .build_cartesian_2d(x0..x1, (y0..y1).log_scale())
+                    .map_err(draw_error)?
+            );
+        } else {
+            let (y0, y1) = padded(all().map(|p| p.1), false);
+            draw!(
+                builder
+                    .build_cartesian_2d(x0..x1, y0..y1)
+                    .map_err(draw_error)?
+            );
+        }
+        root.present().map_err(draw_error)?;
+    }
+    Ok(svg)
+}

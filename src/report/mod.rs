@@ -34,6 +34,8 @@ pub(crate) struct Inputs {
     pub road: Vec<crate::kpi::extract::RoadCurvePoint>,
     /// `kpis.energy_maps.parquet`: each tire-run's friction-energy maps.
     pub maps: std::collections::BTreeMap<crate::kpi::TireRun, crate::kpi::energy_maps::EnergyMaps>,
+    /// `compounds/*.toml`: the master curves.
+    pub compounds: Vec<crate::ingest::compound::Compound>,
 }
 
 fn read_json(path: &Path) -> Result<Option<serde_json::Value>, ReportError> {
@@ -99,7 +101,14 @@ impl Inputs {
         } else {
             Default::default()
         };
+        let compounds_dir = dir.join("compounds");
+        let compounds = if compounds_dir.is_dir() {
+            crate::ingest::compound::read_compounds(&compounds_dir).map_err(input(compounds_dir))?
+        } else {
+            Vec::new()
+        };
         Ok(Inputs {
+            compounds,
             road,
             maps,
             dir: dir.into(),
@@ -132,6 +141,7 @@ pub(crate) fn render(inputs: &Inputs) -> Result<(String, Vec<Section>), ReportEr
     let sections = vec![
         sections::season(inputs),
         sections::road(inputs)?,
+        sections::viscoelastic(inputs)?,
         sections::telemetry(inputs)?,
         sections::physical(inputs)?,
         sections::models(inputs)?,

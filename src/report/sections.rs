@@ -19,7 +19,7 @@ fn missing(text: &str) -> String {
     format!("<p class=\"missing\">{}</p>\n", escape(text))
 }
 
-/// Section 1: what the season holds, and what was left out and why.
+/// The season section: what the season holds, and what was left out and why.
 pub(super) fn season(inputs: &Inputs) -> Section {
     let rows = &inputs.rows;
     let count = |f: &dyn Fn(&KpiRow) -> &str| rows.iter().map(f).collect::<BTreeSet<_>>().len();
@@ -127,7 +127,7 @@ fn track_curve(inputs: &Inputs, track: &str, curve: &str) -> Vec<(f64, f64)> {
         .collect()
 }
 
-/// Section 2 (table 3): the tracks' road texture, PSD and height-difference
+/// The road section (table 3): the tracks' road texture, PSD and height-difference
 /// correlation on log-log axes, and their roughness indices.
 pub(super) fn road(inputs: &Inputs) -> Result<Section, ReportError> {
     let tracks = track_names(inputs);
@@ -242,7 +242,143 @@ mean over the track's locations; its slope on log-log axes is 2H",
     })
 }
 
-/// Section 3 (table 4): where on the tread's temperatures the friction
+/// The viscoelastic section (table 5): each compound's master curves with
+/// the tire-runs' operating points at their shifted temperature T*.
+pub(super) fn viscoelastic(inputs: &Inputs) -> Result<Section, ReportError> {
+    let mut html = String::new();
+    let mut figures = 0;
+    if inputs.compounds.is_empty() {
+        html += &missing("No compounds/*.toml in the folder: the master curves are not shown.");
+    }
+    let compound_rows = |id: String| inputs.rows.iter().filter(move |r| r.compound == id);
+    for (key, title, y, log_y) in [
+        (
+            "e",
+            "Storage modulus master curves",
+            "storage modulus E′ (MPa)",
+            true,
+        ),
+        (
+            "tan",
+            "Loss factor master curves",
+            "loss factor tan δ (1)",
+            false,
+        ),
+    ] {
+        if inputs.compounds.is_empty() {
+            break;
+        }
+        let pick = |r: &KpiRow| {
+            if key == "e" {
+                r.storage_modulus_mpa
+            } else {
+                r.loss_factor
+            }
+        };
+        let curves: Vec<Points> = inputs
+            .compounds
+            .iter()
+            .enumerate()
+            .map(|(k, c)| {
+                let m = &c.master_curve;
+                let ys = if key == "e" {
+                    &m.storage_modulus_mpa
+                } else {
+                    &m.loss_factor
+                };
+                Points {
+                    label: c.id.clone(),
+                    color: k,
+                    xy: m
+                        .temperature_c
+                        .iter()
+                        .copied()
+                        .zip(ys.iter().copied())
+                        .collect(),
+                    filled: false,
+                }
+            })
+            .collect();
+        let marks: Vec<Points> = inputs
+            .compounds
+            .iter()
+            .enumerate()
+            .map(|(k, c)| Points {
+                label: c.id.clone(),
+                color: k,
+                xy: compound_rows(c.id.clone())
+                    .map(|r| (r.shifted_temperature_c, pick(r)))
+                    .collect(),
+                filled: false,
+            })
+            .collect();
+        let svg = figure::curves_with_marks(
+            &Axes {
+                title,
+                x: "temperature at the reference frequency (°C)",
+                y,
+            },
+            &curves,
+            &marks,
+            log_y,
+        )?;
+        html += &fig(
+            &svg,
+            &format!(
+                "{title}: each compound's master curve at its reference frequency (line), and \
+each tire-run's operating point (circle): its shifted temperature T* — the mean surface \
+temperature moved by WLF to the reference frequency from the road's solicitation \
+frequency f = v_s / λ_macro — and the curve's value there."
+            ),
+            "",
+        );
+        figures += 1;
+    }
+    let rows: Vec<Vec<String>> = inputs
+        .compounds
+        .iter()
+        .map(|c| {
+            let t: Vec<f64> = compound_rows(c.id.clone())
+                .map(|r| r.shifted_temperature_c)
+                .filter(|t| t.is_finite())
+                .collect();
+            let lo = t.iter().copied().fold(f64::INFINITY, f64::min);
+            let hi = t.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+            vec![
+                c.id.clone(),
+                num(c.reference_frequency_hz, 1),
+                num(c.wlf.c1, 2),
+                num(c.wlf.c2_k, 1),
+                num(c.wlf.t_ref_c, 1),
+                t.len().to_string(),
+                num(lo, 1),
+                num(hi, 1),
+            ]
+        })
+        .collect();
+    if !rows.is_empty() {
+        html += &table(
+            &[
+                "compound",
+                "reference frequency (Hz)",
+                "WLF C1",
+                "WLF C2 (K)",
+                "T_ref (°C)",
+                "tire-runs",
+                "T* min (°C)",
+                "T* max (°C)",
+            ],
+            &rows,
+        );
+    }
+    Ok(Section {
+        title: "Viscoelastic".into(),
+        html,
+        figures,
+    })
+}
+
+/// The telemetry section (table 4): where on the tread's temperatures the friction
 /// energy was dissipated, per axle.
 pub(super) fn telemetry(inputs: &Inputs) -> Result<Section, ReportError> {
     use crate::kpi::energy_maps::{T_INNER_BINS, T_SURFACE_BINS};
@@ -353,7 +489,7 @@ pub(crate) fn line_fit(xy: &[(f64, f64)]) -> Option<(f64, f64, f64)> {
     Some((a, b, r2))
 }
 
-/// Section 2 (paper 4.3): mean wear against total friction energy, per track and axle.
+/// The physical-correlations section (paper 4.3): mean wear against total friction energy, per track and axle.
 pub(super) fn physical(inputs: &Inputs) -> Result<Section, ReportError> {
     let tracks: Vec<&str> = inputs
         .rows
@@ -478,7 +614,7 @@ pub(crate) fn fit_quality(pairs: &[(f64, f64)]) -> (f64, f64) {
     (r2, (sse / n).sqrt())
 }
 
-/// Section 3 (tables 8, 9, 11): each fitted model's predictions against the
+/// The models section (tables 8, 9, 11): each fitted model's predictions against the
 /// measurements, training and testing events apart.
 pub(super) fn models(inputs: &Inputs) -> Result<Section, ReportError> {
     let mut html = String::new();
@@ -615,7 +751,7 @@ fn f(v: &Value) -> f64 {
     v.as_f64().unwrap_or(f64::NAN)
 }
 
-/// Section 4, the sim-to-real gap: where (slices with intervals), which effect
+/// The gap section: where (slices with intervals), which effect
 /// (candidate ranking) and how far it shrinks (RMSE after each step).
 pub(super) fn gap(inputs: &Inputs) -> Result<Section, ReportError> {
     let Some(g) = &inputs.gap else {
