@@ -63,7 +63,7 @@ fn the_demo_report_has_every_section_its_figures_and_no_external_url() {
     .unwrap();
 
     let out = dir.path().join("report.html");
-    let summary = tirewear::report::write_report(dir.path(), &out).unwrap();
+    let summary = tirewear::report::write_report(dir.path(), &out, None).unwrap();
     let html = std::fs::read_to_string(&out).unwrap();
 
     // Every section, in order.
@@ -152,12 +152,40 @@ fn the_demo_report_has_every_section_its_figures_and_no_external_url() {
         .map(percent_decode)
         .unwrap();
     assert_eq!(csv.lines().count(), rows.len() + 1);
+
+    // With a `tirewear bench` JSON (written by hand: two lines), a
+    // performance section with one more figure and each line's ratio.
+    let bench = dir.path().join("my-bench.json");
+    std::fs::write(
+        &bench,
+        r#"{"cpu": "CPU, 2 threads", "gpu": null, "threads": 2, "lines": [
+            {"kernel": "energy_map", "size": "1 M samples", "engine": "cpu, 1 thread",
+             "seconds": 0.004, "vs_memory_pass": 0.5, "reference": "memory pass"},
+            {"kernel": "decode, block", "size": "80 runs", "engine": "tirewear, 1 thread",
+             "seconds": 0.3, "vs_memory_pass": 0.73, "reference": "zstd only"}]}"#,
+    )
+    .unwrap();
+    let with = tirewear::report::write_report(dir.path(), &out, Some(&bench)).unwrap();
+    assert_eq!(with.sections.last().unwrap(), "Performance");
+    assert_eq!(with.figures, summary.figures + 1);
+    let html = std::fs::read_to_string(&out).unwrap();
+    for cell in [
+        "<td class=\"n\">4.00</td>",
+        "<td class=\"n\">0.500</td>",
+        "<td class=\"n\">0.730</td>",
+    ] {
+        assert!(html.contains(cell), "{cell}");
+    }
+    let missing = dir.path().join("nothing.json");
+    let e = tirewear::report::write_report(dir.path(), &out, Some(&missing)).unwrap_err();
+    assert!(e.to_string().contains("nothing.json"), "{e}");
 }
 
 #[test]
 fn a_folder_without_kpis_is_an_error_naming_the_file() {
     let dir = tempfile::tempdir().unwrap();
-    let e = tirewear::report::write_report(dir.path(), &dir.path().join("r.html")).unwrap_err();
+    let e =
+        tirewear::report::write_report(dir.path(), &dir.path().join("r.html"), None).unwrap_err();
     let msg = e.to_string();
     assert!(
         msg.contains("kpis.parquet") && msg.contains("tirewear extract"),

@@ -79,6 +79,6 @@ pub(crate) fn run(a: DemoArgs, progress: bool) -> Result<()> {
         &out.join("gap"),
     )?;
     println!();
-    run_report(&out, &out.join("report.html"))?;
+    run_report(&out, &out.join("report.html"), None)?;
     Ok(())
 }

@@ -11,11 +11,15 @@ pub(crate) struct ReportArgs {
     /// Where to write the page (default DIR/report.html).
     #[arg(long)]
     out: Option<PathBuf>,
+    /// A `tirewear bench` JSON for the performance section (default
+    /// DIR/bench.json when it exists; without one the section is left out).
+    #[arg(long)]
+    bench: Option<PathBuf>,
 }
 
 /// Writes the report of `dir` to `out` and says where it is.
-pub(crate) fn run_report(dir: &Path, out: &Path) -> Result<()> {
-    let s = tirewear::report::write_report(dir, out)?;
+pub(crate) fn run_report(dir: &Path, out: &Path, bench: Option<&Path>) -> Result<()> {
+    let s = tirewear::report::write_report(dir, out, bench)?;
     println!(
         "wrote {} ({} figures; sections: {})",
         s.path.display(),
@@ -28,5 +32,5 @@ pub(crate) fn run_report(dir: &Path, out: &Path) -> Result<()> {
 /// Runs `tirewear report`.
 pub(crate) fn run(a: ReportArgs) -> Result<()> {
     let out = a.out.unwrap_or_else(|| a.dir.join("report.html"));
-    run_report(&a.dir, &out)
+    run_report(&a.dir, &out, a.bench.as_deref())
 }

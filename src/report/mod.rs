@@ -36,6 +36,8 @@ pub(crate) struct Inputs {
     pub maps: std::collections::BTreeMap<crate::kpi::TireRun, crate::kpi::energy_maps::EnergyMaps>,
     /// `compounds/*.toml`: the master curves.
     pub compounds: Vec<crate::ingest::compound::Compound>,
+    /// A `tirewear bench` JSON, when given or in the folder as `bench.json`.
+    pub bench: Option<serde_json::Value>,
 }
 
 fn read_json(path: &Path) -> Result<Option<serde_json::Value>, ReportError> {
@@ -55,7 +57,7 @@ fn read_json(path: &Path) -> Result<Option<serde_json::Value>, ReportError> {
 }
 
 impl Inputs {
-    pub fn read(dir: &Path) -> Result<Inputs, ReportError> {
+    pub fn read(dir: &Path, bench: Option<&Path>) -> Result<Inputs, ReportError> {
         let kpis = dir.join("kpis.parquet");
         if !kpis.exists() {
             return Err(ReportError::Input {
@@ -107,7 +109,18 @@ impl Inputs {
         } else {
             Vec::new()
         };
+        let bench = match bench {
+            Some(path) if !path.exists() => {
+                return Err(ReportError::Input {
+                    path: path.into(),
+                    message: "not found (a `tirewear bench` JSON was asked for)".into(),
+                });
+            }
+            Some(path) => read_json(path)?,
+            None => read_json(&dir.join("bench.json"))?,
+        };
         Ok(Inputs {
+            bench,
             compounds,
             road,
             maps,
@@ -138,7 +151,7 @@ p.missing{color:#a33}@media print{a.csv{display:none}}";
 
 /// The whole page.
 pub(crate) fn render(inputs: &Inputs) -> Result<(String, Vec<Section>), ReportError> {
-    let sections = vec![
+    let sections: Vec<Section> = [
         sections::season(inputs),
         sections::road(inputs)?,
         sections::viscoelastic(inputs)?,
@@ -146,7 +159,10 @@ pub(crate) fn render(inputs: &Inputs) -> Result<(String, Vec<Section>), ReportEr
         sections::physical(inputs)?,
         sections::models(inputs)?,
         sections::gap(inputs)?,
-    ];
+    ]
+    .into_iter()
+    .chain(sections::performance(inputs)?)
+    .collect::<Vec<_>>();
     let name = inputs
         .dir
         .file_name()
@@ -182,9 +198,15 @@ outputs. Figures mirror the paper's; definitions in docs/report.md and docs/kpis
     Ok((page, sections))
 }
 
-/// Writes `out` (atomically) from the season folder `dir`.
-pub fn write_report(dir: &Path, out: &Path) -> Result<ReportSummary, ReportError> {
-    let inputs = Inputs::read(dir)?;
+/// Writes `out` (atomically) from the season folder `dir`, with the
+/// performance section from `bench` (a `tirewear bench` JSON; default
+/// `dir/bench.json` when it exists).
+pub fn write_report(
+    dir: &Path,
+    out: &Path,
+    bench: Option<&Path>,
+) -> Result<ReportSummary, ReportError> {
+    let inputs = Inputs::read(dir, bench)?;
     let (page, sections) = render(&inputs)?;
     crate::atomic::write_bytes(out, page.as_bytes()).map_err(|source| ReportError::Io {
         path: out.into(),

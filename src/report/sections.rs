@@ -898,6 +898,86 @@ beyond chance.</p>\n";
     })
 }
 
+/// The performance section, when a `tirewear bench` JSON is given: every
+/// line's speed against its reference (the memory pass for the kernels,
+/// zstd alone for decoding, the 10 s target for the gap).
+pub(super) fn performance(inputs: &Inputs) -> Result<Option<Section>, ReportError> {
+    let Some(b) = &inputs.bench else {
+        return Ok(None);
+    };
+    let lines: Vec<&Value> = b["lines"].as_array().into_iter().flatten().collect();
+    let kernels: Vec<&str> = lines
+        .iter()
+        .filter_map(|l| l["kernel"].as_str())
+        .collect::<BTreeSet<_>>()
+        .into_iter()
+        .collect();
+    let color_of = |l: &Value| {
+        let k = l["kernel"].as_str().unwrap_or("");
+        kernels.iter().position(|x| *x == k).unwrap_or(0)
+    };
+    let bars: Vec<Bar> = lines
+        .iter()
+        .map(|l| Bar {
+            value: f(&l["vs_memory_pass"]),
+            interval: None,
+            color: Some(color_of(l)),
+        })
+        .collect();
+    let rows: Vec<Vec<String>> = lines
+        .iter()
+        .enumerate()
+        .map(|(i, l)| {
+            vec![
+                (i + 1).to_string(),
+                l["kernel"].as_str().unwrap_or("").to_string(),
+                l["size"].as_str().unwrap_or("").to_string(),
+                l["engine"].as_str().unwrap_or("").to_string(),
+                num(f(&l["seconds"]) * 1e3, 2),
+                l["reference"].as_str().unwrap_or("memory pass").to_string(),
+                num(f(&l["vs_memory_pass"]), 3),
+            ]
+        })
+        .collect();
+    let svg = figure::bars(
+        &Axes {
+            title: "Speed against each line's reference",
+            x: "benchmark line (table)",
+            y: "reference time / time (1)",
+        },
+        &bars,
+    )?;
+    let html = format!(
+        "<p>CPU: {}; GPU: {}.</p>\n{}",
+        escape(b["cpu"].as_str().unwrap_or("?")),
+        escape(b["gpu"].as_str().unwrap_or("none")),
+        fig(
+            &svg,
+            "Each benchmark line's speed as the reference's time over its time: above 1 \
+faster than the reference (a plain memory pass over the same buffer for the kernels, zstd \
+alone over the same chunks for decoding, the 10 s target for the gap diagnosis); one colour \
+per kernel, the lines numbered as in the table.",
+            &table(
+                &[
+                    "#",
+                    "kernel",
+                    "size",
+                    "engine",
+                    "time (ms)",
+                    "reference",
+                    "vs reference"
+                ],
+                &rows,
+            ),
+        )
+    );
+    Ok(Some(Section {
+        title: "Performance".into(),
+        html,
+        figures: 1,
+    }))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
