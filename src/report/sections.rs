@@ -594,11 +594,228 @@ temperatures.</p>\n",
         ],
         &csv,
     );
+    let (svg_t, svg_s, table_ts) = slopes_and_skewness(inputs, &tracks)?;
+    html += &fig(
+        &svg_t,
+        "Each track's wear-per-energy slope (the lines above, %/MJ) against the mean \
+surface temperature of its tires (°C), front and rear axles: the paper's temperature \
+dependence of the abrasion per joule (the rubber's viscoelastic temperature factor).",
+        "",
+    );
+    html += &fig(
+        &svg_s,
+        "Each track's mean residual of one wear-per-energy line per axle (all tracks \
+pooled, % of the new tread) against its road's skewness: the paper's road effect that \
+energy alone leaves (plateau-like, negatively skewed roads abrade less).",
+        &table(
+            &[
+                "track",
+                "axle",
+                "mean surface temperature (°C)",
+                "slope (%/MJ)",
+                "skewness",
+                "mean residual of the pooled line (%)",
+            ],
+            &table_ts,
+        ),
+    );
+    figures += 2;
     Ok(Section {
         title: "Physical correlations".into(),
         html,
         figures,
     })
+}
+
+/// Two figures of the physical correlations: each track's slope against
+/// its mean surface temperature, and each track's mean residual of one
+/// line per axle (all tracks pooled) against its road's skewness; with
+/// the table behind both.
+fn slopes_and_skewness(
+    inputs: &Inputs,
+    tracks: &[&str],
+) -> Result<(String, String, Vec<Vec<String>>), ReportError> {
+    let mut slope_points = Vec::new();
+    let mut skew_points = Vec::new();
+    let mut rows = Vec::new();
+    for (k, axle) in Axle::ALL.into_iter().enumerate() {
+        let on_axle: Vec<&KpiRow> = inputs
+            .rows
+            .iter()
+            .filter(|r| r.axle == axle && measured(r) && r.friction_energy_j.is_finite())
+            .collect();
+        let xy = |rs: &[&KpiRow]| -> Vec<(f64, f64)> {
+            rs.iter()
+                .map(|r| (r.friction_energy_j / 1e6, r.wear_mean_pct))
+                .collect()
+        };
+        let pooled = line_fit(&xy(&on_axle));
+        let (mut slopes, mut skews) = (Vec::new(), Vec::new());
+        for track in tracks {
+            let rs: Vec<&KpiRow> = on_axle
+                .iter()
+                .copied()
+                .filter(|r| r.track == *track)
+                .collect();
+            if rs.is_empty() {
+                continue;
+            }
+            let n = rs.len() as f64;
+            let t_surface = rs.iter().map(|r| r.t_surface_avg_c).sum::<f64>() / n;
+            let skewness = rs[0].skewness;
+            let slope = line_fit(&xy(&rs)).map_or(f64::NAN, |f| f.1);
+            let residual = pooled.map_or(f64::NAN, |(a, b, _)| {
+                rs.iter()
+                    .map(|r| r.wear_mean_pct - (a + b * r.friction_energy_j / 1e6))
+                    .sum::<f64>()
+                    / n
+            });
+            slopes.push((t_surface, slope));
+            skews.push((skewness, residual));
+            rows.push(vec![
+                track.to_string(),
+                axle.to_string(),
+                num(t_surface, 1),
+                num(slope, 3),
+                num(skewness, 2),
+                num(residual, 2),
+            ]);
+        }
+        let group = |xy: Vec<(f64, f64)>| Points {
+            label: format!("{axle} axle"),
+            color: k,
+            xy,
+            filled: true,
+        };
+        slope_points.push(group(slopes));
+        skew_points.push(group(skews));
+    }
+    let svg_t = figure::scatter(
+        &Axes {
+            title: "Wear-per-energy slope against surface temperature",
+            x: "mean surface temperature of the track's tires (°C)",
+            y: "slope of wear on energy (%/MJ)",
+        },
+        &slope_points,
+        &[],
+        false,
+    )?;
+    let svg_s = figure::scatter(
+        &Axes {
+            title: "What energy leaves: residual against road skewness",
+            x: "road skewness Sk (1)",
+            y: "track's mean residual (% of new tread)",
+        },
+        &skew_points,
+        &[],
+        false,
+    )?;
+    Ok((svg_t, svg_s, rows))
+}
+
+/// The figure a method adds about itself: PCA's explained variance per
+/// component, the network's validation error against its second hidden
+/// layer's width (the search that chose it).
+fn model_details(m: &crate::model::saved::SavedModel) -> Result<Option<String>, ReportError> {
+    use crate::model::saved::ModelBody;
+    match &m.model {
+        ModelBody::Pca { pca, .. } => {
+            let bars: Vec<Bar> = pca
+                .proportions
+                .iter()
+                .enumerate()
+                .map(|(i, p)| Bar {
+                    value: 100.0 * p,
+                    interval: None,
+                    color: if i < pca.kept { None } else { Some(7) },
+                })
+                .collect();
+            let svg = figure::bars(
+                &Axes {
+                    title: "PCA: variance explained per component",
+                    x: "principal component (1: the largest)",
+                    y: "share of the inputs' variance (%)",
+                },
+                &bars,
+            )?;
+            let kept: f64 = pca.proportions.iter().take(pca.kept).sum();
+            let rows: Vec<Vec<String>> = pca
+                .proportions
+                .iter()
+                .enumerate()
+                .map(|(i, p)| {
+                    let cumulative: f64 = pca.proportions[..=i].iter().sum();
+                    vec![
+                        format!("PC{}", i + 1),
+                        num(pca.eigenvalues[i], 3),
+                        num(100.0 * p, 2),
+                        num(100.0 * cumulative, 2),
+                        (i < pca.kept).to_string(),
+                    ]
+                })
+                .collect();
+            Ok(Some(fig(
+                &svg,
+                &format!(
+                    "PCA of the {} standardised inputs: each component's share of their \
+variance (eigenvalue of the correlation matrix over their sum, eq. 4); the {} kept \
+components (blue) explain {} %, the regression uses their scores.",
+                    pca.inputs.len(),
+                    pca.kept,
+                    num(100.0 * kept, 1)
+                ),
+                &csv_link(
+                    "pca_explained_variance.csv",
+                    &[
+                        "component",
+                        "eigenvalue",
+                        "share_pct",
+                        "cumulative_pct",
+                        "kept",
+                    ],
+                    &rows,
+                ),
+            )))
+        }
+        ModelBody::Ffnn { network, .. } => {
+            let xy: Vec<(f64, f64)> = network
+                .trials
+                .iter()
+                .map(|t| (t.hidden2 as f64, t.validation_mse))
+                .collect();
+            let svg = figure::curves_with_marks(
+                &Axes {
+                    title: "Network: validation error against the second layer's width",
+                    x: "neurons in the second hidden layer",
+                    y: "validation MSE (normalised units)",
+                },
+                &[Points {
+                    label: "validation MSE".into(),
+                    color: 0,
+                    xy: xy.clone(),
+                    filled: false,
+                }],
+                &[Points {
+                    label: String::new(),
+                    color: 0,
+                    xy,
+                    filled: false,
+                }],
+                false,
+            )?;
+            Ok(Some(fig(
+                &svg,
+                &format!(
+                    "The network's width search: the validation error (MSE of the normalised \
+wear on the {} validation rows) of each second-layer width tried; the chosen network has {} \
+and {} neurons.",
+                    network.validation_rows, network.net.hidden1, network.net.hidden2
+                ),
+                "",
+            )))
+        }
+        ModelBody::Physical { .. } => Ok(None),
+    }
 }
 
 /// R² and RMSE of (measured, predicted) pairs.
@@ -706,6 +923,10 @@ line. Training R² {} RMSE {} %, testing R² {} RMSE {} %.",
             ),
         );
         figures += 1;
+        if let Some(extra) = model_details(m)? {
+            html += &extra;
+            figures += 1;
+        }
         summary.push(vec![
             method.to_string(),
             train.len().to_string(),
