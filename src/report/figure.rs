@@ -38,7 +38,7 @@ fn color(i: Option<usize>) -> RGBColor {
             let c = Palette99::pick(i).to_rgba();
             RGBColor(c.0, c.1, c.2)
         }
-        None => RGBColor(70, 110, 160),
+        None => RGBColor(120, 120, 120),
     }
 }
 
@@ -140,7 +140,7 @@ pub(crate) fn scatter(
 pub(crate) struct Bar {
     pub value: f64,
     pub interval: Option<(f64, f64)>,
-    /// A palette index; None: the neutral colour.
+    /// A palette index; None: steel blue.
     pub color: Option<usize>,
 }
 
@@ -180,7 +180,10 @@ pub(crate) fn bars(axes: &Axes, bars: &[Bar]) -> Result<String, ReportError> {
                 let x = i as f64 + 1.0;
                 Rectangle::new(
                     [(x - 0.3, 0.0), (x + 0.3, b.value)],
-                    color(b.color).mix(0.8).filled(),
+                    b.color
+                        .map_or(RGBColor(70, 110, 160), |c| color(Some(c)))
+                        .mix(0.8)
+                        .filled(),
                 )
             }))
             .map_err(draw_error)?;

@@ -1108,6 +1108,88 @@ added, on the training and the testing events.",
         );
         figures += 1;
     }
+    // Each added term's wear against the residual it is there to explain.
+    let terms: Vec<&str> = steps
+        .iter()
+        .skip(1)
+        .filter_map(|s| s["added"].as_str())
+        .collect();
+    let measured_wear: std::collections::HashMap<(String, String), f64> = inputs
+        .rows
+        .iter()
+        .map(|r| ((r.run.clone(), r.wheel.to_string()), r.wear_mean_pct))
+        .collect();
+    let tires: Vec<&Value> = g["terms_wear"].as_array().into_iter().flatten().collect();
+    for (j, term) in terms.iter().enumerate() {
+        let mut groups: Vec<Points> = Axle::ALL
+            .into_iter()
+            .enumerate()
+            .map(|(k, a)| Points {
+                label: format!("{a} axle"),
+                color: k,
+                xy: Vec::new(),
+                filled: true,
+            })
+            .collect();
+        for t in &tires {
+            let key = (
+                t["run"].as_str().unwrap_or("").to_string(),
+                t["wheel"].as_str().unwrap_or("").to_string(),
+            );
+            let Some(&wear) = measured_wear.get(&key) else {
+                continue;
+            };
+            let part = f(&t["by_term_pct"][j]);
+            // What is left to explain without this term.
+            let residual = wear - f(&t["predicted_pct"]) + part;
+            if !(part.is_finite() && residual.is_finite()) {
+                continue;
+            }
+            let axle = usize::from(t["axle"].as_str() == Some("rear"));
+            groups[axle].xy.push((part, residual));
+        }
+        let all: Vec<(f64, f64)> = groups.iter().flat_map(|g| g.xy.iter().copied()).collect();
+        if all.is_empty() {
+            continue;
+        }
+        let r = line_fit(&all).map_or(f64::NAN, |f| f.2.sqrt());
+        let lo = all
+            .iter()
+            .map(|p| p.0.min(p.1))
+            .fold(f64::INFINITY, f64::min);
+        let hi = all
+            .iter()
+            .map(|p| p.0.max(p.1))
+            .fold(f64::NEG_INFINITY, f64::max);
+        let title = format!("Term {}: its wear against the residual it explains", j + 1);
+        let svg = figure::scatter(
+            &Axes {
+                title: &title,
+                x: "the term's wear (% of new tread)",
+                y: "residual without the term (%)",
+            },
+            &groups,
+            &[Segment {
+                color: None,
+                from: (lo, lo),
+                to: (hi, hi),
+            }],
+            false,
+        )?;
+        html += &fig(
+            &svg,
+            &format!(
+                "Term {} ({term}): each tire-run's wear from this term in the final model \
+against what the measurement leaves without it (measured − final prediction + the \
+term's wear), grey the 1:1 line; |correlation| {}. A term that explains a real effect \
+follows the residual along the line.",
+                j + 1,
+                num(r, 2)
+            ),
+            "",
+        );
+        figures += 1;
+    }
     if g["final_terms"].as_array().is_some_and(|t| t.is_empty()) {
         html += "<p>No term was added: nothing the candidates describe explains the gap \
 beyond chance.</p>\n";
