@@ -84,14 +84,14 @@ fn the_demo_report_has_every_section_its_figures_and_no_external_url() {
         );
     }
     // Figures: the road's PSD and HDC, the master curves' E′ and tan δ, an
-    // energy map per axle, two axles of wear against energy, the slopes
+    // energy map per axle, four table-4 KPIs per track, two axles of wear against energy, the slopes
     // against temperature and the residuals against skewness, one model and
     // its explained variance, and the gap's shrink chart (plus the slices'
     // bars when a slice is flagged).
     let svgs: Vec<&str> = html.split("<svg").skip(1).collect();
     assert_eq!(svgs.len(), summary.figures);
     let flagged = !d.slices.is_empty();
-    assert_eq!(summary.figures, 13 + flagged as usize);
+    assert_eq!(summary.figures, 17 + flagged as usize);
     for svg in &svgs {
         let svg = &svg[..svg.find("</svg>").expect("closed svg")];
         // Axis titles carry their unit in parentheses: both axes.

@@ -448,11 +448,84 @@ pub(super) fn telemetry(inputs: &Inputs) -> Result<Section, ReportError> {
             &csv,
         );
     }
+    let (strips, n) = kpi_distributions(inputs)?;
+    html += &strips;
+    figures += n;
     Ok(Section {
         title: "Telemetry".into(),
         html,
         figures,
     })
+}
+
+/// Table-4 KPIs whose spread per track the telemetry section shows: column,
+/// axis title, and the factor from the column's unit to the axis's.
+const DISTRIBUTED_KPIS: [(&str, &str, f64); 4] = [
+    ("t_surface_avg_c", "mean surface temperature (°C)", 1.0),
+    ("friction_energy_j", "total friction energy (MJ)", 1e-6),
+    ("sliding_distance_m", "sliding distance (km)", 1e-3),
+    ("fz_avg_n", "mean vertical load (kN)", 1e-3),
+];
+
+/// Strip plots of [`DISTRIBUTED_KPIS`]: every tire-run's value at its
+/// track's number (spread sideways by wheel), front and rear in two
+/// colours; the track numbering in a table. Returns the HTML and how many
+/// figures.
+fn kpi_distributions(inputs: &Inputs) -> Result<(String, usize), ReportError> {
+    let tracks = track_names(inputs);
+    let mut html = String::new();
+    for (column, label, scale) in DISTRIBUTED_KPIS {
+        let groups: Vec<Points> = Axle::ALL
+            .into_iter()
+            .enumerate()
+            .map(|(k, axle)| Points {
+                label: format!("{axle} axle"),
+                color: k,
+                xy: inputs
+                    .rows
+                    .iter()
+                    .filter(|r| r.axle == axle)
+                    .filter_map(|r| {
+                        let t = tracks.iter().position(|t| *t == r.track)?;
+                        let v = r.number(column)? * scale;
+                        // Left and right wheels side by side, front and rear apart.
+                        let dx = 0.12 * (r.wheel.index() as f64 - 1.5);
+                        Some((t as f64 + 1.0 + dx, v))
+                    })
+                    .collect(),
+                filled: true,
+            })
+            .collect();
+        let title = format!("Per track: {label}");
+        let svg = figure::scatter(
+            &Axes {
+                title: &title,
+                x: "track (number in the table below)",
+                y: label,
+            },
+            &groups,
+            &[],
+            false,
+        )?;
+        html += &fig(
+            &svg,
+            &format!(
+                "{title}: every tire-run's value (column {column}) at its track's number, the \
+four wheels side by side (FL, FR, RL, RR), front and rear in two colours."
+            ),
+            "",
+        );
+    }
+    let rows: Vec<Vec<String>> = tracks
+        .iter()
+        .enumerate()
+        .map(|(i, t)| {
+            let n = inputs.rows.iter().filter(|r| r.track == *t).count();
+            vec![(i + 1).to_string(), t.clone(), n.to_string()]
+        })
+        .collect();
+    html += &table(&["#", "track", "tire-runs"], &rows);
+    Ok((html, DISTRIBUTED_KPIS.len()))
 }
 
 fn track_names(inputs: &Inputs) -> Vec<String> {
