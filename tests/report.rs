@@ -41,7 +41,8 @@ fn the_demo_report_has_every_section_its_figures_and_no_external_url() {
     let settings = FitSettings::default();
     let s = split(&rows, None).unwrap();
     let (pca, _) = fit_method(Method::Pca, &s, &settings).unwrap();
-    save_all(std::slice::from_ref(&pca), &dir.path().join("models")).unwrap();
+    let (physical, _) = fit_method(Method::Physical, &s, &settings).unwrap();
+    save_all(&[pca.clone(), physical.clone()], &dir.path().join("models")).unwrap();
     let kpis = dir.path().join("kpis.parquet");
     let maps = tirewear::kpi::energy_maps::read_tire_maps(&kpis).unwrap();
     let gap_settings = tirewear::gap::report::GapSettings {
@@ -86,12 +87,13 @@ fn the_demo_report_has_every_section_its_figures_and_no_external_url() {
     // Figures: the road's PSD and HDC, the master curves' E′ and tan δ, an
     // energy map per axle, four table-4 KPIs per track, two axles of wear against energy, the slopes
     // against temperature and the residuals against skewness, one model and
-    // its explained variance, and the gap's shrink chart (plus the slices'
+    // its explained variance, the physical model's predictions, and the
+    // gap's shrink chart (plus the slices'
     // bars when a slice is flagged).
     let svgs: Vec<&str> = html.split("<svg").skip(1).collect();
     assert_eq!(svgs.len(), summary.figures);
     let flagged = !d.slices.is_empty();
-    assert_eq!(summary.figures, 17 + flagged as usize);
+    assert_eq!(summary.figures, 18 + flagged as usize);
     for svg in &svgs {
         let svg = &svg[..svg.find("</svg>").expect("closed svg")];
         // Axis titles carry their unit in parentheses: both axes.
@@ -146,6 +148,36 @@ fn the_demo_report_has_every_section_its_figures_and_no_external_url() {
         xy.len()
     );
     assert!(html.contains(&cell), "{cell}");
+    // The per-track lines of the report (all events) and the physical
+    // model's preliminary analysis (its own code, training events) agree
+    // where a track raced only in training events (same n); R1 and R2 are
+    // in the reliability table.
+    let tirewear::model::saved::ModelBody::Physical { front, .. } = &physical.model else {
+        panic!("a physical model")
+    };
+    let mut compared = 0;
+    for l in &front.lines {
+        let line = format!(
+            "<td class=\"t\">{}</td><td class=\"t\">front</td><td class=\"n\">{}</td><td class=\"n\">{:.3}</td>",
+            l.track, l.n, l.slope_pct_per_mj
+        );
+        let report_n = rows
+            .iter()
+            .filter(|r| r.track == l.track && r.axle == tirewear::Axle::Front)
+            .filter(|r| r.wear_mean_pct.is_finite() && r.worn_through_readings <= 0.0)
+            .count();
+        if report_n == l.n {
+            // Twice: the report's table and the reliability table.
+            assert_eq!(html.matches(&line).count(), 2, "{line}");
+            compared += 1;
+        }
+        let r1r2 = format!(
+            "<td class=\"n\">{:.3}</td><td class=\"n\">{:.3}</td><td class=\"n\">{}</td>",
+            l.r1, l.r2, l.n_consistent
+        );
+        assert!(html.contains(&r1r2), "{r1r2}");
+    }
+    assert!(compared >= 2, "{compared} tracks compared");
     // The CSV behind the figure holds every tire-run.
     let csv = attributes(&html, "href")
         .into_iter()

@@ -693,6 +693,7 @@ energy alone leaves (plateau-like, negatively skewed roads abrade less).",
         ),
     );
     figures += 2;
+    html += &reliability_table(inputs);
     Ok(Section {
         title: "Physical correlations".into(),
         html,
@@ -889,6 +890,63 @@ and {} neurons.",
         }
         ModelBody::Physical { .. } => Ok(None),
     }
+}
+
+/// The physical model's own preliminary analysis (`models/physical.json`,
+/// training events): each track's line with the paper's reliability
+/// indexes R1 and R2, and the correlations that chose its inputs.
+fn reliability_table(inputs: &Inputs) -> String {
+    use crate::model::saved::ModelBody;
+    let Some(ModelBody::Physical { front, rear }) = inputs
+        .models
+        .iter()
+        .map(|(_, m)| &m.model)
+        .find(|m| matches!(m, ModelBody::Physical { .. }))
+    else {
+        return String::new();
+    };
+    let mut rows = Vec::new();
+    let mut notes = Vec::new();
+    for a in [front, rear] {
+        for l in &a.lines {
+            rows.push(vec![
+                l.track.clone(),
+                a.axle.to_string(),
+                l.n.to_string(),
+                num(l.slope_pct_per_mj, 3),
+                num(l.r1, 3),
+                num(l.r2, 3),
+                l.n_consistent.to_string(),
+            ]);
+        }
+        notes.push(format!(
+            "{} axle: slopes against mean surface temperature r = {} (weighted by R1, tracks \
+with R2 ≥ 0.5), residuals of wear = a + b·E + c·E·T_surf against skewness r = {}",
+            a.axle,
+            num(a.slope_vs_t_surface, 2),
+            num(a.residual_vs_skewness, 2)
+        ));
+    }
+    format!(
+        "<h3>Reliability of the per-track lines (the physical model's training events)</h3>\n\
+<p>R1 = 1 − RMSE / (max − min wear) of a track's points about its line (1: every point on \
+it); R2 = the track's consistent points (within 3 robust standard deviations of its line) \
+over the most any track has; the paper weights by R1 and drops tracks of low R2 \
+(section 4.3). {}.</p>\n{}",
+        escape(&notes.join("; ")),
+        table(
+            &[
+                "track",
+                "axle",
+                "n",
+                "slope (%/MJ)",
+                "R1",
+                "R2",
+                "consistent points"
+            ],
+            &rows
+        )
+    )
 }
 
 /// R² and RMSE of (measured, predicted) pairs.
