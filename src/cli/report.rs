@@ -6,7 +6,8 @@ use std::path::{Path, PathBuf};
 #[derive(clap::Args)]
 pub(crate) struct ReportArgs {
     /// Season folder after `tirewear extract` (its `kpis.parquet`), and
-    /// optionally `fit` (`models/`) and `gap` (`gap/gap.json`).
+    /// optionally `fit` (`models/`) and `gap` (`gap/gap.json`); or a
+    /// `tirewear process` dataset (the newest dated models and gap).
     dir: PathBuf,
     /// Where to write the page (default DIR/report.html).
     #[arg(long)]

@@ -56,6 +56,43 @@ fn read_json(path: &Path) -> Result<Option<serde_json::Value>, ReportError> {
         })
 }
 
+/// Where `name` lives under `dir/sub`: directly (a season folder after
+/// `fit`/`gap`) or in the newest dated subfolder (`tirewear process --then
+/// fit,gap` writes `models/2026-11-24T0230Z/…`; the names sort by time).
+fn newest(dir: &Path, sub: &str, name: &str) -> PathBuf {
+    let direct = dir.join(sub).join(name);
+    if direct.exists() {
+        return direct;
+    }
+    let dated = std::fs::read_dir(dir.join(sub))
+        .into_iter()
+        .flatten()
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.join(name).exists())
+        .max();
+    dated.map_or(direct, |d| d.join(name))
+}
+
+/// The compound folders of a season folder, or of the archives a `process`
+/// dataset was built from (its `dataset.json`).
+fn compound_dirs(dir: &Path) -> Result<Vec<PathBuf>, ReportError> {
+    let own = dir.join("compounds");
+    if own.is_dir() {
+        return Ok(vec![own]);
+    }
+    let Some(dataset) = read_json(&dir.join("dataset.json"))? else {
+        return Ok(Vec::new());
+    };
+    Ok(dataset["archives"]
+        .as_array()
+        .into_iter()
+        .flatten()
+        .filter_map(|a| a.as_str())
+        .map(|a| Path::new(a).join("compounds"))
+        .filter(|p| p.is_dir())
+        .collect())
+}
+
 impl Inputs {
     pub fn read(dir: &Path, bench: Option<&Path>) -> Result<Inputs, ReportError> {
         let kpis = dir.join("kpis.parquet");
@@ -71,7 +108,7 @@ impl Inputs {
         })?;
         let mut models = Vec::new();
         for method in ["physical", "pca", "ffnn"] {
-            let path = dir.join("models").join(format!("{method}.json"));
+            let path = newest(dir, "models", &format!("{method}.json"));
             if path.exists() {
                 let m = crate::model::saved::SavedModel::load(&path).map_err(|e| {
                     ReportError::Input {
@@ -103,12 +140,14 @@ impl Inputs {
         } else {
             Default::default()
         };
-        let compounds_dir = dir.join("compounds");
-        let compounds = if compounds_dir.is_dir() {
-            crate::ingest::compound::read_compounds(&compounds_dir).map_err(input(compounds_dir))?
-        } else {
-            Vec::new()
-        };
+        let mut compounds: Vec<crate::ingest::compound::Compound> = Vec::new();
+        for d in compound_dirs(dir)? {
+            for c in crate::ingest::compound::read_compounds(&d).map_err(input(d.clone()))? {
+                if !compounds.iter().any(|k| k.id == c.id) {
+                    compounds.push(c);
+                }
+            }
+        }
         let bench = match bench {
             Some(path) if !path.exists() => {
                 return Err(ReportError::Input {
@@ -126,9 +165,13 @@ impl Inputs {
             maps,
             dir: dir.into(),
             rows,
-            extraction: read_json(&dir.join("kpis.report.json"))?,
+            // A season's extraction report, or a `process` dataset's summary.
+            extraction: match read_json(&dir.join("kpis.report.json"))? {
+                Some(r) => Some(r),
+                None => read_json(&dir.join("summary.json"))?,
+            },
             models,
-            gap: read_json(&dir.join("gap").join("gap.json"))?,
+            gap: read_json(&newest(dir, "gap", "gap.json"))?,
         })
     }
 }
@@ -217,4 +260,49 @@ pub fn write_report(
         figures: sections.iter().map(|s| s.figures).sum(),
         sections: sections.into_iter().map(|s| s.title).collect(),
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn newest_takes_the_direct_file_else_the_latest_dated_folder() {
+        let dir = tempfile::tempdir().unwrap();
+        let d = dir.path();
+        for stamp in ["2026-11-23T0230Z", "2026-11-24T0230Z", "2026-11-22T0230Z"] {
+            std::fs::create_dir_all(d.join("models").join(stamp)).unwrap();
+            std::fs::write(d.join("models").join(stamp).join("pca.json"), "{}").unwrap();
+        }
+        // A later folder without the file does not count.
+        std::fs::create_dir_all(d.join("models/2026-11-25T0230Z")).unwrap();
+        assert_eq!(
+            newest(d, "models", "pca.json"),
+            d.join("models/2026-11-24T0230Z/pca.json")
+        );
+        std::fs::write(d.join("models/pca.json"), "{}").unwrap();
+        assert_eq!(newest(d, "models", "pca.json"), d.join("models/pca.json"));
+        // Nothing at all: the direct path, which does not exist.
+        assert_eq!(newest(d, "gap", "gap.json"), d.join("gap/gap.json"));
+    }
+
+    #[test]
+    fn a_process_summary_lists_its_failed_runs() {
+        let inputs = Inputs {
+            dir: "season".into(),
+            rows: Vec::new(),
+            extraction: Some(serde_json::json!({
+                "failed": [{"run": "E01-car1-R2", "season": "s", "reason": "CRC mismatch in chunk 3"}]
+            })),
+            models: Vec::new(),
+            gap: None,
+            road: Vec::new(),
+            maps: Default::default(),
+            compounds: Vec::new(),
+            bench: None,
+        };
+        let s = sections::season(&inputs);
+        assert!(s.html.contains("Skipped runs (1)"), "{}", s.html);
+        assert!(s.html.contains("E01-car1-R2") && s.html.contains("CRC mismatch in chunk 3"));
+    }
 }

@@ -46,7 +46,13 @@ pub(super) fn season(inputs: &Inputs) -> Section {
     );
     match &inputs.extraction {
         Some(report) => {
-            let skipped: Vec<Vec<String>> = report["skipped"]
+            // `extract`'s skipped runs, or `process`'s failed ones.
+            let list = if report["skipped"].is_array() {
+                &report["skipped"]
+            } else {
+                &report["failed"]
+            };
+            let skipped: Vec<Vec<String>> = list
                 .as_array()
                 .into_iter()
                 .flatten()
