@@ -150,19 +150,10 @@ pub fn read_energy_maps(
     use crate::ingest::IngestError;
     use arrow_array::{Array, Float64Array, StringArray, UInt32Array};
     use arrow_schema::DataType;
-    let perr = |e: parquet::errors::ParquetError| IngestError::Parquet {
-        path: path.to_path_buf(),
-        source: e,
-    };
-    let file = std::fs::File::open(path).map_err(|e| IngestError::io(path, e))?;
-    let reader = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file)
-        .map_err(perr)?
-        .build()
-        .map_err(perr)?;
     let mut out: std::collections::BTreeMap<super::TireRun, EnergyMaps> = Default::default();
     let mut record = 0usize;
-    for batch in reader {
-        let batch = batch.map_err(|e| perr(e.into()))?;
+    for batch in crate::kpi::table::side_batches(path)? {
+        let batch = batch?;
         let col = |name: &str, ty: &DataType| {
             crate::kpi::table::checked_column(path, &batch, name, ty, record)
         };

@@ -712,18 +712,9 @@ pub struct RoadCurvePoint {
 /// [`road_curves_batch`] writes it); a missing column or a null is an
 /// error naming the file, column and row.
 pub fn read_road_curves(path: &std::path::Path) -> Result<Vec<RoadCurvePoint>, IngestError> {
-    let perr = |e: parquet::errors::ParquetError| IngestError::Parquet {
-        path: path.to_path_buf(),
-        source: e,
-    };
-    let file = std::fs::File::open(path).map_err(|e| IngestError::io(path, e))?;
-    let reader = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file)
-        .map_err(perr)?
-        .build()
-        .map_err(perr)?;
     let mut out = Vec::new();
-    for batch in reader {
-        let batch = batch.map_err(|e| perr(e.into()))?;
+    for batch in super::table::side_batches(path)? {
+        let batch = batch?;
         let col = |name: &str, ty: &DataType| {
             super::table::checked_column(path, &batch, name, ty, out.len())
         };

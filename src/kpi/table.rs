@@ -188,6 +188,19 @@ fn parquet_err(path: &Path, e: impl Into<parquet::errors::ParquetError>) -> Inge
     }
 }
 
+/// The record batches of a side table, each error naming the file.
+pub(crate) fn side_batches(
+    path: &Path,
+) -> Result<impl Iterator<Item = Result<RecordBatch, IngestError>> + use<>, IngestError> {
+    let file = std::fs::File::open(path).map_err(|e| IngestError::io(path, e))?;
+    let reader = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file)
+        .map_err(|e| parquet_err(path, e))?
+        .build()
+        .map_err(|e| parquet_err(path, e))?;
+    let path = path.to_path_buf();
+    Ok(reader.map(move |b| b.map_err(|e| parquet_err(&path, e))))
+}
+
 /// Schema metadata key that ties the outputs of one extraction together
 /// (the KPI table, its side tables and its report carry the same value).
 pub(crate) const EXTRACTION_ID_KEY: &str = "tirewear.extraction_id";

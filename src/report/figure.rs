@@ -64,6 +64,62 @@ pub(crate) fn padded(values: impl Iterator<Item = f64>, from_zero: bool) -> (f64
     (lo - pad, hi + pad)
 }
 
+type Root<'a> = DrawingArea<SVGBackend<'a>, plotters::coord::Shift>;
+
+/// A figure as an SVG string: a white canvas that `draw` fills.
+fn svg(draw: impl FnOnce(&Root) -> Result<(), ReportError>) -> Result<String, ReportError> {
+    let mut svg = String::new();
+    {
+        let root = SVGBackend::with_string(&mut svg, SIZE).into_drawing_area();
+        root.fill(&WHITE).map_err(draw_error)?;
+        draw(&root)?;
+        root.present().map_err(draw_error)?;
+    }
+    Ok(svg)
+}
+
+/// The frame every figure shares: its title, margins and label areas.
+fn frame<'a, 'b>(root: &'a Root<'b>, axes: &Axes) -> ChartBuilder<'a, 'b, SVGBackend<'b>> {
+    let mut b = ChartBuilder::on(root);
+    b.caption(axes.title, ("sans-serif", 18))
+        .margin(12)
+        .x_label_area_size(44)
+        .y_label_area_size(70);
+    b
+}
+
+/// The axis titles, tick labels and grid in the figures' style; a macro
+/// because the mesh's type depends on the axes' kinds (linear, log).
+macro_rules! mesh {
+    ($chart:expr, $axes:expr) => {
+        $chart
+            .configure_mesh()
+            .x_desc($axes.x)
+            .y_desc($axes.y)
+            .label_style(("sans-serif", 13))
+            .axis_desc_style(("sans-serif", 14))
+            .light_line_style(RGBColor(235, 235, 235))
+    };
+}
+
+/// The legend box of the series drawn with a label.
+macro_rules! legend {
+    ($chart:expr, $position:expr) => {
+        $chart
+            .configure_series_labels()
+            .background_style(WHITE.mix(0.85))
+            .border_style(BLACK)
+            .position($position)
+            .draw()
+            .map_err(draw_error)?
+    };
+}
+
+/// A line's legend mark.
+fn line_mark(c: RGBColor) -> impl Fn((i32, i32)) -> PathElement<(i32, i32)> {
+    move |(x, y)| PathElement::new([(x, y), (x + 16, y)], c.stroke_width(2))
+}
+
 /// A scatter of point groups with lines over them, as an SVG element.
 pub(crate) fn scatter(
     axes: &Axes,
@@ -83,26 +139,11 @@ pub(crate) fn scatter(
         .chain(ends().map(|q| q.1));
     let (x0, x1) = padded(xs, from_zero);
     let (y0, y1) = padded(ys, from_zero);
-    let mut svg = String::new();
-    {
-        let root = SVGBackend::with_string(&mut svg, SIZE).into_drawing_area();
-        root.fill(&WHITE).map_err(draw_error)?;
-        let mut chart = ChartBuilder::on(&root)
-            .caption(axes.title, ("sans-serif", 18))
-            .margin(12)
-            .x_label_area_size(44)
-            .y_label_area_size(60)
+    svg(|root| {
+        let mut chart = frame(root, axes)
             .build_cartesian_2d(x0..x1, y0..y1)
             .map_err(draw_error)?;
-        chart
-            .configure_mesh()
-            .x_desc(axes.x)
-            .y_desc(axes.y)
-            .label_style(("sans-serif", 13))
-            .axis_desc_style(("sans-serif", 14))
-            .light_line_style(RGBColor(235, 235, 235))
-            .draw()
-            .map_err(draw_error)?;
+        mesh!(chart, axes).draw().map_err(draw_error)?;
         for l in lines {
             let c = color(l.color);
             chart
@@ -123,17 +164,10 @@ pub(crate) fn scatter(
                 .legend(move |(x, y)| Circle::new((x + 8, y), 4, style));
         }
         if points.len() > 1 {
-            chart
-                .configure_series_labels()
-                .background_style(WHITE.mix(0.85))
-                .border_style(BLACK)
-                .position(SeriesLabelPosition::UpperLeft)
-                .draw()
-                .map_err(draw_error)?;
+            legend!(chart, SeriesLabelPosition::UpperLeft);
         }
-        root.present().map_err(draw_error)?;
-    }
-    Ok(svg)
+        Ok(())
+    })
 }
 
 /// One bar of [`bars`]: its value and optional interval (lo, hi).
@@ -153,55 +187,35 @@ pub(crate) fn bars(axes: &Axes, bars: &[Bar]) -> Result<String, ReportError> {
     });
     let (y0, y1) = padded(values, true);
     let x1 = bars.len() as f64 + 0.5;
-    let mut svg = String::new();
-    {
-        let root = SVGBackend::with_string(&mut svg, SIZE).into_drawing_area();
-        root.fill(&WHITE).map_err(draw_error)?;
-        let mut chart = ChartBuilder::on(&root)
-            .caption(axes.title, ("sans-serif", 18))
-            .margin(12)
-            .x_label_area_size(44)
-            .y_label_area_size(60)
+    svg(|root| {
+        let mut chart = frame(root, axes)
             .build_cartesian_2d(0.5..x1, y0..y1)
             .map_err(draw_error)?;
-        chart
-            .configure_mesh()
-            .x_desc(axes.x)
-            .y_desc(axes.y)
+        mesh!(chart, axes)
             .x_labels(bars.len().clamp(1, 20))
-            .x_label_formatter(&|v| format!("{:.0}", v))
-            .label_style(("sans-serif", 13))
-            .axis_desc_style(("sans-serif", 14))
-            .light_line_style(RGBColor(235, 235, 235))
+            .x_label_formatter(&|v| format!("{v:.0}"))
             .draw()
             .map_err(draw_error)?;
         chart
             .draw_series(bars.iter().enumerate().map(|(i, b)| {
                 let x = i as f64 + 1.0;
-                Rectangle::new(
-                    [(x - 0.3, 0.0), (x + 0.3, b.value)],
-                    b.color
-                        .map_or(RGBColor(70, 110, 160), |c| color(Some(c)))
-                        .mix(0.8)
-                        .filled(),
-                )
+                let fill = b.color.map_or(RGBColor(70, 110, 160), |c| color(Some(c)));
+                Rectangle::new([(x - 0.3, 0.0), (x + 0.3, b.value)], fill.mix(0.8).filled())
             }))
             .map_err(draw_error)?;
         for (i, b) in bars.iter().enumerate() {
             if let Some((lo, hi)) = b.interval {
                 let x = i as f64 + 1.0;
-                let whisker = [(x, lo), (x, hi)];
                 chart
-                    .draw_series(LineSeries::new(whisker, BLACK.stroke_width(2)))
+                    .draw_series(LineSeries::new([(x, lo), (x, hi)], BLACK.stroke_width(2)))
                     .map_err(draw_error)?;
             }
         }
         chart
             .draw_series(LineSeries::new([(0.5, 0.0), (x1, 0.0)], BLACK))
             .map_err(draw_error)?;
-        root.present().map_err(draw_error)?;
-    }
-    Ok(svg)
+        Ok(())
+    })
 }
 
 /// Lines through points at x = 0, 1, … (steps), one per series, with marks.
@@ -211,26 +225,13 @@ pub(crate) fn steps(
 ) -> Result<String, ReportError> {
     let n = series.iter().map(|s| s.2.len()).max().unwrap_or(1);
     let (y0, y1) = padded(series.iter().flat_map(|s| s.2.iter().copied()), true);
-    let mut svg = String::new();
-    {
-        let root = SVGBackend::with_string(&mut svg, SIZE).into_drawing_area();
-        root.fill(&WHITE).map_err(draw_error)?;
-        let mut chart = ChartBuilder::on(&root)
-            .caption(axes.title, ("sans-serif", 18))
-            .margin(12)
-            .x_label_area_size(44)
-            .y_label_area_size(60)
+    svg(|root| {
+        let mut chart = frame(root, axes)
             .build_cartesian_2d(-0.3..(n as f64 - 0.7), y0..y1)
             .map_err(draw_error)?;
-        chart
-            .configure_mesh()
-            .x_desc(axes.x)
-            .y_desc(axes.y)
+        mesh!(chart, axes)
             .x_labels(n.clamp(1, 20))
-            .x_label_formatter(&|v| format!("{:.0}", v))
-            .label_style(("sans-serif", 13))
-            .axis_desc_style(("sans-serif", 14))
-            .light_line_style(RGBColor(235, 235, 235))
+            .x_label_formatter(&|v| format!("{v:.0}"))
             .draw()
             .map_err(draw_error)?;
         for (label, c, ys) in series {
@@ -240,21 +241,29 @@ pub(crate) fn steps(
                 .draw_series(LineSeries::new(pts.clone(), c.stroke_width(2)))
                 .map_err(draw_error)?
                 .label(label.as_str())
-                .legend(move |(x, y)| PathElement::new([(x, y), (x + 16, y)], c.stroke_width(2)));
+                .legend(line_mark(c));
             chart
                 .draw_series(pts.into_iter().map(|q| Circle::new(q, 4, c.filled())))
                 .map_err(draw_error)?;
         }
-        chart
-            .configure_series_labels()
-            .background_style(WHITE.mix(0.85))
-            .border_style(BLACK)
-            .position(SeriesLabelPosition::UpperRight)
-            .draw()
-            .map_err(draw_error)?;
-        root.present().map_err(draw_error)?;
+        legend!(chart, SeriesLabelPosition::UpperRight);
+        Ok(())
+    })
+}
+
+/// The range of positive `values` widened by 20 % each way (for a log
+/// axis); (1, 10) when there are none.
+fn log_range(values: impl Iterator<Item = f64>) -> (f64, f64) {
+    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+    for v in values.filter(|v| *v > 0.0 && v.is_finite()) {
+        lo = lo.min(v);
+        hi = hi.max(v);
     }
-    Ok(svg)
+    if lo.is_finite() && hi > lo {
+        (lo / 1.2, hi * 1.2)
+    } else {
+        (1.0, 10.0)
+    }
 }
 
 /// Curves on log-log axes (positive values only), one colour each (the
@@ -262,37 +271,15 @@ pub(crate) fn steps(
 pub(crate) fn log_curves(axes: &Axes, series: &[Points]) -> Result<String, ReportError> {
     let positive = |v: &&(f64, f64)| v.0 > 0.0 && v.1 > 0.0 && v.0.is_finite() && v.1.is_finite();
     let all = || series.iter().flat_map(|s| s.xy.iter().filter(positive));
-    let range = |vals: Vec<f64>| -> (f64, f64) {
-        let lo = vals.iter().copied().fold(f64::INFINITY, f64::min);
-        let hi = vals.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-        if lo.is_finite() && hi > lo {
-            (lo / 1.2, hi * 1.2)
-        } else {
-            (1.0, 10.0)
-        }
-    };
-    let (x0, x1) = range(all().map(|p| p.0).collect());
-    let (y0, y1) = range(all().map(|p| p.1).collect());
-    let mut svg = String::new();
-    {
-        let root = SVGBackend::with_string(&mut svg, SIZE).into_drawing_area();
-        root.fill(&WHITE).map_err(draw_error)?;
-        let mut chart = ChartBuilder::on(&root)
-            .caption(axes.title, ("sans-serif", 18))
-            .margin(12)
-            .x_label_area_size(44)
-            .y_label_area_size(70)
+    let (x0, x1) = log_range(all().map(|p| p.0));
+    let (y0, y1) = log_range(all().map(|p| p.1));
+    svg(|root| {
+        let mut chart = frame(root, axes)
             .build_cartesian_2d((x0..x1).log_scale(), (y0..y1).log_scale())
             .map_err(draw_error)?;
-        chart
-            .configure_mesh()
-            .x_desc(axes.x)
-            .y_desc(axes.y)
-            .label_style(("sans-serif", 13))
-            .axis_desc_style(("sans-serif", 14))
+        mesh!(chart, axes)
             .x_label_formatter(&|v| format!("{v:.0e}"))
             .y_label_formatter(&|v| format!("{v:.0e}"))
-            .light_line_style(RGBColor(235, 235, 235))
             .draw()
             .map_err(draw_error)?;
         for s in series {
@@ -302,18 +289,11 @@ pub(crate) fn log_curves(axes: &Axes, series: &[Points]) -> Result<String, Repor
                 .draw_series(LineSeries::new(pts, c.stroke_width(2)))
                 .map_err(draw_error)?
                 .label(s.label.as_str())
-                .legend(move |(x, y)| PathElement::new([(x, y), (x + 16, y)], c.stroke_width(2)));
+                .legend(line_mark(c));
         }
-        chart
-            .configure_series_labels()
-            .background_style(WHITE.mix(0.85))
-            .border_style(BLACK)
-            .position(SeriesLabelPosition::LowerLeft)
-            .draw()
-            .map_err(draw_error)?;
-        root.present().map_err(draw_error)?;
-    }
-    Ok(svg)
+        legend!(chart, SeriesLabelPosition::LowerLeft);
+        Ok(())
+    })
 }
 
 /// A grid of cells coloured by value (white at 0 to dark blue at the
@@ -328,32 +308,20 @@ pub(crate) fn heatmap(
     let max = cells.iter().flatten().copied().fold(0.0f64, f64::max);
     let (x0, x1) = (x_edges[0], x_edges[x_edges.len() - 1]);
     let (y0, y1) = (y_edges[0], y_edges[y_edges.len() - 1]);
-    let mut svg = String::new();
-    {
-        let root = SVGBackend::with_string(&mut svg, SIZE).into_drawing_area();
-        root.fill(&WHITE).map_err(draw_error)?;
-        let mut chart = ChartBuilder::on(&root)
-            .caption(axes.title, ("sans-serif", 18))
-            .margin(12)
-            .x_label_area_size(44)
-            .y_label_area_size(60)
+    let shade = |v: f64| {
+        // sqrt: the maps' energy is concentrated; the tails stay visible.
+        let t = if max > 0.0 { (v / max).sqrt() } else { 0.0 };
+        let mix = |a: f64, b: f64| (a + (b - a) * t).round() as u8;
+        RGBColor(mix(255.0, 20.0), mix(255.0, 50.0), mix(255.0, 120.0))
+    };
+    svg(|root| {
+        let mut chart = frame(root, axes)
             .build_cartesian_2d(x0..x1, y0..y1)
             .map_err(draw_error)?;
-        chart
-            .configure_mesh()
-            .x_desc(axes.x)
-            .y_desc(axes.y)
-            .label_style(("sans-serif", 13))
-            .axis_desc_style(("sans-serif", 14))
+        mesh!(chart, axes)
             .disable_mesh()
             .draw()
             .map_err(draw_error)?;
-        let shade = |v: f64| {
-            // sqrt: the maps' energy is concentrated; the tails stay visible.
-            let t = if max > 0.0 { (v / max).sqrt() } else { 0.0 };
-            let mix = |a: f64, b: f64| (a + (b - a) * t).round() as u8;
-            RGBColor(mix(255.0, 20.0), mix(255.0, 50.0), mix(255.0, 120.0))
-        };
         chart
             .draw_series(cells.iter().enumerate().flat_map(|(i, col)| {
                 col.iter()
@@ -367,9 +335,8 @@ pub(crate) fn heatmap(
                     })
             }))
             .map_err(draw_error)?;
-        root.present().map_err(draw_error)?;
-    }
-    Ok(svg)
+        Ok(())
+    })
 }
 
 /// Curves on a linear x and a logarithmic y axis (`log_y`) or linear y, one
@@ -389,81 +356,48 @@ pub(crate) fn curves_with_marks(
             .flat_map(|s| s.xy.iter().filter(ok))
     };
     let (x0, x1) = padded(all().map(|p| p.0), false);
-    let mut svg = String::new();
-    {
-        let root = SVGBackend::with_string(&mut svg, SIZE).into_drawing_area();
-        root.fill(&WHITE).map_err(draw_error)?;
-        let mut builder = ChartBuilder::on(&root);
-        builder
-            .caption(axes.title, ("sans-serif", 18))
-            .margin(12)
-            .x_label_area_size(44)
-            .y_label_area_size(70);
-        macro_rules! draw {
-            ($chart:expr) => {{
-                let mut chart = $chart;
+    macro_rules! draw {
+        ($chart:expr) => {{
+            let mut chart = $chart;
+            mesh!(chart, axes).draw().map_err(draw_error)?;
+            for s in curves {
+                let c = color(Some(s.color));
+                let pts: Vec<(f64, f64)> = s.xy.iter().filter(ok).copied().collect();
                 chart
-                    .configure_mesh()
-                    .x_desc(axes.x)
-                    .y_desc(axes.y)
-                    .label_style(("sans-serif", 13))
-                    .axis_desc_style(("sans-serif", 14))
-                    .light_line_style(RGBColor(235, 235, 235))
-                    .draw()
-                    .map_err(draw_error)?;
-                for s in curves {
-                    let c = color(Some(s.color));
-                    let pts: Vec<(f64, f64)> = s.xy.iter().filter(ok).copied().collect();
-                    chart
-                        .draw_series(LineSeries::new(pts, c.stroke_width(2)))
-                        .map_err(draw_error)?
-                        .label(s.label.as_str())
-                        .legend(move |(x, y)| {
-                            PathElement::new([(x, y), (x + 16, y)], c.stroke_width(2))
-                        });
-                }
-                for s in marks {
-                    let c = color(Some(s.color));
-                    chart
-                        .draw_series(
-                            s.xy.iter()
-                                .filter(ok)
-                                .map(|&q| Circle::new(q, 3, c.stroke_width(1))),
-                        )
-                        .map_err(draw_error)?;
-                }
+                    .draw_series(LineSeries::new(pts, c.stroke_width(2)))
+                    .map_err(draw_error)?
+                    .label(s.label.as_str())
+                    .legend(line_mark(c));
+            }
+            for s in marks {
+                let c = color(Some(s.color));
                 chart
-                    .configure_series_labels()
-                    .background_style(WHITE.mix(0.85))
-                    .border_style(BLACK)
-                    .position(SeriesLabelPosition::UpperRight)
-                    .draw()
+                    .draw_series(
+                        s.xy.iter()
+                            .filter(ok)
+                            .map(|&q| Circle::new(q, 3, c.stroke_width(1))),
+                    )
                     .map_err(draw_error)?;
-            }};
-        }
+            }
+            legend!(chart, SeriesLabelPosition::UpperRight);
+        }};
+    }
+    svg(|root| {
         if log_y {
-            let ys: Vec<f64> = all().map(|p| p.1).collect();
-            let lo = ys.iter().copied().fold(f64::INFINITY, f64::min);
-            let hi = ys.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-            let (y0, y1) = if lo.is_finite() && hi > lo {
-                (lo / 1.3, hi * 1.3)
-            } else {
-                (1.0, 10.0)
-            };
+            let (y0, y1) = log_range(all().map(|p| p.1));
             draw!(
-                builder
+                frame(root, axes)
                     .build_cartesian_2d(x0..x1, (y0..y1).log_scale())
                     .map_err(draw_error)?
             );
         } else {
             let (y0, y1) = padded(all().map(|p| p.1), false);
             draw!(
-                builder
+                frame(root, axes)
                     .build_cartesian_2d(x0..x1, y0..y1)
                     .map_err(draw_error)?
             );
         }
-        root.present().map_err(draw_error)?;
-    }
-    Ok(svg)
+        Ok(())
+    })
 }
