@@ -38,7 +38,9 @@ pub(crate) struct ProcessArgs {
     allow_external_paths: bool,
     /// After a commit that changed the dataset, also refit the models
     /// (`fit`: DATASET/models/STAMP/) and rerun the gap diagnosis (`gap`:
-    /// DATASET/gap/STAMP/), STAMP being the UTC time (YYYY-MM-DDTHHMMZ).
+    /// DATASET/gap/STAMP/) and write the HTML report (`report`:
+    /// DATASET/report/STAMP/report.html, from the newest models and gap),
+    /// STAMP being the UTC time (YYYY-MM-DDTHHMMZ).
     #[arg(long, value_delimiter = ',', value_enum)]
     then: Vec<Then>,
 }
@@ -48,6 +50,7 @@ pub(crate) struct ProcessArgs {
 pub(crate) enum Then {
     Fit,
     Gap,
+    Report,
 }
 
 /// `K/N` with 1 <= K <= N, as (K - 1, N).
@@ -211,6 +214,11 @@ fn then_steps(opts: &ProcessOptions, steps: &[Then]) -> Result<()> {
             &settings,
             &opts.dataset.join("gap").join(&stamp),
         )?;
+    }
+    if steps.contains(&Then::Report) {
+        println!();
+        let dir = opts.dataset.join("report").join(&stamp);
+        super::report::run_report(&opts.dataset, &dir.join("report.html"), None)?;
     }
     Ok(())
 }

@@ -251,6 +251,12 @@ pub fn write_report(
 ) -> Result<ReportSummary, ReportError> {
     let inputs = Inputs::read(dir, bench)?;
     let (page, sections) = render(&inputs)?;
+    if let Some(parent) = out.parent().filter(|p| !p.as_os_str().is_empty()) {
+        std::fs::create_dir_all(parent).map_err(|source| ReportError::Io {
+            path: parent.into(),
+            source,
+        })?;
+    }
     crate::atomic::write_bytes(out, page.as_bytes()).map_err(|source| ReportError::Io {
         path: out.into(),
         source,
