@@ -1105,6 +1105,10 @@ fn short(v: f64) -> String {
     }
 }
 
+/// Flagged slices drawn in the gap's bar chart, and traced in its shrink chart.
+const SHOWN_SLICES: usize = 12;
+const SHRINK_SLICES: usize = 5;
+
 fn f(v: &Value) -> f64 {
     v.as_f64().unwrap_or(f64::NAN)
 }
@@ -1134,7 +1138,10 @@ pub(super) fn gap(inputs: &Inputs) -> Result<Section, ReportError> {
         html += "<p>No slice of the season differs from the rest beyond chance: the \
 model's residuals show no place where it and the measurements disagree.</p>\n";
     } else {
-        let bars: Vec<Bar> = slices
+        // A strong effect flags hundreds of overlapping slices: the first
+        // ones in the diagnosis's order are drawn, all are in the CSV.
+        let shown = &slices[..slices.len().min(SHOWN_SLICES)];
+        let bars: Vec<Bar> = shown
             .iter()
             .map(|s| {
                 let ci = s["ci_pct"].as_array();
@@ -1167,21 +1174,35 @@ model's residuals show no place where it and the measurements disagree.</p>\n";
                 ]
             })
             .collect();
+        let header = [
+            "#",
+            "slice",
+            "n",
+            "mean residual (%)",
+            "difference (%)",
+            "p adj.",
+        ];
         html += &fig(
             &svg,
-            "Flagged slices: how much more (or less) the tires of each slice wear than the \
-model predicts, against the rest of the season (difference of mean residuals, % of the \
-new tread), with its 95 % interval; the slices are numbered as in the table.",
-            &table(
-                &[
-                    "#",
-                    "slice",
-                    "n",
-                    "mean residual (%)",
-                    "difference (%)",
-                    "p adj.",
-                ],
-                &rows,
+            &format!(
+                "Flagged slices: how much more (or less) the tires of each slice wear than \
+the model predicts, against the rest of the season (difference of mean residuals, % of \
+the new tread), with its 95 % interval; the slices are numbered as in the table. {} \
+slices flagged{}.",
+                slices.len(),
+                if slices.len() > shown.len() {
+                    format!(
+                        "; the first {} in the diagnosis's order are drawn, all are in the CSV",
+                        shown.len()
+                    )
+                } else {
+                    String::new()
+                }
+            ),
+            &format!(
+                "{}{}",
+                table(&header, &rows[..shown.len()]),
+                csv_link("flagged_slices.csv", &header, &rows)
             ),
         );
         figures += 1;
@@ -1211,37 +1232,53 @@ new tread), with its 95 % interval; the slices are numbered as in the table.",
     if !steps.is_empty() {
         let series =
             |key: &str| -> Vec<f64> { steps.iter().map(|s| f(&s[key]["rmse_pct"])).collect() };
+        // Inside each flagged slice too (numbered as in the slices' table).
+        let in_slice = |k: usize| -> Vec<f64> {
+            steps
+                .iter()
+                .map(|s| f(&s["slices"][k]["rmse_pct"]))
+                .collect()
+        };
+        let mut lines = vec![
+            ("training".to_string(), 0, series("training")),
+            ("testing".to_string(), 1, series("testing")),
+        ];
+        let traced = slices.len().min(SHRINK_SLICES);
+        lines.extend((0..traced).map(|k| (format!("slice {}", k + 1), k + 2, in_slice(k))));
         let svg = figure::steps(
             &Axes {
                 title: "How far the gap shrinks",
                 x: "step (0: baseline; then each added term)",
                 y: "RMSE (% of new tread)",
             },
-            &[
-                ("training".into(), 0, series("training")),
-                ("testing".into(), 1, series("testing")),
-            ],
+            &lines,
         )?;
+        let header: Vec<String> = ["step", "added", "training RMSE (%)", "testing RMSE (%)"]
+            .into_iter()
+            .map(String::from)
+            .chain((0..traced).map(|k| format!("slice {} RMSE (%)", k + 1)))
+            .collect();
         let rows: Vec<Vec<String>> = steps
             .iter()
             .enumerate()
             .map(|(i, s)| {
-                vec![
+                let mut row = vec![
                     i.to_string(),
                     s["added"].as_str().unwrap_or("").to_string(),
                     num(f(&s["training"]["rmse_pct"]), 3),
                     num(f(&s["testing"]["rmse_pct"]), 3),
-                ]
+                ];
+                row.extend((0..traced).map(|k| num(f(&s["slices"][k]["rmse_pct"]), 3)));
+                row
             })
             .collect();
+        let header: Vec<&str> = header.iter().map(String::as_str).collect();
         html += &fig(
             &svg,
             "Shrink table: the RMSE of the baseline, then after each term the selection \
-added, on the training and the testing events.",
-            &table(
-                &["step", "added", "training RMSE (%)", "testing RMSE (%)"],
-                &rows,
-            ),
+added, on the training and the testing events and inside the first flagged slices \
+(numbered as in the slices' table).",
+            &table(&header, &rows),
         );
         figures += 1;
     }
