@@ -251,6 +251,27 @@ pub(crate) fn steps(
     })
 }
 
+/// A tick label: three significant digits, in exponent form when far
+/// from 1.
+fn tick(v: f64) -> String {
+    if v == 0.0 {
+        "0".into()
+    } else if !(1e-3..1e5).contains(&v.abs()) {
+        format!("{v:.1e}")
+    } else {
+        let s = format!(
+            "{:.*}",
+            (2 - v.abs().log10().floor() as i64).max(0) as usize,
+            v
+        );
+        if s.contains('.') {
+            s.trim_end_matches('0').trim_end_matches('.').to_string()
+        } else {
+            s
+        }
+    }
+}
+
 /// The range of positive `values` widened by 20 % each way (for a log
 /// axis); (1, 10) when there are none.
 fn log_range(values: impl Iterator<Item = f64>) -> (f64, f64) {
@@ -359,7 +380,10 @@ pub(crate) fn curves_with_marks(
     macro_rules! draw {
         ($chart:expr) => {{
             let mut chart = $chart;
-            mesh!(chart, axes).draw().map_err(draw_error)?;
+            mesh!(chart, axes)
+                .y_label_formatter(&|v| tick(*v))
+                .draw()
+                .map_err(draw_error)?;
             for s in curves {
                 let c = color(Some(s.color));
                 let pts: Vec<(f64, f64)> = s.xy.iter().filter(ok).copied().collect();
@@ -384,7 +408,10 @@ pub(crate) fn curves_with_marks(
     }
     svg(|root| {
         if log_y {
+            // Six decades at most: a training error that falls to rounding
+            // would squash everything else.
             let (y0, y1) = log_range(all().map(|p| p.1));
+            let y0 = y0.max(y1 * 1e-6);
             draw!(
                 frame(root, axes)
                     .build_cartesian_2d(x0..x1, (y0..y1).log_scale())

@@ -793,10 +793,11 @@ fn slopes_and_skewness(
     Ok((svg_t, svg_s, rows))
 }
 
-/// The figure a method adds about itself: PCA's explained variance per
-/// component, the network's validation error against its second hidden
-/// layer's width (the search that chose it).
-fn model_details(m: &crate::model::saved::SavedModel) -> Result<Option<String>, ReportError> {
+/// The figures a method adds about itself: PCA's explained variance per
+/// component; the network's training curve and its validation error
+/// against the second hidden layer's width (the search that chose it).
+/// Returns the HTML and how many figures.
+fn model_details(m: &crate::model::saved::SavedModel) -> Result<(String, usize), ReportError> {
     use crate::model::saved::ModelBody;
     match &m.model {
         ModelBody::Pca { pca, .. } => {
@@ -834,28 +835,31 @@ fn model_details(m: &crate::model::saved::SavedModel) -> Result<Option<String>, 
                     ]
                 })
                 .collect();
-            Ok(Some(fig(
-                &svg,
-                &format!(
-                    "PCA of the {} standardised inputs: each component's share of their \
+            Ok((
+                fig(
+                    &svg,
+                    &format!(
+                        "PCA of the {} standardised inputs: each component's share of their \
 variance (eigenvalue of the correlation matrix over their sum, eq. 4); the {} kept \
 components (blue) explain {} %, the regression uses their scores.",
-                    pca.inputs.len(),
-                    pca.kept,
-                    num(100.0 * kept, 1)
+                        pca.inputs.len(),
+                        pca.kept,
+                        num(100.0 * kept, 1)
+                    ),
+                    &csv_link(
+                        "pca_explained_variance.csv",
+                        &[
+                            "component",
+                            "eigenvalue",
+                            "share_pct",
+                            "cumulative_pct",
+                            "kept",
+                        ],
+                        &rows,
+                    ),
                 ),
-                &csv_link(
-                    "pca_explained_variance.csv",
-                    &[
-                        "component",
-                        "eigenvalue",
-                        "share_pct",
-                        "cumulative_pct",
-                        "kept",
-                    ],
-                    &rows,
-                ),
-            )))
+                1,
+            ))
         }
         ModelBody::Ffnn { network, .. } => {
             let xy: Vec<(f64, f64)> = network
@@ -883,18 +887,74 @@ components (blue) explain {} %, the regression uses their scores.",
                 }],
                 false,
             )?;
-            Ok(Some(fig(
-                &svg,
+            let net = &network.net;
+            let epochs = |k: usize| -> Vec<(f64, f64)> {
+                net.curve
+                    .iter()
+                    .enumerate()
+                    .map(|(e, c)| ((e + 1) as f64, if k == 0 { c.0 } else { c.1 }))
+                    .collect()
+            };
+            let best: Vec<(f64, f64)> = net
+                .curve
+                .get(net.best_epoch.saturating_sub(1))
+                .map(|c| vec![(net.best_epoch as f64, c.1)])
+                .unwrap_or_default();
+            let curve = figure::curves_with_marks(
+                &Axes {
+                    title: "Network: training curve (Levenberg–Marquardt)",
+                    x: "epoch",
+                    y: "MSE (normalised units)",
+                },
+                &[
+                    Points {
+                        label: "training".into(),
+                        color: 0,
+                        xy: epochs(0),
+                        filled: false,
+                    },
+                    Points {
+                        label: "validation".into(),
+                        color: 1,
+                        xy: epochs(1),
+                        filled: false,
+                    },
+                ],
+                &[Points {
+                    label: String::new(),
+                    color: 1,
+                    xy: best,
+                    filled: false,
+                }],
+                true,
+            )?;
+            let training_curve = fig(
+                &curve,
                 &format!(
-                    "The network's width search: the validation error (MSE of the normalised \
-wear on the {} validation rows) of each second-layer width tried; the chosen network has {} \
-and {} neurons.",
-                    network.validation_rows, network.net.hidden1, network.net.hidden2
+                    "The chosen network's training: the mean squared error of the normalised \
+wear on the training and the validation rows after each Levenberg–Marquardt epoch (log \
+axis over six decades: a training error below runs along its floor); training stopped when the validation error had not improved for a while, and the \
+weights of epoch {} (circled, the lowest validation error) were kept.",
+                    net.best_epoch
                 ),
                 "",
-            )))
+            );
+            Ok((
+                training_curve
+                    + &fig(
+                        &svg,
+                        &format!(
+                            "The network's width search: the validation error (MSE of the normalised \
+wear on the {} validation rows) of each second-layer width tried; the chosen network has {} \
+and {} neurons.",
+                            network.validation_rows, network.net.hidden1, network.net.hidden2
+                        ),
+                        "",
+                    ),
+                2,
+            ))
         }
-        ModelBody::Physical { .. } => Ok(None),
+        ModelBody::Physical { .. } => Ok((String::new(), 0)),
     }
 }
 
@@ -1060,10 +1120,9 @@ line. Training R² {} RMSE {} %, testing R² {} RMSE {} %.",
             ),
         );
         figures += 1;
-        if let Some(extra) = model_details(m)? {
-            html += &extra;
-            figures += 1;
-        }
+        let (extra, n) = model_details(m)?;
+        html += &extra;
+        figures += n;
         summary.push(vec![
             method.to_string(),
             train.len().to_string(),
