@@ -288,8 +288,14 @@ fn log_range(values: impl Iterator<Item = f64>) -> (f64, f64) {
 }
 
 /// Curves on log-log axes (positive values only), one colour each (the
-/// points' `filled` is not used).
-pub(crate) fn log_curves(axes: &Axes, series: &[Points]) -> Result<String, ReportError> {
+/// points' `filled` is not used), with fitted lines over them drawn broad
+/// and translucent in their curve's colour.
+pub(crate) fn log_curves(
+    axes: &Axes,
+    series: &[Points],
+    fits: &[Segment],
+    legend_right: bool,
+) -> Result<String, ReportError> {
     let positive = |v: &&(f64, f64)| v.0 > 0.0 && v.1 > 0.0 && v.0.is_finite() && v.1.is_finite();
     let all = || series.iter().flat_map(|s| s.xy.iter().filter(positive));
     let (x0, x1) = log_range(all().map(|p| p.0));
@@ -312,7 +318,17 @@ pub(crate) fn log_curves(axes: &Axes, series: &[Points]) -> Result<String, Repor
                 .label(s.label.as_str())
                 .legend(line_mark(c));
         }
-        legend!(chart, SeriesLabelPosition::LowerLeft);
+        for l in fits.iter().filter(|l| l.from.1 > 0.0 && l.to.1 > 0.0) {
+            let c = color(l.color).mix(0.45);
+            chart
+                .draw_series(LineSeries::new([l.from, l.to], c.stroke_width(6)))
+                .map_err(draw_error)?;
+        }
+        if legend_right {
+            legend!(chart, SeriesLabelPosition::LowerRight);
+        } else {
+            legend!(chart, SeriesLabelPosition::LowerLeft);
+        }
         Ok(())
     })
 }

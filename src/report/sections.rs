@@ -133,6 +133,48 @@ fn track_curve(inputs: &Inputs, track: &str, curve: &str) -> Vec<(f64, f64)> {
         .collect()
 }
 
+/// The fitted Hurst line of one track's curve: slope −(1 + 2H) on the PSD
+/// over the wavenumbers of [`HURST_BAND_MM`](crate::kpi::road::HURST_BAND_MM),
+/// 2H on the HDC over its lags (as `kpi::road` fits them), through the
+/// curve's points in that band (least squares for the intercept in log-log).
+fn hurst_line(inputs: &Inputs, track: &str, curve: &str, s: &Points) -> Option<Segment> {
+    use crate::kpi::road::HURST_BAND_MM;
+    let row = inputs.rows.iter().find(|r| r.track == track)?;
+    let (lo, hi, slope) = if curve == "psd" {
+        let tau = std::f64::consts::TAU;
+        (
+            tau / HURST_BAND_MM.1,
+            tau / HURST_BAND_MM.0,
+            -(1.0 + 2.0 * row.hurst),
+        )
+    } else {
+        (
+            HURST_BAND_MM.0 / 10.0,
+            HURST_BAND_MM.1 / 10.0,
+            2.0 * row.hurst_hdc,
+        )
+    };
+    let logs: Vec<(f64, f64)> =
+        s.xy.iter()
+            .filter(|p| p.0 >= lo && p.0 <= hi && p.1 > 0.0)
+            .map(|p| (p.0.ln(), p.1.ln()))
+            .collect();
+    if logs.len() < 2 || !slope.is_finite() {
+        return None;
+    }
+    let n = logs.len() as f64;
+    let a = logs.iter().map(|p| p.1 - slope * p.0).sum::<f64>() / n;
+    let (x0, x1) = (
+        logs.iter().map(|p| p.0).fold(f64::INFINITY, f64::min),
+        logs.iter().map(|p| p.0).fold(f64::NEG_INFINITY, f64::max),
+    );
+    Some(Segment {
+        color: Some(s.color),
+        from: (x0.exp(), (a + slope * x0).exp()),
+        to: (x1.exp(), (a + slope * x1).exp()),
+    })
+}
+
 /// The road section (table 3): the tracks' road texture, PSD and height-difference
 /// correlation on log-log axes, and their roughness indices.
 pub(super) fn road(inputs: &Inputs) -> Result<Section, ReportError> {
@@ -150,8 +192,8 @@ pub(super) fn road(inputs: &Inputs) -> Result<Section, ReportError> {
                 "wavenumber q (rad/mm)",
                 "C(q) (mm⁴)",
                 "the 1-D power spectral density of the road profile (Welch), mean over the \
-track's measured locations; the slope of its self-affine part is −(1 + 2H), H the Hurst \
-exponent in the legend",
+track's measured locations; the broad translucent lines have the fitted slope −(1 + 2H) \
+over the band the Hurst exponent H (legend) is fitted on, wavelengths 0.1–5 mm",
             ),
             (
                 "hdc",
@@ -159,7 +201,8 @@ exponent in the legend",
                 "lag (mm)",
                 "C_HDC (mm²)",
                 "the height-difference correlation ⟨(z(x + λ) − z(x))²⟩ against the lag λ, \
-mean over the track's locations; its slope on log-log axes is 2H",
+mean over the track's locations; the broad translucent lines have the fitted slope 2H \
+over the lags 0.01–0.5 mm that H (legend) is fitted on",
             ),
         ] {
             let series: Vec<Points> = tracks
@@ -183,7 +226,14 @@ mean over the track's locations; its slope on log-log axes is 2H",
                 })
                 .filter(|s| !s.xy.is_empty())
                 .collect();
-            let svg = figure::log_curves(&Axes { title, x, y }, &series)?;
+            // A curve's colour is its track's index.
+            let fits: Vec<Segment> = series
+                .iter()
+                .filter_map(|s| hurst_line(inputs, &tracks[s.color], curve, s))
+                .collect();
+            // The PSD falls to the right, the HDC rises: the legend goes where
+            // the curves are not.
+            let svg = figure::log_curves(&Axes { title, x, y }, &series, &fits, curve == "hdc")?;
             let csv: Vec<Vec<String>> = inputs
                 .road
                 .iter()
