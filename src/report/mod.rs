@@ -293,6 +293,36 @@ mod tests {
     }
 
     #[test]
+    fn a_malformed_gap_file_renders_without_panicking() {
+        // Slices with an empty or missing interval, non-numeric fields,
+        // steps without slices, terms without their parts: every figure is
+        // still drawn, missing numbers shown as "–".
+        let inputs = Inputs {
+            dir: "season".into(),
+            rows: Vec::new(),
+            extraction: None,
+            models: Vec::new(),
+            gap: Some(serde_json::json!({
+                "slices": [
+                    {"name": "a", "n": 3, "difference_pct": 1.0, "ci_pct": []},
+                    {"name": 7, "difference_pct": "x"}
+                ],
+                "candidates": [{"name": null}],
+                "steps": [{"added": "baseline"}, {"added": "t", "training": {"rmse_pct": 1.0}}],
+                "terms_wear": [{"run": "r", "wheel": "FL", "by_term_pct": []}],
+                "final_terms": []
+            })),
+            road: Vec::new(),
+            maps: Default::default(),
+            compounds: Vec::new(),
+            bench: None,
+        };
+        let s = sections::gap(&inputs).unwrap();
+        assert_eq!(s.figures, 2, "the slices' bars and the shrink chart");
+        assert!(s.html.contains("<td class=\"n\">–</td>"));
+    }
+
+    #[test]
     fn a_process_summary_lists_its_failed_runs() {
         let inputs = Inputs {
             dir: "season".into(),

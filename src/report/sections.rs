@@ -620,13 +620,8 @@ pub(crate) fn line_fit(xy: &[(f64, f64)]) -> Option<(f64, f64, f64)> {
 
 /// The physical-correlations section (paper 4.3): mean wear against total friction energy, per track and axle.
 pub(super) fn physical(inputs: &Inputs) -> Result<Section, ReportError> {
-    let tracks: Vec<&str> = inputs
-        .rows
-        .iter()
-        .map(|r| r.track.as_str())
-        .collect::<BTreeSet<_>>()
-        .into_iter()
-        .collect();
+    let names = track_names(inputs);
+    let tracks: Vec<&str> = names.iter().map(String::as_str).collect();
     let mut html = String::from(
         "<p>Each mark is one tire and run: its mean wear (% of the new tread depth) \
 against its total friction energy E = ∫ |F·v_s| dt (MJ), one colour per track, with \
@@ -878,7 +873,8 @@ fn model_details(m: &crate::model::saved::SavedModel) -> Result<(String, usize),
                     let cumulative: f64 = pca.proportions[..=i].iter().sum();
                     vec![
                         format!("PC{}", i + 1),
-                        num(pca.eigenvalues[i], 3),
+                        // A hand-edited file may hold fewer: "–", not a panic.
+                        num(pca.eigenvalues.get(i).copied().unwrap_or(f64::NAN), 3),
                         num(100.0 * p, 2),
                         num(100.0 * cumulative, 2),
                         (i < pca.kept).to_string(),
@@ -1065,17 +1061,13 @@ over the most any track has; the paper weights by R1 and drops tracks of low R2 
     )
 }
 
-/// R² and RMSE of (measured, predicted) pairs.
+/// R² and RMSE of (measured, predicted) pairs, by the models' own
+/// indicators (`model::metrics`); NaN where they are undefined (too few
+/// pairs).
 pub(crate) fn fit_quality(pairs: &[(f64, f64)]) -> (f64, f64) {
-    let n = pairs.len() as f64;
-    if pairs.is_empty() {
-        return (f64::NAN, f64::NAN);
-    }
-    let mean = pairs.iter().map(|p| p.0).sum::<f64>() / n;
-    let sse: f64 = pairs.iter().map(|p| (p.0 - p.1).powi(2)).sum();
-    let sst: f64 = pairs.iter().map(|p| (p.0 - mean).powi(2)).sum();
-    let r2 = if sst > 0.0 { 1.0 - sse / sst } else { f64::NAN };
-    (r2, (sse / n).sqrt())
+    let (measured, predicted): (Vec<f64>, Vec<f64>) = pairs.iter().copied().unzip();
+    crate::model::metrics::metrics(&measured, &predicted, 0)
+        .map_or((f64::NAN, f64::NAN), |m| (m.r2, m.rmse))
 }
 
 /// The models section (tables 8, 9, 11): each fitted model's predictions against the
@@ -1253,10 +1245,14 @@ model's residuals show no place where it and the measurements disagree.</p>\n";
         let bars: Vec<Bar> = shown
             .iter()
             .map(|s| {
-                let ci = s["ci_pct"].as_array();
+                // Value indexing gives Null (NaN here) for a short or
+                // missing interval, where Vec indexing would panic.
+                let ci = s["ci_pct"].as_array().map(|_| &s["ci_pct"]);
                 Bar {
                     value: f(&s["difference_pct"]),
-                    interval: ci.map(|c| (f(&c[0]), f(&c[1]))),
+                    interval: ci
+                        .map(|c| (f(&c[0]), f(&c[1])))
+                        .filter(|(lo, hi)| lo.is_finite() && hi.is_finite()),
                     color: None,
                 }
             })
