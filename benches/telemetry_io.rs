@@ -26,6 +26,7 @@ fn bench(c: &mut Criterion) {
             rate_hz: Some(if small { 20.0 } else { 200.0 }),
             out: out.clone(),
             sensor_noise: true,
+            logger_export: None,
             progress: false,
         };
         let summary = simulate(&opts).unwrap();
@@ -73,6 +74,7 @@ fn bench_extract(c: &mut Criterion) {
         rate_hz: None,
         out: season.clone(),
         sensor_noise: true,
+        logger_export: None,
         progress: false,
     })
     .unwrap();

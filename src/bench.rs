@@ -491,6 +491,7 @@ impl BenchSeason {
             rate_hz: self.rate_hz,
             out: out.to_path_buf(),
             sensor_noise: true,
+            logger_export: None,
             progress: false,
         }
     }

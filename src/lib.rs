@@ -9,6 +9,7 @@ pub mod bench;
 pub mod engine;
 pub mod gap;
 pub mod gpu;
+pub mod import;
 pub mod ingest;
 pub mod kpi;
 pub mod model;

@@ -19,7 +19,8 @@ use clap::{Parser, Subcommand};
     long_about,
     after_help = "Exit codes: 0 done; 1 an error stopped the command (it names the file, \
 record and what was wrong); 2 bad command line; 3 extract wrote its outputs but skipped \
-some runs (listed, and in NAME.report.json), or process committed all runs but some that \
+some runs (listed, and in NAME.report.json), import imported some logs but not all (listed), \
+or process committed all runs but some that \
 failed (listed, and in DATASET/summary.json); 4 process found the dataset locked by another \
 process; 101 internal error (a bug, please report). \
 See docs/reliability.md."
@@ -54,6 +55,15 @@ enum Command {
     /// (Slurm, Kubernetes; docs/nightly.md). Exit 3: some runs failed, the
     /// rest committed; exit 4: another process holds the dataset.
     Process(cli::process::ProcessArgs),
+    /// Import real logger data into a season archive: MoTeC `.ld`, MoTeC
+    /// CSV exports, generic CSV or Parquet with a time column. Channels are
+    /// named through a channel map (a shipped default knows MoTeC, ACC and
+    /// iRacing spellings), put on one time base, and what loggers do not
+    /// record (wheel loads, forces, wheel-centre and sliding velocities) is
+    /// estimated from a vehicle description (car.toml) and marked as
+    /// estimated (docs/import.md). Exit 3: some logs failed, the rest were
+    /// imported.
+    Import(cli::import::ImportArgs),
     /// Fit wear models on a KPI database: the feed-forward network (LM),
     /// PCA + regression and the physical correlations + regression per axle,
     /// trained on some events and tested on others. Prints the paper's
@@ -140,6 +150,11 @@ fn run() -> Result<std::process::ExitCode> {
             }
             cli::process::Outcome::Locked => return Ok(std::process::ExitCode::from(EXIT_LOCKED)),
         },
+        Command::Import(a) => {
+            if !cli::import::run(a)? {
+                return Ok(std::process::ExitCode::from(EXIT_RUNS_SKIPPED));
+            }
+        }
         Command::Fit(a) => cli::fit::run(a)?,
         Command::Predict(a) => cli::predict::run(a)?,
         Command::Gap(a) => cli::gap::run(a, progress)?,

@@ -21,6 +21,7 @@ fn sim(out: &Path, preset: Preset, rate: f64) {
         rate_hz: Some(rate),
         out: out.to_path_buf(),
         sensor_noise: true,
+        logger_export: None,
         progress: false,
     })
     .unwrap();
@@ -476,6 +477,7 @@ fn bench_decode_lines_measure_a_given_season() {
         rate_hz: Some(10.0),
         out: season.clone(),
         sensor_noise: false,
+        logger_export: None,
         progress: false,
     })
     .unwrap();

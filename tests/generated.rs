@@ -40,6 +40,7 @@ fn simulate_with(out: &Path, g: GeneratedEffect) -> (Vec<TruthRow>, GeneratedEff
         rate_hz: Some(20.0),
         out: out.to_path_buf(),
         sensor_noise: false,
+        logger_export: None,
         progress: false,
     })
     .unwrap();

@@ -88,6 +88,7 @@ fn findings(seed: u64) -> Findings {
         rate_hz: Some(5.0), // the findings do not need 20 Hz; keeps the test quick
         out: dir.path().to_path_buf(),
         sensor_noise: true,
+        logger_export: None,
         progress: false,
     })
     .unwrap();

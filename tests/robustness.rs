@@ -441,6 +441,7 @@ fn mutated_manifests_compounds_roads_and_wear_never_panic() {
         rate_hz: Some(5.0),
         out: season_dir.clone(),
         sensor_noise: true,
+        logger_export: None,
         progress: false,
     })
     .unwrap();

@@ -22,6 +22,7 @@ fn sim(out: &Path, seed: u64, encoding: Encoding, noise: bool, effects: Vec<Effe
         rate_hz: None,
         out: out.to_path_buf(),
         sensor_noise: noise,
+        logger_export: None,
         progress: false,
     };
     let s = simulate(&opts).unwrap();

@@ -39,6 +39,7 @@ pub(crate) fn run(a: DemoArgs, progress: bool) -> Result<()> {
         rate_hz: None,
         out: out.clone(),
         sensor_noise: true,
+        logger_export: None,
         progress,
     };
     let s = run_simulation(&opts)?;

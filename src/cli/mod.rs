@@ -8,6 +8,7 @@ pub(crate) mod demo;
 pub(crate) mod extract;
 pub(crate) mod fit;
 pub(crate) mod gap;
+pub(crate) mod import;
 pub(crate) mod predict;
 pub(crate) mod process;
 pub(crate) mod report;

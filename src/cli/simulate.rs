@@ -46,6 +46,13 @@ pub(crate) struct SimulateArgs {
     /// Ideal sensors: no measurement noise and no logger dropouts.
     #[arg(long)]
     no_noise: bool,
+    /// Also write each run as a race logger would have recorded it, in
+    /// OUT/logger/ (only channels real loggers have: speed, accelerations,
+    /// yaw rate, body slip, steering, wheel speeds, IR tyre temperatures,
+    /// TPMS), with OUT/logger/CAR.car.toml per car: the input of `tirewear
+    /// import` with a known answer (docs/import.md).
+    #[arg(long, value_enum, value_name = "FORMAT")]
+    logger_export: Option<LoggerFormatArg>,
     /// Output folder (created; files in it are replaced).
     #[arg(long)]
     out: PathBuf,
@@ -138,10 +145,29 @@ pub(crate) fn run(a: SimulateArgs, progress: bool) -> Result<()> {
         rate_hz: a.rate,
         out: a.out,
         sensor_noise: !a.no_noise,
+        logger_export: a.logger_export.map(Into::into),
         progress,
     };
     run_simulation(&opts)?;
     Ok(())
+}
+
+/// `--logger-export`: the library's `sim::logger::LoggerFormat`.
+#[derive(Clone, Copy, clap::ValueEnum)]
+pub(crate) enum LoggerFormatArg {
+    /// MoTeC CSV export (`logger/RUN.csv`).
+    MotecCsv,
+    /// MoTeC i2 `.ld` (`logger/RUN.ld`; tyre temperatures and TPMS at lower rates).
+    MotecLd,
+}
+
+impl From<LoggerFormatArg> for tirewear::sim::logger::LoggerFormat {
+    fn from(f: LoggerFormatArg) -> Self {
+        match f {
+            LoggerFormatArg::MotecCsv => Self::MotecCsv,
+            LoggerFormatArg::MotecLd => Self::MotecLd,
+        }
+    }
 }
 
 /// `--wear-scatter`: the library's `sim::WearScatter` presets.

@@ -314,6 +314,17 @@ impl TelemetryWriter {
         })
     }
 
+    /// Adds an MCAP metadata record (the importer's source file, channel
+    /// map and list of estimated channels).
+    pub fn write_metadata(&mut self, name: &str, metadata: BTreeMap<String, String>) -> Result<()> {
+        self.mcap
+            .write_metadata(&mcap::records::Metadata {
+                name: name.into(),
+                metadata,
+            })
+            .map_err(|e| self.mcap_err(e))
+    }
+
     fn mcap_err(&self, source: mcap::McapError) -> IngestError {
         IngestError::Mcap {
             path: self.path.clone(),

@@ -7,6 +7,7 @@ pub mod effects;
 pub mod error;
 pub mod generated;
 pub mod lap;
+pub mod logger;
 pub mod preset;
 pub mod road;
 pub mod run;
@@ -53,6 +54,9 @@ pub struct SimOptions {
     pub out: PathBuf,
     /// Sensor noise and logger dropouts (default on; off gives ideal sensors).
     pub sensor_noise: bool,
+    /// Also write each run as a race logger would have recorded it
+    /// (`OUT/logger/`, `logger::LoggerFormat`), with a `car.toml` per car.
+    pub logger_export: Option<logger::LoggerFormat>,
     /// Show a progress bar.
     pub progress: bool,
 }
@@ -99,6 +103,16 @@ pub fn simulate(opts: &SimOptions) -> Result<SimSummary, SimError> {
     let out = &opts.out;
     let io = |p: &Path, e| SimError::Ingest(IngestError::io(p, e));
     std::fs::create_dir_all(out).map_err(|e| io(out, e))?;
+    if opts.logger_export.is_some() {
+        let dir = out.join("logger");
+        std::fs::create_dir_all(&dir).map_err(|e| io(&dir, e))?;
+        for car in &plan.cars {
+            write_toml(
+                &dir.join(format!("{}.car.toml", car.id)),
+                &logger::car_description(car),
+            )?;
+        }
+    }
     if out.join("season.toml").exists() {
         std::fs::remove_file(out.join("season.toml")).map_err(|e| io(out, e))?;
     }
@@ -198,10 +212,36 @@ pub fn simulate(opts: &SimOptions) -> Result<SimSummary, SimError> {
                 plan.rate_hz.round() as usize,
             )?;
             let mut rng = ChaCha8Rng::seed_from_u64(rp.seed);
-            let truth = run::simulate_run(&ctx, &settings, &mut rng, |t, tires, veh| {
+            // The export's noise has its own stream: asking for an export
+            // leaves the archive unchanged.
+            let mut logger_rng = ChaCha8Rng::seed_from_u64(rp.seed ^ 0x6c6f_6767_6572);
+            let mut recorder = opts
+                .logger_export
+                .map(|_| logger::Recorder::new(car, opts.sensor_noise));
+            let truth = run::simulate_run(&ctx, &settings, &mut rng, |t, tires, veh, motion| {
+                if let Some(r) = &mut recorder {
+                    r.push(t, tires, veh, motion, &mut logger_rng);
+                }
                 writer.push(t, tires, veh)
             })?;
             writer.finish()?;
+            if let (Some(r), Some(format)) = (&recorder, opts.logger_export) {
+                let ext = match format {
+                    logger::LoggerFormat::MotecCsv => "csv",
+                    logger::LoggerFormat::MotecLd => "ld",
+                };
+                let path = out.join(format!("logger/{}.{ext}", rp.id));
+                let info = logger::ExportInfo {
+                    run: rp.id.clone(),
+                    venue: plan.tracks[ev.track].name.clone(),
+                    vehicle: car.id.clone(),
+                    vehicle_desc: car.name.clone(),
+                    date: ev.date.clone(),
+                    rate_hz: plan.rate_hz,
+                };
+                r.write(&path, format, &info)
+                    .map_err(|e| IngestError::io(&path, e))?;
+            }
             samples.fetch_add(truth.samples, Ordering::Relaxed);
             progress.inc(1);
             Ok(truth)

@@ -137,12 +137,24 @@ impl PsiTable {
     }
 }
 
-/// Simulates a run, passing each recorded sample to `sink(time_ns, tires, vehicle)`.
+/// What a logger records beside the archive's channels, noise-free: the
+/// logger export (`super::logger`) derives its channels from these.
+#[derive(Debug, Clone, Copy, Default)]
+pub(crate) struct Motion {
+    pub ax_mps2: f64,
+    pub ay_mps2: f64,
+    pub yaw_rate_radps: f64,
+    /// Each wheel's lateral slip `v_y/v_x` (paper eq. 20).
+    pub slip_y: [f64; 4],
+}
+
+/// Simulates a run, passing each recorded sample to `sink(time_ns, tires,
+/// vehicle, motion)`.
 pub(crate) fn simulate_run<E>(
     ctx: &RunContext,
     set: &RunSettings,
     rng: &mut impl Rng,
-    mut sink: impl FnMut(u64, &[TireSample; 4], &VehicleSample) -> Result<(), E>,
+    mut sink: impl FnMut(u64, &[TireSample; 4], &VehicleSample, &Motion) -> Result<(), E>,
 ) -> Result<RunTruth, E> {
     let car = ctx.car;
     let lap = ctx.lap;
@@ -205,6 +217,12 @@ pub(crate) fn simulate_run<E>(
         let t_track = set.track_c + 2.5 * weather;
 
         let forces = car.wheel_forces(v, ax, ay);
+        let mut motion = Motion {
+            ax_mps2: ax,
+            ay_mps2: ay,
+            yaw_rate_radps: yaw_rate,
+            slip_y: [0.0; 4],
+        };
         for wheel in Wheel::ALL {
             let k = wheel.index();
             let f = forces[k];
@@ -214,6 +232,7 @@ pub(crate) fn simulate_run<E>(
                 .mu(temps[k].surface_c, f.fz, ctx.road_grip);
             let (sx, sy, saturated) = slips(f.fx, f.fy, f.fz, mu);
             truth.saturated_samples += saturated as u64;
+            motion.slip_y[k] = sy;
             let y_w = wheel.side_sign() * 0.5 * car.track_width(wheel);
             let vx = (v - yaw_rate * y_w).max(0.5);
             let v_sx = sx * vx; // paper eq. 21
@@ -221,7 +240,7 @@ pub(crate) fn simulate_run<E>(
             let p_x = -f.fx * v_sx; // paper eq. 23, dissipated (≥ 0)
             let p_y = -f.fy * v_sy; // paper eq. 24
             let p = p_x + p_y; // paper eq. 25
-            let radius = car.rolling_radius(wheel) - f.fz / 600_000.0;
+            let radius = car.rolling_radius(wheel) - f.fz / RADIAL_STIFFNESS_N_PER_M;
             let omega = vx * (1.0 - sx) / radius;
             let camber = car.camber_deg(wheel, ay);
             let pressure = hot_pressure_pa(set.cold_pressure_pa[k], 20.0, temps[k].inner_c);
@@ -298,7 +317,12 @@ pub(crate) fn simulate_run<E>(
         if dropped {
             truth.dropped_samples += 1;
         } else {
-            sink(set.start_ns + truth.samples * period_ns, &tires, &vehicle)?;
+            sink(
+                set.start_ns + truth.samples * period_ns,
+                &tires,
+                &vehicle,
+                &motion,
+            )?;
         }
         truth.samples += 1;
         s_lap += v * dt;
@@ -320,6 +344,9 @@ pub(crate) fn simulate_run<E>(
     truth.duration_s = time;
     Ok(truth)
 }
+
+/// Radial stiffness of the simulated tires (N/m): loaded radius `R0 − F_z/k`.
+pub(crate) const RADIAL_STIFFNESS_N_PER_M: f64 = 600_000.0;
 
 /// Surface temperature (°C) above which the driver manages the tires.
 pub(crate) const MANAGE_ABOVE_C: f64 = 105.0;

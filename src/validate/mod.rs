@@ -185,6 +185,7 @@ pub fn run_case(
         rate_hz: Some(s.rate_hz),
         out: dir.clone(),
         sensor_noise: true,
+        logger_export: None,
         progress: false,
     })?;
     let rows = crate::kpi::table::read_parquet(&kpis)?;

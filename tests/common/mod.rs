@@ -17,6 +17,7 @@ fn simulate_at_5_hz(preset: tirewear::sim::Preset, seed: u64, dir: &Path) {
         rate_hz: Some(5.0),
         out: dir.to_path_buf(),
         sensor_noise: true,
+        logger_export: None,
         progress: false,
     })
     .unwrap();

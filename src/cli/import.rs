@@ -1,0 +1,148 @@
+//! `tirewear import`: its arguments and what it runs.
+
+use anyhow::{Context, Result, bail};
+use std::path::PathBuf;
+use tirewear::import::{CarDescription, ChannelMap, ImportSettings, NewRun, import_logs};
+use tirewear::ingest::manifest::TireSets;
+
+#[derive(clap::Args)]
+pub(crate) struct ImportArgs {
+    /// Log files: MoTeC `.ld` (its `.ldx` beside it is not needed), MoTeC
+    /// CSV exports or generic `.csv`/`.parquet` tables with a time column.
+    #[arg(required = true)]
+    logs: Vec<PathBuf>,
+    /// Season archive to import into (its season.toml is updated; the
+    /// telemetry goes to ARCHIVE/telemetry/RUN.mcap).
+    #[arg(long)]
+    archive: PathBuf,
+    /// Vehicle description (docs/import.md, "Vehicle description"),
+    /// repeatable: a run in the manifest uses its car's (by id), a new run
+    /// the only one or the one whose id is the log's vehicle.
+    #[arg(long = "car", required = true)]
+    cars: Vec<PathBuf>,
+    /// Channel map (default: the shipped one, datasets/import/channels.toml).
+    #[arg(long)]
+    channels: Option<PathBuf>,
+    /// Run id (one log only; default: the log's file name without extension).
+    /// A run already in the manifest gets its telemetry replaced.
+    #[arg(long)]
+    run: Option<String>,
+    /// Event of a new run (created with --track when the manifest lacks it,
+    /// dated by the log).
+    #[arg(long)]
+    event: Option<String>,
+    /// Track of a new event.
+    #[arg(long)]
+    track: Option<String>,
+    /// Compound of a new run.
+    #[arg(long)]
+    compound: Option<String>,
+    /// Tire sets of a new run: FL=ID,FR=ID,RL=ID,RR=ID.
+    #[arg(long, value_name = "FL=..,FR=..,RL=..,RR=..")]
+    tire_sets: Option<String>,
+    /// Sample rate (Hz) to put a `.ld` log's channels on (default: the
+    /// fastest mapped channel's rate).
+    #[arg(long)]
+    rate: Option<f64>,
+}
+
+fn parse_tire_sets(s: &str) -> Result<TireSets> {
+    let mut m = std::collections::HashMap::new();
+    for part in s.split(',') {
+        let (k, v) = part
+            .split_once('=')
+            .with_context(|| format!("--tire-sets: '{part}' is not WHEEL=ID"))?;
+        m.insert(k.trim().to_ascii_uppercase(), v.trim().to_string());
+    }
+    let get = |w: &str| {
+        m.get(w)
+            .filter(|v| !v.is_empty())
+            .cloned()
+            .with_context(|| format!("--tire-sets has no {w}"))
+    };
+    Ok(TireSets {
+        fl: get("FL")?,
+        fr: get("FR")?,
+        rl: get("RL")?,
+        rr: get("RR")?,
+    })
+}
+
+/// Runs `tirewear import`; false when some logs failed.
+pub(crate) fn run(a: ImportArgs) -> Result<bool> {
+    if a.run.is_some() && a.logs.len() > 1 {
+        bail!("--run names one run: give one log with it");
+    }
+    let channels = match &a.channels {
+        Some(p) => ChannelMap::read(p)?,
+        None => ChannelMap::default_map(),
+    };
+    let settings = ImportSettings {
+        channels,
+        cars: a
+            .cars
+            .iter()
+            .map(|p| CarDescription::read(p))
+            .collect::<Result<_, _>>()?,
+        rate_hz: a.rate,
+        new_run: NewRun {
+            event: a.event,
+            track: a.track,
+            compound: a.compound,
+            tire_sets: a.tire_sets.as_deref().map(parse_tire_sets).transpose()?,
+        },
+    };
+    let ids: Vec<String> = match a.run {
+        Some(r) => vec![r],
+        None => a
+            .logs
+            .iter()
+            .map(|p| {
+                p.file_stem()
+                    .map(|s| s.to_string_lossy().into_owned())
+                    .unwrap_or_default()
+            })
+            .collect(),
+    };
+    let s = import_logs(&a.archive, &a.logs, &ids, &settings)?;
+    for r in &s.imported {
+        println!(
+            "{} -> run {} ({}): {} samples at {} Hz, {:.0} s, {:.0} m{}; lateral slip: {}",
+            r.log.display(),
+            r.run,
+            if r.replaced {
+                "telemetry replaced"
+            } else {
+                "new run"
+            },
+            r.samples,
+            r.rate_hz,
+            r.duration_s,
+            r.distance_m,
+            if r.dropped_samples > 0 {
+                format!(", {} incomplete samples dropped", r.dropped_samples)
+            } else {
+                String::new()
+            },
+            match r.lateral {
+                Some(tirewear::import::estimate::LateralMethod::Kinematic) => "kinematic",
+                Some(tirewear::import::estimate::LateralMethod::TyreModel) => "tyre model",
+                None => "-",
+            }
+        );
+        if !r.unmapped.is_empty() {
+            println!("  not mapped: {}", r.unmapped.join(", "));
+        }
+        println!("  estimated: {}", r.estimated.join("; "));
+    }
+    for (log, e) in &s.failed {
+        eprintln!("failed: {}: {e}", log.display());
+    }
+    println!(
+        "imported {} of {} logs into {}",
+        s.imported.len(),
+        a.logs.len(),
+        a.archive.display()
+    );
+    Ok(s.failed.is_empty())
+}

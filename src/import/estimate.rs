@@ -1,0 +1,528 @@
+//! Virtual sensors: the archive's per-wheel channels from what a logger
+//! records and the vehicle description (`docs/import.md`, "Virtual
+//! sensors"). Quasi-static: loads from static weight, downforce and load
+//! transfer; forces from the measured accelerations; wheel-centre
+//! velocities from speed and yaw rate; lateral sliding from body slip and
+//! steering (kinematics) or, without them, from a linear tyre.
+
+use super::align::Aligned;
+use super::car::{CarDescription, DrivenAxle};
+use super::channel_map::Quantity;
+use super::error::ImportError;
+use super::units::STANDARD_GRAVITY as G;
+use crate::Wheel;
+use crate::ingest::telemetry::proto::{TireSample, VehicleSample};
+use std::path::Path;
+
+/// How the lateral sliding velocity was obtained.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum LateralMethod {
+    /// Body slip angle, yaw rate and steer angle (rigid-body kinematics).
+    Kinematic,
+    /// Lateral force over cornering stiffness (`car.toml` `[tyres]`).
+    TyreModel,
+}
+
+/// The estimated samples of a run.
+#[derive(Debug, Clone, Default)]
+pub struct Estimated {
+    pub tires: Vec<[TireSample; 4]>,
+    pub vehicle: Vec<VehicleSample>,
+    /// Archive channels that were estimated, each with how (`fz_n: load transfer`).
+    pub estimated: Vec<String>,
+    pub lateral: Option<LateralMethod>,
+}
+
+/// Values the log may lack that the manifest's event has.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct EventConditions {
+    pub air_c: Option<f64>,
+    pub track_c: Option<f64>,
+}
+
+/// Half-width (s) of the centred difference that derives the longitudinal
+/// acceleration from speed when the log has none.
+const DERIVATIVE_HALF_WIDTH_S: f64 = 0.25;
+
+fn missing(path: &Path, quantity: &str, tried: &str, a: &Aligned) -> ImportError {
+    ImportError::Missing {
+        path: path.to_path_buf(),
+        quantity: quantity.into(),
+        tried: tried.into(),
+        available: a
+            .series
+            .keys()
+            .map(|(q, c)| match c {
+                Some(w) => format!("{} {}", q.key(), w.name()),
+                None => q.key().to_string(),
+            })
+            .collect::<Vec<_>>()
+            .join(", "),
+    }
+}
+
+/// Centred difference over ±half-width of the grid (one-sided at the ends).
+fn derivative(a: &Aligned, v: &[f64]) -> Vec<f64> {
+    let h = (DERIVATIVE_HALF_WIDTH_S * a.rate_hz).round().max(1.0) as usize;
+    let n = v.len();
+    (0..n)
+        .map(|i| {
+            let (lo, hi) = (i.saturating_sub(h), (i + h).min(n - 1));
+            if hi == lo {
+                return 0.0;
+            }
+            let dt = (a.index[hi] - a.index[lo]) as f64 / a.rate_hz;
+            (v[hi] - v[lo]) / dt
+        })
+        .collect()
+}
+
+/// Estimates every archive channel for each aligned sample.
+pub fn estimate(
+    path: &Path,
+    a: &Aligned,
+    car: &CarDescription,
+    cond: EventConditions,
+) -> Result<Estimated, ImportError> {
+    let n = a.len();
+    let mut est = Estimated::default();
+    let mut notes: Vec<String> = Vec::new();
+    let mut note = |s: &str| notes.push(s.to_string());
+    let speed = a
+        .get(Quantity::GroundSpeed, None)
+        .ok_or_else(|| missing(path, "ground_speed", "[channels.ground_speed] names", a))?;
+    let yaw_in = a.get(Quantity::YawRate, None);
+    let ay_in = a.get(Quantity::AccelLat, None);
+    let (ay, yaw): (Vec<f64>, Vec<f64>) = match (ay_in, yaw_in) {
+        (Some(ay), Some(r)) => (ay.to_vec(), r.to_vec()),
+        (Some(ay), None) => {
+            note("yaw rate: lateral acceleration / speed");
+            (
+                ay.to_vec(),
+                ay.iter().zip(speed).map(|(y, v)| y / v.max(1.0)).collect(),
+            )
+        }
+        (None, Some(r)) => {
+            note("lateral acceleration: speed · yaw rate");
+            (
+                r.iter().zip(speed).map(|(r, v)| r * v).collect(),
+                r.to_vec(),
+            )
+        }
+        (None, None) => {
+            return Err(missing(
+                path,
+                "accel_lat or yaw_rate",
+                "[channels.accel_lat], [channels.yaw_rate] names",
+                a,
+            ));
+        }
+    };
+    let ax: Vec<f64> = match a.get(Quantity::AccelLong, None) {
+        Some(x) => x.to_vec(),
+        None => {
+            note("longitudinal acceleration: d(speed)/dt over ±0.25 s");
+            derivative(a, speed)
+        }
+    };
+    let mut wheel_omega = Vec::new();
+    for w in Wheel::ALL {
+        let ws = a.get(Quantity::WheelSpeed, Some(w)).ok_or_else(|| {
+            missing(
+                path,
+                &format!("wheel_speed {}", w.name()),
+                "[channels.wheel_speed] names",
+                a,
+            )
+        })?;
+        wheel_omega.push(ws);
+    }
+    // A linear wheel speed (the unit said km/h, m/s...) is Ω·R at the
+    // logger's radius; an angular one (rpm, rad/s) is Ω.
+    let angular = |w: Wheel| {
+        a.series.contains_key(&(Quantity::WheelSpeed, Some(w)))
+            && matches!(
+                unit_dimension(a, w),
+                Some(super::units::Dimension::AngularSpeed)
+            )
+    };
+    let temp_of = |q: Quantity, w: Wheel, name: &str| {
+        a.get(q, Some(w)).ok_or_else(|| {
+            missing(
+                path,
+                &format!("{name} {}", w.name()),
+                &format!("[channels.{name}] names"),
+                a,
+            )
+        })
+    };
+    let mut surface = Vec::new();
+    let mut pressure = Vec::new();
+    for w in Wheel::ALL {
+        surface.push(temp_of(Quantity::TyreTemp, w, "tyre_temp")?);
+        pressure.push(temp_of(Quantity::TpmsPressure, w, "tpms_pressure")?);
+    }
+    let inner: Vec<Option<&[f64]>> = Wheel::ALL
+        .iter()
+        .map(|&w| a.get(Quantity::TpmsTemp, Some(w)))
+        .collect();
+    if inner.iter().any(Option::is_none) {
+        note("t_inner_c: the surface temperature (no TPMS gas temperature)");
+    } else {
+        note("t_inner_c: TPMS gas temperature");
+    }
+    let loads: Vec<Option<&[f64]>> = Wheel::ALL
+        .iter()
+        .map(|&w| a.get(Quantity::WheelLoad, Some(w)))
+        .collect();
+    let measured_loads = loads.iter().all(Option::is_some);
+    if !measured_loads {
+        note("fz_n: static weight, downforce and load transfer (car.toml)");
+    }
+    note("fx_n, fy_n: the accelerations distributed over the wheels (car.toml)");
+    note("vx_mps: speed and yaw rate at the wheel centre");
+    note("rolling_radius_m: car.toml");
+    let steer: Option<Vec<f64>> = match (
+        a.get(Quantity::SteerAngle, None),
+        a.get(Quantity::SteeringWheel, None),
+    ) {
+        (Some(d), _) => Some(d.to_vec()),
+        (None, Some(sw)) => car
+            .steering_ratio
+            .map(|r| sw.iter().map(|x| x / r).collect()),
+        _ => None,
+    };
+    let body_slip = a.get(Quantity::BodySlip, None);
+    let lateral = match (&body_slip, &steer, car.tyres.cornering_stiffness_per_rad) {
+        (Some(_), Some(_), _) => LateralMethod::Kinematic,
+        (_, _, Some(_)) => LateralMethod::TyreModel,
+        _ => {
+            return Err(missing(
+                path,
+                "body_slip and steer_angle (or steering_wheel with car.toml steering_ratio), or car.toml [tyres] cornering_stiffness_per_rad",
+                "[channels.body_slip], [channels.steer_angle], [channels.steering_wheel] names",
+                a,
+            ));
+        }
+    };
+    match lateral {
+        LateralMethod::Kinematic => {
+            note("vy_mps: body slip angle, yaw rate and steer angle (kinematics)")
+        }
+        LateralMethod::TyreModel => note("vy_mps: lateral force / cornering stiffness (car.toml)"),
+    }
+    if car.camber.is_some() {
+        note("camber_deg: static camber and roll (car.toml)");
+    } else {
+        note("camber_deg: 0 (car.toml has no [camber])");
+    }
+    let air = a.get(Quantity::AirTemp, None);
+    let track = a.get(Quantity::TrackTemp, None);
+    let air_c = match air {
+        Some(_) => None,
+        None => {
+            note("t_air_c: the event's air temperature");
+            Some(cond.air_c.ok_or_else(|| {
+                missing(
+                    path,
+                    "air_temp (and no event to take it from)",
+                    "[channels.air_temp] names",
+                    a,
+                )
+            })?)
+        }
+    };
+    let track_c = match track {
+        Some(_) => None,
+        None => {
+            note("t_track_c: the event's track temperature");
+            Some(cond.track_c.ok_or_else(|| {
+                missing(
+                    path,
+                    "track_temp (and no event to take it from)",
+                    "[channels.track_temp] names",
+                    a,
+                )
+            })?)
+        }
+    };
+    let distance: Vec<f64> = match a.get(Quantity::Distance, None) {
+        Some(d) => d.iter().map(|x| x - d[0]).collect(),
+        None => {
+            note("distance_m: speed integrated over time");
+            let mut d = vec![0.0; n];
+            for i in 1..n {
+                let dt = (a.index[i] - a.index[i - 1]) as f64 / a.rate_hz;
+                d[i] = d[i - 1] + 0.5 * (speed[i] + speed[i - 1]) * dt;
+            }
+            d
+        }
+    };
+
+    est.lateral = Some(lateral);
+    let m = car.mass_kg;
+    let (h, l, wf) = (car.cg_height_m, car.wheelbase_m, car.front_weight_fraction);
+    let (a_front, b_rear) = (car.cg_to_front_m(), car.cg_to_rear_m());
+    let rho = car.aero.air_density_kg_m3;
+    est.estimated = notes;
+    est.tires.reserve(n);
+    est.vehicle.reserve(n);
+    for i in 0..n {
+        let v = speed[i].max(0.0);
+        let (axi, ayi, r) = (ax[i], ay[i], yaw[i]);
+        let fz: [f64; 4] = if measured_loads {
+            std::array::from_fn(|k| loads[k].expect("all present")[i])
+        } else {
+            let df = 0.5 * rho * car.aero.cl_a_m2 * v * v;
+            let long = m * axi * h / l;
+            let axle = [
+                m * G * wf + df * car.aero.front_fraction - long,
+                m * G * (1.0 - wf) + df * (1.0 - car.aero.front_fraction) + long,
+            ];
+            let lat_share = [
+                car.roll_stiffness_front_fraction,
+                1.0 - car.roll_stiffness_front_fraction,
+            ];
+            std::array::from_fn(|k| {
+                let w = Wheel::ALL[k];
+                let ax_i = CarDescription::axle_of(w);
+                let lat = lat_share[ax_i] * m * ayi * h / car.track_width(w);
+                // A left turn (a_y > 0) moves load to the right wheels.
+                (0.5 * axle[ax_i] - w.side_sign() * lat).max(50.0)
+            })
+        };
+        let drag = 0.5 * rho * car.aero.cd_a_m2 * v * v;
+        let fx_total = m * axi + drag;
+        let axle_fx = if fx_total >= 0.0 {
+            match car.driven_axle {
+                DrivenAxle::Rear => [0.0, fx_total],
+                DrivenAxle::Front => [fx_total, 0.0],
+                DrivenAxle::All => [fx_total * wf, fx_total * (1.0 - wf)],
+            }
+        } else {
+            [
+                fx_total * car.brake_front_fraction,
+                fx_total * (1.0 - car.brake_front_fraction),
+            ]
+        };
+        // Steady-turn yaw balance: the front axle carries m·a_y·b/L.
+        let axle_fy = [m * ayi * wf, m * ayi * (1.0 - wf)];
+        let vv = v.max(1.0);
+        let slip_kin = match lateral {
+            LateralMethod::Kinematic => {
+                let tb = body_slip.expect("kinematic")[i].to_radians().tan();
+                let td = steer.as_ref().expect("kinematic")[i].to_radians().tan();
+                Some([tb + a_front * r / vv - td, tb - b_rear * r / vv])
+            }
+            LateralMethod::TyreModel => None,
+        };
+        let mut tires = [TireSample::default(); 4];
+        for w in Wheel::ALL {
+            let k = w.index();
+            let ax_i = CarDescription::axle_of(w);
+            let (l_, r_) = if ax_i == 0 {
+                (fz[0], fz[1])
+            } else {
+                (fz[2], fz[3])
+            };
+            let share = fz[k] / (l_ + r_);
+            let fx = axle_fx[ax_i] * share;
+            let fy = axle_fy[ax_i] * share;
+            let y_w = w.side_sign() * 0.5 * car.track_width(w);
+            let vx = (v - r * y_w).max(0.5);
+            let s_y = match slip_kin {
+                Some(s) => s[ax_i],
+                None => {
+                    let c = car.tyres.cornering_stiffness_per_rad.expect("tyre model")[ax_i];
+                    -fy / (c * fz[k])
+                }
+            };
+            let ws = wheel_omega[k][i];
+            let omega = if angular(w) {
+                ws
+            } else {
+                ws / car.wheel_speed_radius(w)
+            };
+            let camber = car.camber.as_ref().map_or(0.0, |c| {
+                let roll = c.roll_gradient_deg_per_g * ayi / G;
+                c.static_deg[ax_i] - w.side_sign() * c.change_per_roll * roll
+            });
+            tires[k] = TireSample {
+                vx_mps: vx as f32,
+                vy_mps: (s_y * vx) as f32,
+                omega_radps: omega as f32,
+                rolling_radius_m: car.loaded_radius(w, fz[k]) as f32,
+                fx_n: fx as f32,
+                fy_n: fy as f32,
+                fz_n: fz[k] as f32,
+                t_surface_c: surface[k][i] as f32,
+                t_inner_c: inner[k].unwrap_or(surface[k])[i] as f32,
+                pressure_pa: pressure[k][i] as f32,
+                camber_deg: camber as f32,
+            };
+        }
+        est.tires.push(tires);
+        est.vehicle.push(VehicleSample {
+            speed_mps: v as f32,
+            t_track_c: track.map_or_else(|| track_c.expect("set when absent"), |t| t[i]) as f32,
+            t_air_c: air.map_or_else(|| air_c.expect("set when absent"), |t| t[i]) as f32,
+            distance_m: distance[i],
+        });
+    }
+    Ok(est)
+}
+
+/// The dimension of the unit wheel `w`'s speed was given in.
+fn unit_dimension(a: &Aligned, w: Wheel) -> Option<super::units::Dimension> {
+    a.wheel_speed_dimension.get(w.index()).copied().flatten()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::import::car::CarDescription;
+
+    fn car() -> CarDescription {
+        toml::from_str(include_str!("../../datasets/import/car.toml")).unwrap()
+    }
+
+    /// One sample with the given car channels and wheel speeds (m/s at the logger radius).
+    fn sample(
+        v: f64,
+        ax: f64,
+        ay: f64,
+        r: f64,
+        beta_deg: f64,
+        steer_deg: f64,
+        ws: [f64; 4],
+    ) -> Aligned {
+        let mut a = Aligned {
+            rate_hz: 10.0,
+            index: vec![0],
+            ..Aligned::default()
+        };
+        let mut put = |q: Quantity, c: Option<Wheel>, x: f64| {
+            a.series.insert((q, c), vec![x]);
+        };
+        put(Quantity::GroundSpeed, None, v);
+        put(Quantity::AccelLong, None, ax);
+        put(Quantity::AccelLat, None, ay);
+        put(Quantity::YawRate, None, r);
+        put(Quantity::BodySlip, None, beta_deg);
+        put(Quantity::SteerAngle, None, steer_deg);
+        put(Quantity::AirTemp, None, 20.0);
+        put(Quantity::TrackTemp, None, 30.0);
+        put(Quantity::Distance, None, 0.0);
+        for w in Wheel::ALL {
+            put(Quantity::WheelSpeed, Some(w), ws[w.index()]);
+            put(Quantity::TyreTemp, Some(w), 90.0);
+            put(Quantity::TpmsPressure, Some(w), 1.8e5);
+            put(Quantity::TpmsTemp, Some(w), 95.0);
+        }
+        a.wheel_speed_dimension = [Some(crate::import::units::Dimension::Speed); 4];
+        a
+    }
+
+    #[test]
+    fn steady_left_corner_by_hand() {
+        let c = car();
+        // 40 m/s, 2 g to the left on a 81.5 m radius: r = a_y / v.
+        let (v, ay) = (40.0, 2.0 * G);
+        let r = ay / v;
+        let a = sample(v, 0.0, ay, r, 0.5, 3.0, [40.0; 4]);
+        let e = estimate(Path::new("x"), &a, &c, EventConditions::default()).unwrap();
+        let t = &e.tires[0];
+        let (m, h) = (798.0, 0.30);
+        // Downforce 0.5·1.2·3.2·40² = 3072 N, 42 % on the front.
+        let df = 0.5 * 1.2 * 3.2 * 1600.0;
+        let front_axle = m * G * 0.445 + df * 0.42;
+        let d_front = 0.55 * m * ay * h / 1.60;
+        let fz_fl = 0.5 * front_axle - d_front;
+        let fz_fr = 0.5 * front_axle + d_front;
+        assert!(
+            (t[0].fz_n as f64 - fz_fl).abs() < 0.01,
+            "{} vs {fz_fl}",
+            t[0].fz_n
+        );
+        assert!((t[1].fz_n as f64 - fz_fr).abs() < 0.01);
+        // Front axle lateral force m·a_y·(weight on front), split by load.
+        let fy_front = m * ay * 0.445;
+        assert!((t[0].fy_n as f64 - fy_front * fz_fl / (fz_fl + fz_fr)).abs() < 0.01);
+        assert!(((t[0].fy_n + t[1].fy_n) as f64 - fy_front).abs() < 0.01);
+        // No longitudinal acceleration: drag alone, on the rear axle.
+        let drag = 0.5 * 1.2 * 1.05 * 1600.0;
+        assert_eq!(t[0].fx_n, 0.0);
+        assert!(((t[2].fx_n + t[3].fx_n) as f64 - drag).abs() < 0.01);
+        // Wheel-centre speed: the left wheels are on the inside (y = +t/2).
+        assert!((t[0].vx_mps as f64 - (v - r * 0.80)).abs() < 1e-4);
+        assert!((t[1].vx_mps as f64 - (v + r * 0.80)).abs() < 1e-4);
+        // Lateral slip: rear tan β − b·r/v, front tan β + a·r/v − tan δ.
+        let (a_cg, b_cg) = (3.60 * 0.555, 3.60 * 0.445);
+        let tb = 0.5f64.to_radians().tan();
+        let s_rear = tb - b_cg * r / v;
+        let s_front = tb + a_cg * r / v - 3.0f64.to_radians().tan();
+        assert!((t[2].vy_mps as f64 - s_rear * t[2].vx_mps as f64).abs() < 1e-5);
+        assert!((t[0].vy_mps as f64 - s_front * t[0].vx_mps as f64).abs() < 1e-5);
+        // Camber: static −3.2° at the front; 2 g rolls the body 0.7°, the
+        // outer (right) wheel gains 0.42° of positive camber.
+        let roll = 0.35 * ay / G;
+        assert!((t[1].camber_deg as f64 - (-3.2 + 0.6 * roll)).abs() < 1e-5);
+        assert!((t[0].camber_deg as f64 - (-3.2 - 0.6 * roll)).abs() < 1e-5);
+        // Wheel speeds at the logger radius: Ω = 40 / 0.330.
+        assert!((t[0].omega_radps as f64 - 40.0 / 0.330).abs() < 1e-3);
+        assert!((t[0].rolling_radius_m as f64 - (0.330 - fz_fl / 600_000.0)).abs() < 1e-6);
+        assert_eq!(e.lateral, Some(LateralMethod::Kinematic));
+    }
+
+    #[test]
+    fn straight_line_braking_by_hand() {
+        let c = car();
+        let (v, ax) = (60.0, -3.0 * G);
+        let a = sample(v, ax, 0.0, 0.0, 0.0, 0.0, [60.0, 60.0, 59.0, 59.0]);
+        let e = estimate(Path::new("x"), &a, &c, EventConditions::default()).unwrap();
+        let t = &e.tires[0];
+        let m = 798.0;
+        let drag = 0.5 * 1.2 * 1.05 * v * v;
+        let fx_total = m * ax + drag;
+        // Brake bias 57 % front, equal left and right on a straight.
+        assert!((t[0].fx_n as f64 - 0.5 * 0.57 * fx_total).abs() < 0.05);
+        assert!((t[3].fx_n as f64 - 0.5 * 0.43 * fx_total).abs() < 0.05);
+        // Longitudinal load transfer m·a_x·h/L moves 1.95 kN to the front.
+        let df = 0.5 * 1.2 * 3.2 * v * v;
+        let long = m * ax * 0.30 / 3.60;
+        let fz_front = 0.5 * (m * G * 0.445 + df * 0.42 - long);
+        assert!((t[0].fz_n as f64 - fz_front).abs() < 0.05);
+        assert_eq!(t[0].fy_n, 0.0);
+        assert_eq!(t[0].vy_mps, 0.0);
+        // Rear wheels at 59 m/s at the logger radius: Ω = 59/0.335, and the
+        // loaded radius follows the hand-computed load.
+        let fz_rear = 0.5 * (m * G * 0.555 + df * 0.58 + long);
+        assert!((t[2].fz_n as f64 - fz_rear).abs() < 0.05);
+        let omega = 59.0 / 0.335;
+        let r_loaded = 0.335 - fz_rear / 600_000.0;
+        assert_eq!(t[2].vx_mps, 60.0);
+        assert!((t[2].omega_radps as f64 - omega).abs() < 1e-3);
+        assert!((t[2].rolling_radius_m as f64 - r_loaded).abs() < 1e-6);
+    }
+
+    #[test]
+    fn without_body_slip_the_tyre_model_or_a_clear_error() {
+        let mut c = car();
+        let mut a = sample(40.0, 0.0, 10.0, 0.25, 0.0, 0.0, [40.0; 4]);
+        a.series.remove(&(Quantity::BodySlip, None));
+        let e = estimate(Path::new("x"), &a, &c, EventConditions::default()).unwrap();
+        assert_eq!(e.lateral, Some(LateralMethod::TyreModel));
+        let t = &e.tires[0][0];
+        // v_y/v_x = −F_y/(C·F_z) with C = 48 /rad.
+        assert!((t.vy_mps / t.vx_mps + t.fy_n / (48.0 * t.fz_n)).abs() < 1e-6);
+        c.tyres.cornering_stiffness_per_rad = None;
+        let err = estimate(Path::new("log.csv"), &a, &c, EventConditions::default())
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("log.csv") && err.contains("body_slip") && err.contains("ground_speed"),
+            "{err}"
+        );
+    }
+}

@@ -1,0 +1,385 @@
+//! Real logger data into a season archive (`tirewear import`,
+//! `docs/import.md`): a log (MoTeC `.ld`, MoTeC CSV, generic CSV or
+//! Parquet) is read ([`log`], [`ld`]), its channels named through the
+//! channel map ([`channel_map`]) and put on one time base ([`align`]); what
+//! the logger does not record is estimated from the vehicle description
+//! ([`car`], [`estimate`]); the run is written as MCAP in the archive's
+//! schema and entered in the manifest.
+
+pub mod align;
+pub mod car;
+pub mod channel_map;
+pub mod error;
+pub mod estimate;
+pub mod ld;
+pub mod log;
+pub mod units;
+
+pub use car::CarDescription;
+pub use channel_map::ChannelMap;
+pub use error::ImportError;
+
+use crate::ingest::manifest::{self, Season, TireSets};
+use crate::ingest::telemetry::{Encoding, RunInfo, TelemetryWriter};
+use estimate::{EventConditions, LateralMethod};
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+/// Where an imported run goes when the manifest does not have it yet.
+#[derive(Debug, Clone, Default)]
+pub struct NewRun {
+    /// Event id; created when absent (then `track` is needed).
+    pub event: Option<String>,
+    /// Track of a new event.
+    pub track: Option<String>,
+    pub compound: Option<String>,
+    pub tire_sets: Option<TireSets>,
+}
+
+/// Settings of an import.
+#[derive(Debug, Clone)]
+pub struct ImportSettings {
+    pub channels: ChannelMap,
+    /// Vehicle descriptions: a run already in the manifest uses its car's;
+    /// a new run the only one, or the one whose id is the log's vehicle.
+    pub cars: Vec<CarDescription>,
+    /// Rate (Hz) to put a `.ld` log's channels on (default: the fastest mapped one).
+    pub rate_hz: Option<f64>,
+    pub new_run: NewRun,
+}
+
+/// What one log became.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct ImportedRun {
+    pub log: PathBuf,
+    pub run: String,
+    /// Telemetry file written (relative to the archive).
+    pub telemetry: String,
+    pub replaced: bool,
+    pub format: String,
+    pub samples: usize,
+    pub dropped_samples: u64,
+    pub rate_hz: f64,
+    pub duration_s: f64,
+    pub distance_m: f64,
+    pub lateral: Option<LateralMethod>,
+    /// Channel map: tirewear quantity → source channels (and unit).
+    pub mapping: BTreeMap<String, String>,
+    pub estimated: Vec<String>,
+    pub unmapped: Vec<String>,
+}
+
+/// Days since 1970-01-01 of a `YYYY-MM-DD` date (proleptic Gregorian).
+fn days_from_civil(date: &str) -> Option<i64> {
+    let p: Vec<i64> = date
+        .split('-')
+        .map(|x| x.parse().ok())
+        .collect::<Option<_>>()?;
+    let (y, m, d) = (p[0] - i64::from(p[1] <= 2), p[1], p[2]);
+    let era = y.div_euclid(400);
+    let yoe = y - era * 400;
+    let doy = (153 * (m + if m > 2 { -3 } else { 9 }) + 2) / 5 + d - 1;
+    let doe = yoe * 365 + yoe / 4 - yoe / 100 + doy;
+    Some(era * 146_097 + doe - 719_468)
+}
+
+/// Reads one log and writes its run into the archive's manifest copy
+/// `manifest` (the caller writes the manifest once, after every log).
+pub fn import_log(
+    log_path: &Path,
+    run_id: &str,
+    season: &Season,
+    manifest: &mut manifest::Manifest,
+    settings: &ImportSettings,
+) -> Result<ImportedRun, ImportError> {
+    let raw = log::read_log(log_path)?;
+    let mapping = settings
+        .channels
+        .map(log_path, &raw.names(), &raw.units())?;
+    let aligned = align::align(&raw, &mapping, settings.rate_hz)?;
+    if aligned.len() < 2 {
+        return Err(ImportError::log(
+            log_path,
+            "data",
+            "fewer than two complete samples",
+        ));
+    }
+    let archive_err = |what: String| ImportError::Archive {
+        path: season.manifest_path.clone(),
+        what,
+    };
+    let existing = manifest.runs.iter().position(|r| r.id == run_id);
+    let event_id = match existing {
+        Some(i) => manifest.runs[i].event.clone(),
+        None => settings.new_run.event.clone().ok_or_else(|| {
+            archive_err(format!(
+                "run '{run_id}' is not in the manifest: give --event, --compound and --tire-sets"
+            ))
+        })?,
+    };
+    let event = manifest.events.iter().find(|e| e.id == event_id).cloned();
+    let cond = EventConditions {
+        air_c: event.as_ref().map(|e| e.air_temp_c),
+        track_c: event.as_ref().map(|e| e.track_temp_c),
+    };
+    let car = choose_car(
+        settings,
+        existing.map(|i| manifest.runs[i].car.as_str()),
+        &raw.meta.vehicle,
+    )
+    .map_err(archive_err)?;
+    let est = estimate::estimate(log_path, &aligned, car, cond)?;
+
+    // The run's start: the log's date and time of day (UTC), else the epoch.
+    let start_s = raw
+        .meta
+        .date
+        .as_deref()
+        .or(event.as_ref().map(|e| e.date.as_str()))
+        .and_then(days_from_civil)
+        .map_or(0, |d| d.max(0) as u64 * 86_400)
+        + raw.meta.time_of_day_s.unwrap_or(0.0) as u64;
+    let period_ns = (1e9 / aligned.rate_hz).round() as u64;
+    let telemetry = match existing {
+        Some(i) => manifest.runs[i].telemetry.clone(),
+        None => format!("telemetry/{run_id}.mcap"),
+    };
+    let out_path = season.path(&telemetry);
+    if let Some(dir) = out_path.parent() {
+        std::fs::create_dir_all(dir).map_err(|e| ImportError::io(dir, e))?;
+    }
+    let info = RunInfo {
+        run: run_id.to_string(),
+        event: event_id.clone(),
+        car: car.id.clone(),
+        sample_rate_hz: aligned.rate_hz,
+    };
+    let mut writer = TelemetryWriter::create(
+        &out_path,
+        &info,
+        Encoding::Block,
+        aligned.rate_hz.round().max(1.0) as usize,
+    )?;
+    let mut map_record = BTreeMap::new();
+    for m in &mapping.mapped {
+        let key = match m.corner {
+            Some(w) => format!("{} {}", m.quantity.key(), w.name()),
+            None => m.quantity.key().to_string(),
+        };
+        let names: Vec<&str> = m
+            .sources
+            .iter()
+            .map(|&s| raw.channels[s].name.as_str())
+            .collect();
+        map_record.insert(key, format!("{} [{}]", names.join(" + "), m.unit));
+    }
+    let mut meta = BTreeMap::from([
+        ("source_file".to_string(), log_path.display().to_string()),
+        ("source_format".to_string(), raw.meta.format.clone()),
+        ("venue".to_string(), raw.meta.venue.clone()),
+        ("vehicle".to_string(), raw.meta.vehicle.clone()),
+        ("driver".to_string(), raw.meta.driver.clone()),
+        ("session".to_string(), raw.meta.session.clone()),
+        (
+            "car_description".to_string(),
+            toml::to_string(car).unwrap_or_default(),
+        ),
+    ]);
+    meta.insert("estimated".to_string(), est.estimated.join("; "));
+    writer.write_metadata("tirewear.import", meta)?;
+    writer.write_metadata("tirewear.channel_map", map_record.clone())?;
+    for (i, k) in aligned.index.iter().enumerate() {
+        writer.push(
+            start_s * 1_000_000_000 + k * period_ns,
+            &est.tires[i],
+            &est.vehicle[i],
+        )?;
+    }
+    writer.finish()?;
+
+    let distance_m = est.vehicle.last().map_or(0.0, |v| v.distance_m);
+    let duration_s = (aligned.index[aligned.len() - 1] - aligned.index[0]) as f64 / aligned.rate_hz;
+    let replaced = existing.is_some();
+    if existing.is_none() {
+        add_run(
+            manifest, run_id, &event_id, &telemetry, distance_m, &raw.meta, &est, car, settings,
+        )
+        .map_err(archive_err)?;
+    }
+    Ok(ImportedRun {
+        log: log_path.to_path_buf(),
+        run: run_id.to_string(),
+        telemetry,
+        replaced,
+        format: raw.meta.format.clone(),
+        samples: aligned.len(),
+        dropped_samples: aligned.dropped,
+        rate_hz: aligned.rate_hz,
+        duration_s,
+        distance_m,
+        lateral: est.lateral,
+        mapping: map_record,
+        estimated: est.estimated,
+        unmapped: mapping.unmapped,
+    })
+}
+
+/// The vehicle description of a run: its manifest car's for a run in the
+/// manifest, else the only one given, else the one named by the log.
+fn choose_car<'a>(
+    settings: &'a ImportSettings,
+    manifest_car: Option<&str>,
+    log_vehicle: &str,
+) -> Result<&'a CarDescription, String> {
+    let ids = || {
+        settings
+            .cars
+            .iter()
+            .map(|c| c.id.as_str())
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    match manifest_car {
+        Some(id) => settings.cars.iter().find(|c| c.id == id).ok_or_else(|| {
+            format!(
+                "the run is on car '{id}' in the manifest; no --car describes it (given: {})",
+                ids()
+            )
+        }),
+        None if settings.cars.len() == 1 => Ok(&settings.cars[0]),
+        None => settings
+            .cars
+            .iter()
+            .find(|c| c.id == log_vehicle.trim())
+            .ok_or_else(|| {
+                format!(
+                    "the log's vehicle is '{log_vehicle}'; no --car has that id (given: {})",
+                    ids()
+                )
+            }),
+    }
+}
+
+/// Enters a new run (and, when missing, its event and car) in the manifest.
+#[allow(clippy::too_many_arguments)]
+fn add_run(
+    manifest: &mut manifest::Manifest,
+    run_id: &str,
+    event_id: &str,
+    telemetry: &str,
+    distance_m: f64,
+    meta: &log::LogMeta,
+    est: &estimate::Estimated,
+    car: &CarDescription,
+    settings: &ImportSettings,
+) -> Result<(), String> {
+    let nr = &settings.new_run;
+    let compound = nr.compound.clone().ok_or("a new run needs --compound")?;
+    if !manifest.compounds.iter().any(|c| c.id == compound) {
+        return Err(format!("compound '{compound}' is not in the manifest"));
+    }
+    let tire_sets = nr
+        .tire_sets
+        .clone()
+        .ok_or("a new run needs --tire-sets FL=..,FR=..,RL=..,RR=..")?;
+    if !manifest.events.iter().any(|e| e.id == event_id) {
+        let track = nr.track.clone().ok_or(format!(
+            "event '{event_id}' is not in the manifest: give --track to create it"
+        ))?;
+        if !manifest.tracks.iter().any(|t| t.id == track) {
+            return Err(format!("track '{track}' is not in the manifest"));
+        }
+        let date = meta
+            .date
+            .clone()
+            .ok_or("the log has no date to create the event with")?;
+        let mean = |f: fn(&crate::ingest::telemetry::proto::VehicleSample) -> f32| {
+            est.vehicle.iter().map(|v| f(v) as f64).sum::<f64>() / est.vehicle.len().max(1) as f64
+        };
+        manifest.events.push(manifest::Event {
+            id: event_id.to_string(),
+            track,
+            date,
+            air_temp_c: mean(|v| v.t_air_c),
+            track_temp_c: mean(|v| v.t_track_c),
+        });
+    }
+    if !manifest.cars.iter().any(|c| c.id == car.id) {
+        let c = car;
+        manifest.cars.push(manifest::Car {
+            id: c.id.clone(),
+            name: if c.name.is_empty() {
+                c.id.clone()
+            } else {
+                c.name.clone()
+            },
+            mass_kg: c.mass_kg,
+            wheelbase_m: c.wheelbase_m,
+            front_track_m: c.front_track_m,
+            rear_track_m: c.rear_track_m,
+        });
+    }
+    manifest.runs.push(manifest::Run {
+        id: run_id.to_string(),
+        event: event_id.to_string(),
+        car: car.id.clone(),
+        compound,
+        distance_m: distance_m.max(1.0),
+        telemetry: telemetry.to_string(),
+        tire_sets,
+    });
+    Ok(())
+}
+
+/// The outcome of importing several logs.
+#[derive(Debug, Default, serde::Serialize)]
+pub struct ImportSummary {
+    pub imported: Vec<ImportedRun>,
+    /// Logs that failed, with the error.
+    pub failed: Vec<(PathBuf, String)>,
+}
+
+/// Imports `logs` (run ids from `run_ids`, same length) into the archive at
+/// `archive`, then writes its manifest once (atomically) if any run was
+/// imported. One log's failure does not stop the others.
+pub fn import_logs(
+    archive: &Path,
+    logs: &[PathBuf],
+    run_ids: &[String],
+    settings: &ImportSettings,
+) -> Result<ImportSummary, ImportError> {
+    let season = Season::open(archive)?;
+    let mut manifest = season.manifest.clone();
+    let mut summary = ImportSummary::default();
+    for (log, run) in logs.iter().zip(run_ids) {
+        let before = manifest.clone();
+        match import_log(log, run, &season, &mut manifest, settings) {
+            Ok(r) => {
+                tracing::info!(log = %log.display(), run = %r.run, samples = r.samples, "imported");
+                summary.imported.push(r);
+            }
+            Err(e) => {
+                tracing::error!("{e}");
+                manifest = before;
+                summary.failed.push((log.clone(), e.to_string()));
+            }
+        }
+    }
+    if summary.imported.iter().any(|r| !r.replaced) {
+        manifest.validate(&season.manifest_path)?;
+        manifest.write(&season.manifest_path)?;
+    }
+    Ok(summary)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn civil_days_by_hand() {
+        assert_eq!(days_from_civil("1970-01-01"), Some(0));
+        assert_eq!(days_from_civil("2000-03-01"), Some(11_017));
+        assert_eq!(days_from_civil("2026-03-02"), Some(20_514));
+    }
+}
