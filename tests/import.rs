@@ -6,6 +6,8 @@
 //! runs. The tolerances are those stated in docs/import.md, "Accuracy".
 
 use std::path::Path;
+use tirewear::Wheel;
+use tirewear::import::channel_map::Quantity;
 use tirewear::import::{CarDescription, ChannelMap, ImportSettings, NewRun, import_logs};
 use tirewear::kpi::KpiRow;
 use tirewear::sim::logger::LoggerFormat;
@@ -204,5 +206,407 @@ fn accuracy_over_seeds() {
                 100.0 * mx
             );
         }
+    }
+}
+
+/// Simulates the tiny season (no export) into `dir`.
+fn tiny_archive(dir: &Path) {
+    tirewear::sim::simulate(&tirewear::sim::SimOptions {
+        preset: tirewear::sim::Preset::Tiny,
+        scale: 1.0,
+        seed: 3,
+        effects: vec![],
+        generated: None,
+        scatter: tirewear::sim::WearScatter::NONE,
+        encoding: tirewear::ingest::telemetry::Encoding::Block,
+        rate_hz: Some(5.0),
+        out: dir.to_path_buf(),
+        sensor_noise: true,
+        logger_export: None,
+        progress: false,
+    })
+    .unwrap();
+}
+
+fn fixture(name: &str) -> std::path::PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/fixtures/import")
+        .join(name)
+}
+
+/// A MoTeC CSV written by an independent Python script
+/// (tests/oracles/write_motec_csv.py) with iRacing/ACC spellings and mph,
+/// rpm, °F, psi, rad/s, rad: imported as a new run, every archive channel
+/// equals the script's own computation of the documented formulas.
+#[test]
+fn python_written_motec_csv_matches_the_oracle() {
+    let tmp = tempfile::tempdir().unwrap();
+    let arch = tmp.path().join("season");
+    tiny_archive(&arch);
+    let settings = ImportSettings {
+        channels: ChannelMap::default_map(),
+        cars: vec![
+            CarDescription::read(Path::new(concat!(
+                env!("CARGO_MANIFEST_DIR"),
+                "/datasets/import/car.toml"
+            )))
+            .unwrap(),
+        ],
+        rate_hz: None,
+        new_run: NewRun {
+            event: Some("E99-python".into()),
+            track: Some("valle-rossa".into()),
+            compound: Some("soft".into()),
+            tire_sets: Some(tirewear::ingest::manifest::TireSets {
+                fl: "P1".into(),
+                fr: "P2".into(),
+                rl: "P3".into(),
+                rr: "P4".into(),
+            }),
+        },
+    };
+    let compound = tirewear::ingest::manifest::Season::open(&arch)
+        .unwrap()
+        .manifest
+        .compounds[0]
+        .id
+        .clone();
+    let settings = ImportSettings {
+        new_run: NewRun {
+            compound: Some(compound),
+            ..settings.new_run.clone()
+        },
+        ..settings
+    };
+    let s = import_logs(
+        &arch,
+        &[fixture("python-motec.csv")],
+        &["py-1".into()],
+        &settings,
+    )
+    .unwrap();
+    assert!(s.failed.is_empty(), "{:?}", s.failed);
+    let r = &s.imported[0];
+    assert!(!r.replaced);
+    assert_eq!(r.unmapped, ["Engine RPM"]);
+    assert!(
+        r.mapping["tyre_temp RR"].contains("RRtempCL + RRtempCM + RRtempCR"),
+        "{:?}",
+        r.mapping
+    );
+    let season = tirewear::ingest::manifest::Season::open(&arch).unwrap();
+    let ev = season.event("E99-python").expect("event created");
+    assert_eq!(ev.date, "2026-04-05");
+    assert_eq!(ev.track, "valle-rossa");
+    let run = season
+        .manifest
+        .runs
+        .iter()
+        .find(|r| r.id == "py-1")
+        .unwrap();
+    let tel = tirewear::ingest::telemetry::read_telemetry(&season.path(&run.telemetry)).unwrap();
+
+    let gold: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/tests/golden/import-python-motec.json"
+        ))
+        .unwrap(),
+    )
+    .unwrap();
+    let samples = gold["samples"].as_array().unwrap();
+    assert_eq!(tel.vehicle.speed_mps.len(), samples.len());
+    let start_ns = gold["start_unix_s"].as_u64().unwrap() * 1_000_000_000;
+    assert_eq!(tel.vehicle.time_ns[0], start_ns);
+    assert_eq!(
+        tel.vehicle.time_ns[1] - tel.vehicle.time_ns[0],
+        40_000_000,
+        "25 Hz"
+    );
+    // f32 in the archive: 1e-5 relative, or 1e-3 absolute near zero.
+    let close = |got: f64, want: f64, what: &str| {
+        assert!(
+            (got - want).abs() <= 1e-5 * want.abs() + 1e-3,
+            "{what}: {got} vs {want}"
+        );
+    };
+    for (i, g) in samples.iter().enumerate() {
+        let v = &g["vehicle"];
+        close(
+            tel.vehicle.speed_mps[i] as f64,
+            v["speed_mps"].as_f64().unwrap(),
+            "speed",
+        );
+        close(
+            tel.vehicle.t_air_c[i] as f64,
+            v["t_air_c"].as_f64().unwrap(),
+            "air",
+        );
+        close(
+            tel.vehicle.t_track_c[i] as f64,
+            v["t_track_c"].as_f64().unwrap(),
+            "track",
+        );
+        close(
+            tel.vehicle.distance_m[i],
+            v["distance_m"].as_f64().unwrap(),
+            "distance",
+        );
+        for (k, w) in g["wheels"].as_array().unwrap().iter().enumerate() {
+            let ws = &tel.wheels[k];
+            for (name, got) in [
+                ("vx_mps", ws.vx_mps[i]),
+                ("vy_mps", ws.vy_mps[i]),
+                ("omega_radps", ws.omega_radps[i]),
+                ("rolling_radius_m", ws.rolling_radius_m[i]),
+                ("fx_n", ws.fx_n[i]),
+                ("fy_n", ws.fy_n[i]),
+                ("fz_n", ws.fz_n[i]),
+                ("t_surface_c", ws.t_surface_c[i]),
+                ("t_inner_c", ws.t_inner_c[i]),
+                ("pressure_pa", ws.pressure_pa[i]),
+                ("camber_deg", ws.camber_deg[i]),
+            ] {
+                close(
+                    got as f64,
+                    w[name].as_f64().unwrap(),
+                    &format!("sample {i} wheel {k} {name}"),
+                );
+            }
+        }
+    }
+}
+
+fn tirewear_import(args: &[&str]) -> (i32, String) {
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_tirewear"))
+        .arg("--quiet")
+        .arg("import")
+        .args(args)
+        .output()
+        .unwrap();
+    let text =
+        String::from_utf8_lossy(&out.stdout).into_owned() + &String::from_utf8_lossy(&out.stderr);
+    (out.status.code().unwrap_or(-1), text)
+}
+
+/// Bad logs get errors naming the file and channel; one bad log does not
+/// stop the others (exit 3), and the manifest stays valid.
+#[test]
+fn bad_logs_are_named_and_do_not_sink_the_batch() {
+    let tmp = tempfile::tempdir().unwrap();
+    let arch = tmp.path().join("season");
+    tiny_archive(&arch);
+    let good = std::fs::read_to_string(fixture("python-motec.csv")).unwrap();
+    let write = |name: &str, text: &str| {
+        let p = tmp.path().join(name);
+        std::fs::write(&p, text).unwrap();
+        p.to_string_lossy().into_owned()
+    };
+    // Remove the wheel speeds: a missing required channel lists what the file has.
+    let no_ws = good.replace("wheel_speed_lf", "wheel_rate_lf");
+    let unit = good.replace("\"mph\"", "\"furlong/fortnight\"");
+    let backwards = good.replace("\"0.080\"", "\"0.020\"");
+    let mixed = good.replace("\"0.080\"", "\"0.060\"");
+    let car = concat!(env!("CARGO_MANIFEST_DIR"), "/datasets/import/car.toml");
+    let arch_s = arch.to_string_lossy().into_owned();
+    let common = [
+        "--archive",
+        &arch_s,
+        "--car",
+        car,
+        "--event",
+        "E01-valle-rossa",
+        "--compound",
+        "soft",
+        "--tire-sets",
+        "FL=a,FR=b,RL=c,RR=d",
+    ];
+    let cases = [
+        (
+            write("no_ws.csv", &no_ws),
+            vec![
+                "no channel for wheel_speed FL",
+                "wheel_rate_lf",
+                "no_ws.csv",
+            ],
+        ),
+        (
+            write("unit.csv", &unit),
+            vec![
+                "unit.csv",
+                "channel 'Speed'",
+                "unknown unit 'furlong/fortnight'",
+            ],
+        ),
+        (
+            write("backwards.csv", &backwards),
+            vec!["backwards.csv", "channel 'Time'", "non-monotonic"],
+        ),
+        (write("mixed.csv", &mixed), vec!["mixed.csv", "mixed rates"]),
+    ];
+    for (path, want) in &cases {
+        let mut args = vec![path.as_str()];
+        args.extend(common);
+        let (code, text) = tirewear_import(&args);
+        assert_eq!(code, 3, "{text}");
+        for w in want {
+            assert!(text.contains(w), "'{w}' not in: {text}");
+        }
+    }
+    // A good log beside a bad one: the good one is imported, exit 3.
+    let good_path = write("good.csv", &good);
+    let mut args = vec![cases[0].0.as_str(), good_path.as_str()];
+    args.extend(common);
+    let (code, text) = tirewear_import(&args);
+    assert_eq!(code, 3, "{text}");
+    assert!(text.contains("imported 1 of 2 logs"), "{text}");
+    let season = tirewear::ingest::manifest::Season::open(&arch).unwrap();
+    assert!(season.manifest.runs.iter().any(|r| r.id == "good"));
+    assert!(!season.manifest.runs.iter().any(|r| r.id == "no_ws"));
+    // A new run without --event is a usage error naming what is needed.
+    let (code, text) = tirewear_import(&[
+        &good_path,
+        "--archive",
+        &arch_s,
+        "--car",
+        car,
+        "--run",
+        "other",
+    ]);
+    assert_eq!(code, 3, "{text}");
+    assert!(text.contains("give --event"), "{text}");
+}
+
+/// A real `.ld` recorded by a MoTeC ADL in 2005 (shipped with the
+/// motec-i2 crate as samples/Sample1.ld): header and first values.
+#[test]
+fn real_motec_ld_reads() {
+    let log = tirewear::import::log::read_log(&fixture("Sample1.ld")).unwrap();
+    assert_eq!(log.meta.venue, "Calder");
+    assert_eq!(log.meta.vehicle, "11A");
+    assert_eq!(log.meta.date.as_deref(), Some("2005-11-23"));
+    let air = log
+        .channels
+        .iter()
+        .find(|c| c.name == "Air Temp Inlet")
+        .unwrap();
+    assert_eq!(air.unit, "C");
+    assert_eq!(air.rate_hz, Some(2.0));
+    assert_eq!(air.values.len(), 908);
+    for (got, want) in air.values.iter().zip([19.9, 19.9, 20.1, 19.9, 19.9]) {
+        assert!((got - want).abs() < 1e-9, "{got} vs {want}");
+    }
+    let steer = log
+        .channels
+        .iter()
+        .find(|c| c.name == "Steered Angle")
+        .unwrap();
+    assert_eq!(
+        (steer.rate_hz, steer.values.len(), steer.unit.as_str()),
+        (Some(20.0), 9080, "deg")
+    );
+    // The default map finds its speed and wheel speeds.
+    let m = ChannelMap::default_map()
+        .map(&log.path, &log.names(), &log.units())
+        .unwrap();
+    let found = |q: Quantity, c: Option<Wheel>| {
+        m.get(q, c).map(|x| {
+            x.sources
+                .iter()
+                .map(|&s| log.channels[s].name.as_str())
+                .collect::<Vec<_>>()
+        })
+    };
+    assert_eq!(
+        found(Quantity::GroundSpeed, None),
+        Some(vec!["Ground Speed"])
+    );
+    assert_eq!(
+        found(Quantity::YawRate, None),
+        Some(vec!["Gyro Yaw Velocity"])
+    );
+    assert_eq!(
+        found(Quantity::SteeringWheel, None),
+        Some(vec!["Steered Angle"])
+    );
+    assert_eq!(
+        found(Quantity::WheelSpeed, Some(Wheel::RR)),
+        Some(vec!["Wheel Speed RR"])
+    );
+    assert_eq!(
+        found(Quantity::TyreTemp, Some(Wheel::FR)),
+        Some(vec![
+            "Tyre Temp FR Center",
+            "Tyre Temp FR Inner",
+            "Tyre Temp FR Outer"
+        ])
+    );
+    assert_eq!(
+        found(Quantity::TyreTemp, Some(Wheel::RL)),
+        Some(vec!["Tyre Temp RL"])
+    );
+    // No body slip and no TPMS in this log: with car.toml's cornering
+    // stiffness and hot pressure it imports, the fallbacks marked.
+    let tmp = tempfile::tempdir().unwrap();
+    let arch = tmp.path().join("season");
+    tiny_archive(&arch);
+    let mut car = CarDescription::read(Path::new(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/datasets/import/car.toml"
+    )))
+    .unwrap();
+    car.tyres.pressure_kpa = Some([180.0, 175.0]);
+    let settings = ImportSettings {
+        channels: ChannelMap::default_map(),
+        cars: vec![car],
+        rate_hz: None,
+        new_run: NewRun::default(),
+    };
+    let s = import_logs(
+        &arch,
+        &[fixture("Sample1.ld")],
+        &["E01-valle-rossa-car1-R1".into()],
+        &settings,
+    )
+    .unwrap();
+    assert!(s.failed.is_empty(), "{:?}", s.failed);
+    let r = &s.imported[0];
+    assert_eq!(r.rate_hz, 20.0);
+    assert_eq!(
+        r.lateral,
+        Some(tirewear::import::estimate::LateralMethod::TyreModel)
+    );
+    assert!(
+        r.estimated.iter().any(|e| e.starts_with("pressure_pa")),
+        "{:?}",
+        r.estimated
+    );
+    let season = tirewear::ingest::manifest::Season::open(&arch).unwrap();
+    let tel = tirewear::ingest::telemetry::read_telemetry(
+        &season.path("telemetry/E01-valle-rossa-car1-R1.mcap"),
+    )
+    .unwrap();
+    assert_eq!(tel.wheels[0].pressure_pa[0], 180_000.0);
+    assert_eq!(tel.wheels[3].pressure_pa[0], 175_000.0);
+}
+
+/// The KPI table says which rows come from estimated channels.
+#[test]
+fn imported_rows_are_marked_estimated_in_the_kpi_table() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (full, logged) = (tmp.path().join("full"), tmp.path().join("logged"));
+    simulate(&full, 9, LoggerFormat::MotecCsv);
+    import_copy(&full, &logged, "csv");
+    for row in extract(&full) {
+        assert_eq!(row.quality, "ok");
+    }
+    for row in extract(&logged) {
+        assert!(
+            row.quality.starts_with("estimated: ")
+                && row.quality.contains("fz_n")
+                && row.quality.contains("vy_mps"),
+            "{}",
+            row.quality
+        );
     }
 }

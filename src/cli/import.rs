@@ -135,8 +135,8 @@ pub(crate) fn run(a: ImportArgs) -> Result<bool> {
         }
         println!("  estimated: {}", r.estimated.join("; "));
     }
-    for (log, e) in &s.failed {
-        eprintln!("failed: {}: {e}", log.display());
+    for (_, e) in &s.failed {
+        eprintln!("failed: {e}");
     }
     println!(
         "imported {} of {} logs into {}",

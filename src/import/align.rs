@@ -19,6 +19,10 @@ pub struct Aligned {
     pub series: BTreeMap<(Quantity, Option<Wheel>), Vec<f64>>,
     /// Grid points dropped because a mapped channel had no value there.
     pub dropped: u64,
+    /// The log's channel names and the names the map tried per quantity
+    /// (for errors that name what is missing).
+    pub source_names: Vec<String>,
+    pub tried: BTreeMap<Quantity, Vec<String>>,
     /// The dimension each wheel's speed was given in (linear or angular).
     pub wheel_speed_dimension: [Option<super::units::Dimension>; 4],
 }
@@ -68,7 +72,11 @@ pub fn align(
         .iter()
         .filter(|m| m.quantity != Quantity::Time)
         .collect();
-    let mut out = Aligned::default();
+    let mut out = Aligned {
+        source_names: mapping.source_names.clone(),
+        tried: mapping.tried.clone(),
+        ..Aligned::default()
+    };
     for w in Wheel::ALL {
         out.wheel_speed_dimension[w.index()] = mapping
             .get(Quantity::WheelSpeed, Some(w))
@@ -80,7 +88,10 @@ pub fn align(
             .ok_or_else(|| ImportError::Missing {
                 path: path.clone(),
                 quantity: "time".into(),
-                tried: "the map's [channels.time] names".into(),
+                tried: mapping
+                    .tried
+                    .get(&Quantity::Time)
+                    .map_or("[channels.time] has no names".into(), |t| t.join(", ")),
                 available: log.names().join(", "),
             })?;
         let tc = &log.channels[time.sources[0]];

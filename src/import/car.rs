@@ -50,6 +50,10 @@ pub struct Tyres {
     /// angle and steering angle.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub cornering_stiffness_per_rad: Option<[f64; 2]>,
+    /// Hot gauge pressure, front and rear (kPa), taken when the log has no
+    /// TPMS pressure (marked as estimated).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pressure_kpa: Option<[f64; 2]>,
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -163,6 +167,11 @@ impl CarDescription {
         if let Some(cs) = self.tyres.cornering_stiffness_per_rad {
             for c in cs {
                 range("tyres.cornering_stiffness_per_rad", c, 1.0, 500.0)?;
+            }
+        }
+        if let Some(ps) = self.tyres.pressure_kpa {
+            for p in ps {
+                range("tyres.pressure_kpa", p, 20.0, 1000.0)?;
             }
         }
         if let Some(c) = &self.camber {

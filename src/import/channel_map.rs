@@ -161,6 +161,10 @@ pub struct Mapping {
     pub mapped: Vec<Mapped>,
     /// Channels no rule matched, by name.
     pub unmapped: Vec<String>,
+    /// Every channel of the log, by name (for errors that list them).
+    pub source_names: Vec<String>,
+    /// The names the map tries for each quantity (for errors).
+    pub tried: BTreeMap<Quantity, Vec<String>>,
 }
 
 impl Mapping {
@@ -316,8 +320,15 @@ impl ChannelMap {
     ) -> Result<Mapping, ImportError> {
         let norm: Vec<String> = names.iter().map(|n| normalise(n)).collect();
         let mut used = vec![false; names.len()];
-        let mut mapping = Mapping::default();
+        let mut mapping = Mapping {
+            source_names: names.to_vec(),
+            ..Mapping::default()
+        };
         for rule in &self.rules {
+            mapping.tried.insert(
+                rule.quantity,
+                rule.patterns[0].iter().map(|(p, _)| p.clone()).collect(),
+            );
             for (ci, patterns) in rule.patterns.iter().enumerate() {
                 let corner = rule.quantity.per_corner().then(|| Wheel::ALL[ci]);
                 let Some((pattern, hits)) = patterns.iter().find_map(|(p, re)| {

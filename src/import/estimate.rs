@@ -45,20 +45,29 @@ pub struct EventConditions {
 /// acceleration from speed when the log has none.
 const DERIVATIVE_HALF_WIDTH_S: f64 = 0.25;
 
-fn missing(path: &Path, quantity: &str, tried: &str, a: &Aligned) -> ImportError {
+/// A required quantity is missing: the error lists the names the map
+/// tried for `quantities` and every channel the log has.
+fn missing(path: &Path, what: &str, quantities: &[Quantity], a: &Aligned) -> ImportError {
+    let tried: Vec<String> = quantities
+        .iter()
+        .map(|q| match a.tried.get(q) {
+            Some(names) => format!(
+                "{}: {}",
+                q.key(),
+                names
+                    .iter()
+                    .map(|n| format!("'{n}'"))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ),
+            None => format!("{}: no names in the map", q.key()),
+        })
+        .collect();
     ImportError::Missing {
         path: path.to_path_buf(),
-        quantity: quantity.into(),
-        tried: tried.into(),
-        available: a
-            .series
-            .keys()
-            .map(|(q, c)| match c {
-                Some(w) => format!("{} {}", q.key(), w.name()),
-                None => q.key().to_string(),
-            })
-            .collect::<Vec<_>>()
-            .join(", "),
+        quantity: what.into(),
+        tried: tried.join("; "),
+        available: a.source_names.join(", "),
     }
 }
 
@@ -91,7 +100,7 @@ pub fn estimate(
     let mut note = |s: &str| notes.push(s.to_string());
     let speed = a
         .get(Quantity::GroundSpeed, None)
-        .ok_or_else(|| missing(path, "ground_speed", "[channels.ground_speed] names", a))?;
+        .ok_or_else(|| missing(path, "ground_speed", &[Quantity::GroundSpeed], a))?;
     let yaw_in = a.get(Quantity::YawRate, None);
     let ay_in = a.get(Quantity::AccelLat, None);
     let (ay, yaw): (Vec<f64>, Vec<f64>) = match (ay_in, yaw_in) {
@@ -114,7 +123,7 @@ pub fn estimate(
             return Err(missing(
                 path,
                 "accel_lat or yaw_rate",
-                "[channels.accel_lat], [channels.yaw_rate] names",
+                &[Quantity::AccelLat, Quantity::YawRate],
                 a,
             ));
         }
@@ -132,7 +141,7 @@ pub fn estimate(
             missing(
                 path,
                 &format!("wheel_speed {}", w.name()),
-                "[channels.wheel_speed] names",
+                &[Quantity::WheelSpeed],
                 a,
             )
         })?;
@@ -148,20 +157,47 @@ pub fn estimate(
             )
     };
     let temp_of = |q: Quantity, w: Wheel, name: &str| {
-        a.get(q, Some(w)).ok_or_else(|| {
-            missing(
-                path,
-                &format!("{name} {}", w.name()),
-                &format!("[channels.{name}] names"),
-                a,
-            )
-        })
+        a.get(q, Some(w))
+            .ok_or_else(|| missing(path, &format!("{name} {}", w.name()), &[q], a))
     };
     let mut surface = Vec::new();
-    let mut pressure = Vec::new();
     for w in Wheel::ALL {
         surface.push(temp_of(Quantity::TyreTemp, w, "tyre_temp")?);
-        pressure.push(temp_of(Quantity::TpmsPressure, w, "tpms_pressure")?);
+    }
+    // Without TPMS, car.toml's hot pressure per axle (a constant).
+    let mut fixed_pressure: Vec<Vec<f64>> = Vec::new();
+    let mut pressure: Vec<&[f64]> = Vec::new();
+    let have_tpms = Wheel::ALL
+        .iter()
+        .all(|&w| a.get(Quantity::TpmsPressure, Some(w)).is_some());
+    match (have_tpms, car.tyres.pressure_kpa) {
+        (true, _) => {
+            for w in Wheel::ALL {
+                pressure.push(a.get(Quantity::TpmsPressure, Some(w)).expect("checked"));
+            }
+        }
+        (false, Some(kpa)) => {
+            note("pressure_pa: car.toml [tyres] pressure_kpa (no TPMS)");
+            for w in Wheel::ALL {
+                fixed_pressure.push(vec![kpa[CarDescription::axle_of(w)] * 1e3; n]);
+            }
+            pressure = fixed_pressure.iter().map(Vec::as_slice).collect();
+        }
+        (false, None) => {
+            let w = Wheel::ALL
+                .into_iter()
+                .find(|&w| a.get(Quantity::TpmsPressure, Some(w)).is_none())
+                .expect("one is missing");
+            return Err(missing(
+                path,
+                &format!(
+                    "tpms_pressure {} (or car.toml [tyres] pressure_kpa)",
+                    w.name()
+                ),
+                &[Quantity::TpmsPressure],
+                a,
+            ));
+        }
     }
     let inner: Vec<Option<&[f64]>> = Wheel::ALL
         .iter()
@@ -201,7 +237,11 @@ pub fn estimate(
             return Err(missing(
                 path,
                 "body_slip and steer_angle (or steering_wheel with car.toml steering_ratio), or car.toml [tyres] cornering_stiffness_per_rad",
-                "[channels.body_slip], [channels.steer_angle], [channels.steering_wheel] names",
+                &[
+                    Quantity::BodySlip,
+                    Quantity::SteerAngle,
+                    Quantity::SteeringWheel,
+                ],
                 a,
             ));
         }
@@ -227,7 +267,7 @@ pub fn estimate(
                 missing(
                     path,
                     "air_temp (and no event to take it from)",
-                    "[channels.air_temp] names",
+                    &[Quantity::AirTemp],
                     a,
                 )
             })?)
@@ -241,7 +281,7 @@ pub fn estimate(
                 missing(
                     path,
                     "track_temp (and no event to take it from)",
-                    "[channels.track_temp] names",
+                    &[Quantity::TrackTemp],
                     a,
                 )
             })?)
@@ -521,7 +561,7 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(
-            err.contains("log.csv") && err.contains("body_slip") && err.contains("ground_speed"),
+            err.contains("log.csv") && err.contains("body_slip") && err.contains("cornering_stiffness"),
             "{err}"
         );
     }

@@ -186,7 +186,7 @@ pub fn import_log(
         ),
     ]);
     meta.insert("estimated".to_string(), est.estimated.join("; "));
-    writer.write_metadata("tirewear.import", meta)?;
+    writer.write_metadata(crate::ingest::telemetry::IMPORT_METADATA, meta)?;
     writer.write_metadata("tirewear.channel_map", map_record.clone())?;
     for (i, k) in aligned.index.iter().enumerate() {
         writer.push(

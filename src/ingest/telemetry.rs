@@ -423,6 +423,9 @@ impl TelemetryWriter {
     }
 }
 
+/// Name of the metadata record `tirewear import` writes.
+pub const IMPORT_METADATA: &str = "tirewear.import";
+
 /// All channels of one run, as read from its MCAP file.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct RunTelemetry {
@@ -433,6 +436,10 @@ pub struct RunTelemetry {
     pub encoding: Option<Encoding>,
     /// Messages on topics this reader does not know (ignored).
     pub ignored_messages: u64,
+    /// Channels `tirewear import` estimated rather than measured (the
+    /// `estimated` entry of the `tirewear.import` metadata record, found
+    /// through the summary's metadata index); `None` for a measured run.
+    pub estimated: Option<String>,
 }
 
 /// Reads a telemetry MCAP file (either message form, chunked or not,
@@ -994,6 +1001,12 @@ fn read_indexed(path: &Path) -> Result<Option<RunTelemetry>> {
         }
         run.vehicle.append(part.vehicle);
     }
+    run.estimated = summary
+        .metadata_indexes
+        .iter()
+        .find(|m| m.name == IMPORT_METADATA)
+        .and_then(|m| mcap::read::metadata(bytes, m).ok())
+        .and_then(|m| m.metadata.get("estimated").cloned());
     Ok(Some(run))
 }
 

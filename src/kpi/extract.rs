@@ -13,7 +13,7 @@ use super::cpu::telemetry_reduce::{ReduceBatch, merge};
 use super::energy_maps::{EnergyMaps, SLIDING_SPEED_BINS, T_INNER_BINS, T_SURFACE_BINS};
 use super::road::{RoadCurves, RoadIndices, mean_indices};
 use super::table::{
-    KpiRow, kpi_batch, quality, side_table_path, with_extraction_id, write_batch_to,
+    KpiRow, kpi_batch, quality, side_table_path, with_estimated, with_extraction_id, write_batch_to,
 };
 use super::telemetry::{CleaningReport, finish_wheel, prepare_wheel, vehicle_indices};
 use super::viscoelastic::{ViscoelasticIndices, viscoelastic_indices};
@@ -357,6 +357,9 @@ fn run_rows(
             worn_through_readings: wear_of_tire.map_or(0.0, |t| t.1),
         };
         row.quality = quality(&row, &reasons);
+        if let Some(est) = &tel.estimated {
+            row.quality = with_estimated(&row.quality, est);
+        }
         out.rows.push(row);
         out.maps.push((w, maps, conditions));
         out.cleaning.push((format!("{}/{}", run.id, w), rep));

@@ -303,6 +303,24 @@ pub fn quality(row: &KpiRow, reasons: &[String]) -> String {
     parts.join("; ")
 }
 
+/// The `quality` of a run `tirewear import` wrote: `estimated: CHANNELS`
+/// (the channels its virtual sensors estimated, from the telemetry's
+/// `tirewear.import` record) in place of `ok`, or after the other reasons.
+pub fn with_estimated(quality: &str, estimated: &str) -> String {
+    let names: Vec<&str> = estimated
+        .split("; ")
+        .filter_map(|part| part.split(':').next())
+        .map(str::trim)
+        .filter(|n| !n.is_empty())
+        .collect();
+    let est = format!("estimated: {}", names.join(", "));
+    if quality == QUALITY_OK {
+        est
+    } else {
+        format!("{quality}; {est}")
+    }
+}
+
 /// Casts a column to `to`, refusing nulls and values that do not convert
 /// (a text cell "abc" in a numeric column): the error names the column and
 /// the row (0-based over the file), instead of reading them as 0.

@@ -386,6 +386,7 @@ pub fn car_description(car: &CarParams) -> CarDescription {
             // Slope of the simulator's normalised Magic Formula at zero
             // slip (B·C = 27.2) times a typical peak friction of 1.8.
             cornering_stiffness_per_rad: Some([49.0, 49.0]),
+            pressure_kpa: None,
         },
         camber: Some(Camber {
             static_deg: car.static_camber_deg,
