@@ -610,3 +610,78 @@ fn imported_rows_are_marked_estimated_in_the_kpi_table() {
         );
     }
 }
+
+/// The sensitivity table of docs/import.md: how far a wrong car.toml moves
+/// the imported friction energy. `cargo test --release --test import --
+/// --ignored --nocapture sensitivity_to_the_car_description`.
+#[test]
+#[ignore = "measurement for docs/import.md"]
+fn sensitivity_to_the_car_description() {
+    type Edit = fn(&mut CarDescription);
+    let cases: [(&str, Edit); 8] = [
+        ("exact", |_| {}),
+        ("mass +5 %", |c| c.mass_kg *= 1.05),
+        ("CG height +10 %", |c| c.cg_height_m *= 1.10),
+        ("C_L·A +10 %", |c| c.aero.cl_a_m2 *= 1.10),
+        ("roll stiffness front 0.55 → 0.50", |c| {
+            c.roll_stiffness_front_fraction = 0.50
+        }),
+        ("wheel-speed radius +0.3 %", |c| {
+            let r = c.tyres.wheel_speed_radius_m.unwrap();
+            c.tyres.wheel_speed_radius_m = Some([r[0] * 1.003, r[1] * 1.003]);
+        }),
+        ("no radial stiffness (R = R0)", |c| {
+            c.tyres.radial_stiffness_n_per_m = None
+        }),
+        ("steering ratio 12 → 13", |c| {
+            c.steering_ratio = Some(13.0)
+        }),
+    ];
+    let tmp = tempfile::tempdir().unwrap();
+    let full = tmp.path().join("full");
+    simulate(&full, 101, LoggerFormat::MotecCsv);
+    let a = extract(&full);
+    println!("| car.toml | friction energy: median error | bias |");
+    for (name, edit) in cases {
+        let logged = tmp.path().join(format!("logged-{}", name.len()));
+        let _ = std::fs::remove_dir_all(&logged);
+        copy_dir(&full, &logged);
+        std::fs::remove_dir_all(logged.join("telemetry")).unwrap();
+        let mut car = CarDescription::read(&full.join("logger/car1.car.toml")).unwrap();
+        edit(&mut car);
+        let mut logs: Vec<_> = std::fs::read_dir(full.join("logger"))
+            .unwrap()
+            .map(|e| e.unwrap().path())
+            .filter(|p| p.extension().is_some_and(|e| e == "csv"))
+            .collect();
+        logs.sort();
+        let ids: Vec<String> = logs
+            .iter()
+            .map(|p| p.file_stem().unwrap().to_string_lossy().into_owned())
+            .collect();
+        let settings = ImportSettings {
+            channels: ChannelMap::default_map(),
+            cars: vec![car],
+            rate_hz: None,
+            new_run: NewRun::default(),
+        };
+        import_logs(&logged, &logs, &ids, &settings).unwrap();
+        let b = extract(&logged);
+        let signed: Vec<f64> = a
+            .iter()
+            .map(|x| {
+                let y = b
+                    .iter()
+                    .find(|y| y.run == x.run && y.wheel == x.wheel)
+                    .unwrap();
+                y.friction_energy_j / x.friction_energy_j - 1.0
+            })
+            .collect();
+        let abs: Vec<f64> = signed.iter().map(|e| e.abs()).collect();
+        println!(
+            "| {name} | {:.1} % | {:+.1} % |",
+            100.0 * median(abs),
+            100.0 * signed.iter().sum::<f64>() / signed.len() as f64
+        );
+    }
+}

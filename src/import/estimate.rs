@@ -561,7 +561,9 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(
-            err.contains("log.csv") && err.contains("body_slip") && err.contains("cornering_stiffness"),
+            err.contains("log.csv")
+                && err.contains("body_slip")
+                && err.contains("cornering_stiffness"),
             "{err}"
         );
     }
