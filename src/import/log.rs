@@ -439,6 +439,42 @@ mod tests {
     }
 
     #[test]
+    fn parquet_units_from_metadata_or_the_name() {
+        use arrow_array::{Float32Array, Float64Array, RecordBatch, StringArray};
+        use arrow_schema::{DataType, Field, Schema};
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("log.parquet");
+        let schema = Schema::new(vec![
+            Field::new("t", DataType::Float64, false)
+                .with_metadata(std::collections::HashMap::from([("unit".to_string(), "s".to_string())])),
+            Field::new("Speed [km/h]", DataType::Float32, true),
+            Field::new("driver", DataType::Utf8, false),
+        ]);
+        let batch = RecordBatch::try_new(
+            std::sync::Arc::new(schema),
+            vec![
+                std::sync::Arc::new(Float64Array::from(vec![0.0, 0.05])),
+                std::sync::Arc::new(Float32Array::from(vec![Some(36.0), None])),
+                std::sync::Arc::new(StringArray::from(vec!["a", "b"])),
+            ],
+        )
+        .unwrap();
+        let f = std::fs::File::create(&p).unwrap();
+        let mut w = parquet::arrow::ArrowWriter::try_new(f, batch.schema(), None).unwrap();
+        w.write(&batch).unwrap();
+        w.close().unwrap();
+        let log = read_log(&p).unwrap();
+        assert_eq!(log.meta.format, "Parquet");
+        assert_eq!(log.names(), ["t", "Speed"], "text columns are not channels");
+        assert_eq!(log.units(), ["s", "km/h"]);
+        assert_eq!(log.channels[1].values[0], 36.0);
+        assert!(
+            log.channels[1].values[1].is_nan(),
+            "a null is a missing value"
+        );
+    }
+
+    #[test]
     fn bad_csv_names_the_line_and_channel() {
         let dir = tempfile::tempdir().unwrap();
         let p = write(dir.path(), "c.csv", "t,v\n0,1\n1,abc\n");
