@@ -445,8 +445,9 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let p = dir.path().join("log.parquet");
         let schema = Schema::new(vec![
-            Field::new("t", DataType::Float64, false)
-                .with_metadata(std::collections::HashMap::from([("unit".to_string(), "s".to_string())])),
+            Field::new("t", DataType::Float64, false).with_metadata(
+                std::collections::HashMap::from([("unit".to_string(), "s".to_string())]),
+            ),
             Field::new("Speed [km/h]", DataType::Float32, true),
             Field::new("driver", DataType::Utf8, false),
         ]);

@@ -14,3 +14,6 @@ done
 rm -rf "$tmp"
 python3 tests/oracles/read_our_mcap.py
 python3 tests/oracles/write_python_mcap.py
+# Logger files for `tirewear import` and their goldens (plain Python).
+python3 tests/oracles/write_motec_csv.py
+python3 tests/oracles/write_motec_ld.py
