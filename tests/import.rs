@@ -729,3 +729,50 @@ fn python_written_ld_reads_back_exactly() {
         }
     }
 }
+
+/// A `.ld` with its `.ldx` sidecar: the beacons are read (µs → s) and
+/// recorded; a malformed sidecar is an error naming it.
+#[test]
+fn ldx_sidecar_beacons_are_read() {
+    let tmp = tempfile::tempdir().unwrap();
+    let ld = tmp.path().join("run.ld");
+    std::fs::copy(fixture("python.ld"), &ld).unwrap();
+    std::fs::write(
+        tmp.path().join("run.ldx"),
+        r#"<?xml version="1.0"?>
+<LDXFile Locale="English_Australia.1252" DefaultLocale="C" Version="1.6">
+ <Layers>
+  <Layer>
+   <MarkerBlock>
+    <MarkerGroup Name="Beacons" Index="3">
+     <Marker Version="100" ClassName="BCN" Name="Manual.2" Flags="77" Time="1500000"/>
+     <Marker Version="100" ClassName="BCN" Name="Manual.1" Flags="77" Time="250000.5"/>
+    </MarkerGroup>
+   </MarkerBlock>
+  </Layer>
+  <Details>
+   <String Id="Total Laps" Value="3"/>
+   <String Id="Fastest Lap" Value="2"/>
+  </Details>
+ </Layers>
+</LDXFile>"#,
+    )
+    .unwrap();
+    let log = tirewear::import::log::read_log(&ld).unwrap();
+    assert_eq!(log.meta.beacons_s, [0.2500005, 1.5]);
+    assert_eq!(log.meta.header["Total Laps"], "3");
+    std::fs::write(
+        tmp.path().join("run.ldx"),
+        "<LDXFile><Marker Time=\"soon\"/></LDXFile>",
+    )
+    .unwrap();
+    let e = tirewear::import::log::read_log(&ld)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("run.ldx") && e.contains("'soon'"), "{e}");
+    std::fs::write(tmp.path().join("run.ldx"), "<LDXFile><Marker").unwrap();
+    let e = tirewear::import::log::read_log(&ld)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("run.ldx") && e.contains("XML"), "{e}");
+}

@@ -130,7 +130,12 @@ pub fn read_ld(path: &Path) -> Result<RawLog, ImportError> {
             rate_hz: Some(c.sample_rate as f64),
         });
     }
+    let (beacons_s, details) = match read_ldx(&path.with_extension("ldx"))? {
+        Some(x) => x,
+        None => (Vec::new(), Default::default()),
+    };
     let meta = LogMeta {
+        beacons_s,
         format: "MoTeC ld".into(),
         venue: header.venue.trim().to_string(),
         vehicle: header.vehicleid.trim().to_string(),
@@ -139,13 +144,75 @@ pub fn read_ld(path: &Path) -> Result<RawLog, ImportError> {
         comment: header.short_comment.trim().to_string(),
         date: parse_date(&header.date_string),
         time_of_day_s: parse_time_of_day(&header.time_string),
-        header: Default::default(),
+        header: details,
     };
     Ok(RawLog {
         path: path.to_path_buf(),
         meta,
         channels: out,
     })
+}
+
+/// Largest `.ldx` read (bytes).
+const MAX_LDX_BYTES: u64 = 64 << 20;
+
+/// Reads a `.ld` log's `.ldx` sidecar when there is one: the beacon
+/// markers' times (`<Marker Time="µs"/>`, seconds from the log's start,
+/// sorted) and the `<Details><String Id=.. Value=../>` pairs. A sidecar
+/// that is not well-formed XML, or a marker time that is not a number, is
+/// an error naming it.
+pub fn read_ldx(
+    path: &Path,
+) -> Result<Option<(Vec<f64>, std::collections::BTreeMap<String, String>)>, ImportError> {
+    let Ok(meta) = std::fs::metadata(path) else {
+        return Ok(None);
+    };
+    if meta.len() > MAX_LDX_BYTES {
+        return Err(ImportError::log(
+            path,
+            "file",
+            format!("{} bytes is over the 64 MiB limit", meta.len()),
+        ));
+    }
+    let text = std::fs::read_to_string(path).map_err(|e| ImportError::io(path, e))?;
+    let doc = roxmltree::Document::parse(&text)
+        .map_err(|e| ImportError::log(path, "XML", e.to_string()))?;
+    let mut beacons = Vec::new();
+    let mut details = std::collections::BTreeMap::new();
+    for node in doc.descendants() {
+        match node.tag_name().name() {
+            "Marker" => {
+                let t = node.attribute("Time").ok_or_else(|| {
+                    ImportError::log(
+                        path,
+                        format!("Marker at line {}", doc.text_pos_at(node.range().start).row),
+                        "no Time",
+                    )
+                })?;
+                let us: f64 = t
+                    .trim()
+                    .parse()
+                    .ok()
+                    .filter(|v: &f64| v.is_finite() && *v >= 0.0)
+                    .ok_or_else(|| {
+                        ImportError::log(
+                            path,
+                            format!("Marker at line {}", doc.text_pos_at(node.range().start).row),
+                            format!("Time '{t}' is not a time in microseconds"),
+                        )
+                    })?;
+                beacons.push(us / 1e6);
+            }
+            "String" => {
+                if let (Some(id), Some(v)) = (node.attribute("Id"), node.attribute("Value")) {
+                    details.insert(id.to_string(), v.to_string());
+                }
+            }
+            _ => {}
+        }
+    }
+    beacons.sort_by(f64::total_cmp);
+    Ok(Some((beacons, details)))
 }
 
 /// One channel to write into a `.ld` file: values are stored as 32-bit

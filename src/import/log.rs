@@ -20,8 +20,11 @@ pub struct LogMeta {
     pub date: Option<String>,
     /// Seconds after midnight of the log's start, when known.
     pub time_of_day_s: Option<f64>,
-    /// Every header key and value as written (MoTeC CSV).
+    /// Every header key and value as written (MoTeC CSV; `.ldx` details).
     pub header: BTreeMap<String, String>,
+    /// Beacon (lap marker) times, seconds from the log's start: a `.ld`
+    /// log's `.ldx` sidecar.
+    pub beacons_s: Vec<f64>,
 }
 
 /// One channel as the log stores it.

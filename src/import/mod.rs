@@ -67,6 +67,8 @@ pub struct ImportedRun {
     pub mapping: BTreeMap<String, String>,
     pub estimated: Vec<String>,
     pub unmapped: Vec<String>,
+    /// Beacon times (s from the log's start) from a `.ldx` sidecar.
+    pub beacons_s: Vec<f64>,
 }
 
 /// Days since 1970-01-01 of a `YYYY-MM-DD` date (proleptic Gregorian).
@@ -186,7 +188,25 @@ pub fn import_log(
         ),
     ]);
     meta.insert("estimated".to_string(), est.estimated.join("; "));
+    // The log's own header (MoTeC CSV header block, `.ldx` details).
+    for (k, v) in &raw.meta.header {
+        meta.insert(format!("header: {k}"), v.clone());
+    }
     writer.write_metadata(crate::ingest::telemetry::IMPORT_METADATA, meta)?;
+    if !raw.meta.beacons_s.is_empty() {
+        // Beacons (lap markers) from the `.ldx`, in seconds from the log's start.
+        let mut laps = BTreeMap::new();
+        laps.insert(
+            "beacons_s".into(),
+            raw.meta
+                .beacons_s
+                .iter()
+                .map(|t| format!("{t:.6}"))
+                .collect::<Vec<_>>()
+                .join(","),
+        );
+        writer.write_metadata("tirewear.laps", laps)?;
+    }
     writer.write_metadata("tirewear.channel_map", map_record.clone())?;
     for (i, k) in aligned.index.iter().enumerate() {
         writer.push(
@@ -221,6 +241,7 @@ pub fn import_log(
         mapping: map_record,
         estimated: est.estimated,
         unmapped: mapping.unmapped,
+        beacons_s: raw.meta.beacons_s.clone(),
     })
 }
 
