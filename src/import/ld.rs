@@ -130,10 +130,7 @@ pub fn read_ld(path: &Path) -> Result<RawLog, ImportError> {
             rate_hz: Some(c.sample_rate as f64),
         });
     }
-    let (beacons_s, details) = match read_ldx(&path.with_extension("ldx"))? {
-        Some(x) => x,
-        None => (Vec::new(), Default::default()),
-    };
+    let (beacons_s, details) = read_ldx(&path.with_extension("ldx"))?.unwrap_or_default();
     let meta = LogMeta {
         beacons_s,
         format: "MoTeC ld".into(),
@@ -153,6 +150,9 @@ pub fn read_ld(path: &Path) -> Result<RawLog, ImportError> {
     })
 }
 
+/// A `.ldx` sidecar: beacon times (s) and the details' id/value pairs.
+pub type Ldx = (Vec<f64>, std::collections::BTreeMap<String, String>);
+
 /// Largest `.ldx` read (bytes).
 const MAX_LDX_BYTES: u64 = 64 << 20;
 
@@ -161,9 +161,7 @@ const MAX_LDX_BYTES: u64 = 64 << 20;
 /// sorted) and the `<Details><String Id=.. Value=../>` pairs. A sidecar
 /// that is not well-formed XML, or a marker time that is not a number, is
 /// an error naming it.
-pub fn read_ldx(
-    path: &Path,
-) -> Result<Option<(Vec<f64>, std::collections::BTreeMap<String, String>)>, ImportError> {
+pub fn read_ldx(path: &Path) -> Result<Option<Ldx>, ImportError> {
     let Ok(meta) = std::fs::metadata(path) else {
         return Ok(None);
     };
