@@ -395,3 +395,86 @@ pub fn car_description(car: &CarParams) -> CarDescription {
         }),
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::SeedableRng;
+
+    /// The CSV export reads back to the precision it stores (its decimals).
+    #[test]
+    fn csv_export_round_trips_to_its_decimals() {
+        let car = CarParams::single_seater("car1", "Car #1", 0.0);
+        let mut rec = Recorder::new(&car, true);
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(1);
+        for i in 0..30u64 {
+            let x = i as f32;
+            let tire = TireSample {
+                vx_mps: 50.0 + x,
+                vy_mps: -0.3,
+                omega_radps: 150.0 + 0.37 * x,
+                rolling_radius_m: 0.32,
+                fx_n: 0.0,
+                fy_n: 0.0,
+                fz_n: 4000.0,
+                t_surface_c: 90.0 + 0.123 * x,
+                t_inner_c: 95.0,
+                pressure_pa: 180_000.0 + 17.0 * x,
+                camber_deg: -3.0,
+            };
+            let veh = VehicleSample {
+                speed_mps: 50.0 + x,
+                t_track_c: 30.0,
+                t_air_c: 20.0,
+                distance_m: 50.0 * i as f64,
+            };
+            let m = Motion {
+                ax_mps2: 1.0,
+                ay_mps2: 5.0,
+                yaw_rate_radps: 0.1,
+                slip_y: [-0.02, -0.021, -0.015, -0.016],
+            };
+            // Two dropped samples (10 and 11): a gap in the time column.
+            if i != 10 && i != 11 {
+                rec.push(
+                    1_000_000_000 + i * 50_000_000,
+                    &[tire; 4],
+                    &veh,
+                    &m,
+                    &mut rng,
+                );
+            }
+        }
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("r.csv");
+        let info = ExportInfo {
+            run: "r".into(),
+            venue: "V".into(),
+            vehicle: "car1".into(),
+            vehicle_desc: "Car #1".into(),
+            date: "2026-03-02".into(),
+            rate_hz: 20.0,
+        };
+        rec.write(&p, LoggerFormat::MotecCsv, &info).unwrap();
+        let log = crate::import::log::read_csv(&p).unwrap();
+        assert_eq!(log.meta.format, "MoTeC CSV");
+        assert_eq!(log.meta.date.as_deref(), Some("2026-03-02"));
+        let time = &log.channels[0].values;
+        assert_eq!(time.len(), 28);
+        assert!(
+            (time[10] - 0.6).abs() < 1e-12,
+            "the gap is kept: {}",
+            time[10]
+        );
+        for (c, spec) in log.channels[1..].iter().zip(specs()) {
+            assert_eq!(c.name, spec.0);
+            assert_eq!(c.unit, spec.2);
+            let half = 0.5 * 10f64.powi(-(spec.3 as i32)) + 1e-9;
+            let col = specs().iter().position(|s| s.0 == spec.0).unwrap();
+            for (k, v) in c.values.iter().enumerate() {
+                let want = rec.rows[k * rec.width + col];
+                assert!((v - want).abs() <= half, "{}: {v} vs {want}", spec.0);
+            }
+        }
+    }
+}
