@@ -72,7 +72,13 @@ fn median(mut v: Vec<f64>) -> f64 {
 }
 
 /// Imports `dir/logger/*` into a copy of the archive whose telemetry was removed.
-fn import_copy(dir: &Path, copy: &Path, ext: &str) -> tirewear::import::ImportSummary {
+/// `springs`: loads from the damper positions (else the load-transfer model).
+fn import_copy(
+    dir: &Path,
+    copy: &Path,
+    ext: &str,
+    springs: bool,
+) -> tirewear::import::ImportSummary {
     copy_dir(dir, copy);
     std::fs::remove_dir_all(copy.join("telemetry")).unwrap();
     std::fs::remove_dir_all(copy.join("truth")).unwrap();
@@ -86,9 +92,13 @@ fn import_copy(dir: &Path, copy: &Path, ext: &str) -> tirewear::import::ImportSu
         .iter()
         .map(|p| p.file_stem().unwrap().to_string_lossy().into_owned())
         .collect();
+    let mut car = CarDescription::read(&dir.join("logger/car1.car.toml")).unwrap();
+    if !springs {
+        car.suspension = None;
+    }
     let settings = ImportSettings {
         channels: ChannelMap::default_map(),
-        cars: vec![CarDescription::read(&dir.join("logger/car1.car.toml")).unwrap()],
+        cars: vec![car],
         rate_hz: None,
         new_run: NewRun::default(),
     };
@@ -100,7 +110,7 @@ fn motec_csv_round_trip_reproduces_friction_energy() {
     let tmp = tempfile::tempdir().unwrap();
     let (full, logged) = (tmp.path().join("full"), tmp.path().join("logged"));
     simulate(&full, 3, LoggerFormat::MotecCsv);
-    let s = import_copy(&full, &logged, "csv");
+    let s = import_copy(&full, &logged, "csv", false);
     assert!(s.failed.is_empty(), "{:?}", s.failed);
     assert_eq!(s.imported.len(), 4);
     let (a, b) = (extract(&full), extract(&logged));
@@ -138,7 +148,7 @@ fn motec_ld_round_trip_resamples_slower_channels() {
     let tmp = tempfile::tempdir().unwrap();
     let (full, logged) = (tmp.path().join("full"), tmp.path().join("logged"));
     simulate(&full, 5, LoggerFormat::MotecLd);
-    let s = import_copy(&full, &logged, "ld");
+    let s = import_copy(&full, &logged, "ld", true);
     assert!(s.failed.is_empty(), "{:?}", s.failed);
     let r = &s.imported[0];
     assert_eq!(r.format, "MoTeC ld");
@@ -177,23 +187,32 @@ fn accuracy_over_seeds() {
         "camber_avg_deg",
         "solicitation_frequency_hz",
     ];
-    for (format, ext) in [
-        (LoggerFormat::MotecCsv, "csv"),
-        (LoggerFormat::MotecLd, "ld"),
+    for (format, ext, springs) in [
+        (LoggerFormat::MotecCsv, "csv", false),
+        (LoggerFormat::MotecCsv, "csv", true),
+        (LoggerFormat::MotecLd, "ld", false),
     ] {
         let mut all: Vec<Vec<f64>> = vec![Vec::new(); cols.len()];
         for seed in 101..=112 {
             let tmp = tempfile::tempdir().unwrap();
             let (full, logged) = (tmp.path().join("full"), tmp.path().join("logged"));
             simulate(&full, seed, format);
-            let s = import_copy(&full, &logged, ext);
+            let s = import_copy(&full, &logged, ext, springs);
             assert!(s.failed.is_empty());
             let (a, b) = (extract(&full), extract(&logged));
             for (k, c) in cols.iter().enumerate() {
                 all[k].extend(rel_errors(&a, &b, c));
             }
         }
-        println!("{ext}: {} tire-runs (seeds 101-112)", all[0].len());
+        let loads = if springs {
+            "damper positions"
+        } else {
+            "load transfer"
+        };
+        println!(
+            "{ext}, loads from {loads}: {} tire-runs (seeds 101-112)",
+            all[0].len()
+        );
         for (c, e) in cols.iter().zip(all) {
             let mx = e.iter().copied().fold(0.0, f64::max);
             let mut s = e.clone();
@@ -571,7 +590,13 @@ fn real_motec_ld_reads() {
     .unwrap();
     assert!(s.failed.is_empty(), "{:?}", s.failed);
     let r = &s.imported[0];
-    assert_eq!(r.rate_hz, 20.0);
+    // The fastest mapped channel: the suspension positions at 100 Hz.
+    assert_eq!(r.rate_hz, 100.0);
+    assert!(
+        r.mapping["damper_pos FL"].starts_with("Susp Pos FL"),
+        "{:?}",
+        r.mapping
+    );
     assert_eq!(
         r.lateral,
         Some(tirewear::import::estimate::LateralMethod::TyreModel)
@@ -596,7 +621,7 @@ fn imported_rows_are_marked_estimated_in_the_kpi_table() {
     let tmp = tempfile::tempdir().unwrap();
     let (full, logged) = (tmp.path().join("full"), tmp.path().join("logged"));
     simulate(&full, 9, LoggerFormat::MotecCsv);
-    import_copy(&full, &logged, "csv");
+    import_copy(&full, &logged, "csv", false);
     for row in extract(&full) {
         assert_eq!(row.quality, "ok");
     }
@@ -648,6 +673,7 @@ fn sensitivity_to_the_car_description() {
         copy_dir(&full, &logged);
         std::fs::remove_dir_all(logged.join("telemetry")).unwrap();
         let mut car = CarDescription::read(&full.join("logger/car1.car.toml")).unwrap();
+        car.suspension = None;
         edit(&mut car);
         let mut logs: Vec<_> = std::fs::read_dir(full.join("logger"))
             .unwrap()

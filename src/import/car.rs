@@ -67,6 +67,20 @@ pub struct Camber {
     pub change_per_roll: f64,
 }
 
+/// Springs, for loads from damper positions.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Suspension {
+    /// Wheel rate, front and rear (N/mm): vertical force at the tyre per mm
+    /// of wheel travel (spring through its motion ratio, in series with
+    /// nothing else).
+    pub wheel_rate_n_per_mm: [f64; 2],
+    /// Damper travel per wheel travel, front and rear.
+    pub motion_ratio: [f64; 2],
+    /// Damper position with the car at rest on the set-up pad (mm), front and rear.
+    pub static_damper_mm: [f64; 2],
+}
+
 /// `car.toml`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -95,6 +109,9 @@ pub struct CarDescription {
     pub tyres: Tyres,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub camber: Option<Camber>,
+    /// With damper-position channels, loads come from the springs.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub suspension: Option<Suspension>,
 }
 
 impl CarDescription {
@@ -185,6 +202,17 @@ impl CarDescription {
                 10.0,
             )?;
             range("camber.change_per_roll", c.change_per_roll, -5.0, 5.0)?;
+        }
+        if let Some(s) = &self.suspension {
+            for k in s.wheel_rate_n_per_mm {
+                range("suspension.wheel_rate_n_per_mm", k, 1.0, 10_000.0)?;
+            }
+            for m in s.motion_ratio {
+                range("suspension.motion_ratio", m, 0.1, 5.0)?;
+            }
+            for x in s.static_damper_mm {
+                range("suspension.static_damper_mm", x, -1000.0, 1000.0)?;
+            }
         }
         Ok(())
     }

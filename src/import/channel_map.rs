@@ -28,13 +28,14 @@ pub enum Quantity {
     TrackTemp,
     WheelSpeed,
     WheelLoad,
+    DamperPos,
     TyreTemp,
     TpmsPressure,
     TpmsTemp,
 }
 
 impl Quantity {
-    pub const ALL: [Quantity; 16] = [
+    pub const ALL: [Quantity; 17] = [
         Quantity::Time,
         Quantity::GroundSpeed,
         Quantity::AccelLong,
@@ -48,6 +49,7 @@ impl Quantity {
         Quantity::TrackTemp,
         Quantity::WheelSpeed,
         Quantity::WheelLoad,
+        Quantity::DamperPos,
         Quantity::TyreTemp,
         Quantity::TpmsPressure,
         Quantity::TpmsTemp,
@@ -69,6 +71,7 @@ impl Quantity {
             Quantity::TrackTemp => "track_temp",
             Quantity::WheelSpeed => "wheel_speed",
             Quantity::WheelLoad => "wheel_load",
+            Quantity::DamperPos => "damper_pos",
             Quantity::TyreTemp => "tyre_temp",
             Quantity::TpmsPressure => "tpms_pressure",
             Quantity::TpmsTemp => "tpms_temp",
@@ -85,7 +88,7 @@ impl Quantity {
             Quantity::AccelLong | Quantity::AccelLat => &[Acceleration],
             Quantity::YawRate => &[AngularSpeed],
             Quantity::BodySlip | Quantity::SteerAngle | Quantity::SteeringWheel => &[Angle],
-            Quantity::Distance => &[Length],
+            Quantity::Distance | Quantity::DamperPos => &[Length],
             Quantity::AirTemp | Quantity::TrackTemp | Quantity::TyreTemp | Quantity::TpmsTemp => {
                 &[Temperature]
             }
@@ -100,6 +103,7 @@ impl Quantity {
             self,
             Quantity::WheelSpeed
                 | Quantity::WheelLoad
+                | Quantity::DamperPos
                 | Quantity::TyreTemp
                 | Quantity::TpmsPressure
                 | Quantity::TpmsTemp

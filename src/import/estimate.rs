@@ -213,9 +213,30 @@ pub fn estimate(
         .map(|&w| a.get(Quantity::WheelLoad, Some(w)))
         .collect();
     let measured_loads = loads.iter().all(Option::is_some);
-    if !measured_loads {
+    let dampers: Vec<Option<&[f64]>> = Wheel::ALL
+        .iter()
+        .map(|&w| a.get(Quantity::DamperPos, Some(w)))
+        .collect();
+    let spring_loads =
+        !measured_loads && dampers.iter().all(Option::is_some) && car.suspension.is_some();
+    if spring_loads {
+        note(
+            "fz_n: static load plus wheel rate times wheel travel from the damper positions (car.toml)",
+        );
+    } else if !measured_loads {
         note("fz_n: static weight, downforce and load transfer (car.toml)");
     }
+    let static_load: [f64; 4] = std::array::from_fn(|k| {
+        let w = Wheel::ALL[k];
+        let wf = car.front_weight_fraction;
+        0.5 * car.mass_kg
+            * G
+            * if w.axle() == crate::Axle::Front {
+                wf
+            } else {
+                1.0 - wf
+            }
+    });
     note("fx_n, fy_n: the accelerations distributed over the wheels (car.toml)");
     note("vx_mps: speed and yaw rate at the wheel centre");
     note("rolling_radius_m: car.toml");
@@ -313,6 +334,16 @@ pub fn estimate(
         let (axi, ayi, r) = (ax[i], ay[i], yaw[i]);
         let fz: [f64; 4] = if measured_loads {
             std::array::from_fn(|k| loads[k].expect("all present")[i])
+        } else if spring_loads {
+            let s = car.suspension.as_ref().expect("checked");
+            std::array::from_fn(|k| {
+                let ax_i = CarDescription::axle_of(Wheel::ALL[k]);
+                // Damper travel (mm, compression positive) over the motion
+                // ratio is wheel travel; the wheel rate turns it into load.
+                let damper_mm = dampers[k].expect("all present")[i] * 1e3;
+                let travel_mm = (damper_mm - s.static_damper_mm[ax_i]) / s.motion_ratio[ax_i];
+                (static_load[k] + s.wheel_rate_n_per_mm[ax_i] * travel_mm).max(50.0)
+            })
         } else {
             let df = 0.5 * rho * car.aero.cl_a_m2 * v * v;
             let long = m * axi * h / l;
@@ -544,6 +575,39 @@ mod tests {
         assert_eq!(t[2].vx_mps, 60.0);
         assert!((t[2].omega_radps as f64 - omega).abs() < 1e-3);
         assert!((t[2].rolling_radius_m as f64 - r_loaded).abs() < 1e-6);
+    }
+
+    #[test]
+    fn loads_from_damper_positions_by_hand() {
+        let mut c = car();
+        c.suspension = Some(crate::import::car::Suspension {
+            wheel_rate_n_per_mm: [180.0, 200.0],
+            motion_ratio: [0.8, 0.9],
+            static_damper_mm: [40.0, 45.0],
+        });
+        let mut a = sample(50.0, 0.0, 10.0, 0.2, 0.0, 1.0, [50.0; 4]);
+        // Dampers in m (the archive unit of length): FL 10 mm compressed,
+        // RR 9 mm extended.
+        for (w, mm) in [
+            (Wheel::FL, 50.0),
+            (Wheel::FR, 40.0),
+            (Wheel::RL, 45.0),
+            (Wheel::RR, 36.0),
+        ] {
+            a.series
+                .insert((Quantity::DamperPos, Some(w)), vec![mm * 1e-3]);
+        }
+        let e = estimate(Path::new("x"), &a, &c, EventConditions::default()).unwrap();
+        let t = &e.tires[0];
+        let m = 798.0;
+        let static_front = 0.5 * m * G * 0.445;
+        let static_rear = 0.5 * m * G * 0.555;
+        // 10 mm of damper / 0.8 = 12.5 mm of wheel travel × 180 N/mm = 2250 N.
+        assert!((t[0].fz_n as f64 - (static_front + 2250.0)).abs() < 0.01);
+        assert!((t[1].fz_n as f64 - static_front).abs() < 0.01);
+        // −9 mm / 0.9 = −10 mm × 200 N/mm = −2000 N.
+        assert!((t[3].fz_n as f64 - (static_rear - 2000.0)).abs() < 0.01);
+        assert!(e.estimated.iter().any(|n| n.contains("damper positions")));
     }
 
     #[test]

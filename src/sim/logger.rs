@@ -42,6 +42,12 @@ pub const STEERING_RATIO: f64 = 12.0;
 /// temperature.
 const ZONE_SPREAD_K_PER_DEG: f64 = 1.5;
 
+/// The simulated cars' springs, for the damper-position channels: wheel
+/// rate (N/mm), motion ratio and static damper position (mm), front and rear.
+pub const WHEEL_RATE_N_PER_MM: [f64; 2] = [180.0, 200.0];
+pub const MOTION_RATIO: [f64; 2] = [0.8, 0.9];
+pub const STATIC_DAMPER_MM: [f64; 2] = [40.0, 45.0];
+
 /// Channel: name, short name, unit, decimals, rate divisor (`.ld`).
 struct Spec(&'static str, &'static str, &'static str, i16, u16);
 
@@ -96,6 +102,13 @@ fn specs() -> Vec<Spec> {
             2,
             4,
         ));
+        v.push(Spec(
+            s(format!("Damper Pos {w}")),
+            s(format!("Dmp{w}")),
+            "mm",
+            3,
+            1,
+        ));
     }
     v
 }
@@ -115,6 +128,8 @@ pub(crate) struct Recorder {
     times_ns: Vec<u64>,
     rows: Vec<f64>,
     width: usize,
+    /// Each wheel's load at rest (N): the springs' zero.
+    static_load: [f64; 4],
 }
 
 impl Recorder {
@@ -132,6 +147,11 @@ impl Recorder {
             times_ns: Vec::new(),
             rows: Vec::new(),
             width: specs().len(),
+            static_load: std::array::from_fn(|k| {
+                let front = car.front_weight_fraction;
+                let share = if k < 2 { front } else { 1.0 - front };
+                0.5 * car.mass_kg * STANDARD_GRAVITY * share
+            }),
         }
     }
 
@@ -174,6 +194,13 @@ impl Recorder {
             row.extend([ts + spread, ts, ts - spread]);
             row.push(t.pressure_pa as f64 / 1e5);
             row.push(t.t_inner_c as f64);
+            // The spring's compression for the (noisy) load above its static value.
+            let a = match w.axle() {
+                crate::Axle::Front => 0,
+                crate::Axle::Rear => 1,
+            };
+            let travel_mm = (t.fz_n as f64 - self.static_load[w.index()]) / WHEEL_RATE_N_PER_MM[a];
+            row.push(STATIC_DAMPER_MM[a] + MOTION_RATIO[a] * travel_mm);
         }
         debug_assert_eq!(row.len(), self.width);
         self.times_ns.push(t_ns);
@@ -392,6 +419,11 @@ pub fn car_description(car: &CarParams) -> CarDescription {
             static_deg: car.static_camber_deg,
             roll_gradient_deg_per_g: car.roll_gradient_deg_per_g,
             change_per_roll: car.camber_per_roll,
+        }),
+        suspension: Some(crate::import::car::Suspension {
+            wheel_rate_n_per_mm: WHEEL_RATE_N_PER_MM,
+            motion_ratio: MOTION_RATIO,
+            static_damper_mm: STATIC_DAMPER_MM,
         }),
     }
 }
