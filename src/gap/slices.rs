@@ -1,5 +1,5 @@
 //! Step 1 of the diagnosis, where the gap lies: the residual (measured −
-//! baseline) sliced by the categorical columns, by wear level and by the
+//! baseline) sliced by the categorical columns, by predicted wear and by the
 //! quartile bands of every KPI, singly and in pairs. Each slice is tested
 //! against the rest allowing for the residuals' correlation within events (a
 //! random intercept per event: all tires of an event share its track, day
@@ -52,7 +52,13 @@ struct Single {
     members: Vec<bool>,
 }
 
-fn singles(rows: &[&KpiRow]) -> Vec<Single> {
+/// Name of the predicted wear's bands (measured − residual). Slicing by
+/// the *measured* wear would flag noise: with any model, cov(residual,
+/// measured) = var(noise), so the top band of measured wear has a positive
+/// mean residual even when the model is right.
+pub(crate) const PREDICTED_WEAR: &str = "predicted_wear_pct";
+
+fn singles(rows: &[&KpiRow], residual: &[f64]) -> Vec<Single> {
     let mut out = Vec::new();
     type Getter = fn(&KpiRow) -> &str;
     let text: [(&str, Getter); 6] = [
@@ -75,16 +81,24 @@ fn singles(rows: &[&KpiRow]) -> Vec<Single> {
             });
         }
     }
-    let numeric = std::iter::once("wear_mean_pct").chain(
+    let predicted: Vec<f64> = rows
+        .iter()
+        .zip(residual)
+        .map(|(r, e)| r.wear_mean_pct - e)
+        .collect();
+    let numeric = std::iter::once(PREDICTED_WEAR).chain(
         candidate_inputs()
             .into_iter()
             .filter(|c| *c != "wear_mean_pct"),
     );
     for col in numeric {
-        let v: Vec<f64> = rows
-            .iter()
-            .map(|r| r.number(col).unwrap_or(f64::NAN))
-            .collect();
+        let v: Vec<f64> = if col == PREDICTED_WEAR {
+            predicted.clone()
+        } else {
+            rows.iter()
+                .map(|r| r.number(col).unwrap_or(f64::NAN))
+                .collect()
+        };
         let mut sorted: Vec<f64> = v.iter().copied().filter(|x| x.is_finite()).collect();
         sorted.sort_by(f64::total_cmp);
         if sorted.len() < 2 * MIN_SLICE || sorted[0] == sorted[sorted.len() - 1] {
@@ -179,7 +193,7 @@ pub(crate) fn slice_residuals(rows: &[&KpiRow], residual: &[f64], fdr: f64) -> (
             tested.push(t);
         }
     };
-    let s = singles(rows);
+    let s = singles(rows, residual);
     for a in &s {
         add(a.name.clone(), a.members.clone(), &mut tested);
     }
@@ -210,4 +224,66 @@ pub(crate) fn slice_residuals(rows: &[&KpiRow], residual: &[f64], fdr: f64) -> (
         })
     });
     (tested, count)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::SeedableRng;
+    use rand_distr::{Distribution, Normal};
+
+    /// A right model with noise: measured = predicted + e. Banding by the
+    /// measured wear puts the large e in its top band (cov(e, y) = var(e));
+    /// banding by the prediction does not.
+    #[test]
+    fn noise_alone_flags_no_band_of_predicted_wear() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+        let noise = Normal::new(0.0, 1.0).unwrap();
+        let n = 400;
+        let mut rows = Vec::new();
+        let mut residual = Vec::new();
+        for i in 0..n {
+            let predicted = 10.0 + 5.0 * (i as f64 / n as f64);
+            let e = noise.sample(&mut rng);
+            residual.push(e);
+            rows.push(KpiRow {
+                event: format!("E{}", i % 40),
+                wear_mean_pct: predicted + e,
+                ..KpiRow::default()
+            });
+        }
+        let refs: Vec<&KpiRow> = rows.iter().collect();
+        let s = singles(&refs, &residual);
+        let band = |name: &str| s.iter().find(|x| x.name.starts_with(name)).unwrap();
+        let top = band("predicted_wear_pct in Q4");
+        let mean_in = |m: &[bool]| {
+            let v: Vec<f64> = m
+                .iter()
+                .zip(&residual)
+                .filter(|(k, _)| **k)
+                .map(|(_, r)| *r)
+                .collect();
+            v.iter().sum::<f64>() / v.len() as f64
+        };
+        assert!(
+            mean_in(&top.members).abs() < 0.25,
+            "{}",
+            mean_in(&top.members)
+        );
+        // The measured wear's top band, for contrast: its mean residual is
+        // var(e)/sd(y)·E[z | z > 0.67] ≈ 0.5 here.
+        let measured: Vec<f64> = rows.iter().map(|r| r.wear_mean_pct).collect();
+        let mut sorted = measured.clone();
+        sorted.sort_by(f64::total_cmp);
+        let q75 = sorted[(n as f64 * 0.75) as usize];
+        let top_measured: Vec<bool> = measured.iter().map(|&y| y >= q75).collect();
+        assert!(mean_in(&top_measured) > 0.4, "{}", mean_in(&top_measured));
+        // And the whole step flags nothing.
+        let (tested, _) = slice_residuals(&refs, &residual, 0.05);
+        assert!(
+            tested.iter().all(|t| t.p_adjusted > 0.05),
+            "{:?}",
+            tested.first().map(|t| &t.name)
+        );
+    }
 }
