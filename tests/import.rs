@@ -100,6 +100,7 @@ fn import_copy(
         channels: ChannelMap::default_map(),
         cars: vec![car],
         rate_hz: None,
+        calibrate_radius: false,
         new_run: NewRun::default(),
     };
     import_logs(copy, &logs, &ids, &settings).unwrap()
@@ -272,6 +273,7 @@ fn python_written_motec_csv_matches_the_oracle() {
             .unwrap(),
         ],
         rate_hz: None,
+        calibrate_radius: false,
         new_run: NewRun {
             event: Some("E99-python".into()),
             track: Some("valle-rossa".into()),
@@ -579,6 +581,7 @@ fn real_motec_ld_reads() {
         channels: ChannelMap::default_map(),
         cars: vec![car],
         rate_hz: None,
+        calibrate_radius: false,
         new_run: NewRun::default(),
     };
     let s = import_logs(
@@ -689,6 +692,7 @@ fn sensitivity_to_the_car_description() {
             channels: ChannelMap::default_map(),
             cars: vec![car],
             rate_hz: None,
+            calibrate_radius: false,
             new_run: NewRun::default(),
         };
         import_logs(&logged, &logs, &ids, &settings).unwrap();
@@ -801,4 +805,87 @@ fn ldx_sidecar_beacons_are_read() {
         .unwrap_err()
         .to_string();
     assert!(e.contains("run.ldx") && e.contains("XML"), "{e}");
+}
+
+/// The free-rolling radius check: zero for the right car.toml, the error
+/// for a wheel-speed radius 0.3 % too large; `calibrate_radius` removes it
+/// from the front wheels' longitudinal friction energy.
+#[test]
+fn the_radius_check_finds_a_wrong_wheel_speed_radius() {
+    let tmp = tempfile::tempdir().unwrap();
+    let full = tmp.path().join("full");
+    simulate(&full, 4, LoggerFormat::MotecCsv);
+    let a = extract(&full);
+    let mut logs: Vec<_> = std::fs::read_dir(full.join("logger"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|e| e == "csv"))
+        .collect();
+    logs.sort();
+    let ids: Vec<String> = logs
+        .iter()
+        .map(|p| p.file_stem().unwrap().to_string_lossy().into_owned())
+        .collect();
+    let run = |factor: f64, calibrate: bool, name: &str| {
+        let logged = tmp.path().join(name);
+        copy_dir(&full, &logged);
+        std::fs::remove_dir_all(logged.join("telemetry")).unwrap();
+        let mut car = CarDescription::read(&full.join("logger/car1.car.toml")).unwrap();
+        car.suspension = None;
+        let r = car.tyres.wheel_speed_radius_m.unwrap();
+        car.tyres.wheel_speed_radius_m = Some([r[0] * factor, r[1] * factor]);
+        let settings = ImportSettings {
+            channels: ChannelMap::default_map(),
+            cars: vec![car],
+            rate_hz: None,
+            calibrate_radius: calibrate,
+            new_run: NewRun::default(),
+        };
+        let s = import_logs(&logged, &logs, &ids, &settings).unwrap();
+        (s, extract(&logged))
+    };
+    let front_x_error = |b: &[KpiRow]| {
+        let e: Vec<f64> = a
+            .iter()
+            .filter(|x| x.axle == tirewear::Axle::Front)
+            .map(|x| {
+                let y = b
+                    .iter()
+                    .find(|y| y.run == x.run && y.wheel == x.wheel)
+                    .unwrap();
+                (y.friction_energy_x_j / x.friction_energy_x_j - 1.0).abs()
+            })
+            .collect();
+        median(e)
+    };
+    let (exact, _) = run(1.0, false, "exact");
+    for r in &exact.imported {
+        assert_eq!(
+            r.radius_checks.len(),
+            2,
+            "FL and FR roll freely (rear drive)"
+        );
+        for c in &r.radius_checks {
+            assert!(c.median_slip.abs() < 5e-4, "{c:?}");
+            assert_eq!(c.applied_factor, 1.0);
+        }
+    }
+    let (wrong, b_wrong) = run(1.003, false, "wrong");
+    for c in wrong.imported.iter().flat_map(|r| &r.radius_checks) {
+        assert!((c.median_slip - 0.003).abs() < 5e-4, "{c:?}");
+    }
+    let (fixed, b_fixed) = run(1.003, true, "fixed");
+    for c in fixed.imported.iter().flat_map(|r| &r.radius_checks) {
+        assert!((c.applied_factor - 1.003).abs() < 5e-4, "{c:?}");
+    }
+    let (e_wrong, e_fixed) = (front_x_error(&b_wrong), front_x_error(&b_fixed));
+    eprintln!(
+        "front longitudinal energy: {:.1} % wrong radius, {:.2} % calibrated",
+        100.0 * e_wrong,
+        100.0 * e_fixed
+    );
+    assert!(
+        e_fixed < 0.01 && e_wrong > 5.0 * e_fixed,
+        "{e_wrong} vs {e_fixed}"
+    );
 }

@@ -44,6 +44,11 @@ pub(crate) struct ImportArgs {
     /// fastest mapped channel's rate).
     #[arg(long)]
     rate: Option<f64>,
+    /// Scale each free-rolling wheel's radius (the non-driven axle) so
+    /// that its median slip while rolling freely is zero; without it the
+    /// check is only reported (docs/import.md, "Rolling radius").
+    #[arg(long)]
+    calibrate_radius: bool,
 }
 
 fn parse_tire_sets(s: &str) -> Result<TireSets> {
@@ -85,6 +90,7 @@ pub(crate) fn run(a: ImportArgs) -> Result<bool> {
             .map(|p| CarDescription::read(p))
             .collect::<Result<_, _>>()?,
         rate_hz: a.rate,
+        calibrate_radius: a.calibrate_radius,
         new_run: NewRun {
             event: a.event,
             track: a.track,
@@ -134,6 +140,24 @@ pub(crate) fn run(a: ImportArgs) -> Result<bool> {
             println!("  not mapped: {}", r.unmapped.join(", "));
         }
         println!("  estimated: {}", r.estimated.join("; "));
+        for c in &r.radius_checks {
+            let flag = if c.applied_factor == 1.0 && c.median_slip.abs() > 0.002 {
+                " — the radius looks wrong: check car.toml's rolling and wheel-speed radius, or give --calibrate-radius"
+            } else {
+                ""
+            };
+            println!(
+                "  radius check {}: median free-rolling slip {:+.3} % over {} samples{}{flag}",
+                c.wheel.name(),
+                100.0 * c.median_slip,
+                c.samples,
+                if c.applied_factor != 1.0 {
+                    format!(", radius ×{:.5}", c.applied_factor)
+                } else {
+                    String::new()
+                },
+            );
+        }
     }
     for (_, e) in &s.failed {
         eprintln!("failed: {e}");

@@ -32,6 +32,87 @@ pub struct Estimated {
     /// Archive channels that were estimated, each with how (`fz_n: load transfer`).
     pub estimated: Vec<String>,
     pub lateral: Option<LateralMethod>,
+    /// The rolling-radius check on the wheels that roll freely (docs/import.md).
+    pub radius_checks: Vec<RadiusCheck>,
+}
+
+/// How far a free-rolling wheel's `Ω·R` is from its centre's speed: the
+/// median longitudinal slip `(v_x − ΩR)/v_x` over the samples where the
+/// wheel carries no longitudinal force (the non-driven axle while the car
+/// drives or cruises: speed ≥ 15 m/s, |a_y| ≤ 0.1 g). Zero when the radius
+/// (car.toml's loaded radius and wheel-speed radius) is right; `s` means R
+/// is `s` too small.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct RadiusCheck {
+    pub wheel: Wheel,
+    pub samples: usize,
+    pub median_slip: f64,
+    /// The factor the wheel's radius was multiplied by (1 unless calibrated).
+    pub applied_factor: f64,
+}
+
+/// Fewest free-rolling samples a radius check needs.
+const MIN_FREE_ROLLING: usize = 50;
+
+/// Checks (and with `calibrate`, corrects) the rolling radius of the wheels
+/// that roll freely; see [`RadiusCheck`].
+fn check_radius(est: &mut Estimated, car: &CarDescription, calibrate: bool) {
+    let free_axle = match car.driven_axle {
+        DrivenAxle::Rear => crate::Axle::Front,
+        DrivenAxle::Front => crate::Axle::Rear,
+        DrivenAxle::All => return,
+    };
+    for w in Wheel::ALL.into_iter().filter(|w| w.axle() == free_axle) {
+        let k = w.index();
+        let mut slips: Vec<f64> = est
+            .tires
+            .iter()
+            .zip(&est.vehicle)
+            .filter(|(t, v)| {
+                let t = &t[k];
+                // No drive or brake force, and a lateral force under a
+                // tenth of the load (|a_y| below about 0.1 g).
+                v.speed_mps >= 15.0 && t.fx_n == 0.0 && t.fy_n.abs() <= 0.1 * t.fz_n
+            })
+            .map(|(t, _)| {
+                let t = &t[k];
+                let vx = t.vx_mps as f64;
+                (vx - t.omega_radps as f64 * t.rolling_radius_m as f64) / vx
+            })
+            .collect();
+        if slips.len() < MIN_FREE_ROLLING {
+            continue;
+        }
+        slips.sort_by(f64::total_cmp);
+        let median_slip = slips[slips.len() / 2];
+        let applied_factor = if calibrate {
+            1.0 / (1.0 - median_slip)
+        } else {
+            1.0
+        };
+        if calibrate {
+            for t in &mut est.tires {
+                t[k].rolling_radius_m = (t[k].rolling_radius_m as f64 * applied_factor) as f32;
+            }
+        }
+        est.radius_checks.push(RadiusCheck {
+            wheel: w,
+            samples: slips.len(),
+            median_slip,
+            applied_factor,
+        });
+    }
+    if calibrate && !est.radius_checks.is_empty() {
+        let s: Vec<String> = est
+            .radius_checks
+            .iter()
+            .map(|c| format!("{} ×{:.5}", c.wheel.name(), c.applied_factor))
+            .collect();
+        est.estimated.push(format!(
+            "rolling_radius_m: calibrated on free-rolling samples ({})",
+            s.join(", ")
+        ));
+    }
 }
 
 /// Values the log may lack that the manifest's event has.
@@ -93,6 +174,7 @@ pub fn estimate(
     a: &Aligned,
     car: &CarDescription,
     cond: EventConditions,
+    calibrate_radius: bool,
 ) -> Result<Estimated, ImportError> {
     let n = a.len();
     let mut est = Estimated::default();
@@ -441,6 +523,7 @@ pub fn estimate(
             distance_m: distance[i],
         });
     }
+    check_radius(&mut est, car, calibrate_radius);
     Ok(est)
 }
 
@@ -502,7 +585,7 @@ mod tests {
         let (v, ay) = (40.0, 2.0 * G);
         let r = ay / v;
         let a = sample(v, 0.0, ay, r, 0.5, 3.0, [40.0; 4]);
-        let e = estimate(Path::new("x"), &a, &c, EventConditions::default()).unwrap();
+        let e = estimate(Path::new("x"), &a, &c, EventConditions::default(), false).unwrap();
         let t = &e.tires[0];
         let (m, h) = (798.0, 0.30);
         // Downforce 0.5·1.2·3.2·40² = 3072 N, 42 % on the front.
@@ -551,7 +634,7 @@ mod tests {
         let c = car();
         let (v, ax) = (60.0, -3.0 * G);
         let a = sample(v, ax, 0.0, 0.0, 0.0, 0.0, [60.0, 60.0, 59.0, 59.0]);
-        let e = estimate(Path::new("x"), &a, &c, EventConditions::default()).unwrap();
+        let e = estimate(Path::new("x"), &a, &c, EventConditions::default(), false).unwrap();
         let t = &e.tires[0];
         let m = 798.0;
         let drag = 0.5 * 1.2 * 1.05 * v * v;
@@ -597,7 +680,7 @@ mod tests {
             a.series
                 .insert((Quantity::DamperPos, Some(w)), vec![mm * 1e-3]);
         }
-        let e = estimate(Path::new("x"), &a, &c, EventConditions::default()).unwrap();
+        let e = estimate(Path::new("x"), &a, &c, EventConditions::default(), false).unwrap();
         let t = &e.tires[0];
         let m = 798.0;
         let static_front = 0.5 * m * G * 0.445;
@@ -615,15 +698,21 @@ mod tests {
         let mut c = car();
         let mut a = sample(40.0, 0.0, 10.0, 0.25, 0.0, 0.0, [40.0; 4]);
         a.series.remove(&(Quantity::BodySlip, None));
-        let e = estimate(Path::new("x"), &a, &c, EventConditions::default()).unwrap();
+        let e = estimate(Path::new("x"), &a, &c, EventConditions::default(), false).unwrap();
         assert_eq!(e.lateral, Some(LateralMethod::TyreModel));
         let t = &e.tires[0][0];
         // v_y/v_x = −F_y/(C·F_z) with C = 48 /rad.
         assert!((t.vy_mps / t.vx_mps + t.fy_n / (48.0 * t.fz_n)).abs() < 1e-6);
         c.tyres.cornering_stiffness_per_rad = None;
-        let err = estimate(Path::new("log.csv"), &a, &c, EventConditions::default())
-            .unwrap_err()
-            .to_string();
+        let err = estimate(
+            Path::new("log.csv"),
+            &a,
+            &c,
+            EventConditions::default(),
+            false,
+        )
+        .unwrap_err()
+        .to_string();
         assert!(
             err.contains("log.csv")
                 && err.contains("body_slip")

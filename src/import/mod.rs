@@ -45,6 +45,9 @@ pub struct ImportSettings {
     pub cars: Vec<CarDescription>,
     /// Rate (Hz) to put a `.ld` log's channels on (default: the fastest mapped one).
     pub rate_hz: Option<f64>,
+    /// Scale the free-rolling wheels' radius so that their median slip
+    /// while rolling freely is zero (`estimate::RadiusCheck`).
+    pub calibrate_radius: bool,
     pub new_run: NewRun,
 }
 
@@ -69,6 +72,8 @@ pub struct ImportedRun {
     pub unmapped: Vec<String>,
     /// Beacon times (s from the log's start) from a `.ldx` sidecar.
     pub beacons_s: Vec<f64>,
+    /// The free-rolling wheels' radius checks.
+    pub radius_checks: Vec<estimate::RadiusCheck>,
 }
 
 /// Days since 1970-01-01 of a `YYYY-MM-DD` date (proleptic Gregorian).
@@ -130,7 +135,7 @@ pub fn import_log(
         &raw.meta.vehicle,
     )
     .map_err(archive_err)?;
-    let est = estimate::estimate(log_path, &aligned, car, cond)?;
+    let est = estimate::estimate(log_path, &aligned, car, cond, settings.calibrate_radius)?;
 
     // The run's start: the log's date and time of day (UTC), else the epoch.
     let start_s = raw
@@ -242,6 +247,7 @@ pub fn import_log(
         estimated: est.estimated,
         unmapped: mapping.unmapped,
         beacons_s: raw.meta.beacons_s.clone(),
+        radius_checks: est.radius_checks.clone(),
     })
 }
 
