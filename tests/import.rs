@@ -12,22 +12,11 @@ use tirewear::import::{CarDescription, ChannelMap, ImportSettings, NewRun, impor
 use tirewear::kpi::KpiRow;
 use tirewear::sim::logger::LoggerFormat;
 
+mod common;
+
+/// The tiny season at 20 Hz with its logger export.
 fn simulate(dir: &Path, seed: u64, format: LoggerFormat) {
-    tirewear::sim::simulate(&tirewear::sim::SimOptions {
-        preset: tirewear::sim::Preset::Tiny,
-        scale: 1.0,
-        seed,
-        effects: vec![],
-        generated: None,
-        scatter: tirewear::sim::WearScatter::NONE,
-        encoding: tirewear::ingest::telemetry::Encoding::Block,
-        rate_hz: Some(20.0),
-        out: dir.to_path_buf(),
-        sensor_noise: true,
-        logger_export: Some(format),
-        progress: false,
-    })
-    .unwrap();
+    common::simulate_preset(tirewear::sim::Preset::Tiny, seed, 20.0, Some(format), dir);
 }
 
 fn extract(dir: &Path) -> Vec<KpiRow> {
@@ -71,39 +60,73 @@ fn median(mut v: Vec<f64>) -> f64 {
     v[v.len() / 2]
 }
 
-/// Imports `dir/logger/*` into a copy of the archive whose telemetry was removed.
-/// `springs`: loads from the damper positions (else the load-transfer model).
-fn import_copy(
-    dir: &Path,
-    copy: &Path,
-    ext: &str,
-    springs: bool,
-) -> tirewear::import::ImportSummary {
-    copy_dir(dir, copy);
-    std::fs::remove_dir_all(copy.join("telemetry")).unwrap();
-    std::fs::remove_dir_all(copy.join("truth")).unwrap();
+/// The logger files of `dir` with extension `ext`, sorted, and their run ids.
+fn logger_files(dir: &Path, ext: &str) -> (Vec<std::path::PathBuf>, Vec<String>) {
     let mut logs: Vec<_> = std::fs::read_dir(dir.join("logger"))
         .unwrap()
         .map(|e| e.unwrap().path())
         .filter(|p| p.extension().is_some_and(|e| e == ext))
         .collect();
     logs.sort();
-    let ids: Vec<String> = logs
+    let ids = logs
         .iter()
         .map(|p| p.file_stem().unwrap().to_string_lossy().into_owned())
         .collect();
+    (logs, ids)
+}
+
+/// Imports `dir/logger/*.EXT` into a copy of the archive whose telemetry
+/// was removed, with the exported car1.car.toml changed by `edit`.
+fn import_with(
+    dir: &Path,
+    copy: &Path,
+    ext: &str,
+    edit: impl FnOnce(&mut CarDescription),
+    calibrate_radius: bool,
+) -> tirewear::import::ImportSummary {
+    copy_dir(dir, copy);
+    std::fs::remove_dir_all(copy.join("telemetry")).unwrap();
+    let _ = std::fs::remove_dir_all(copy.join("truth"));
+    let (logs, ids) = logger_files(dir, ext);
     let mut car = CarDescription::read(&dir.join("logger/car1.car.toml")).unwrap();
-    if !springs {
-        car.suspension = None;
-    }
+    edit(&mut car);
     let settings = ImportSettings {
         channels: ChannelMap::default_map(),
         cars: vec![car],
         rate_hz: None,
-        calibrate_radius: false,
+        calibrate_radius,
         new_run: NewRun::default(),
     };
     import_logs(copy, &logs, &ids, &settings).unwrap()
+}
+
+/// As [`import_with`], the car as exported; `springs`: loads from the
+/// damper positions (else the load-transfer model).
+fn import_copy(
+    dir: &Path,
+    copy: &Path,
+    ext: &str,
+    springs: bool,
+) -> tirewear::import::ImportSummary {
+    let edit = |c: &mut CarDescription| {
+        if !springs {
+            c.suspension = None;
+        }
+    };
+    import_with(dir, copy, ext, edit, false)
+}
+
+/// Asserts each column's median and largest relative error.
+fn assert_within(full: &[KpiRow], imported: &[KpiRow], tolerances: &[(&str, f64, f64)]) {
+    for &(col, median_tol, max_tol) in tolerances {
+        let e = rel_errors(full, imported, col);
+        let (md, mx) = (median(e.clone()), e.iter().copied().fold(0.0, f64::max));
+        eprintln!("{col}: median {:.3} %, max {:.3} %", 100.0 * md, 100.0 * mx);
+        assert!(
+            md < median_tol && mx < max_tol,
+            "{col}: median {md}, max {mx}"
+        );
+    }
 }
 
 #[test]
@@ -116,27 +139,23 @@ fn motec_csv_round_trip_reproduces_friction_energy() {
     assert_eq!(s.imported.len(), 4);
     let (a, b) = (extract(&full), extract(&logged));
     assert_eq!(a.len(), b.len());
-    for (col, median_tol, max_tol) in [
-        // Longitudinal: the wheel speeds and the loaded radius give the
-        // sliding speed; within the sensors' noise.
-        ("friction_energy_x_j", 0.005, 0.01),
-        // Lateral: a rigid car gives both wheels of an axle one slip, the
-        // simulator each wheel its own (docs/import.md, "Accuracy").
-        ("friction_energy_y_j", 0.09, 0.16),
-        ("friction_energy_j", 0.05, 0.12),
-        ("fz_avg_n", 0.005, 0.01),
-        ("t_surface_avg_c", 0.002, 0.005),
-        ("pressure_avg_pa", 0.001, 0.002),
-        ("distance_m", 0.001, 0.002),
-    ] {
-        let e = rel_errors(&a, &b, col);
-        let (md, mx) = (median(e.clone()), e.iter().copied().fold(0.0, f64::max));
-        eprintln!("{col}: median {:.3} %, max {:.3} %", 100.0 * md, 100.0 * mx);
-        assert!(
-            md < median_tol && mx < max_tol,
-            "{col}: median {md}, max {mx}"
-        );
-    }
+    assert_within(
+        &a,
+        &b,
+        &[
+            // Longitudinal: the wheel speeds and the loaded radius give the
+            // sliding speed; within the sensors' noise.
+            ("friction_energy_x_j", 0.005, 0.01),
+            // Lateral: a rigid car gives both wheels of an axle one slip, the
+            // simulator each wheel its own (docs/import.md, "Accuracy").
+            ("friction_energy_y_j", 0.09, 0.16),
+            ("friction_energy_j", 0.05, 0.12),
+            ("fz_avg_n", 0.005, 0.01),
+            ("t_surface_avg_c", 0.002, 0.005),
+            ("pressure_avg_pa", 0.001, 0.002),
+            ("distance_m", 0.001, 0.002),
+        ],
+    );
     // The import is recorded in the telemetry file.
     let r = &s.imported[0];
     assert!(r.replaced && r.rate_hz == 20.0);
@@ -155,20 +174,16 @@ fn motec_ld_round_trip_resamples_slower_channels() {
     assert_eq!(r.format, "MoTeC ld");
     assert_eq!(r.rate_hz, 20.0, "the fastest channel's rate");
     let (a, b) = (extract(&full), extract(&logged));
-    for (col, median_tol, max_tol) in [
-        ("friction_energy_j", 0.05, 0.12),
-        // Tyre temperatures at 10 Hz and TPMS at 5 Hz, interpolated back to 20 Hz.
-        ("t_surface_avg_c", 0.003, 0.01),
-        ("pressure_avg_pa", 0.002, 0.005),
-    ] {
-        let e = rel_errors(&a, &b, col);
-        let (md, mx) = (median(e.clone()), e.iter().copied().fold(0.0, f64::max));
-        eprintln!("{col}: median {:.3} %, max {:.3} %", 100.0 * md, 100.0 * mx);
-        assert!(
-            md < median_tol && mx < max_tol,
-            "{col}: median {md}, max {mx}"
-        );
-    }
+    assert_within(
+        &a,
+        &b,
+        &[
+            ("friction_energy_j", 0.05, 0.12),
+            // Tyre temperatures at 10 Hz and TPMS at 5 Hz, interpolated back to 20 Hz.
+            ("t_surface_avg_c", 0.003, 0.01),
+            ("pressure_avg_pa", 0.002, 0.005),
+        ],
+    );
 }
 
 /// The accuracy table of docs/import.md: `cargo test --release --test
@@ -229,23 +244,9 @@ fn accuracy_over_seeds() {
     }
 }
 
-/// Simulates the tiny season (no export) into `dir`.
+/// The tiny season (seed 3, 5 Hz, no export).
 fn tiny_archive(dir: &Path) {
-    tirewear::sim::simulate(&tirewear::sim::SimOptions {
-        preset: tirewear::sim::Preset::Tiny,
-        scale: 1.0,
-        seed: 3,
-        effects: vec![],
-        generated: None,
-        scatter: tirewear::sim::WearScatter::NONE,
-        encoding: tirewear::ingest::telemetry::Encoding::Block,
-        rate_hz: Some(5.0),
-        out: dir.to_path_buf(),
-        sensor_noise: true,
-        logger_export: None,
-        progress: false,
-    })
-    .unwrap();
+    common::simulate_tiny(dir, 3);
 }
 
 fn fixture(name: &str) -> std::path::PathBuf {
@@ -670,32 +671,13 @@ fn sensitivity_to_the_car_description() {
     simulate(&full, 101, LoggerFormat::MotecCsv);
     let a = extract(&full);
     println!("| car.toml | friction energy: median error | bias |");
-    for (name, edit) in cases {
-        let logged = tmp.path().join(format!("logged-{}", name.len()));
-        let _ = std::fs::remove_dir_all(&logged);
-        copy_dir(&full, &logged);
-        std::fs::remove_dir_all(logged.join("telemetry")).unwrap();
-        let mut car = CarDescription::read(&full.join("logger/car1.car.toml")).unwrap();
-        car.suspension = None;
-        edit(&mut car);
-        let mut logs: Vec<_> = std::fs::read_dir(full.join("logger"))
-            .unwrap()
-            .map(|e| e.unwrap().path())
-            .filter(|p| p.extension().is_some_and(|e| e == "csv"))
-            .collect();
-        logs.sort();
-        let ids: Vec<String> = logs
-            .iter()
-            .map(|p| p.file_stem().unwrap().to_string_lossy().into_owned())
-            .collect();
-        let settings = ImportSettings {
-            channels: ChannelMap::default_map(),
-            cars: vec![car],
-            rate_hz: None,
-            calibrate_radius: false,
-            new_run: NewRun::default(),
+    for (k, (name, edit)) in cases.into_iter().enumerate() {
+        let logged = tmp.path().join(format!("logged-{k}"));
+        let springless = |c: &mut CarDescription| {
+            c.suspension = None;
+            edit(c);
         };
-        import_logs(&logged, &logs, &ids, &settings).unwrap();
+        import_with(&full, &logged, "csv", springless, false);
         let b = extract(&logged);
         let signed: Vec<f64> = a
             .iter()
@@ -816,32 +798,14 @@ fn the_radius_check_finds_a_wrong_wheel_speed_radius() {
     let full = tmp.path().join("full");
     simulate(&full, 4, LoggerFormat::MotecCsv);
     let a = extract(&full);
-    let mut logs: Vec<_> = std::fs::read_dir(full.join("logger"))
-        .unwrap()
-        .map(|e| e.unwrap().path())
-        .filter(|p| p.extension().is_some_and(|e| e == "csv"))
-        .collect();
-    logs.sort();
-    let ids: Vec<String> = logs
-        .iter()
-        .map(|p| p.file_stem().unwrap().to_string_lossy().into_owned())
-        .collect();
     let run = |factor: f64, calibrate: bool, name: &str| {
         let logged = tmp.path().join(name);
-        copy_dir(&full, &logged);
-        std::fs::remove_dir_all(logged.join("telemetry")).unwrap();
-        let mut car = CarDescription::read(&full.join("logger/car1.car.toml")).unwrap();
-        car.suspension = None;
-        let r = car.tyres.wheel_speed_radius_m.unwrap();
-        car.tyres.wheel_speed_radius_m = Some([r[0] * factor, r[1] * factor]);
-        let settings = ImportSettings {
-            channels: ChannelMap::default_map(),
-            cars: vec![car],
-            rate_hz: None,
-            calibrate_radius: calibrate,
-            new_run: NewRun::default(),
+        let edit = |car: &mut CarDescription| {
+            car.suspension = None;
+            let r = car.tyres.wheel_speed_radius_m.unwrap();
+            car.tyres.wheel_speed_radius_m = Some([r[0] * factor, r[1] * factor]);
         };
-        let s = import_logs(&logged, &logs, &ids, &settings).unwrap();
+        let s = import_with(&full, &logged, "csv", edit, calibrate);
         (s, extract(&logged))
     };
     let front_x_error = |b: &[KpiRow]| {

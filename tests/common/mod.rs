@@ -4,8 +4,15 @@
 use std::path::Path;
 use tirewear::kpi::KpiRow;
 
-/// Simulates a preset season at 5 Hz into `dir`, without planted effects.
-fn simulate_at_5_hz(preset: tirewear::sim::Preset, seed: u64, dir: &Path) {
+/// Simulates a preset season at `rate_hz` into `dir`, without planted
+/// effects, with sensor noise, and optionally its logger export.
+pub fn simulate_preset(
+    preset: tirewear::sim::Preset,
+    seed: u64,
+    rate_hz: f64,
+    logger_export: Option<tirewear::sim::logger::LoggerFormat>,
+    dir: &Path,
+) {
     tirewear::sim::simulate(&tirewear::sim::SimOptions {
         preset,
         scale: 1.0,
@@ -14,13 +21,18 @@ fn simulate_at_5_hz(preset: tirewear::sim::Preset, seed: u64, dir: &Path) {
         generated: None,
         scatter: tirewear::sim::WearScatter::NONE,
         encoding: tirewear::ingest::telemetry::Encoding::Block,
-        rate_hz: Some(5.0),
+        rate_hz: Some(rate_hz),
         out: dir.to_path_buf(),
         sensor_noise: true,
-        logger_export: None,
+        logger_export,
         progress: false,
     })
     .unwrap();
+}
+
+/// Simulates a preset season at 5 Hz into `dir`, without planted effects.
+fn simulate_at_5_hz(preset: tirewear::sim::Preset, seed: u64, dir: &Path) {
+    simulate_preset(preset, seed, 5.0, None, dir);
 }
 
 /// Simulates the demo season (seed 7) at 5 Hz into `dir`: the findings do
