@@ -34,9 +34,6 @@ impl Aligned {
     pub fn len(&self) -> usize {
         self.index.len()
     }
-    pub fn is_empty(&self) -> bool {
-        self.index.is_empty()
-    }
 }
 
 /// The largest rate accepted (Hz): the archive's limit.

@@ -26,7 +26,7 @@ pub enum LateralMethod {
 
 /// The estimated samples of a run.
 #[derive(Debug, Clone, Default)]
-pub struct Estimated {
+pub(crate) struct Estimated {
     pub tires: Vec<[TireSample; 4]>,
     pub vehicle: Vec<VehicleSample>,
     /// Archive channels that were estimated, each with how (`fz_n: load transfer`).
@@ -117,7 +117,7 @@ fn check_radius(est: &mut Estimated, car: &CarDescription, calibrate: bool) {
 
 /// Values the log may lack that the manifest's event has.
 #[derive(Debug, Clone, Copy, Default)]
-pub struct EventConditions {
+pub(crate) struct EventConditions {
     pub air_c: Option<f64>,
     pub track_c: Option<f64>,
 }
@@ -169,7 +169,7 @@ fn derivative(a: &Aligned, v: &[f64]) -> Vec<f64> {
 }
 
 /// Estimates every archive channel for each aligned sample.
-pub fn estimate(
+pub(crate) fn estimate(
     path: &Path,
     a: &Aligned,
     car: &CarDescription,

@@ -158,7 +158,7 @@ fn parse_cell(path: &Path, row: usize, name: &str, cell: &str) -> Result<f64, Im
 }
 
 /// Reads a CSV log: a MoTeC export or a generic table.
-pub fn read_csv(path: &Path) -> Result<RawLog, ImportError> {
+pub(crate) fn read_csv(path: &Path) -> Result<RawLog, ImportError> {
     let file = std::fs::File::open(path).map_err(|e| ImportError::io(path, e))?;
     let mut rdr = csv::ReaderBuilder::new()
         .has_headers(false)
@@ -337,7 +337,7 @@ pub fn read_csv(path: &Path) -> Result<RawLog, ImportError> {
 
 /// Reads a Parquet table: every numeric column is a channel; a column's
 /// unit is its field metadata `unit`, else a `[unit]` at the end of its name.
-pub fn read_parquet(path: &Path) -> Result<RawLog, ImportError> {
+pub(crate) fn read_parquet(path: &Path) -> Result<RawLog, ImportError> {
     use arrow_array::Array;
     use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
     let file = std::fs::File::open(path).map_err(|e| ImportError::io(path, e))?;

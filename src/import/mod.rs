@@ -6,12 +6,12 @@
 //! ([`car`], [`estimate`]); the run is written as MCAP in the archive's
 //! schema and entered in the manifest.
 
-pub mod align;
+pub(crate) mod align;
 pub mod car;
 pub mod channel_map;
 pub mod error;
 pub mod estimate;
-pub mod ld;
+pub(crate) mod ld;
 pub mod log;
 pub mod units;
 
@@ -92,7 +92,7 @@ fn days_from_civil(date: &str) -> Option<i64> {
 
 /// Reads one log and writes its run into the archive's manifest copy
 /// `manifest` (the caller writes the manifest once, after every log).
-pub fn import_log(
+pub(crate) fn import_log(
     log_path: &Path,
     run_id: &str,
     season: &Season,

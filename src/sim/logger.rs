@@ -386,7 +386,7 @@ impl ExportInfo {
 
 /// The `car.toml` of a simulated car: its exact parameters (the importer's
 /// loads and forces follow the same quasi-static model as the simulator's).
-pub fn car_description(car: &CarParams) -> CarDescription {
+pub(crate) fn car_description(car: &CarParams) -> CarDescription {
     CarDescription {
         id: car.id.clone(),
         name: car.name.clone(),
