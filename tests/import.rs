@@ -497,6 +497,24 @@ fn bad_logs_are_named_and_do_not_sink_the_batch() {
     ]);
     assert_eq!(code, 3, "{text}");
     assert!(text.contains("give --event"), "{text}");
+    // A new run without a compound fails before any telemetry is written.
+    let (code, text) = tirewear_import(&[
+        &good_path,
+        "--archive",
+        &arch_s,
+        "--car",
+        car,
+        "--run",
+        "lonely",
+        "--event",
+        "E01-valle-rossa",
+    ]);
+    assert_eq!(code, 3, "{text}");
+    assert!(text.contains("--compound"), "{text}");
+    assert!(
+        !arch.join("telemetry/lonely.mcap").exists(),
+        "no orphan telemetry"
+    );
 }
 
 /// A real `.ld` recorded by a MoTeC ADL in 2005 (shipped with the

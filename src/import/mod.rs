@@ -151,6 +151,15 @@ pub(crate) fn import_log(
         Some(i) => manifest.runs[i].telemetry.clone(),
         None => format!("telemetry/{run_id}.mcap"),
     };
+    // A new run is entered (in the caller's copy of the manifest) before its
+    // telemetry is written: what it lacks fails the log with no file left.
+    let distance_m = est.vehicle.last().map_or(0.0, |v| v.distance_m);
+    if existing.is_none() {
+        add_run(
+            manifest, run_id, &event_id, &telemetry, distance_m, &raw.meta, &est, car, settings,
+        )
+        .map_err(archive_err)?;
+    }
     let out_path = season.path(&telemetry);
     if let Some(dir) = out_path.parent() {
         std::fs::create_dir_all(dir).map_err(|e| ImportError::io(dir, e))?;
@@ -222,15 +231,8 @@ pub(crate) fn import_log(
     }
     writer.finish()?;
 
-    let distance_m = est.vehicle.last().map_or(0.0, |v| v.distance_m);
     let duration_s = (aligned.index[aligned.len() - 1] - aligned.index[0]) as f64 / aligned.rate_hz;
     let replaced = existing.is_some();
-    if existing.is_none() {
-        add_run(
-            manifest, run_id, &event_id, &telemetry, distance_m, &raw.meta, &est, car, settings,
-        )
-        .map_err(archive_err)?;
-    }
     Ok(ImportedRun {
         log: log_path.to_path_buf(),
         run: run_id.to_string(),
