@@ -2,16 +2,28 @@
 
 use anyhow::Result;
 use std::path::PathBuf;
+use tirewear::nightly::remote::{Location, S3Settings, Session};
 use tirewear::nightly::{Mode, NightlyError, ProcessOptions, ProcessSummary};
 
 #[derive(clap::Args)]
 pub(crate) struct ProcessArgs {
-    /// Season archive folders (with season.toml) or manifests. May be left
-    /// out with --commit: the shards' list (or the last commit's) is used.
-    archives: Vec<PathBuf>,
-    /// The dataset folder to bring up to date (created if missing).
+    /// Season archive folders (with season.toml) or manifests, or
+    /// `s3://bucket/prefix` (mirrored into --cache first, only changed
+    /// objects downloaded). May be left out with --commit: the shards' list
+    /// (or the last commit's) is used.
+    archives: Vec<String>,
+    /// The dataset folder to bring up to date (created if missing), or
+    /// `s3://bucket/prefix`: processed in its mirror under --cache and
+    /// published after the commit, `dataset.json` last with a conditional
+    /// put. The store is reached through the AWS_* environment variables
+    /// (AWS_ENDPOINT, AWS_REGION, AWS_ACCESS_KEY_ID, AWS_SECRET_ACCESS_KEY,
+    /// AWS_ALLOW_HTTP; docs/nightly.md, "Object storage").
     #[arg(long)]
-    out: PathBuf,
+    out: String,
+    /// Local folder for the mirrors of s3:// archives and datasets (kept
+    /// between nights: only what changed is transferred).
+    #[arg(long, env = "TIREWEAR_CACHE")]
+    cache: Option<PathBuf>,
     /// Engine for the heavy reductions: cpu, gpu, or auto. The engine is part
     /// of every run's key: changing it reprocesses every run.
     #[arg(long, value_enum, default_value = "auto")]
@@ -146,9 +158,35 @@ pub(crate) fn run(a: ProcessArgs, progress: bool) -> Result<Outcome> {
         (None, true) => Mode::Commit,
         (None, false) => Mode::Whole,
     };
+    let archives = a
+        .archives
+        .iter()
+        .map(|s| Location::parse(s))
+        .collect::<Result<Vec<_>, _>>()?;
+    let dataset = Location::parse(&a.out)?;
+    if matches!(dataset, Location::S3 { .. }) && matches!(mode, Mode::Shard { .. }) {
+        anyhow::bail!(
+            "--shard stages parts in the dataset folder: give shards a shared folder, not s3://"
+        );
+    }
+    let session = Session::prepare(
+        &archives,
+        &dataset,
+        a.cache.as_deref(),
+        &S3Settings::default(),
+    )?;
+    for (url, r) in &session.pulled {
+        println!(
+            "pulled {url}: {} objects downloaded ({:.1} MB), {} unchanged, {} removed",
+            r.transferred,
+            r.bytes as f64 / 1e6,
+            r.unchanged,
+            r.deleted
+        );
+    }
     let opts = ProcessOptions {
-        archives: a.archives.clone(),
-        dataset: a.out,
+        archives: session.archive_dirs.clone(),
+        dataset: session.dataset_dir.clone(),
         engine: a.engine.into(),
         mode,
         dry_run: a.dry_run,
@@ -161,6 +199,18 @@ pub(crate) fn run(a: ProcessArgs, progress: bool) -> Result<Outcome> {
             print_summary(&s);
             if s.committed && !a.then.is_empty() {
                 then_steps(&opts, &a.then)?;
+            }
+            if !opts.dry_run
+                && let Some(r) = session.publish()?
+            {
+                println!(
+                    "published {}: {} objects uploaded ({:.1} MB), {} unchanged, {} deleted",
+                    dataset.url(),
+                    r.transferred,
+                    r.bytes as f64 / 1e6,
+                    r.unchanged,
+                    r.deleted
+                );
             }
             Ok(if s.failed.is_empty() {
                 Outcome::Done

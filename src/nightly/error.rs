@@ -20,6 +20,16 @@ pub enum NightlyError {
     /// Archives or options that cannot make one dataset.
     #[error("{0}")]
     Invalid(String),
+    /// Object storage (`s3://`): what was being done, and the store's error.
+    #[error("{url}: {what}: {source}")]
+    Remote {
+        url: String,
+        what: String,
+        source: object_store::Error,
+    },
+    /// Another process committed the remote dataset since this one read it.
+    #[error("{url}: {what}")]
+    Conflict { url: String, what: String },
 }
 
 impl NightlyError {

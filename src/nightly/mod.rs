@@ -20,6 +20,7 @@
 mod error;
 mod keys;
 mod lock;
+pub mod remote;
 
 pub use error::NightlyError;
 
