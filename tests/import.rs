@@ -28,19 +28,6 @@ fn extract(dir: &Path) -> Vec<KpiRow> {
     tirewear::kpi::table::read_parquet(&dir.join("kpis.parquet")).unwrap()
 }
 
-fn copy_dir(from: &Path, to: &Path) {
-    std::fs::create_dir_all(to).unwrap();
-    for e in std::fs::read_dir(from).unwrap() {
-        let e = e.unwrap();
-        let target = to.join(e.file_name());
-        if e.file_type().unwrap().is_dir() {
-            copy_dir(&e.path(), &target);
-        } else {
-            std::fs::copy(e.path(), target).unwrap();
-        }
-    }
-}
-
 /// Relative errors |imported/full − 1| of a column over all tire-runs.
 fn rel_errors(full: &[KpiRow], imported: &[KpiRow], col: &str) -> Vec<f64> {
     let mut out = Vec::new();
@@ -84,7 +71,7 @@ fn import_with(
     edit: impl FnOnce(&mut CarDescription),
     calibrate_radius: bool,
 ) -> tirewear::import::ImportSummary {
-    copy_dir(dir, copy);
+    common::copy_dir(dir, copy);
     std::fs::remove_dir_all(copy.join("telemetry")).unwrap();
     let _ = std::fs::remove_dir_all(copy.join("truth"));
     let (logs, ids) = logger_files(dir, ext);

@@ -57,20 +57,6 @@ fn settings(endpoint: &str) -> S3Settings {
     }
 }
 
-/// Copies a local folder into the bucket folder (the server serves files).
-fn copy_dir(from: &Path, to: &Path) {
-    std::fs::create_dir_all(to).unwrap();
-    for e in std::fs::read_dir(from).unwrap() {
-        let e = e.unwrap();
-        let t = to.join(e.file_name());
-        if e.file_type().unwrap().is_dir() {
-            copy_dir(&e.path(), &t);
-        } else {
-            std::fs::copy(e.path(), t).unwrap();
-        }
-    }
-}
-
 /// Runs `process` through a session: pull, process, publish.
 fn run_remote(
     archive: &str,
@@ -105,25 +91,50 @@ fn bytes(p: PathBuf) -> Vec<u8> {
     std::fs::read(&p).unwrap_or_else(|e| panic!("{}: {e}", p.display()))
 }
 
-#[test]
-fn a_dataset_on_s3_matches_a_local_run_and_reruns_incrementally() {
+/// A server over a bucket folder holding the tiny season (seed 3) under
+/// `archive_prefix`: (its folder, the bucket folder, the local archive,
+/// the running server, the settings to reach it).
+struct Bucket {
+    tmp: tempfile::TempDir,
+    bucket: PathBuf,
+    archive: PathBuf,
+    _rt: tokio::runtime::Runtime,
+    settings: S3Settings,
+}
+
+fn bucket_with_tiny_season(archive_prefix: &str) -> Bucket {
     let tmp = tempfile::tempdir().unwrap();
     let server_root = tmp.path().join("s3");
     let bucket = server_root.join("bucket");
     std::fs::create_dir_all(&bucket).unwrap();
-    let (_rt, endpoint) = start_server(&server_root);
-    let s = settings(&endpoint);
+    let (rt, endpoint) = start_server(&server_root);
+    let archive = tmp.path().join("archive");
+    common::simulate_tiny(&archive, 3);
+    common::copy_dir(&archive, &bucket.join(archive_prefix));
+    Bucket {
+        tmp,
+        bucket,
+        archive,
+        _rt: rt,
+        settings: settings(&endpoint),
+    }
+}
 
-    // The archive, simulated locally and put in the bucket.
-    let local_archive = tmp.path().join("archive");
-    common::simulate_tiny(&local_archive, 3);
-    copy_dir(&local_archive, &bucket.join("seasons/tiny"));
+#[test]
+fn a_dataset_on_s3_matches_a_local_run_and_reruns_incrementally() {
+    let b = bucket_with_tiny_season("seasons/tiny");
+    let (tmp, bucket, local_archive, s) = (
+        b.tmp.path(),
+        b.bucket.clone(),
+        b.archive.clone(),
+        b.settings.clone(),
+    );
 
     // The reference: the same archive processed locally.
-    let local_ds = tmp.path().join("local-ds");
+    let local_ds = tmp.join("local-ds");
     process(&ProcessOptions::new(vec![local_archive.clone()], &local_ds)).unwrap();
 
-    let cache = tmp.path().join("cache");
+    let cache = tmp.join("cache");
     let (first, session) = run_remote(
         "s3://bucket/seasons/tiny",
         "s3://bucket/datasets/tiny",
@@ -202,33 +213,14 @@ fn a_dataset_on_s3_matches_a_local_run_and_reruns_incrementally() {
 
 #[test]
 fn a_commit_over_another_processs_commit_is_refused() {
-    let tmp = tempfile::tempdir().unwrap();
-    let server_root = tmp.path().join("s3");
-    let bucket = server_root.join("bucket");
-    std::fs::create_dir_all(&bucket).unwrap();
-    let (_rt, endpoint) = start_server(&server_root);
-    let s = settings(&endpoint);
-    let archive = tmp.path().join("archive");
-    common::simulate_tiny(&archive, 3);
-    copy_dir(&archive, &bucket.join("a"));
+    let b = bucket_with_tiny_season("a");
+    let (tmp, bucket, s) = (b.tmp.path(), b.bucket.clone(), b.settings.clone());
     let a = Location::parse("s3://bucket/a").unwrap();
     let ds = Location::parse("s3://bucket/ds").unwrap();
 
     // Two machines pull the empty dataset; the first publishes.
-    let one = Session::prepare(
-        std::slice::from_ref(&a),
-        &ds,
-        Some(&tmp.path().join("c1")),
-        &s,
-    )
-    .unwrap();
-    let two = Session::prepare(
-        std::slice::from_ref(&a),
-        &ds,
-        Some(&tmp.path().join("c2")),
-        &s,
-    )
-    .unwrap();
+    let one = Session::prepare(std::slice::from_ref(&a), &ds, Some(&tmp.join("c1")), &s).unwrap();
+    let two = Session::prepare(std::slice::from_ref(&a), &ds, Some(&tmp.join("c2")), &s).unwrap();
     process(&ProcessOptions::new(
         one.archive_dirs.clone(),
         one.dataset_dir.clone(),

@@ -231,13 +231,12 @@ pub(crate) fn estimate(
     }
     // A linear wheel speed (the unit said km/h, m/s...) is Ω·R at the
     // logger's radius; an angular one (rpm, rad/s) is Ω.
-    let angular = |w: Wheel| {
-        a.series.contains_key(&(Quantity::WheelSpeed, Some(w)))
-            && matches!(
-                unit_dimension(a, w),
-                Some(super::units::Dimension::AngularSpeed)
-            )
-    };
+    let angular: [bool; 4] = std::array::from_fn(|k| {
+        matches!(
+            a.wheel_speed_dimension[k],
+            Some(super::units::Dimension::AngularSpeed)
+        )
+    });
     let temp_of = |q: Quantity, w: Wheel, name: &str| {
         a.get(q, Some(w))
             .ok_or_else(|| missing(path, &format!("{name} {}", w.name()), &[q], a))
@@ -492,7 +491,7 @@ pub(crate) fn estimate(
                 }
             };
             let ws = wheel_omega[k][i];
-            let omega = if angular(w) {
+            let omega = if angular[k] {
                 ws
             } else {
                 ws / car.wheel_speed_radius(w)
@@ -525,11 +524,6 @@ pub(crate) fn estimate(
     }
     check_radius(&mut est, car, calibrate_radius);
     Ok(est)
-}
-
-/// The dimension of the unit wheel `w`'s speed was given in.
-fn unit_dimension(a: &Aligned, w: Wheel) -> Option<super::units::Dimension> {
-    a.wheel_speed_dimension.get(w.index()).copied().flatten()
 }
 
 #[cfg(test)]

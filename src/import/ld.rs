@@ -286,9 +286,7 @@ pub fn write_ld(path: &Path, header: &LdHeader, channels: &[LdChannel]) -> Resul
     }
     w.write()
         .map_err(|e| ImportError::log(path, "write", e.to_string()))?;
-    let mut out = crate::atomic::AtomicFile::create(path).map_err(|e| ImportError::io(path, e))?;
-    std::io::Write::write_all(out.file(), buf.get_ref()).map_err(|e| ImportError::io(path, e))?;
-    out.commit().map_err(|e| ImportError::io(path, e))
+    crate::atomic::write_bytes(path, buf.get_ref()).map_err(|e| ImportError::io(path, e))
 }
 
 #[cfg(test)]

@@ -374,19 +374,14 @@ impl Remote {
                 report.unchanged += 1;
                 continue;
             }
-            let etag = self.put(rel, &local, PutMode::Overwrite)?;
-            let (size, mtime_ns) = stamp.unwrap_or_default();
-            state.objects.insert(
-                rel.clone(),
-                Synced {
-                    etag,
-                    size,
-                    mtime_ns,
-                    ..Synced::default()
-                },
-            );
-            report.transferred += 1;
-            report.bytes += size;
+            self.upload(
+                &mut state,
+                &mut report,
+                rel,
+                &local,
+                stamp,
+                PutMode::Overwrite,
+            )?;
         }
         let gone: Vec<String> = state
             .objects
@@ -417,19 +412,7 @@ impl Remote {
                 }),
                 None => PutMode::Create,
             };
-            let etag = self.put(commit_file, &local, mode)?;
-            let (size, mtime_ns) = stamp.unwrap_or_default();
-            state.objects.insert(
-                commit_file.to_string(),
-                Synced {
-                    etag,
-                    size,
-                    mtime_ns,
-                    ..Synced::default()
-                },
-            );
-            report.transferred += 1;
-            report.bytes += size;
+            self.upload(&mut state, &mut report, commit_file, &local, stamp, mode)?;
         }
         // The uploaded objects' remote identity, for the next pull.
         for (rel, obj) in self.list()? {
@@ -442,6 +425,30 @@ impl Remote {
         }
         Self::write_state(dir, &state)?;
         Ok(report)
+    }
+
+    /// Uploads `local` as `rel` and records it in the sync state.
+    fn upload(
+        &self,
+        state: &mut SyncState,
+        report: &mut SyncReport,
+        rel: &str,
+        local: &Path,
+        stamp: Option<(u64, u128)>,
+        mode: PutMode,
+    ) -> Result<(), NightlyError> {
+        let etag = self.put(rel, local, mode)?;
+        let (size, mtime_ns) = stamp.unwrap_or_default();
+        let synced = Synced {
+            etag,
+            size,
+            mtime_ns,
+            ..Synced::default()
+        };
+        state.objects.insert(rel.to_string(), synced);
+        report.transferred += 1;
+        report.bytes += size;
+        Ok(())
     }
 
     fn put(&self, rel: &str, local: &Path, mode: PutMode) -> Result<Option<String>, NightlyError> {
