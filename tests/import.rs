@@ -502,6 +502,25 @@ fn bad_logs_are_named_and_do_not_sink_the_batch() {
         !arch.join("telemetry/lonely.mcap").exists(),
         "no orphan telemetry"
     );
+    // A run id that would write outside telemetry/ is refused.
+    let (code, text) = tirewear_import(&[
+        &good_path,
+        "--archive",
+        &arch_s,
+        "--car",
+        car,
+        "--run",
+        "../../escape",
+        "--event",
+        "E01-valle-rossa",
+        "--compound",
+        "soft",
+        "--tire-sets",
+        "FL=a,FR=b,RL=c,RR=d",
+    ]);
+    assert_eq!(code, 3, "{text}");
+    assert!(text.contains("cannot name a file"), "{text}");
+    assert!(!tmp.path().join("escape.mcap").exists());
 }
 
 /// A real `.ld` recorded by a MoTeC ADL in 2005 (shipped with the

@@ -116,6 +116,15 @@ pub(crate) fn import_log(
         what,
     };
     let existing = manifest.runs.iter().position(|r| r.id == run_id);
+    // A new run's telemetry goes to telemetry/RUN.mcap: its id must not
+    // leave that folder.
+    let unsafe_id =
+        run_id.is_empty() || run_id.starts_with('.') || run_id.contains(['/', '\\', ':', '\0']);
+    if existing.is_none() && unsafe_id {
+        return Err(archive_err(format!(
+            "run id '{run_id}' cannot name a file in telemetry/ (empty, a leading '.', or '/', '\\', ':')"
+        )));
+    }
     let event_id = match existing {
         Some(i) => manifest.runs[i].event.clone(),
         None => settings.new_run.event.clone().ok_or_else(|| {
