@@ -303,8 +303,8 @@ pub fn compare_energy_maps(
 }
 
 /// Tolerance of the GPU condition maps against the CPU's: for every wheel,
-/// condition and energy component, the summed |difference| over the
-/// condition's bins at most 1e-3 of its summed |energy|. Why: the sums are
+/// condition (or pair of conditions) and energy component, the summed
+/// |difference| over the map's bins at most 1e-3 of its summed |energy|. Why: the sums are
 /// exact integers on both engines, and raw channels are binned from the same
 /// f32 value with correctly rounded f32 operations on both, so they agree
 /// bin for bin; the ratios (slip ratio, lateral and combined slip, friction
@@ -323,17 +323,19 @@ pub fn compare_condition_maps(
     other: &dyn ReduceEngine,
     batch: &ReduceBatch,
 ) -> Result<f64, EngineError> {
-    use crate::kpi::cpu::condition_map::{CONDITIONS, Component};
+    use crate::kpi::cpu::condition_map::{CONDITIONS, Component, N_PAIRS};
     let (a, b) = (reference.condition_map(batch)?, other.condition_map(batch)?);
     let mut worst = 0.0f64;
     for (x, y) in a.iter().zip(&b) {
-        for c in 0..CONDITIONS.len() {
-            for comp in [
-                Component::Total,
-                Component::Longitudinal,
-                Component::Lateral,
-            ] {
-                let (u, v) = (x.map(comp, c), y.map(comp, c));
+        // The 1-D maps, then the pairs' 2-D maps.
+        for k in 0..CONDITIONS.len() + N_PAIRS {
+            for comp in Component::ALL {
+                let (u, v) = if k < CONDITIONS.len() {
+                    (x.map(comp, k), y.map(comp, k))
+                } else {
+                    let p = k - CONDITIONS.len();
+                    (x.pair_map(comp, p), y.pair_map(comp, p))
+                };
                 let scale: f64 = u.iter().map(|e| e.abs()).sum();
                 let diff: f64 = u.iter().zip(v).map(|(p, q)| (p - q).abs()).sum();
                 worst = worst.max(if scale > 0.0 { diff / scale } else { diff });

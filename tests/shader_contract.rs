@@ -244,7 +244,10 @@ fn condition_map_matches_its_cpu_twin() {
     assert_eq!(constant(&m, "ITEMS"), ITEMS as f64);
     assert_eq!(workgroup_size(&m), [WG_SIZE as u32, 1, 1]);
     assert_eq!(constant(&m, "N_CONDITIONS"), cm::N_CONDITIONS as f64);
+    assert_eq!(constant(&m, "N_PAIRS"), cm::N_PAIRS as f64);
     assert_eq!(constant(&m, "CONDITION_BINS"), cm::CONDITION_BINS as f64);
+    assert_eq!(constant(&m, "PAIR_BINS"), cm::PAIR_BINS as f64);
+    assert_eq!(constant(&m, "COMPONENT_BINS"), cm::COMPONENT_BINS as f64);
     assert_eq!(constant(&m, "MAP_BINS"), cm::MAP_BINS as f64);
     assert_eq!(
         constant(&m, "SLIP_SPEED_FLOOR_MPS"),
@@ -254,7 +257,7 @@ fn condition_map_matches_its_cpu_twin() {
     assert_eq!(constant(&m, "ENERGY_QUANTA_PER_J"), em::ENERGY_QUANTA_PER_J);
     assert_eq!(
         wgsl_struct(&m, "ConditionBins"),
-        rust_struct!(cm::ConditionBins, [lo: f32, inv_width: f32, n: u32, offset: u32])
+        rust_struct!(cm::ConditionBins, [lo: f32, inv_width: f32, n: u32, offset: u32, value: u32])
     );
     assert_eq!(
         names(&bindings(&m)),

@@ -6,7 +6,7 @@
 
 use super::user_effects::UserEffect;
 use crate::kpi::KpiRow;
-use crate::kpi::cpu::condition_map::{CONDITIONS, Component};
+use crate::kpi::cpu::condition_map::{CONDITIONS, Component, N_PAIRS, pair_conditions};
 use crate::kpi::energy_maps::EnergyMaps;
 use crate::model::data::candidate_inputs;
 use crate::{Axle, Wheel};
@@ -64,6 +64,18 @@ pub enum Feature {
         above: bool,
         component: Component,
     },
+    /// Generated from a pair map (`PAIRS[pair]`): the friction energy (the
+    /// total, or its longitudinal or lateral part) of the samples whose
+    /// first condition lies above θ₁ (or below, `first_above` false) *and*
+    /// whose second lies above θ₂ (or below), θ₁ and θ₂ inner edges of the
+    /// conditions' coarse bins (MJ). θ is the index of the edge pair
+    /// ([`pair_thresholds`]): a mechanism that needs two conditions at once.
+    PairEnergy {
+        pair: usize,
+        first_above: bool,
+        second_above: bool,
+        component: Component,
+    },
     /// A user hypothesis from `effects.toml` (`Candidate::user`).
     User,
     /// Set-up: the law's own wear of the tires of one group (a car, a car's
@@ -93,6 +105,7 @@ impl Feature {
             | Feature::SmallPatchEnergy
             | Feature::Kpi(_)
             | Feature::ConditionEnergy { .. }
+            | Feature::PairEnergy { .. }
             | Feature::User
             | Feature::Group => None,
         }
@@ -130,9 +143,31 @@ impl Feature {
                 "1" => "",
                 u => u,
             },
-            Feature::Kpi(_) | Feature::User | Feature::Group => "",
+            Feature::Kpi(_) | Feature::PairEnergy { .. } | Feature::User | Feature::Group => "",
         }
     }
+}
+
+/// A value with a condition's unit, as thresholds print (pressure in kPa).
+fn format_with_unit(unit: &str, x: f64) -> String {
+    match unit {
+        "Pa" => format!("{} kPa", significant(x / 1e3)),
+        "" | "1" => significant(x),
+        u => format!("{} {u}", significant(x)),
+    }
+}
+
+/// The edges (θ₁, θ₂) a pair candidate's threshold index stands for: index
+/// k = (i − 1)·(n₂ − 1) + (j − 1) for the inner edges i of the first
+/// condition's coarse bins and j of the second's.
+pub fn pair_thresholds(pair: usize, theta: f64) -> Option<(usize, usize)> {
+    let (a, b) = pair_conditions(pair);
+    let (na, nb) = (CONDITIONS[a].coarse.n, CONDITIONS[b].coarse.n);
+    if theta.is_nan() || theta < 0.0 || theta.fract() != 0.0 {
+        return None;
+    }
+    let k = theta as usize;
+    (k < (na - 1) * (nb - 1)).then(|| (k / (nb - 1) + 1, k % (nb - 1) + 1))
 }
 
 /// `x` with four significant digits (thresholds: 0.009022, 84.00, 1234).
@@ -147,6 +182,17 @@ pub fn significant(x: f64) -> String {
 impl Feature {
     /// θ with its unit, as the report prints it (pressure in kPa).
     pub fn format_threshold(&self, theta: f64) -> String {
+        if let Feature::PairEnergy { pair, .. } = *self {
+            let (a, b) = pair_conditions(pair);
+            return match pair_thresholds(pair, theta) {
+                Some((i, j)) => format!(
+                    "({}, {})",
+                    format_with_unit(CONDITIONS[a].unit, CONDITIONS[a].coarse.lower_edge(i)),
+                    format_with_unit(CONDITIONS[b].unit, CONDITIONS[b].coarse.lower_edge(j))
+                ),
+                None => significant(theta),
+            };
+        }
         match self.threshold_unit() {
             "Pa" => format!("{} kPa", significant(theta / 1e3)),
             "" => significant(theta),
@@ -336,6 +382,7 @@ pub fn library(rows: &[&KpiRow]) -> Vec<Candidate> {
         }
     }
     out.extend(condition_candidates(&setup_cars(rows)));
+    out.extend(pair_candidates(&setup_cars(rows)));
     // Set-up mechanisms, on both axles (the generic KPI candidates below
     // cover them linearly too); thresholds at the deciles of the rows.
     let deciles = |col: &str, f: fn(f64) -> f64| -> Vec<f64> {
@@ -452,6 +499,49 @@ fn condition_candidates(cars: &[String]) -> Vec<Candidate> {
                         component,
                     },
                     thresholds: thresholds.clone(),
+                    axle: None,
+                    user: None,
+                    group: None,
+                    scopes: condition_scopes(cars),
+                });
+            }
+        }
+    }
+    out
+}
+
+/// Candidates generated from the pair maps: for every pair of [`PAIRS`]
+/// (`crate::kpi::cpu::condition_map::PAIRS`), energy component and quadrant
+/// (each condition above or below its threshold), the energy where both
+/// hold, θ₁ and θ₂ every inner edge of the coarse bins (16 edge pairs,
+/// scanned as one threshold), on the condition candidates' scopes. Rows
+/// without pair maps (an older extraction) give NaN terms.
+fn pair_candidates(cars: &[String]) -> Vec<Candidate> {
+    let mut out = Vec::new();
+    for pair in 0..N_PAIRS {
+        let (a, b) = pair_conditions(pair);
+        let edges = (CONDITIONS[a].coarse.n - 1) * (CONDITIONS[b].coarse.n - 1);
+        let side = |above: bool| if above { "above" } else { "below" };
+        for component in Component::ALL {
+            for (first_above, second_above) in
+                [(true, true), (true, false), (false, true), (false, false)]
+            {
+                out.push(Candidate {
+                    name: format!(
+                        "{} with ({}, {}) {}/{} θ",
+                        component.energy_name(),
+                        CONDITIONS[a].name,
+                        CONDITIONS[b].name,
+                        side(first_above),
+                        side(second_above)
+                    ),
+                    feature: Feature::PairEnergy {
+                        pair,
+                        first_above,
+                        second_above,
+                        component,
+                    },
+                    thresholds: (0..edges).map(|k| k as f64).collect(),
                     axle: None,
                     user: None,
                     group: None,
@@ -685,6 +775,29 @@ pub(crate) fn feature(
                     .sum::<f64>()
                     * mj
             }),
+        Feature::PairEnergy {
+            pair,
+            first_above,
+            second_above,
+            component,
+        } => maps
+            .and_then(|m| m.conditions.as_deref())
+            .filter(|cm| cm.pairs_held)
+            .zip(pair_thresholds(pair, theta))
+            .map_or(f64::NAN, |(cm, (i0, j0))| {
+                let (_, b) = pair_conditions(pair);
+                let nb = CONDITIONS[b].coarse.n;
+                let keep = |k: usize, edge: usize, above: bool| (k >= edge) == above;
+                cm.pair_map(component, pair)
+                    .iter()
+                    .enumerate()
+                    .filter(|(cell, _)| {
+                        keep(cell / nb, i0, first_above) && keep(cell % nb, j0, second_above)
+                    })
+                    .map(|(_, e)| e)
+                    .sum::<f64>()
+                    * mj
+            }),
         // Needs the candidate's expression or group: see `candidate_feature`.
         Feature::User | Feature::Group => f64::NAN,
     }
@@ -899,6 +1012,75 @@ mod tests {
             ..scale(30.0, 5.0)
         };
         assert!((value(kpi("t_air_avg_c"), f64::NAN, seen) - 3.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn pair_candidates_sum_the_quadrant_beyond_both_thresholds() {
+        // combined_slip:t_surface_c, coarse bins 0.02 + 0.02·i and 45 + 10·j,
+        // 5 × 5 cells: 2 MJ at (3, 1) = slip [0.08, 0.10) and 55–65 °C
+        // (cell 16), 1 MJ at (0, 4) = slip below 0.04 and above 85 °C (cell 4).
+        use crate::kpi::cpu::condition_map::{ConditionMaps, pair_name};
+        let pair = (0..N_PAIRS)
+            .find(|&p| pair_name(p) == "combined_slip:t_surface_c")
+            .unwrap();
+        let mut cm = ConditionMaps::default();
+        let o = crate::kpi::cpu::condition_map::CONDITION_BINS;
+        let before: usize = (0..pair)
+            .map(|p| {
+                let (a, b) = pair_conditions(p);
+                CONDITIONS[a].coarse.n * CONDITIONS[b].coarse.n
+            })
+            .sum();
+        cm.energy_j[0][o + before + 16] = 2e6;
+        cm.energy_j[0][o + before + 4] = 1e6;
+        assert_eq!(cm.pair_map(Component::Total, pair)[16], 2e6);
+        let mut m = EnergyMaps::new();
+        m.conditions = Some(Box::new(cm));
+        let r = KpiRow::default();
+        let f = |first_above, second_above, theta: f64| {
+            let feature_ = Feature::PairEnergy {
+                pair,
+                first_above,
+                second_above,
+                component: Component::Total,
+            };
+            feature(feature_, &r, Some(&m), theta, KpiScale::NONE)
+        };
+        // θ index k = (i − 1)·4 + (j − 1): k 9 is edges (i 3, j 2) = (0.08, 65 °C).
+        assert_eq!(pair_thresholds(pair, 9.0), Some((3, 2)));
+        let named = Feature::PairEnergy {
+            pair,
+            first_above: true,
+            second_above: false,
+            component: Component::Total,
+        };
+        assert_eq!(named.format_threshold(9.0), "(0.08000, 65.00 °C)");
+        let close = |a: f64, b: f64| (a - b).abs() < 1e-9;
+        // Slip ≥ 0.08 and surface < 65 °C holds (3, 1): 2 MJ.
+        assert!(close(f(true, false, 9.0), 2.0));
+        // Slip ≥ 0.08 and surface ≥ 65 °C: nothing.
+        assert!(close(f(true, true, 9.0), 0.0));
+        // Slip < 0.04 (i 1) and surface ≥ 85 °C (j 4): k = 0·4 + 3 = 3: 1 MJ.
+        assert!(close(f(false, true, 3.0), 1.0));
+        // Slip < 0.10 (i 4) and surface ≥ 55 °C (j 1): k = 12: both, 3 MJ.
+        assert!(close(f(false, true, 12.0), 3.0));
+        // Outside the grid, or maps without pairs: undefined.
+        assert!(f(true, true, 16.0).is_nan() && f(true, true, 0.5).is_nan());
+        let mut old = m.clone();
+        if let Some(cm) = old.conditions.as_mut() {
+            cm.pairs_held = false;
+        }
+        let old_value = feature(named, &r, Some(&old), 9.0, KpiScale::NONE);
+        assert!(old_value.is_nan());
+        // Every pair, component and quadrant is a candidate on every scope.
+        let cars = vec!["car1".to_string()];
+        let generated = pair_candidates(&cars);
+        assert_eq!(generated.len(), N_PAIRS * 3 * 4);
+        assert!(
+            generated
+                .iter()
+                .all(|c| c.thresholds.len() == 16 && c.scopes.len() == 10)
+        );
     }
 
     #[test]

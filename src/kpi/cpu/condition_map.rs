@@ -5,7 +5,10 @@
 //! utilisation, temperatures, pressure, camber, speed — so that a wear
 //! effect acting only under some condition can be looked for later without
 //! re-reading telemetry. One 1-D map per condition; each sums to the run's
-//! friction energy.
+//! friction energy. And one 2-D map for each pair of [`PAIRS`], on each
+//! condition's coarse bins (`Condition::coarse`): the energy where two
+//! conditions hold together (sliding on a cold tread, say), which two 1-D
+//! maps cannot tell apart from each acting alone.
 //!
 //! Raw channels are binned in their logged SI units (N, Pa), never rescaled,
 //! so that a value both engines hold exactly lands in the same bin on both
@@ -25,6 +28,10 @@ pub struct Condition {
     pub name: &'static str,
     pub unit: &'static str,
     pub bins: Bins,
+    /// Five coarse bins for the pair maps ([`PAIRS`]): inside the bulk of
+    /// a season's energy (its 5–95 % energy quantiles on the demo), their
+    /// edges on `bins`' edges, so a pair's threshold is a 1-D threshold too.
+    pub coarse: Bins,
     /// How it is computed from the sample (docs/kpis.md repeats it).
     pub formula: &'static str,
 }
@@ -46,66 +53,77 @@ pub const CONDITIONS: [Condition; N_CONDITIONS] = [
         name: "slip_ratio",
         unit: "1",
         bins: bins(-0.3, 0.02, 30),
+        coarse: bins(-0.08, 0.04, 5),
         formula: "κ = (ω·r − v_x) / max(|v_x|, 1 m/s) = −v_sx / max(|v_x|, 1 m/s)",
     },
     Condition {
         name: "lateral_slip",
         unit: "1",
         bins: bins(-0.3, 0.02, 30),
+        coarse: bins(-0.08, 0.04, 5),
         formula: "tan α = v_y / max(|v_x|, 1 m/s) (the slip angle's tangent: ±0.3 is ±16.7°)",
     },
     Condition {
         name: "combined_slip",
         unit: "1",
         bins: bins(0.0, 0.02, 30),
+        coarse: bins(0.02, 0.02, 5),
         formula: "√(κ² + tan²α) = |v_s| / max(|v_x|, 1 m/s)",
     },
     Condition {
         name: "sliding_speed_mps",
         unit: "m/s",
         bins: bins(0.0, 0.5, 20),
+        coarse: bins(1.0, 1.0, 5),
         formula: "|v_s| = √(v_sx² + v_sy²)",
     },
     Condition {
         name: "load_n",
         unit: "N",
         bins: bins(0.0, 500.0, 24),
+        coarse: bins(2000.0, 1500.0, 5),
         formula: "F_z",
     },
     Condition {
         name: "friction_utilisation",
         unit: "1",
         bins: bins(0.0, 0.1, 25),
+        coarse: bins(0.6, 0.3, 5),
         formula: "√(F_x² + F_y²) / max(F_z, 100 N)",
     },
     Condition {
         name: "t_surface_c",
         unit: "°C",
         bins: bins(20.0, 5.0, 24),
+        coarse: bins(45.0, 10.0, 5),
         formula: "T_surface",
     },
     Condition {
         name: "t_inner_c",
         unit: "°C",
         bins: bins(40.0, 5.0, 24),
+        coarse: bins(75.0, 15.0, 5),
         formula: "T_inner (inner liner)",
     },
     Condition {
         name: "pressure_pa",
         unit: "Pa",
         bins: bins(100e3, 5e3, 30),
+        coarse: bins(105e3, 10e3, 5),
         formula: "p (inflation pressure)",
     },
     Condition {
         name: "camber_deg",
         unit: "deg",
         bins: bins(-6.0, 0.25, 32),
+        coarse: bins(-3.75, 0.5, 5),
         formula: "γ",
     },
     Condition {
         name: "speed_mps",
         unit: "m/s",
         bins: bins(0.0, 4.0, 25),
+        coarse: bins(24.0, 16.0, 5),
         formula: "v_x (wheel centre, longitudinal)",
     },
     // From format version 2 on.
@@ -113,36 +131,42 @@ pub const CONDITIONS: [Condition; N_CONDITIONS] = [
         name: "t_bulk_c",
         unit: "°C",
         bins: bins(30.0, 5.0, 24),
+        coarse: bins(60.0, 10.0, 5),
         formula: "(T_surface + T_inner) / 2 (bulk rubber)",
     },
     Condition {
         name: "t_surface_rate_kps",
         unit: "K/s",
         bins: bins(-15.0, 1.0, 30),
+        coarse: bins(-3.0, 2.0, 5),
         formula: "(T_surface(j₁) − T_surface(j₀)) / (t(j₁) − t(j₀)), j₀ and j₁ the first and last kept samples within ±0.5 s",
     },
     Condition {
         name: "t_inner_rate_kps",
         unit: "K/s",
         bins: bins(-1.5, 0.1, 30),
+        coarse: bins(-0.5, 0.3, 5),
         formula: "as t_surface_rate_kps, of T_inner",
     },
     Condition {
         name: "relative_load",
         unit: "1",
         bins: bins(0.0, 0.1, 30),
+        coarse: bins(0.5, 0.3, 5),
         formula: "F_z / mean F_z of the tire's kept samples in the run",
     },
     Condition {
         name: "time_since_start_s",
         unit: "s",
         bins: bins(0.0, 120.0, 30),
+        coarse: bins(0.0, 360.0, 5),
         formula: "t − t of the tire's first kept sample",
     },
     Condition {
         name: "distance_since_start_m",
         unit: "m",
         bins: bins(0.0, 5000.0, 30),
+        coarse: bins(0.0, 15000.0, 5),
         formula: "Σ v_x·Δt over the tire's kept samples before this one",
     },
 ];
@@ -150,15 +174,85 @@ pub const CONDITIONS: [Condition; N_CONDITIONS] = [
 /// Conditions a format-version-1 side table holds (the first ones).
 pub const V1_CONDITIONS: usize = 11;
 
+/// A pair of conditions with a 2-D map: the energy binned by both at once,
+/// on their coarse bins, [first's coarse bin][second's coarse bin].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Pair {
+    /// Side-table names of the two conditions.
+    pub first: &'static str,
+    pub second: &'static str,
+    /// Why this pair: the mechanism an engineer would look for in it.
+    pub reason: &'static str,
+}
+
+/// The pairs with a 2-D map. A documented selection, not all 136: every
+/// pair would be 3 400 bins per tire and component, more than the
+/// workgroup's 16 KiB histogram holds and 5× the per-sample cost of the
+/// 1-D maps. Wear mechanisms combine how hard the tread slides with the
+/// state it slides in (temperature, load, camber, speed), so each pair is
+/// a sliding measure and a state (docs/kpis.md).
+pub const PAIRS: [Pair; N_PAIRS] = [
+    Pair {
+        first: "combined_slip",
+        second: "t_surface_c",
+        reason: "sliding on a cold surface (graining) or a hot one (thermal degradation)",
+    },
+    Pair {
+        first: "combined_slip",
+        second: "t_bulk_c",
+        reason: "sliding with a cold bulk (graining) or a hot one (blistering)",
+    },
+    Pair {
+        first: "sliding_speed_mps",
+        second: "t_surface_c",
+        reason: "fast sliding on a hot surface (flash temperature)",
+    },
+    Pair {
+        first: "friction_utilisation",
+        second: "t_surface_c",
+        reason: "grip used near its limit at a tread temperature",
+    },
+    Pair {
+        first: "combined_slip",
+        second: "relative_load",
+        reason: "sliding under load transfer (tearing on the loaded tire)",
+    },
+    Pair {
+        first: "slip_ratio",
+        second: "relative_load",
+        reason: "traction or braking slip under load",
+    },
+    Pair {
+        first: "lateral_slip",
+        second: "camber_deg",
+        reason: "cornering on a tilted contact patch (shoulder wear)",
+    },
+    Pair {
+        first: "combined_slip",
+        second: "speed_mps",
+        reason: "sliding at high road speed (energy density in the patch)",
+    },
+];
+
+/// Number of pairs with a 2-D map. Must match `N_PAIRS` in the shader
+/// (checked by tests/shader_contract.rs).
+pub const N_PAIRS: usize = 8;
+
 /// Number of conditions. Must match `N_CONDITIONS` in the shader (checked by tests/shader_contract.rs).
 pub const N_CONDITIONS: usize = 17;
-/// Bins of one energy component over all conditions. Must match
+/// Bins of one energy component over all conditions' 1-D maps. Must match
 /// `CONDITION_BINS` in the shader (checked by tests/shader_contract.rs).
 pub const CONDITION_BINS: usize = 468;
+/// Cells of one energy component over all pair maps (after the 1-D bins).
+/// Must match `PAIR_BINS` in the shader (checked by tests/shader_contract.rs).
+pub const PAIR_BINS: usize = 200;
+/// Bins of one energy component: the 1-D maps, then the pair maps. Must
+/// match `COMPONENT_BINS` in the shader (checked by tests/shader_contract.rs).
+pub const COMPONENT_BINS: usize = CONDITION_BINS + PAIR_BINS;
 /// Energy components: total, longitudinal (−F_x·v_sx·Δt), lateral (−F_y·v_sy·Δt).
 pub(crate) const COMPONENTS: usize = 3;
 /// Bins of one wheel's maps. Must match `MAP_BINS` in the shader (checked by tests/shader_contract.rs).
-pub const MAP_BINS: usize = COMPONENTS * CONDITION_BINS;
+pub const MAP_BINS: usize = COMPONENTS * COMPONENT_BINS;
 
 const fn total_bins() -> usize {
     let mut n = 0;
@@ -170,6 +264,33 @@ const fn total_bins() -> usize {
     n
 }
 const _: () = assert!(CONDITION_BINS == total_bins());
+
+/// The conditions of pair `p` (indices into [`CONDITIONS`]).
+pub fn pair_conditions(p: usize) -> (usize, usize) {
+    let index =
+        |name| ConditionMaps::condition_index(name).expect("PAIRS name conditions (unit-tested)");
+    (index(PAIRS[p].first), index(PAIRS[p].second))
+}
+
+/// Cells of pair `p`'s map.
+fn pair_cells(p: usize) -> usize {
+    let (a, b) = pair_conditions(p);
+    CONDITIONS[a].coarse.n * CONDITIONS[b].coarse.n
+}
+
+/// First cell of each pair within a component's pair cells.
+fn pair_offsets() -> [usize; N_PAIRS] {
+    let mut o = [0; N_PAIRS];
+    for p in 1..N_PAIRS {
+        o[p] = o[p - 1] + pair_cells(p - 1);
+    }
+    o
+}
+
+/// A pair's side-table name: its conditions' names joined by ':'.
+pub fn pair_name(p: usize) -> String {
+    format!("{}:{}", PAIRS[p].first, PAIRS[p].second)
+}
 
 /// One condition's bins as both engines apply them: in f32, as
 /// ⌊(x − lo)·inv_width⌋ clamped to 0..n−1 (NaN to 0). Subtraction and
@@ -185,26 +306,35 @@ pub struct ConditionBins {
     /// 1 / width, rounded to f32.
     pub inv_width: f32,
     pub n: u32,
-    /// First bin of this condition within a component's `CONDITION_BINS`.
+    /// First bin of this map within a component's `COMPONENT_BINS` (a
+    /// pair's second axis: 0, unused).
     pub offset: u32,
+    /// Which condition value it bins (index into [`CONDITIONS`]).
+    pub value: u32,
 }
 
-/// The table the GPU engine uploads (f32 edges; the CPU twin bins in f64).
+/// The table the GPU engine uploads (binding 2): one entry per condition's
+/// 1-D map, in [`CONDITIONS`] order, then two per pair of [`PAIRS`] (its
+/// first condition's coarse bins with the pair's offset, then its second's).
 pub(crate) fn condition_table() -> Vec<ConditionBins> {
-    let mut offset = 0;
-    CONDITIONS
+    let entry = |bins: &Bins, offset: usize, value: usize| ConditionBins {
+        lo: bins.lo as f32,
+        inv_width: (1.0 / bins.width) as f32,
+        n: bins.n as u32,
+        offset: offset as u32,
+        value: value as u32,
+    };
+    let mut out: Vec<ConditionBins> = offsets()
         .iter()
-        .map(|c| {
-            let b = ConditionBins {
-                lo: c.bins.lo as f32,
-                inv_width: (1.0 / c.bins.width) as f32,
-                n: c.bins.n as u32,
-                offset,
-            };
-            offset += c.bins.n as u32;
-            b
-        })
-        .collect()
+        .enumerate()
+        .map(|(c, &o)| entry(&CONDITIONS[c].bins, o, c))
+        .collect();
+    for (p, o) in pair_offsets().iter().enumerate() {
+        let (a, b) = pair_conditions(p);
+        out.push(entry(&CONDITIONS[a].coarse, CONDITION_BINS + o, a));
+        out.push(entry(&CONDITIONS[b].coarse, 0, b));
+    }
+    out
 }
 
 impl ConditionBins {
@@ -279,13 +409,20 @@ fn workgroup(batch: &ReduceBatch, chunk: &ReduceChunk, table: &[ConditionBins], 
                 let e_y = -f(p.fy) * v_sy * dt; // eq. 24
                 let q = [to_quanta(e_x + e_y), to_quanta(e_x), to_quanta(e_y)];
                 let values = condition_values(p);
-                for c in 0..N_CONDITIONS {
-                    let t = &table[c];
-                    let b = t.offset as usize + t.index(values[c]);
+                let mut add = |b: usize| {
                     for (m, &qm) in q.iter().enumerate() {
-                        let slot = &mut bins[m * CONDITION_BINS + b];
+                        let slot = &mut bins[m * COMPONENT_BINS + b];
                         *slot = slot.wrapping_add(qm);
                     }
+                };
+                for t in &table[..N_CONDITIONS] {
+                    add(t.offset as usize + t.index(values[t.value as usize]));
+                }
+                for pair in table[N_CONDITIONS..].chunks_exact(2) {
+                    let (ta, tb) = (&pair[0], &pair[1]);
+                    let ia = ta.index(values[ta.value as usize]);
+                    let ib = tb.index(values[tb.value as usize]);
+                    add(ta.offset as usize + ia * tb.n as usize + ib);
                 }
             }
         }
@@ -302,21 +439,26 @@ pub fn condition_map(batch: &ReduceBatch) -> Vec<u64> {
 }
 
 /// One tire and run's condition maps (J per bin): for each component, the
-/// bins of every condition back to back in [`CONDITIONS`] order.
+/// bins of every condition back to back in [`CONDITIONS`] order, then the
+/// cells of every pair in [`PAIRS`] order.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ConditionMaps {
-    /// [component][CONDITION_BINS]: total, longitudinal, lateral.
+    /// [component][COMPONENT_BINS]: total, longitudinal, lateral.
     pub energy_j: [Vec<f64>; COMPONENTS],
     /// How many of [`CONDITIONS`] (the first ones) the maps hold: all, or
     /// [`V1_CONDITIONS`] when read from a format-version-1 side table.
     pub held: usize,
+    /// Whether the maps hold the pair maps (not read from a side table
+    /// older than format version 3).
+    pub pairs_held: bool,
 }
 
 impl Default for ConditionMaps {
     fn default() -> Self {
         ConditionMaps {
-            energy_j: std::array::from_fn(|_| vec![0.0; CONDITION_BINS]),
+            energy_j: std::array::from_fn(|_| vec![0.0; COMPONENT_BINS]),
             held: N_CONDITIONS,
+            pairs_held: true,
         }
     }
 }
@@ -360,6 +502,12 @@ impl ConditionMaps {
     pub fn condition_index(name: &str) -> Option<usize> {
         CONDITIONS.iter().position(|c| c.name == name)
     }
+    /// Pair `p`'s map of one component (J per cell, [first's coarse
+    /// bin][second's coarse bin], row-major).
+    pub fn pair_map(&self, component: Component, p: usize) -> &[f64] {
+        let o = CONDITION_BINS + pair_offsets()[p];
+        &self.energy_j[component as usize][o..o + pair_cells(p)]
+    }
 }
 
 /// Each wheel's condition maps (J per bin) from its `MAP_BINS` sums of quanta.
@@ -368,12 +516,13 @@ pub(crate) fn condition_maps_from_quanta(quanta: &[u64]) -> Vec<ConditionMaps> {
         .chunks_exact(MAP_BINS)
         .map(|q| ConditionMaps {
             energy_j: std::array::from_fn(|m| {
-                q[m * CONDITION_BINS..(m + 1) * CONDITION_BINS]
+                q[m * COMPONENT_BINS..(m + 1) * COMPONENT_BINS]
                     .iter()
                     .map(|&v| from_quanta(v))
                     .collect()
             }),
             held: N_CONDITIONS,
+            pairs_held: true,
         })
         .collect()
 }
@@ -381,14 +530,18 @@ pub(crate) fn condition_maps_from_quanta(quanta: &[u64]) -> Vec<ConditionMaps> {
 /// Schema-metadata key of the side table's format version.
 pub(crate) const VERSION_KEY: &str = "tirewear.condition_maps.version";
 /// The side table's format version this build writes. It also reads
-/// version 1, which holds the first [`V1_CONDITIONS`] conditions.
-pub(crate) const VERSION: u32 = 2;
+/// version 2, which has no pair maps, and version 1, which also holds only
+/// the first [`V1_CONDITIONS`] conditions.
+pub(crate) const VERSION: u32 = 3;
 
 /// Side table of condition maps (`NAME.condition_maps.parquet`): one row per
 /// tire, run, condition and non-empty bin: run, wheel, condition, unit, bin,
 /// lo, hi (the bin's edges; the first and last bins also hold the values
-/// below and above), energy_j, energy_x_j, energy_y_j. Versioned in the
-/// schema metadata ([`VERSION_KEY`]).
+/// below and above), energy_j, energy_x_j, energy_y_j, lo_2, hi_2. A pair
+/// map's rows name the pair `first:second` (unit `u1:u2`), its cell
+/// i·n₂ + j as the bin, the first condition's coarse edges of i in lo/hi
+/// and the second's of j in lo_2/hi_2 (NaN in the 1-D rows; columns from
+/// version 3 on). Versioned in the schema metadata ([`VERSION_KEY`]).
 pub(crate) fn side_table(
     maps: &[(String, crate::Wheel, ConditionMaps)],
 ) -> arrow_array::RecordBatch {
@@ -396,23 +549,26 @@ pub(crate) fn side_table(
     use arrow_schema::{DataType, Field, Schema};
     use std::sync::Arc;
     let (mut run, mut wheel, mut cond, mut unit) = (vec![], vec![], vec![], vec![]);
-    let (mut bin, mut lo, mut hi) = (vec![], vec![], vec![]);
+    let (mut bin, mut lo, mut hi, mut lo_2, mut hi_2) = (vec![], vec![], vec![], vec![], vec![]);
     let mut e: [Vec<f64>; COMPONENTS] = Default::default();
-    let offsets = offsets();
+    let layouts = map_layouts();
     for (r, w, m) in maps {
-        for (c, cd) in CONDITIONS.iter().enumerate() {
-            for b in 0..cd.bins.n {
-                let k = offsets[c] + b;
+        for l in &layouts {
+            for b in 0..l.cells {
+                let k = l.offset + b;
                 if (0..COMPONENTS).all(|m_| m.energy_j[m_][k] == 0.0) {
                     continue;
                 }
                 run.push(r.clone());
                 wheel.push(w.name());
-                cond.push(cd.name);
-                unit.push(cd.unit);
+                cond.push(l.name.clone());
+                unit.push(l.unit.clone());
                 bin.push(b as u32);
-                lo.push(cd.bins.lower_edge(b));
-                hi.push(cd.bins.lower_edge(b + 1));
+                let [a, b_, c, d] = l.edges(b);
+                lo.push(a);
+                hi.push(b_);
+                lo_2.push(c);
+                hi_2.push(d);
                 for (col, comp) in e.iter_mut().zip(&m.energy_j) {
                     col.push(comp[k]);
                 }
@@ -430,6 +586,8 @@ pub(crate) fn side_table(
         Field::new("energy_j", DataType::Float64, false),
         Field::new("energy_x_j", DataType::Float64, false),
         Field::new("energy_y_j", DataType::Float64, false),
+        Field::new("lo_2", DataType::Float64, false),
+        Field::new("hi_2", DataType::Float64, false),
     ])
     .with_metadata(std::collections::HashMap::from([(
         VERSION_KEY.to_string(),
@@ -449,9 +607,78 @@ pub(crate) fn side_table(
             Arc::new(Float64Array::from(et)),
             Arc::new(Float64Array::from(ex)),
             Arc::new(Float64Array::from(ey)),
+            Arc::new(Float64Array::from(lo_2)),
+            Arc::new(Float64Array::from(hi_2)),
         ],
     )
     .expect("columns match the schema")
+}
+
+/// One map of the side table: a condition's 1-D map or a pair's 2-D map.
+struct MapLayout {
+    name: String,
+    unit: String,
+    /// First bin within a component's `COMPONENT_BINS`.
+    offset: usize,
+    cells: usize,
+    /// The condition (1-D) or the pair's first condition.
+    condition: usize,
+    /// The pair's second condition.
+    second: Option<usize>,
+}
+
+impl MapLayout {
+    /// A cell's edges: lo, hi and, for a pair, the second condition's lo_2,
+    /// hi_2 (NaN for a 1-D map).
+    fn edges(&self, cell: usize) -> [f64; 4] {
+        let first = &CONDITIONS[self.condition];
+        match self.second {
+            None => [
+                first.bins.lower_edge(cell),
+                first.bins.lower_edge(cell + 1),
+                f64::NAN,
+                f64::NAN,
+            ],
+            Some(s) => {
+                let n = CONDITIONS[s].coarse.n;
+                let (i, j) = (cell / n, cell % n);
+                [
+                    first.coarse.lower_edge(i),
+                    first.coarse.lower_edge(i + 1),
+                    CONDITIONS[s].coarse.lower_edge(j),
+                    CONDITIONS[s].coarse.lower_edge(j + 1),
+                ]
+            }
+        }
+    }
+}
+
+/// Every map in side-table order: the conditions, then the pairs.
+fn map_layouts() -> Vec<MapLayout> {
+    let mut out: Vec<MapLayout> = offsets()
+        .iter()
+        .enumerate()
+        .map(|(c, &offset)| MapLayout {
+            name: CONDITIONS[c].name.to_string(),
+            unit: CONDITIONS[c].unit.to_string(),
+            offset,
+            cells: CONDITIONS[c].bins.n,
+            condition: c,
+            second: None,
+        })
+        .collect();
+    for (p, o) in pair_offsets().iter().enumerate() {
+        let (a, b) = pair_conditions(p);
+        out.push(MapLayout {
+            name: pair_name(p),
+            unit: format!("{}:{}", CONDITIONS[a].unit, CONDITIONS[b].unit),
+            offset: CONDITION_BINS + o,
+            cells: pair_cells(p),
+            condition: a,
+            second: Some(b),
+        });
+    }
+    out
 }
 
 /// Reads a condition-map side table back, keyed by (run, wheel). A file of
@@ -474,9 +701,8 @@ pub fn read_condition_maps(
     let file = std::fs::File::open(path).map_err(|e| IngestError::io(path, e))?;
     let builder = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file)
         .map_err(perr)?;
-    let held = match builder.schema().metadata().get(VERSION_KEY) {
-        Some(v) if v == &VERSION.to_string() => N_CONDITIONS,
-        Some(v) if v == "1" => V1_CONDITIONS,
+    let version: u32 = match builder.schema().metadata().get(VERSION_KEY) {
+        Some(v) if matches!(v.as_str(), "1" | "2" | "3") => v.parse().expect("a digit"),
         Some(v) => {
             return Err(IngestError::invalid(
                 path,
@@ -494,8 +720,26 @@ pub fn read_condition_maps(
             ));
         }
     };
+    let held = if version == 1 {
+        V1_CONDITIONS
+    } else {
+        N_CONDITIONS
+    };
+    let pairs_held = version >= 3;
+    // The maps a file of this version may hold, by name.
+    let layouts = map_layouts();
+    let by_name: std::collections::HashMap<&str, &MapLayout> = layouts
+        .iter()
+        .filter(|l| {
+            if l.second.is_some() {
+                pairs_held
+            } else {
+                l.condition < held
+            }
+        })
+        .map(|l| (l.name.as_str(), l))
+        .collect();
     let reader = builder.build().map_err(perr)?;
-    let offsets = offsets();
     let mut out: std::collections::BTreeMap<crate::kpi::TireRun, ConditionMaps> =
         Default::default();
     let mut record = 0usize;
@@ -526,6 +770,11 @@ pub fn read_condition_maps(
             .expect("cast")
             .clone();
         let (lo, hi) = (float("lo")?, float("hi")?);
+        let second = if pairs_held {
+            Some((float("lo_2")?, float("hi_2")?))
+        } else {
+            None
+        };
         let e = [
             float("energy_j")?,
             float("energy_x_j")?,
@@ -535,39 +784,43 @@ pub fn read_condition_maps(
             record += 1;
             let at = || format!("record {record}");
             let name = cond.value(k);
-            let c = ConditionMaps::condition_index(name)
-                .filter(|&c| c < held)
-                .ok_or_else(|| {
-                    IngestError::invalid(
-                        path,
-                        at(),
-                        format!(
-                            "unknown condition '{name}' in a version-{} table",
-                            version_of(held)
-                        ),
-                    )
-                })?;
-            let bins = CONDITIONS[c].bins;
+            let l = by_name.get(name).ok_or_else(|| {
+                IngestError::invalid(
+                    path,
+                    at(),
+                    format!("unknown condition '{name}' in a version-{version} table"),
+                )
+            })?;
             let b = bin.value(k) as usize;
-            if b >= bins.n {
+            if b >= l.cells {
                 return Err(IngestError::invalid(
                     path,
                     at(),
-                    format!("bin {b} outside the {} bins of '{name}'", bins.n),
+                    format!("bin {b} outside the {} bins of '{name}'", l.cells),
                 ));
             }
-            let edges = (bins.lower_edge(b), bins.lower_edge(b + 1));
-            let close = |a: f64, b: f64| (a - b).abs() <= 1e-9 * (1.0 + b.abs());
-            if !close(lo.value(k), edges.0) || !close(hi.value(k), edges.1) {
+            let want = l.edges(b);
+            let got = match (&second, l.second) {
+                (Some((lo_2, hi_2)), Some(_)) => {
+                    [lo.value(k), hi.value(k), lo_2.value(k), hi_2.value(k)]
+                }
+                _ => [lo.value(k), hi.value(k), f64::NAN, f64::NAN],
+            };
+            let close = |a: f64, b: f64| {
+                (a.is_nan() && b.is_nan()) || (a - b).abs() <= 1e-9 * (1.0 + b.abs())
+            };
+            if !got.iter().zip(&want).all(|(g, w)| close(*g, *w)) {
+                let show = |e: &[f64]| match l.second {
+                    None => format!("[{}, {})", e[0], e[1]),
+                    Some(_) => format!("[{}, {}) × [{}, {})", e[0], e[1], e[2], e[3]),
+                };
                 return Err(IngestError::invalid(
                     path,
                     at(),
                     format!(
-                        "bin {b} of '{name}' is [{}, {}) in the file but [{}, {}) in this build",
-                        lo.value(k),
-                        hi.value(k),
-                        edges.0,
-                        edges.1
+                        "bin {b} of '{name}' is {} in the file but {} in this build",
+                        show(&got),
+                        show(&want)
                     ),
                 ));
             }
@@ -576,6 +829,7 @@ pub fn read_condition_maps(
                 .entry((run.value(k).to_string(), w))
                 .or_insert_with(|| ConditionMaps {
                     held,
+                    pairs_held,
                     ..Default::default()
                 });
             for (comp, col) in e.iter().enumerate() {
@@ -587,16 +841,11 @@ pub fn read_condition_maps(
                         format!("energy {v} of '{name}' bin {b} is not finite"),
                     ));
                 }
-                m.energy_j[comp][offsets[c] + b] += v;
+                m.energy_j[comp][l.offset + b] += v;
             }
         }
     }
     Ok(out)
-}
-
-/// The format version whose tables hold `held` conditions.
-fn version_of(held: usize) -> u32 {
-    if held == V1_CONDITIONS { 1 } else { VERSION }
 }
 
 #[cfg(test)]
@@ -606,15 +855,82 @@ mod tests {
     #[test]
     fn table_is_consistent() {
         let t = condition_table();
-        assert_eq!(t.len(), N_CONDITIONS);
+        assert_eq!(t.len(), N_CONDITIONS + 2 * N_PAIRS);
         assert_eq!(
-            t.last().map(|b| (b.offset + b.n) as usize),
-            Some(CONDITION_BINS)
+            t[N_CONDITIONS - 1].offset + t[N_CONDITIONS - 1].n,
+            CONDITION_BINS as u32
         );
         let mut names: Vec<_> = CONDITIONS.iter().map(|c| c.name).collect();
         names.sort();
         names.dedup();
         assert_eq!(names.len(), N_CONDITIONS, "condition names are unique");
+        // The pairs: known, distinct conditions, each pair once, their cells
+        // back to back after the 1-D bins and filling PAIR_BINS.
+        let mut pairs: Vec<_> = (0..N_PAIRS).map(pair_conditions).collect();
+        assert!(pairs.iter().all(|(a, b)| a != b));
+        pairs.sort();
+        pairs.dedup();
+        assert_eq!(pairs.len(), N_PAIRS);
+        let last = &t[N_CONDITIONS + 2 * (N_PAIRS - 1)..];
+        assert_eq!(
+            last[0].offset + last[0].n * last[1].n,
+            COMPONENT_BINS as u32
+        );
+        assert_eq!((0..N_PAIRS).map(pair_cells).sum::<usize>(), PAIR_BINS);
+    }
+
+    #[test]
+    fn coarse_edges_are_fine_edges() {
+        // A pair's threshold is then a 1-D threshold of the same condition.
+        for c in &CONDITIONS {
+            for k in 1..c.coarse.n {
+                let x = c.coarse.lower_edge(k);
+                let fine = (x - c.bins.lo) / c.bins.width;
+                assert!(
+                    (fine - fine.round()).abs() < 1e-9 && fine > 0.0 && fine < c.bins.n as f64,
+                    "{}: coarse edge {x} is not an inner edge of its bins",
+                    c.name
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn pair_cell_of_one_sample_by_hand() {
+        // combined slip √(0.03² + 0.05²) = 0.0583 → coarse (0.0583 − 0.02)/0.02
+        // = 1.92 → 1; T_surface 91 °C → (91 − 45)/10 = 4.6 → 4; cell 1·5 + 4 = 9.
+        let p = ReduceSample {
+            vx: 40.0,
+            vy: -2.0,
+            omega: 103.0,
+            radius: 0.4,
+            fx: 3000.0,
+            fy: -4000.0,
+            fz: 4000.0,
+            t_surface: 91.0,
+            t_inner: 104.0,
+            dt: 0.01,
+            ..Default::default()
+        };
+        let mut batch = ReduceBatch::default();
+        batch.push_wheel(&[p]);
+        let maps = condition_maps_from_quanta(&condition_map(&batch));
+        let pair = (0..N_PAIRS)
+            .find(|&k| pair_name(k) == "combined_slip:t_surface_c")
+            .unwrap();
+        let m = maps[0].pair_map(Component::Total, pair);
+        // E = −F_x·v_sx·Δt − F_y·v_sy·Δt = 3000·1.2·0.01 − 4000·2·0.01 = −44 J
+        // (made-up forces: a map sums whatever energy it is given), as every
+        // 1-D map holds it.
+        let total: f64 = maps[0].map(Component::Total, 0).iter().sum();
+        // (ω·r = 41.2 is not exact in f32: 1e-3 J.)
+        assert!((total + 44.0).abs() < 1e-3, "{total}");
+        assert_eq!(m.iter().filter(|e| **e != 0.0).count(), 1);
+        assert_eq!(m[9], total);
+        for k in 0..N_PAIRS {
+            let s: f64 = maps[0].pair_map(Component::Total, k).iter().sum();
+            assert_eq!(s, total, "{}", pair_name(k));
+        }
     }
 
     #[test]
@@ -677,8 +993,9 @@ mod tests {
         m.energy_j[1][3] = 10.0;
         m.energy_j[2][3] = 2.5;
         m.energy_j[0][CONDITION_BINS - 1] = -1.0;
+        m.energy_j[2][COMPONENT_BINS - 1] = 4.0; // the last pair's last cell
         let batch = side_table(&[("r1".into(), crate::Wheel::FL, m.clone())]);
-        assert_eq!(batch.num_rows(), 2);
+        assert_eq!(batch.num_rows(), 3);
         let dir = tempfile::tempdir().unwrap();
         let write = |name: &str, b: &arrow_array::RecordBatch| {
             let path = dir.path().join(name);
@@ -699,9 +1016,38 @@ mod tests {
             )
             .unwrap()
         };
+        let last = &back[&("r1".to_string(), crate::Wheel::FL)];
+        assert_eq!(last.pair_map(Component::Lateral, N_PAIRS - 1)[24], 4.0);
         // A later format version is refused.
-        let e = read_condition_maps(&write("v3.parquet", &with_version(&batch, "3"))).unwrap_err();
-        assert!(e.to_string().contains("format version 3"), "{e}");
+        let e = read_condition_maps(&write("v4.parquet", &with_version(&batch, "4"))).unwrap_err();
+        assert!(e.to_string().contains("format version 4"), "{e}");
+        // Version 2 has no pair maps: a pair in it is an error, and its
+        // maps say they lack the pairs.
+        let e = read_condition_maps(&write("v2bad.parquet", &with_version(&batch, "2")))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("record 3") && e.contains("in a version-2"),
+            "{e}"
+        );
+        let v2 = with_version(&batch.slice(0, 2), "2");
+        let got = read_condition_maps(&write("v2.parquet", &v2)).unwrap();
+        let got = &got[&("r1".to_string(), crate::Wheel::FL)];
+        assert!(!got.pairs_held && got.held == N_CONDITIONS);
+        assert_eq!(got.energy_j[0][CONDITION_BINS - 1], -1.0);
+        // A pair cell whose second edges differ from this build's.
+        let mut cols = batch.columns().to_vec();
+        cols[10] = Arc::new(arrow_array::Float64Array::from(vec![
+            f64::NAN,
+            f64::NAN,
+            0.0,
+        ]));
+        let bad = arrow_array::RecordBatch::try_new(batch.schema(), cols).unwrap();
+        let e = read_condition_maps(&write("badedge.parquet", &bad)).unwrap_err();
+        assert!(
+            e.to_string().contains("record 3") && e.to_string().contains("× [0, "),
+            "{e}"
+        );
         // Version 1 holds the first conditions only: a later one in it is
         // an error, and its maps say which conditions they lack.
         let e = read_condition_maps(&write("v1bad.parquet", &with_version(&batch, "1")))
@@ -722,6 +1068,7 @@ mod tests {
         cols[2] = Arc::new(arrow_array::StringArray::from(vec![
             "slip_ratio",
             "toe_deg",
+            "combined_slip:speed_mps",
         ]));
         let bad = arrow_array::RecordBatch::try_new(batch.schema(), cols).unwrap();
         let e = read_condition_maps(&write("bad.parquet", &bad)).unwrap_err();
@@ -731,7 +1078,7 @@ mod tests {
         );
         // So does a wheel that is not a wheel position.
         let mut cols = batch.columns().to_vec();
-        cols[1] = Arc::new(arrow_array::StringArray::from(vec!["FL", "LF"]));
+        cols[1] = Arc::new(arrow_array::StringArray::from(vec!["FL", "LF", "FL"]));
         let bad = arrow_array::RecordBatch::try_new(batch.schema(), cols).unwrap();
         let e = read_condition_maps(&write("badwheel.parquet", &bad)).unwrap_err();
         assert!(
