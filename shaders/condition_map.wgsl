@@ -1,7 +1,7 @@
 // Condition energy maps: each sample's friction energy (total, longitudinal,
 // lateral) binned by each per-sample condition (slip ratio, lateral slip, …),
-// one 1-D map per condition, and one 2-D map per pair of conditions on their
-// coarse bins, accumulated into one set of maps per wheel.
+// one 1-D map per condition, and one 2-D map of the total energy per pair of
+// conditions on their coarse bins, accumulated into one set of maps per wheel.
 // The bin table comes from the host (binding 2: src/kpi/cpu/condition_map.rs is
 // its only definition); the conditions are computed here in the table's
 // order. Sums are exact 64-bit fixed-point quanta, as in energy_map.wgsl:
@@ -17,9 +17,8 @@
 const N_CONDITIONS: u32 = 17u;
 const N_PAIRS: u32 = 8u;
 const CONDITION_BINS: u32 = 468u; // 1-D bins of one component over all conditions
-const PAIR_BINS: u32 = 200u; // 2-D cells of one component over all pairs
-const COMPONENT_BINS: u32 = 668u; // CONDITION_BINS + PAIR_BINS
-const MAP_BINS: u32 = 2004u; // 3 components
+const PAIR_BINS: u32 = 512u; // 2-D cells over all pairs (total energy only)
+const MAP_BINS: u32 = 1916u; // 3 components' CONDITION_BINS, then PAIR_BINS
 const SLIP_SPEED_FLOOR_MPS: f32 = 1.0;
 const LOAD_FLOOR_N: f32 = 100.0;
 
@@ -28,7 +27,7 @@ struct ConditionBins {
     lo: f32,
     inv_width: f32, // 1 / width
     n: u32,
-    offset: u32, // first bin in a component (a pair's second axis: unused)
+    offset: u32, // first bin in a component's 1-D bins or in the pair cells (a pair's second axis: unused)
     value: u32, // which of condition_values it bins
 }
 
@@ -40,7 +39,7 @@ struct ConditionBins {
 @group(0) @binding(3) var<storage, read_write> maps: array<atomic<u32>>;
 
 var<workgroup> bin_lo: array<atomic<u32>, MAP_BINS>;
-var<workgroup> bin_hi: array<atomic<u32>, MAP_BINS>; // 15.7 KiB with bin_lo (limit 16 KiB)
+var<workgroup> bin_hi: array<atomic<u32>, MAP_BINS>; // 15 KiB with bin_lo (limit 16 KiB)
 
 // Equal-width bins clamped at both ends, NaN to bin 0; subtraction and
 // multiplication only (correctly rounded), as ConditionBins::index.
@@ -52,19 +51,12 @@ fn bin_index(x: f32, b: ConditionBins) -> u32 {
     return min(u32(i), b.n - 1u);
 }
 
-fn add_to_workgroup_bin(bin: u32, q: vec2<u32>) {
+fn add_to_workgroup(bin: u32, q: vec2<u32>) {
     let old = atomicAdd(&bin_lo[bin], q.x);
     let hi = carried(old, q.x, q.y);
     if hi != 0u {
         atomicAdd(&bin_hi[bin], hi);
     }
-}
-
-// One bin of every component.
-fn add_to_workgroup(b: u32, q_total: vec2<u32>, q_x: vec2<u32>, q_y: vec2<u32>) {
-    add_to_workgroup_bin(b, q_total);
-    add_to_workgroup_bin(COMPONENT_BINS + b, q_x);
-    add_to_workgroup_bin(2u * COMPONENT_BINS + b, q_y);
 }
 
 fn add_to_map(slot: u32, lo: u32, hi: u32) {
@@ -140,14 +132,17 @@ fn main(
             var values = condition_values(p); // var: indexed by a loop counter
             for (var c = 0u; c < N_CONDITIONS; c++) {
                 let t = conditions[c];
-                add_to_workgroup(t.offset + bin_index(values[t.value], t), q_total, q_x, q_y);
+                let b = t.offset + bin_index(values[t.value], t);
+                add_to_workgroup(b, q_total);
+                add_to_workgroup(CONDITION_BINS + b, q_x);
+                add_to_workgroup(2u * CONDITION_BINS + b, q_y);
             }
             for (var pr = 0u; pr < N_PAIRS; pr++) {
                 let ta = conditions[N_CONDITIONS + 2u * pr];
                 let tb = conditions[N_CONDITIONS + 2u * pr + 1u];
                 let ia = bin_index(values[ta.value], ta);
                 let ib = bin_index(values[tb.value], tb);
-                add_to_workgroup(ta.offset + ia * tb.n + ib, q_total, q_x, q_y);
+                add_to_workgroup(3u * CONDITION_BINS + ta.offset + ia * tb.n + ib, q_total);
             }
         }
     }

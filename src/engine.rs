@@ -327,14 +327,16 @@ pub fn compare_condition_maps(
     let (a, b) = (reference.condition_map(batch)?, other.condition_map(batch)?);
     let mut worst = 0.0f64;
     for (x, y) in a.iter().zip(&b) {
-        // The 1-D maps, then the pairs' 2-D maps.
+        // The 1-D maps, then the pairs' 2-D maps (total energy only).
         for k in 0..CONDITIONS.len() + N_PAIRS {
             for comp in Component::ALL {
                 let (u, v) = if k < CONDITIONS.len() {
                     (x.map(comp, k), y.map(comp, k))
-                } else {
+                } else if comp == Component::Total {
                     let p = k - CONDITIONS.len();
-                    (x.pair_map(comp, p), y.pair_map(comp, p))
+                    (x.pair_map(p), y.pair_map(p))
+                } else {
+                    continue;
                 };
                 let scale: f64 = u.iter().map(|e| e.abs()).sum();
                 let diff: f64 = u.iter().zip(v).map(|(p, q)| (p - q).abs()).sum();

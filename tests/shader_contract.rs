@@ -247,7 +247,6 @@ fn condition_map_matches_its_cpu_twin() {
     assert_eq!(constant(&m, "N_PAIRS"), cm::N_PAIRS as f64);
     assert_eq!(constant(&m, "CONDITION_BINS"), cm::CONDITION_BINS as f64);
     assert_eq!(constant(&m, "PAIR_BINS"), cm::PAIR_BINS as f64);
-    assert_eq!(constant(&m, "COMPONENT_BINS"), cm::COMPONENT_BINS as f64);
     assert_eq!(constant(&m, "MAP_BINS"), cm::MAP_BINS as f64);
     assert_eq!(
         constant(&m, "SLIP_SPEED_FLOOR_MPS"),

@@ -64,17 +64,16 @@ pub enum Feature {
         above: bool,
         component: Component,
     },
-    /// Generated from a pair map (`PAIRS[pair]`): the friction energy (the
-    /// total, or its longitudinal or lateral part) of the samples whose
-    /// first condition lies above θ₁ (or below, `first_above` false) *and*
-    /// whose second lies above θ₂ (or below), θ₁ and θ₂ inner edges of the
-    /// conditions' coarse bins (MJ). θ is the index of the edge pair
-    /// ([`pair_thresholds`]): a mechanism that needs two conditions at once.
+    /// Generated from a pair map (`PAIRS[pair]`): the friction energy of
+    /// the samples whose first condition lies above θ₁ (or below,
+    /// `first_above` false) *and* whose second lies above θ₂ (or below),
+    /// θ₁ and θ₂ inner edges of the conditions' coarse bins (MJ). θ is the
+    /// index of the edge pair ([`pair_thresholds`]): a mechanism that needs
+    /// two conditions at once.
     PairEnergy {
         pair: usize,
         first_above: bool,
         second_above: bool,
-        component: Component,
     },
     /// A user hypothesis from `effects.toml` (`Candidate::user`).
     User,
@@ -510,44 +509,38 @@ fn condition_candidates(cars: &[String]) -> Vec<Candidate> {
     out
 }
 
-/// Candidates generated from the pair maps: for every pair of [`PAIRS`]
-/// (`crate::kpi::cpu::condition_map::PAIRS`), energy component and quadrant
-/// (each condition above or below its threshold), the energy where both
-/// hold, θ₁ and θ₂ every inner edge of the coarse bins (16 edge pairs,
-/// scanned as one threshold), on the condition candidates' scopes. Rows
-/// without pair maps (an older extraction) give NaN terms.
+/// Candidates generated from the pair maps: for every pair of
+/// `condition_map::PAIRS` and quadrant (each condition above or below its
+/// threshold), the energy where both hold, θ₁ and θ₂ every inner edge of
+/// the coarse bins (7 × 7 edge pairs, scanned as one threshold), on the
+/// condition candidates' scopes. Rows without pair maps (an older
+/// extraction) give NaN terms.
 fn pair_candidates(cars: &[String]) -> Vec<Candidate> {
+    let side = |above: bool| if above { "above" } else { "below" };
     let mut out = Vec::new();
     for pair in 0..N_PAIRS {
         let (a, b) = pair_conditions(pair);
         let edges = (CONDITIONS[a].coarse.n - 1) * (CONDITIONS[b].coarse.n - 1);
-        let side = |above: bool| if above { "above" } else { "below" };
-        for component in Component::ALL {
-            for (first_above, second_above) in
-                [(true, true), (true, false), (false, true), (false, false)]
-            {
-                out.push(Candidate {
-                    name: format!(
-                        "{} with ({}, {}) {}/{} θ",
-                        component.energy_name(),
-                        CONDITIONS[a].name,
-                        CONDITIONS[b].name,
-                        side(first_above),
-                        side(second_above)
-                    ),
-                    feature: Feature::PairEnergy {
-                        pair,
-                        first_above,
-                        second_above,
-                        component,
-                    },
-                    thresholds: (0..edges).map(|k| k as f64).collect(),
-                    axle: None,
-                    user: None,
-                    group: None,
-                    scopes: condition_scopes(cars),
-                });
-            }
+        for (first_above, second_above) in [(true, true), (true, false), (false, true), (false, false)] {
+            out.push(Candidate {
+                name: format!(
+                    "energy with ({}, {}) {}/{} θ",
+                    CONDITIONS[a].name,
+                    CONDITIONS[b].name,
+                    side(first_above),
+                    side(second_above)
+                ),
+                feature: Feature::PairEnergy {
+                    pair,
+                    first_above,
+                    second_above,
+                },
+                thresholds: (0..edges).map(|k| k as f64).collect(),
+                axle: None,
+                user: None,
+                group: None,
+                scopes: condition_scopes(cars),
+            });
         }
     }
     out
@@ -779,7 +772,6 @@ pub(crate) fn feature(
             pair,
             first_above,
             second_above,
-            component,
         } => maps
             .and_then(|m| m.conditions.as_deref())
             .filter(|cm| cm.pairs_held)
@@ -788,7 +780,7 @@ pub(crate) fn feature(
                 let (_, b) = pair_conditions(pair);
                 let nb = CONDITIONS[b].coarse.n;
                 let keep = |k: usize, edge: usize, above: bool| (k >= edge) == above;
-                cm.pair_map(component, pair)
+                cm.pair_map(pair)
                     .iter()
                     .enumerate()
                     .filter(|(cell, _)| {
@@ -1016,24 +1008,24 @@ mod tests {
 
     #[test]
     fn pair_candidates_sum_the_quadrant_beyond_both_thresholds() {
-        // combined_slip:t_surface_c, coarse bins 0.02 + 0.02·i and 45 + 10·j,
-        // 5 × 5 cells: 2 MJ at (3, 1) = slip [0.08, 0.10) and 55–65 °C
-        // (cell 16), 1 MJ at (0, 4) = slip below 0.04 and above 85 °C (cell 4).
+        // combined_slip:t_surface_c, coarse bins [0.02·i, 0.02·(i + 1)) and
+        // [45 + 5·j, 50 + 5·j) °C, 8 × 8 cells: 2 MJ at (4, 2) = slip
+        // [0.08, 0.10) at 55–60 °C (cell 34), 1 MJ at (1, 7) = slip
+        // [0.02, 0.04) above 80 °C (cell 15).
         use crate::kpi::cpu::condition_map::{ConditionMaps, pair_name};
         let pair = (0..N_PAIRS)
             .find(|&p| pair_name(p) == "combined_slip:t_surface_c")
             .unwrap();
         let mut cm = ConditionMaps::default();
-        let o = crate::kpi::cpu::condition_map::CONDITION_BINS;
         let before: usize = (0..pair)
             .map(|p| {
                 let (a, b) = pair_conditions(p);
                 CONDITIONS[a].coarse.n * CONDITIONS[b].coarse.n
             })
             .sum();
-        cm.energy_j[0][o + before + 16] = 2e6;
-        cm.energy_j[0][o + before + 4] = 1e6;
-        assert_eq!(cm.pair_map(Component::Total, pair)[16], 2e6);
+        cm.pairs_j[before + 34] = 2e6;
+        cm.pairs_j[before + 15] = 1e6;
+        assert_eq!(cm.pair_map(pair)[34], 2e6);
         let mut m = EnergyMaps::new();
         m.conditions = Some(Box::new(cm));
         let r = KpiRow::default();
@@ -1042,44 +1034,42 @@ mod tests {
                 pair,
                 first_above,
                 second_above,
-                component: Component::Total,
             };
             feature(feature_, &r, Some(&m), theta, KpiScale::NONE)
         };
-        // θ index k = (i − 1)·4 + (j − 1): k 9 is edges (i 3, j 2) = (0.08, 65 °C).
-        assert_eq!(pair_thresholds(pair, 9.0), Some((3, 2)));
+        // θ index k = (i − 1)·7 + (j − 1): k 23 is edges (i 4, j 3) = (0.08, 60 °C).
+        assert_eq!(pair_thresholds(pair, 23.0), Some((4, 3)));
         let named = Feature::PairEnergy {
             pair,
             first_above: true,
             second_above: false,
-            component: Component::Total,
         };
-        assert_eq!(named.format_threshold(9.0), "(0.08000, 65.00 °C)");
+        assert_eq!(named.format_threshold(23.0), "(0.08000, 60.00 °C)");
         let close = |a: f64, b: f64| (a - b).abs() < 1e-9;
-        // Slip ≥ 0.08 and surface < 65 °C holds (3, 1): 2 MJ.
-        assert!(close(f(true, false, 9.0), 2.0));
-        // Slip ≥ 0.08 and surface ≥ 65 °C: nothing.
-        assert!(close(f(true, true, 9.0), 0.0));
-        // Slip < 0.04 (i 1) and surface ≥ 85 °C (j 4): k = 0·4 + 3 = 3: 1 MJ.
-        assert!(close(f(false, true, 3.0), 1.0));
-        // Slip < 0.10 (i 4) and surface ≥ 55 °C (j 1): k = 12: both, 3 MJ.
-        assert!(close(f(false, true, 12.0), 3.0));
+        // Slip ≥ 0.08 and surface < 60 °C holds (4, 2): 2 MJ.
+        assert!(close(f(true, false, 23.0), 2.0));
+        // Slip ≥ 0.08 and surface ≥ 60 °C: nothing.
+        assert!(close(f(true, true, 23.0), 0.0));
+        // Slip < 0.04 (i 2) and surface ≥ 80 °C (j 7): k = 1·7 + 6 = 13: 1 MJ.
+        assert!(close(f(false, true, 13.0), 1.0));
+        // Slip < 0.10 (i 5) and surface ≥ 55 °C (j 2): k = 4·7 + 1 = 29: both, 3 MJ.
+        assert!(close(f(false, true, 29.0), 3.0));
         // Outside the grid, or maps without pairs: undefined.
-        assert!(f(true, true, 16.0).is_nan() && f(true, true, 0.5).is_nan());
+        assert!(f(true, true, 49.0).is_nan() && f(true, true, 0.5).is_nan());
         let mut old = m.clone();
         if let Some(cm) = old.conditions.as_mut() {
             cm.pairs_held = false;
         }
-        let old_value = feature(named, &r, Some(&old), 9.0, KpiScale::NONE);
+        let old_value = feature(named, &r, Some(&old), 23.0, KpiScale::NONE);
         assert!(old_value.is_nan());
-        // Every pair, component and quadrant is a candidate on every scope.
+        // Every pair and quadrant is a candidate on every scope.
         let cars = vec!["car1".to_string()];
         let generated = pair_candidates(&cars);
-        assert_eq!(generated.len(), N_PAIRS * 3 * 4);
+        assert_eq!(generated.len(), N_PAIRS * 4);
         assert!(
             generated
                 .iter()
-                .all(|c| c.thresholds.len() == 16 && c.scopes.len() == 10)
+                .all(|c| c.thresholds.len() == 49 && c.scopes.len() == 10)
         );
     }
 

@@ -158,7 +158,10 @@ pub fn render_markdown(d: &Diagnosis, max_slices: usize) -> String {
                     format!(
                         "+ {} (θ = {}, c = {:+.4})",
                         st.added,
-                        significant(st.threshold),
+                        st.feature.map_or_else(
+                            || significant(st.threshold),
+                            |f| f.format_threshold(st.threshold)
+                        ),
                         st.coefficient
                     )
                 } else {

@@ -1206,6 +1206,30 @@ fn short(v: f64) -> String {
     }
 }
 
+/// A candidate's threshold from gap.json: a pair candidate's is the index
+/// of its two edges, printed as the edges.
+fn threshold_text(c: &Value) -> String {
+    let theta = f(&c["threshold"]);
+    let pair = &c["feature"]["PairEnergy"];
+    match (
+        pair["pair"].as_u64(),
+        pair["first_above"].as_bool(),
+        pair["second_above"].as_bool(),
+    ) {
+        (Some(p), Some(first_above), Some(second_above))
+            if (p as usize) < crate::kpi::cpu::condition_map::N_PAIRS =>
+        {
+            crate::gap::candidates::Feature::PairEnergy {
+                pair: p as usize,
+                first_above,
+                second_above,
+            }
+            .format_threshold(theta)
+        }
+        _ => short(theta),
+    }
+}
+
 /// Flagged slices drawn in the gap's bar chart, and traced in its shrink chart.
 const SHOWN_SLICES: usize = 12;
 const SHRINK_SLICES: usize = 5;
@@ -1321,7 +1345,7 @@ slices flagged{}.",
         .map(|c| {
             vec![
                 c["name"].as_str().unwrap_or("").to_string(),
-                short(f(&c["threshold"])),
+                threshold_text(c),
                 num(f(&c["cv_gain"]), 3),
                 num(f(&c["p_adjusted"]), 4),
             ]

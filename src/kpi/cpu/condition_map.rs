@@ -28,9 +28,10 @@ pub struct Condition {
     pub name: &'static str,
     pub unit: &'static str,
     pub bins: Bins,
-    /// Five coarse bins for the pair maps ([`PAIRS`]): inside the bulk of
-    /// a season's energy (its 5–95 % energy quantiles on the demo), their
-    /// edges on `bins`' edges, so a pair's threshold is a 1-D threshold too.
+    /// Eight coarse bins for the pair maps ([`PAIRS`]): their inner edges
+    /// span the middle of a season's energy (about its 5–95 % energy
+    /// quantiles on the demo, finest where a threshold is likeliest) and
+    /// lie on `bins`' edges, so a pair's threshold is a 1-D threshold too.
     pub coarse: Bins,
     /// How it is computed from the sample (docs/kpis.md repeats it).
     pub formula: &'static str,
@@ -53,77 +54,77 @@ pub const CONDITIONS: [Condition; N_CONDITIONS] = [
         name: "slip_ratio",
         unit: "1",
         bins: bins(-0.3, 0.02, 30),
-        coarse: bins(-0.08, 0.04, 5),
+        coarse: bins(-0.08, 0.02, 8),
         formula: "κ = (ω·r − v_x) / max(|v_x|, 1 m/s) = −v_sx / max(|v_x|, 1 m/s)",
     },
     Condition {
         name: "lateral_slip",
         unit: "1",
         bins: bins(-0.3, 0.02, 30),
-        coarse: bins(-0.08, 0.04, 5),
+        coarse: bins(-0.08, 0.02, 8),
         formula: "tan α = v_y / max(|v_x|, 1 m/s) (the slip angle's tangent: ±0.3 is ±16.7°)",
     },
     Condition {
         name: "combined_slip",
         unit: "1",
         bins: bins(0.0, 0.02, 30),
-        coarse: bins(0.02, 0.02, 5),
+        coarse: bins(0.0, 0.02, 8),
         formula: "√(κ² + tan²α) = |v_s| / max(|v_x|, 1 m/s)",
     },
     Condition {
         name: "sliding_speed_mps",
         unit: "m/s",
         bins: bins(0.0, 0.5, 20),
-        coarse: bins(1.0, 1.0, 5),
+        coarse: bins(1.0, 0.5, 8),
         formula: "|v_s| = √(v_sx² + v_sy²)",
     },
     Condition {
         name: "load_n",
         unit: "N",
         bins: bins(0.0, 500.0, 24),
-        coarse: bins(2000.0, 1500.0, 5),
+        coarse: bins(1500.0, 1000.0, 8),
         formula: "F_z",
     },
     Condition {
         name: "friction_utilisation",
         unit: "1",
         bins: bins(0.0, 0.1, 25),
-        coarse: bins(0.6, 0.3, 5),
+        coarse: bins(1.0, 0.1, 8),
         formula: "√(F_x² + F_y²) / max(F_z, 100 N)",
     },
     Condition {
         name: "t_surface_c",
         unit: "°C",
         bins: bins(20.0, 5.0, 24),
-        coarse: bins(45.0, 10.0, 5),
+        coarse: bins(45.0, 5.0, 8),
         formula: "T_surface",
     },
     Condition {
         name: "t_inner_c",
         unit: "°C",
         bins: bins(40.0, 5.0, 24),
-        coarse: bins(75.0, 15.0, 5),
+        coarse: bins(70.0, 10.0, 8),
         formula: "T_inner (inner liner)",
     },
     Condition {
         name: "pressure_pa",
         unit: "Pa",
         bins: bins(100e3, 5e3, 30),
-        coarse: bins(105e3, 10e3, 5),
+        coarse: bins(105e3, 5e3, 8),
         formula: "p (inflation pressure)",
     },
     Condition {
         name: "camber_deg",
         unit: "deg",
         bins: bins(-6.0, 0.25, 32),
-        coarse: bins(-3.75, 0.5, 5),
+        coarse: bins(-4.0, 0.5, 8),
         formula: "γ",
     },
     Condition {
         name: "speed_mps",
         unit: "m/s",
         bins: bins(0.0, 4.0, 25),
-        coarse: bins(24.0, 16.0, 5),
+        coarse: bins(24.0, 8.0, 8),
         formula: "v_x (wheel centre, longitudinal)",
     },
     // From format version 2 on.
@@ -131,42 +132,42 @@ pub const CONDITIONS: [Condition; N_CONDITIONS] = [
         name: "t_bulk_c",
         unit: "°C",
         bins: bins(30.0, 5.0, 24),
-        coarse: bins(60.0, 10.0, 5),
+        coarse: bins(65.0, 5.0, 8),
         formula: "(T_surface + T_inner) / 2 (bulk rubber)",
     },
     Condition {
         name: "t_surface_rate_kps",
         unit: "K/s",
         bins: bins(-15.0, 1.0, 30),
-        coarse: bins(-3.0, 2.0, 5),
+        coarse: bins(-2.0, 1.0, 8),
         formula: "(T_surface(j₁) − T_surface(j₀)) / (t(j₁) − t(j₀)), j₀ and j₁ the first and last kept samples within ±0.5 s",
     },
     Condition {
         name: "t_inner_rate_kps",
         unit: "K/s",
         bins: bins(-1.5, 0.1, 30),
-        coarse: bins(-0.5, 0.3, 5),
+        coarse: bins(-0.8, 0.2, 8),
         formula: "as t_surface_rate_kps, of T_inner",
     },
     Condition {
         name: "relative_load",
         unit: "1",
         bins: bins(0.0, 0.1, 30),
-        coarse: bins(0.5, 0.3, 5),
+        coarse: bins(0.5, 0.2, 8),
         formula: "F_z / mean F_z of the tire's kept samples in the run",
     },
     Condition {
         name: "time_since_start_s",
         unit: "s",
         bins: bins(0.0, 120.0, 30),
-        coarse: bins(0.0, 360.0, 5),
+        coarse: bins(0.0, 240.0, 8),
         formula: "t − t of the tire's first kept sample",
     },
     Condition {
         name: "distance_since_start_m",
         unit: "m",
         bins: bins(0.0, 5000.0, 30),
-        coarse: bins(0.0, 15000.0, 5),
+        coarse: bins(0.0, 10000.0, 8),
         formula: "Σ v_x·Δt over the tire's kept samples before this one",
     },
 ];
@@ -174,8 +175,9 @@ pub const CONDITIONS: [Condition; N_CONDITIONS] = [
 /// Conditions a format-version-1 side table holds (the first ones).
 pub const V1_CONDITIONS: usize = 11;
 
-/// A pair of conditions with a 2-D map: the energy binned by both at once,
-/// on their coarse bins, [first's coarse bin][second's coarse bin].
+/// A pair of conditions with a 2-D map: the friction energy (the total
+/// only) binned by both at once, on their coarse bins, [first's coarse
+/// bin][second's coarse bin].
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Pair {
     /// Side-table names of the two conditions.
@@ -186,9 +188,9 @@ pub struct Pair {
 }
 
 /// The pairs with a 2-D map. A documented selection, not all 136: every
-/// pair would be 3 400 bins per tire and component, more than the
-/// workgroup's 16 KiB histogram holds and 5× the per-sample cost of the
-/// 1-D maps. Wear mechanisms combine how hard the tread slides with the
+/// pair would be 8 704 cells per tire, more than four times what the
+/// workgroup's 16 KiB histogram holds, and 2.7× the per-sample work of
+/// the 1-D maps. Wear mechanisms combine how hard the tread slides with the
 /// state it slides in (temperature, load, camber, speed), so each pair is
 /// a sliding measure and a state (docs/kpis.md).
 pub const PAIRS: [Pair; N_PAIRS] = [
@@ -243,16 +245,14 @@ pub const N_CONDITIONS: usize = 17;
 /// Bins of one energy component over all conditions' 1-D maps. Must match
 /// `CONDITION_BINS` in the shader (checked by tests/shader_contract.rs).
 pub const CONDITION_BINS: usize = 468;
-/// Cells of one energy component over all pair maps (after the 1-D bins).
-/// Must match `PAIR_BINS` in the shader (checked by tests/shader_contract.rs).
-pub const PAIR_BINS: usize = 200;
-/// Bins of one energy component: the 1-D maps, then the pair maps. Must
-/// match `COMPONENT_BINS` in the shader (checked by tests/shader_contract.rs).
-pub const COMPONENT_BINS: usize = CONDITION_BINS + PAIR_BINS;
+/// Cells of all pair maps (total energy only). Must match `PAIR_BINS` in
+/// the shader (checked by tests/shader_contract.rs).
+pub const PAIR_BINS: usize = 512;
 /// Energy components: total, longitudinal (−F_x·v_sx·Δt), lateral (−F_y·v_sy·Δt).
 pub(crate) const COMPONENTS: usize = 3;
-/// Bins of one wheel's maps. Must match `MAP_BINS` in the shader (checked by tests/shader_contract.rs).
-pub const MAP_BINS: usize = COMPONENTS * COMPONENT_BINS;
+/// Bins of one wheel's maps: each component's 1-D maps, then the pair
+/// maps. Must match `MAP_BINS` in the shader (checked by tests/shader_contract.rs).
+pub const MAP_BINS: usize = COMPONENTS * CONDITION_BINS + PAIR_BINS;
 
 const fn total_bins() -> usize {
     let mut n = 0;
@@ -278,7 +278,7 @@ fn pair_cells(p: usize) -> usize {
     CONDITIONS[a].coarse.n * CONDITIONS[b].coarse.n
 }
 
-/// First cell of each pair within a component's pair cells.
+/// First cell of each pair within the pair cells.
 fn pair_offsets() -> [usize; N_PAIRS] {
     let mut o = [0; N_PAIRS];
     for p in 1..N_PAIRS {
@@ -306,8 +306,9 @@ pub struct ConditionBins {
     /// 1 / width, rounded to f32.
     pub inv_width: f32,
     pub n: u32,
-    /// First bin of this map within a component's `COMPONENT_BINS` (a
-    /// pair's second axis: 0, unused).
+    /// First bin of this map: within a component's `CONDITION_BINS` (a
+    /// condition), within the `PAIR_BINS` (a pair's first axis); 0, unused
+    /// (a pair's second axis).
     pub offset: u32,
     /// Which condition value it bins (index into [`CONDITIONS`]).
     pub value: u32,
@@ -331,7 +332,7 @@ pub(crate) fn condition_table() -> Vec<ConditionBins> {
         .collect();
     for (p, o) in pair_offsets().iter().enumerate() {
         let (a, b) = pair_conditions(p);
-        out.push(entry(&CONDITIONS[a].coarse, CONDITION_BINS + o, a));
+        out.push(entry(&CONDITIONS[a].coarse, *o, a));
         out.push(entry(&CONDITIONS[b].coarse, 0, b));
     }
     out
@@ -409,20 +410,20 @@ fn workgroup(batch: &ReduceBatch, chunk: &ReduceChunk, table: &[ConditionBins], 
                 let e_y = -f(p.fy) * v_sy * dt; // eq. 24
                 let q = [to_quanta(e_x + e_y), to_quanta(e_x), to_quanta(e_y)];
                 let values = condition_values(p);
-                let mut add = |b: usize| {
+                for t in &table[..N_CONDITIONS] {
+                    let b = t.offset as usize + t.index(values[t.value as usize]);
                     for (m, &qm) in q.iter().enumerate() {
-                        let slot = &mut bins[m * COMPONENT_BINS + b];
+                        let slot = &mut bins[m * CONDITION_BINS + b];
                         *slot = slot.wrapping_add(qm);
                     }
-                };
-                for t in &table[..N_CONDITIONS] {
-                    add(t.offset as usize + t.index(values[t.value as usize]));
                 }
                 for pair in table[N_CONDITIONS..].chunks_exact(2) {
                     let (ta, tb) = (&pair[0], &pair[1]);
                     let ia = ta.index(values[ta.value as usize]);
                     let ib = tb.index(values[tb.value as usize]);
-                    add(ta.offset as usize + ia * tb.n as usize + ib);
+                    let cell = ta.offset as usize + ia * tb.n as usize + ib;
+                    let slot = &mut bins[COMPONENTS * CONDITION_BINS + cell];
+                    *slot = slot.wrapping_add(q[0]);
                 }
             }
         }
@@ -439,12 +440,14 @@ pub fn condition_map(batch: &ReduceBatch) -> Vec<u64> {
 }
 
 /// One tire and run's condition maps (J per bin): for each component, the
-/// bins of every condition back to back in [`CONDITIONS`] order, then the
-/// cells of every pair in [`PAIRS`] order.
+/// bins of every condition back to back in [`CONDITIONS`] order; and the
+/// total energy's cells of every pair in [`PAIRS`] order.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ConditionMaps {
-    /// [component][COMPONENT_BINS]: total, longitudinal, lateral.
+    /// [component][CONDITION_BINS]: total, longitudinal, lateral.
     pub energy_j: [Vec<f64>; COMPONENTS],
+    /// [PAIR_BINS]: the pair maps of the total energy.
+    pub pairs_j: Vec<f64>,
     /// How many of [`CONDITIONS`] (the first ones) the maps hold: all, or
     /// [`V1_CONDITIONS`] when read from a format-version-1 side table.
     pub held: usize,
@@ -456,7 +459,8 @@ pub struct ConditionMaps {
 impl Default for ConditionMaps {
     fn default() -> Self {
         ConditionMaps {
-            energy_j: std::array::from_fn(|_| vec![0.0; COMPONENT_BINS]),
+            energy_j: std::array::from_fn(|_| vec![0.0; CONDITION_BINS]),
+            pairs_j: vec![0.0; PAIR_BINS],
             held: N_CONDITIONS,
             pairs_held: true,
         }
@@ -502,11 +506,11 @@ impl ConditionMaps {
     pub fn condition_index(name: &str) -> Option<usize> {
         CONDITIONS.iter().position(|c| c.name == name)
     }
-    /// Pair `p`'s map of one component (J per cell, [first's coarse
+    /// Pair `p`'s map of the total energy (J per cell, [first's coarse
     /// bin][second's coarse bin], row-major).
-    pub fn pair_map(&self, component: Component, p: usize) -> &[f64] {
-        let o = CONDITION_BINS + pair_offsets()[p];
-        &self.energy_j[component as usize][o..o + pair_cells(p)]
+    pub fn pair_map(&self, p: usize) -> &[f64] {
+        let o = pair_offsets()[p];
+        &self.pairs_j[o..o + pair_cells(p)]
     }
 }
 
@@ -516,11 +520,15 @@ pub(crate) fn condition_maps_from_quanta(quanta: &[u64]) -> Vec<ConditionMaps> {
         .chunks_exact(MAP_BINS)
         .map(|q| ConditionMaps {
             energy_j: std::array::from_fn(|m| {
-                q[m * COMPONENT_BINS..(m + 1) * COMPONENT_BINS]
+                q[m * CONDITION_BINS..(m + 1) * CONDITION_BINS]
                     .iter()
                     .map(|&v| from_quanta(v))
                     .collect()
             }),
+            pairs_j: q[COMPONENTS * CONDITION_BINS..]
+                .iter()
+                .map(|&v| from_quanta(v))
+                .collect(),
             held: N_CONDITIONS,
             pairs_held: true,
         })
@@ -555,8 +563,8 @@ pub(crate) fn side_table(
     for (r, w, m) in maps {
         for l in &layouts {
             for b in 0..l.cells {
-                let k = l.offset + b;
-                if (0..COMPONENTS).all(|m_| m.energy_j[m_][k] == 0.0) {
+                let energies = l.energies(m, b);
+                if energies.iter().all(|e| *e == 0.0 || e.is_nan()) {
                     continue;
                 }
                 run.push(r.clone());
@@ -569,8 +577,8 @@ pub(crate) fn side_table(
                 hi.push(b_);
                 lo_2.push(c);
                 hi_2.push(d);
-                for (col, comp) in e.iter_mut().zip(&m.energy_j) {
-                    col.push(comp[k]);
+                for (col, v) in e.iter_mut().zip(energies) {
+                    col.push(v);
                 }
             }
         }
@@ -618,7 +626,8 @@ pub(crate) fn side_table(
 struct MapLayout {
     name: String,
     unit: String,
-    /// First bin within a component's `COMPONENT_BINS`.
+    /// First bin within a component's `CONDITION_BINS` (a condition) or
+    /// within the `PAIR_BINS` (a pair).
     offset: usize,
     cells: usize,
     /// The condition (1-D) or the pair's first condition.
@@ -628,6 +637,16 @@ struct MapLayout {
 }
 
 impl MapLayout {
+    /// A cell's energies (J): total, longitudinal, lateral; a pair map
+    /// holds the total only (NaN for the parts).
+    fn energies(&self, m: &ConditionMaps, cell: usize) -> [f64; COMPONENTS] {
+        let k = self.offset + cell;
+        match self.second {
+            None => std::array::from_fn(|c| m.energy_j[c][k]),
+            Some(_) => [m.pairs_j[k], f64::NAN, f64::NAN],
+        }
+    }
+
     /// A cell's edges: lo, hi and, for a pair, the second condition's lo_2,
     /// hi_2 (NaN for a 1-D map).
     fn edges(&self, cell: usize) -> [f64; 4] {
@@ -672,7 +691,7 @@ fn map_layouts() -> Vec<MapLayout> {
         out.push(MapLayout {
             name: pair_name(p),
             unit: format!("{}:{}", CONDITIONS[a].unit, CONDITIONS[b].unit),
-            offset: CONDITION_BINS + o,
+            offset: *o,
             cells: pair_cells(p),
             condition: a,
             second: Some(b),
@@ -832,7 +851,9 @@ pub fn read_condition_maps(
                     pairs_held,
                     ..Default::default()
                 });
-            for (comp, col) in e.iter().enumerate() {
+            // A pair map holds the total only: its parts' columns are NaN.
+            let parts = if l.second.is_some() { 1 } else { COMPONENTS };
+            for (comp, col) in e.iter().enumerate().take(parts) {
                 let v = col.value(k);
                 if !v.is_finite() {
                     return Err(IngestError::invalid(
@@ -841,7 +862,11 @@ pub fn read_condition_maps(
                         format!("energy {v} of '{name}' bin {b} is not finite"),
                     ));
                 }
-                m.energy_j[comp][l.offset + b] += v;
+                if l.second.is_some() {
+                    m.pairs_j[l.offset + b] += v;
+                } else {
+                    m.energy_j[comp][l.offset + b] += v;
+                }
             }
         }
     }
@@ -872,10 +897,7 @@ mod tests {
         pairs.dedup();
         assert_eq!(pairs.len(), N_PAIRS);
         let last = &t[N_CONDITIONS + 2 * (N_PAIRS - 1)..];
-        assert_eq!(
-            last[0].offset + last[0].n * last[1].n,
-            COMPONENT_BINS as u32
-        );
+        assert_eq!(last[0].offset + last[0].n * last[1].n, PAIR_BINS as u32);
         assert_eq!((0..N_PAIRS).map(pair_cells).sum::<usize>(), PAIR_BINS);
     }
 
@@ -897,8 +919,8 @@ mod tests {
 
     #[test]
     fn pair_cell_of_one_sample_by_hand() {
-        // combined slip √(0.03² + 0.05²) = 0.0583 → coarse (0.0583 − 0.02)/0.02
-        // = 1.92 → 1; T_surface 91 °C → (91 − 45)/10 = 4.6 → 4; cell 1·5 + 4 = 9.
+        // combined slip √(0.03² + 0.05²) = 0.0583 → coarse 0.0583/0.02 = 2.9
+        // → 2; T_surface 91 °C → (91 − 45)/5 = 9.2 → last (7); cell 2·8 + 7 = 23.
         let p = ReduceSample {
             vx: 40.0,
             vy: -2.0,
@@ -918,7 +940,7 @@ mod tests {
         let pair = (0..N_PAIRS)
             .find(|&k| pair_name(k) == "combined_slip:t_surface_c")
             .unwrap();
-        let m = maps[0].pair_map(Component::Total, pair);
+        let m = maps[0].pair_map(pair);
         // E = −F_x·v_sx·Δt − F_y·v_sy·Δt = 3000·1.2·0.01 − 4000·2·0.01 = −44 J
         // (made-up forces: a map sums whatever energy it is given), as every
         // 1-D map holds it.
@@ -926,9 +948,9 @@ mod tests {
         // (ω·r = 41.2 is not exact in f32: 1e-3 J.)
         assert!((total + 44.0).abs() < 1e-3, "{total}");
         assert_eq!(m.iter().filter(|e| **e != 0.0).count(), 1);
-        assert_eq!(m[9], total);
+        assert_eq!(m[23], total);
         for k in 0..N_PAIRS {
-            let s: f64 = maps[0].pair_map(Component::Total, k).iter().sum();
+            let s: f64 = maps[0].pair_map(k).iter().sum();
             assert_eq!(s, total, "{}", pair_name(k));
         }
     }
@@ -993,7 +1015,7 @@ mod tests {
         m.energy_j[1][3] = 10.0;
         m.energy_j[2][3] = 2.5;
         m.energy_j[0][CONDITION_BINS - 1] = -1.0;
-        m.energy_j[2][COMPONENT_BINS - 1] = 4.0; // the last pair's last cell
+        m.pairs_j[PAIR_BINS - 1] = 4.0; // the last pair's last cell
         let batch = side_table(&[("r1".into(), crate::Wheel::FL, m.clone())]);
         assert_eq!(batch.num_rows(), 3);
         let dir = tempfile::tempdir().unwrap();
@@ -1017,7 +1039,7 @@ mod tests {
             .unwrap()
         };
         let last = &back[&("r1".to_string(), crate::Wheel::FL)];
-        assert_eq!(last.pair_map(Component::Lateral, N_PAIRS - 1)[24], 4.0);
+        assert_eq!(last.pair_map(N_PAIRS - 1)[63], 4.0);
         // A later format version is refused.
         let e = read_condition_maps(&write("v4.parquet", &with_version(&batch, "4"))).unwrap_err();
         assert!(e.to_string().contains("format version 4"), "{e}");
