@@ -203,13 +203,16 @@ fn condition_maps_by_hand_on_every_engine() {
             let sum: f64 = m.map(Component::Total, c).iter().sum();
             assert!(close(sum, ea + eb), "{n}: {} sums to {sum}", cd.name);
         }
-        // Pairs, on the coarse bins: a's combined slip 0.0099 → 0.0099/0.02
-        // = 0.5 → 0, T_surface 82 °C → (82 − 45)/5 = 7.4 → 7: cell 7; b's
+        // Pairs, on the coarse bins: a's combined slip 0.0099 → below the
+        // first edge (0.03) → 0, T_surface 82 °C → (82 − 45)/5 = 7.4 → 7: cell 7; b's
         // combined slip 12 → last (7), 19 °C → 0: cell 7·8 = 56. Speed: a
         // 50.5 m/s → (50.5 − 24)/8 = 3.3 → 3: cell 3; b 0 → cell 56.
         let pair = |name: &str| (0..N_PAIRS).find(|&p| pair_name(p) == name).unwrap();
         let slip_surface = m.pair_map(pair("combined_slip:t_surface_c"));
-        assert!(close(slip_surface[7], ea) && close(slip_surface[56], eb), "{n}");
+        assert!(
+            close(slip_surface[7], ea) && close(slip_surface[56], eb),
+            "{n}"
+        );
         let slip_speed = m.pair_map(pair("combined_slip:speed_mps"));
         assert!(close(slip_speed[3], ea) && close(slip_speed[56], eb), "{n}");
         for p in 0..N_PAIRS {

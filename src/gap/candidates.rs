@@ -521,7 +521,9 @@ fn pair_candidates(cars: &[String]) -> Vec<Candidate> {
     for pair in 0..N_PAIRS {
         let (a, b) = pair_conditions(pair);
         let edges = (CONDITIONS[a].coarse.n - 1) * (CONDITIONS[b].coarse.n - 1);
-        for (first_above, second_above) in [(true, true), (true, false), (false, true), (false, false)] {
+        for (first_above, second_above) in
+            [(true, true), (true, false), (false, true), (false, false)]
+        {
             out.push(Candidate {
                 name: format!(
                     "energy with ({}, {}) {}/{} θ",
@@ -1008,10 +1010,10 @@ mod tests {
 
     #[test]
     fn pair_candidates_sum_the_quadrant_beyond_both_thresholds() {
-        // combined_slip:t_surface_c, coarse bins [0.02·i, 0.02·(i + 1)) and
-        // [45 + 5·j, 50 + 5·j) °C, 8 × 8 cells: 2 MJ at (4, 2) = slip
-        // [0.08, 0.10) at 55–60 °C (cell 34), 1 MJ at (1, 7) = slip
-        // [0.02, 0.04) above 80 °C (cell 15).
+        // combined_slip:t_surface_c, coarse bins [0.02 + 0.01·i, 0.03 +
+        // 0.01·i) and [45 + 5·j, 50 + 5·j) °C, 8 × 8 cells: 2 MJ at (4, 2) =
+        // slip [0.06, 0.07) at 55–60 °C (cell 34), 1 MJ at (1, 7) = slip
+        // [0.03, 0.04) above 80 °C (cell 15).
         use crate::kpi::cpu::condition_map::{ConditionMaps, pair_name};
         let pair = (0..N_PAIRS)
             .find(|&p| pair_name(p) == "combined_slip:t_surface_c")
@@ -1037,22 +1039,22 @@ mod tests {
             };
             feature(feature_, &r, Some(&m), theta, KpiScale::NONE)
         };
-        // θ index k = (i − 1)·7 + (j − 1): k 23 is edges (i 4, j 3) = (0.08, 60 °C).
+        // θ index k = (i − 1)·7 + (j − 1): k 23 is edges (i 4, j 3) = (0.06, 60 °C).
         assert_eq!(pair_thresholds(pair, 23.0), Some((4, 3)));
         let named = Feature::PairEnergy {
             pair,
             first_above: true,
             second_above: false,
         };
-        assert_eq!(named.format_threshold(23.0), "(0.08000, 60.00 °C)");
+        assert_eq!(named.format_threshold(23.0), "(0.06000, 60.00 °C)");
         let close = |a: f64, b: f64| (a - b).abs() < 1e-9;
-        // Slip ≥ 0.08 and surface < 60 °C holds (4, 2): 2 MJ.
+        // Slip ≥ 0.06 and surface < 60 °C holds (4, 2): 2 MJ.
         assert!(close(f(true, false, 23.0), 2.0));
-        // Slip ≥ 0.08 and surface ≥ 60 °C: nothing.
+        // Slip ≥ 0.06 and surface ≥ 60 °C: nothing.
         assert!(close(f(true, true, 23.0), 0.0));
         // Slip < 0.04 (i 2) and surface ≥ 80 °C (j 7): k = 1·7 + 6 = 13: 1 MJ.
         assert!(close(f(false, true, 13.0), 1.0));
-        // Slip < 0.10 (i 5) and surface ≥ 55 °C (j 2): k = 4·7 + 1 = 29: both, 3 MJ.
+        // Slip < 0.07 (i 5) and surface ≥ 55 °C (j 2): k = 4·7 + 1 = 29: both, 3 MJ.
         assert!(close(f(false, true, 29.0), 3.0));
         // Outside the grid, or maps without pairs: undefined.
         assert!(f(true, true, 49.0).is_nan() && f(true, true, 0.5).is_nan());
