@@ -133,7 +133,7 @@ impl OutputSet {
     }
 
     /// Writes `dest`'s new contents to a temporary file beside it.
-    pub fn add(
+    pub(crate) fn add(
         &mut self,
         dest: &Path,
         body: impl FnOnce(&mut File) -> io::Result<()>,
@@ -148,7 +148,7 @@ impl OutputSet {
 
     /// Moves the finished, synced file `from` to `dest` at commit (a part
     /// staged by an earlier process); dropped without commit, `from` stays.
-    pub fn add_move(&mut self, from: &Path, dest: &Path) {
+    pub(crate) fn add_move(&mut self, from: &Path, dest: &Path) {
         self.moves.push((from.to_path_buf(), dest.to_path_buf()));
     }
 
@@ -176,7 +176,7 @@ impl OutputSet {
 
 /// Finishes a commit that a killed process left half done: every temporary
 /// file its journal names that still exists is renamed into place.
-pub fn recover(journal: &Path) -> io::Result<()> {
+pub(crate) fn recover(journal: &Path) -> io::Result<()> {
     let text = match std::fs::read(journal) {
         Ok(t) => t,
         Err(e) if e.kind() == io::ErrorKind::NotFound => return Ok(()),
@@ -200,7 +200,7 @@ pub fn recover(journal: &Path) -> io::Result<()> {
 /// Removes this module's temporary files in `dir` whose writer process is
 /// gone (Linux: no `/proc/<pid>`); returns how many. Elsewhere nothing is
 /// removed, since a live writer cannot be told apart.
-pub fn remove_orphans(dir: &Path) -> io::Result<usize> {
+pub(crate) fn remove_orphans(dir: &Path) -> io::Result<usize> {
     if !Path::new("/proc/self").exists() {
         return Ok(0);
     }

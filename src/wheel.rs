@@ -80,7 +80,7 @@ impl Wheel {
         }
     }
 
-    pub fn from_topic(topic: &str) -> Option<Wheel> {
+    pub(crate) fn from_topic(topic: &str) -> Option<Wheel> {
         Wheel::ALL.into_iter().find(|w| w.topic() == topic)
     }
 
@@ -92,7 +92,7 @@ impl Wheel {
     }
 
     /// +1 for left wheels, -1 for right (the sign of the wheel's y in ISO 8855 axes).
-    pub fn side_sign(self) -> f64 {
+    pub(crate) fn side_sign(self) -> f64 {
         match self {
             Wheel::FL | Wheel::RL => 1.0,
             Wheel::FR | Wheel::RR => -1.0,

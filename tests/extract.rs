@@ -106,13 +106,26 @@ fn demo_season_extracts_to_complete_rows() {
     // The condition maps read back (format version checked): every
     // condition's map holds the row's friction energy, its longitudinal and
     // its lateral part, as the telemetry reduction summed them (quanta of
-    // 6e-8 J per sample: 1e-3 J of slack).
+    // 6e-8 J per sample: 1e-3 J of slack); so does every pair map, read
+    // back through the side table's pair rows.
     let path = dir.path().join("kpis.condition_maps.parquet");
     let cmaps = tirewear::kpi::cpu::condition_map::read_condition_maps(&path).unwrap();
     assert_eq!(cmaps.len(), rows.len());
-    use tirewear::kpi::cpu::condition_map::{CONDITIONS, Component};
+    use tirewear::kpi::cpu::condition_map::{CONDITIONS, Component, N_PAIRS, pair_name};
     for r in &rows {
         let m = &cmaps[&r.tire_run()];
+        assert!(m.pairs_held);
+        for p in 0..N_PAIRS {
+            let got: f64 = m.pair_map(p).iter().sum();
+            let want = r.friction_energy_j;
+            assert!(
+                (got - want).abs() <= 1e-9 * want.abs() + 1e-3,
+                "{} {}: {} {got} vs {want}",
+                r.run,
+                r.wheel,
+                pair_name(p)
+            );
+        }
         for (c, cd) in CONDITIONS.iter().enumerate() {
             for (comp, want) in [
                 (Component::Total, r.friction_energy_j),

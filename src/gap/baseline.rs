@@ -54,7 +54,7 @@ impl TemperatureFactor {
     }
 
     /// ∂φ/∂(its parameter) of `compound` at `t_c` (γ for WLF, β for the exponential).
-    pub fn derivative_at(&self, compound: &str, t_c: f64) -> f64 {
+    pub(crate) fn derivative_at(&self, compound: &str, t_c: f64) -> f64 {
         match self {
             TemperatureFactor::Exponential { .. } => self.at(compound, t_c) * (t_c - REFERENCE_C),
             TemperatureFactor::Wlf { wlf, .. } => wlf.get(compound).map_or(f64::NAN, |w| {
@@ -66,7 +66,7 @@ impl TemperatureFactor {
     }
 
     /// The calibrated parameter in words.
-    pub fn describe(&self) -> String {
+    pub(crate) fn describe(&self) -> String {
         match self {
             TemperatureFactor::Exponential { beta_per_k } => {
                 format!("φ = exp(β(T − 60 °C)), β = {beta_per_k:.4} /K")
@@ -187,7 +187,7 @@ impl PhysicsBaseline {
     /// same `rows`: γ (or β) and s on their grids, the k per group in closed
     /// form. Rows with a non-finite wear, energy, temperature or skewness are
     /// left out.
-    pub fn fit_grid(grid: &LawGrid, rows: &[&KpiRow], y: &[f64]) -> PhysicsBaseline {
+    pub(crate) fn fit_grid(grid: &LawGrid, rows: &[&KpiRow], y: &[f64]) -> PhysicsBaseline {
         let ok: Vec<usize> = (0..rows.len())
             .filter(|&i| y[i].is_finite() && usable(rows[i]))
             .collect();
@@ -235,7 +235,7 @@ impl PhysicsBaseline {
     }
 
     /// The law's energy term of a row, before its group's k (MJ).
-    pub fn energy_term(&self, r: &KpiRow, maps: Option<&EnergyMaps>) -> f64 {
+    pub(crate) fn energy_term(&self, r: &KpiRow, maps: Option<&EnergyMaps>) -> f64 {
         weighted_energy_mj(r, maps, &self.temperature_factor)
             * (self.skewness_coefficient * r.skewness).exp()
     }
@@ -249,7 +249,7 @@ impl PhysicsBaseline {
     }
 
     /// What the law says about one row, each part computed once.
-    pub fn law_row(&self, r: &KpiRow, maps: Option<&EnergyMaps>) -> LawRow {
+    pub(crate) fn law_row(&self, r: &KpiRow, maps: Option<&EnergyMaps>) -> LawRow {
         let energy_mj = self.energy_term(r, maps);
         let k = self
             .k_pct_per_mj

@@ -112,14 +112,14 @@ impl Feature {
 
     /// A physical mechanism only adds wear: its coefficient must be positive.
     /// A generic KPI may act either way.
-    pub fn adds_wear_only(&self) -> bool {
+    pub(crate) fn adds_wear_only(&self) -> bool {
         !matches!(self, Feature::Kpi(_) | Feature::Group)
     }
 
     /// A term that is the row's law energy times a value of its track (road
     /// candidates): it can only be told apart from the other track-level
     /// causes by comparing tracks, so it is tested across tracks.
-    pub fn track_level(&self) -> bool {
+    pub(crate) fn track_level(&self) -> bool {
         match self {
             Feature::RoughRoadEnergy | Feature::RoughRoadEnergySquared => true,
             Feature::Kpi(c) => ROAD_KPIS.contains(c),
@@ -128,7 +128,7 @@ impl Feature {
     }
 
     /// Unit of the threshold.
-    pub fn threshold_unit(&self) -> &'static str {
+    pub(crate) fn threshold_unit(&self) -> &'static str {
         match self {
             Feature::ColdTreadLateralEnergy
             | Feature::HotInnerEnergy
@@ -159,7 +159,7 @@ fn format_with_unit(unit: &str, x: f64) -> String {
 /// The edges (θ₁, θ₂) a pair candidate's threshold index stands for: index
 /// k = (i − 1)·(n₂ − 1) + (j − 1) for the inner edges i of the first
 /// condition's coarse bins and j of the second's.
-pub fn pair_thresholds(pair: usize, theta: f64) -> Option<(usize, usize)> {
+pub(crate) fn pair_thresholds(pair: usize, theta: f64) -> Option<(usize, usize)> {
     let (a, b) = pair_conditions(pair);
     let (na, nb) = (CONDITIONS[a].coarse.n, CONDITIONS[b].coarse.n);
     if theta.is_nan() || theta < 0.0 || theta.fract() != 0.0 {
@@ -180,7 +180,7 @@ pub fn significant(x: f64) -> String {
 
 impl Feature {
     /// θ with its unit, as the report prints it (pressure in kPa).
-    pub fn format_threshold(&self, theta: f64) -> String {
+    pub(crate) fn format_threshold(&self, theta: f64) -> String {
         if let Feature::PairEnergy { pair, .. } = *self {
             let (a, b) = pair_conditions(pair);
             return match pair_thresholds(pair, theta) {
@@ -245,7 +245,7 @@ impl Group {
     }
 
     /// "car2", "car2, FL", "FL on every car".
-    pub fn describe(&self) -> String {
+    pub(crate) fn describe(&self) -> String {
         match (&self.car, &self.wheel) {
             (Some(c), Some(w)) => format!("{c}, {w}"),
             (Some(c), None) => c.clone(),
@@ -258,7 +258,7 @@ impl Group {
 impl Candidate {
     /// The candidates the scoring scans for this one: each of its scopes as
     /// a candidate of its own (named with the scope's suffix), or itself.
-    pub fn resolved(&self) -> Vec<Candidate> {
+    pub(crate) fn resolved(&self) -> Vec<Candidate> {
         if self.scopes.is_empty() {
             return vec![self.clone()];
         }
@@ -276,7 +276,7 @@ impl Candidate {
 
     /// Only positive coefficients count: built-in mechanisms, and user
     /// hypotheses unless they say otherwise.
-    pub fn adds_wear_only(&self) -> bool {
+    pub(crate) fn adds_wear_only(&self) -> bool {
         match &self.user {
             Some(u) => u.adds_wear,
             None => self.feature.adds_wear_only(),
@@ -840,7 +840,7 @@ impl LawRow {
 /// term is the law's whole wear in its group (a factor on the law). A user
 /// hypothesis that adds wear is charged like a built-in mechanism; generic
 /// KPI terms and two-sided hypotheses stay on the raw friction energy.
-pub fn candidate_feature(
+pub(crate) fn candidate_feature(
     c: &Candidate,
     r: &KpiRow,
     maps: Option<&EnergyMaps>,
@@ -890,7 +890,7 @@ impl KpiScale {
     };
 
     /// (clamp(x, min, max) − mean)/sd; 0 for a constant column.
-    pub fn standardised(&self, x: f64) -> f64 {
+    pub(crate) fn standardised(&self, x: f64) -> f64 {
         if self.sd > 0.0 {
             (x.clamp(self.min, self.max) - self.mean) / self.sd
         } else {

@@ -134,7 +134,7 @@ impl BaseFit {
     }
 
     /// Coefficients of the base fit.
-    pub fn k0(&self) -> &[f64] {
+    pub(crate) fn k0(&self) -> &[f64] {
         &self.k0
     }
 
@@ -145,7 +145,7 @@ impl BaseFit {
     /// partitioned normal equations: β = G⁻¹Xᵀx, x⊥ = x − Xβ,
     /// c = x⊥·r₀ / |x⊥|² (|x⊥|² floored at 1e-12·|x|², `lstsq`'s jitter),
     /// SSE = SSE₀ − 2c·x⊥·r₀ + c²|x⊥|², base coefficients k₀ − c·β.
-    pub fn with_column(
+    pub(crate) fn with_column(
         &self,
         cols: &[&[f64]],
         x: &[f64],

@@ -138,7 +138,7 @@ impl Score {
     /// The scored term as a candidate at its chosen threshold and scope
     /// (without a user hypothesis's expression: [`Score::resolve`] takes
     /// that from the library).
-    pub fn as_candidate(&self) -> Candidate {
+    pub(crate) fn as_candidate(&self) -> Candidate {
         Candidate {
             name: self.name.clone(),
             feature: self.feature,
@@ -152,7 +152,7 @@ impl Score {
 
     /// The library's candidate at the chosen scope (its threshold grid
     /// kept), or [`Score::as_candidate`] when the library does not hold it.
-    pub fn resolve(&self, lib: &[Candidate]) -> Candidate {
+    pub(crate) fn resolve(&self, lib: &[Candidate]) -> Candidate {
         lib.iter()
             .find(|l| l.name == self.candidate)
             .and_then(|l| l.resolved().into_iter().find(|r| r.name == self.name))

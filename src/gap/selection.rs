@@ -97,7 +97,7 @@ impl<'a> Selection<'a> {
     /// (`named`: name and members) whose mean gap (`residual`) the change
     /// in prediction follows most, the baseline and the term refitted as
     /// step 3 refits them (the baseline gives back what the term takes over).
-    pub fn acts_in(
+    pub(crate) fn acts_in(
         &self,
         candidates: &mut [Score],
         lib: &[Candidate],
@@ -141,7 +141,7 @@ impl<'a> Selection<'a> {
     /// refitted without track scales; if it turns negative it was fitting
     /// something else (a track-level effect, say). Either way its name is
     /// used.
-    pub fn add(&mut self, best: &Score, lib: &[Candidate]) -> Option<(Score, Vec<f64>)> {
+    pub(crate) fn add(&mut self, best: &Score, lib: &[Candidate]) -> Option<(Score, Vec<f64>)> {
         let cand = Candidate {
             thresholds: vec![best.threshold],
             ..best.resolve(lib)

@@ -147,7 +147,13 @@ impl<'a> Severities<'a> {
     /// thresholds against `draws` Monte Carlo draws; 1 when fewer than
     /// [`MIN_TRACKS`] tracks (or too few beyond the null's columns) carry
     /// rows on its axle.
-    pub fn p_value(&self, c: &Candidate, kpi_scale: KpiScale, draws: usize, seed: u64) -> f64 {
+    pub(crate) fn p_value(
+        &self,
+        c: &Candidate,
+        kpi_scale: KpiScale,
+        draws: usize,
+        seed: u64,
+    ) -> f64 {
         let slot = match c.axle {
             None => 0,
             Some(Axle::Front) => 1,

@@ -108,7 +108,11 @@ impl Context for Vars<'_> {
 
 impl UserEffect {
     /// Compiles one expression, checking every variable it reads.
-    pub fn compile(name: &str, expression: &str, adds_wear: bool) -> Result<UserEffect, String> {
+    pub(crate) fn compile(
+        name: &str,
+        expression: &str,
+        adds_wear: bool,
+    ) -> Result<UserEffect, String> {
         let node = evalexpr::build_operator_tree::<DefaultNumericTypes>(expression)
             .map_err(|e| format!("cannot parse '{expression}': {e}"))?;
         let mut variables: Vec<String> = node
@@ -160,7 +164,7 @@ impl UserEffect {
 
     /// Sums the expression over the lateral friction energy's (surface ×
     /// inner-liner) map instead of the total energy's.
-    pub fn on_lateral_energy(mut self) -> Result<UserEffect, String> {
+    pub(crate) fn on_lateral_energy(mut self) -> Result<UserEffect, String> {
         if self.speed_map {
             return Err("energy = \"lateral\" has no sliding-speed map: drop sliding_speed".into());
         }
@@ -179,7 +183,7 @@ impl UserEffect {
 
     /// The term of one row at θ (MJ); NaN without a map or where the
     /// expression does not give a number.
-    pub fn feature(&self, r: &KpiRow, maps: Option<&EnergyMaps>, theta: f64) -> f64 {
+    pub(crate) fn feature(&self, r: &KpiRow, maps: Option<&EnergyMaps>, theta: f64) -> f64 {
         let Some(m) = maps else {
             return f64::NAN;
         };

@@ -83,7 +83,7 @@ impl GpuTimings {
     pub fn total(&self) -> Duration {
         self.upload + self.compute + self.readback
     }
-    pub fn add(&mut self, o: &GpuTimings) {
+    pub(crate) fn add(&mut self, o: &GpuTimings) {
         self.upload += o.upload;
         self.compute += o.compute;
         self.readback += o.readback;

@@ -58,7 +58,7 @@ fn mean_of_zones(log: &RawLog, m: &Mapped, at: impl Fn(&[f64], Option<f64>) -> f
 
 /// Aligns the mapped channels. `rate_hz` overrides the rate a `.ld` log is
 /// interpolated to.
-pub fn align(
+pub(crate) fn align(
     log: &RawLog,
     mapping: &Mapping,
     rate_hz: Option<f64>,

@@ -224,22 +224,22 @@ impl CarDescription {
         }
     }
 
-    pub fn track_width(&self, w: Wheel) -> f64 {
+    pub(crate) fn track_width(&self, w: Wheel) -> f64 {
         [self.front_track_m, self.rear_track_m][Self::axle_index(w)]
     }
 
-    pub fn rolling_radius(&self, w: Wheel) -> f64 {
+    pub(crate) fn rolling_radius(&self, w: Wheel) -> f64 {
         self.tyres.rolling_radius_m[Self::axle_index(w)]
     }
 
-    pub fn wheel_speed_radius(&self, w: Wheel) -> f64 {
+    pub(crate) fn wheel_speed_radius(&self, w: Wheel) -> f64 {
         self.tyres
             .wheel_speed_radius_m
             .unwrap_or(self.tyres.rolling_radius_m)[Self::axle_index(w)]
     }
 
     /// Loaded rolling radius (m) under `fz` (N).
-    pub fn loaded_radius(&self, w: Wheel, fz: f64) -> f64 {
+    pub(crate) fn loaded_radius(&self, w: Wheel, fz: f64) -> f64 {
         let r0 = self.rolling_radius(w);
         match self.tyres.radial_stiffness_n_per_m {
             Some(k) => r0 - fz / k,
@@ -248,12 +248,12 @@ impl CarDescription {
     }
 
     /// Distance from the centre of gravity to the front axle, `a` (m).
-    pub fn cg_to_front_m(&self) -> f64 {
+    pub(crate) fn cg_to_front_m(&self) -> f64 {
         self.wheelbase_m * (1.0 - self.front_weight_fraction)
     }
 
     /// Distance from the centre of gravity to the rear axle, `b` (m).
-    pub fn cg_to_rear_m(&self) -> f64 {
+    pub(crate) fn cg_to_rear_m(&self) -> f64 {
         self.wheelbase_m * self.front_weight_fraction
     }
 

@@ -80,7 +80,7 @@ impl Quantity {
 
     /// The dimensions a source channel may have (wheel speed: a linear speed
     /// at the logger's radius, or an angular speed).
-    pub fn dimensions(self) -> &'static [Dimension] {
+    pub(crate) fn dimensions(self) -> &'static [Dimension] {
         use Dimension::*;
         match self {
             Quantity::Time => &[Time],
@@ -98,7 +98,7 @@ impl Quantity {
         }
     }
 
-    pub fn per_corner(self) -> bool {
+    pub(crate) fn per_corner(self) -> bool {
         matches!(
             self,
             Quantity::WheelSpeed

@@ -95,7 +95,7 @@ fn decode(s: &Sample, c: &ChannelMetadata) -> f64 {
 
 /// Reads a `.ld` file (whole, up to the log size limit). Beacon channels
 /// and empty channels are skipped.
-pub fn read_ld(path: &Path) -> Result<RawLog, ImportError> {
+pub(crate) fn read_ld(path: &Path) -> Result<RawLog, ImportError> {
     let bytes = std::fs::read(path).map_err(|e| ImportError::io(path, e))?;
     check_layout(path, &bytes)?;
     let mut cursor = Cursor::new(bytes);
@@ -161,7 +161,7 @@ const MAX_LDX_BYTES: u64 = 64 << 20;
 /// sorted) and the `<Details><String Id=.. Value=../>` pairs. A sidecar
 /// that is not well-formed XML, or a marker time that is not a number, is
 /// an error naming it.
-pub fn read_ldx(path: &Path) -> Result<Option<Ldx>, ImportError> {
+pub(crate) fn read_ldx(path: &Path) -> Result<Option<Ldx>, ImportError> {
     let Ok(meta) = std::fs::metadata(path) else {
         return Ok(None);
     };
@@ -237,7 +237,11 @@ pub struct LdHeader<'a> {
 
 /// Writes a `.ld` file with the crate's writer (used by the simulator's
 /// logger export), atomically.
-pub fn write_ld(path: &Path, header: &LdHeader, channels: &[LdChannel]) -> Result<(), ImportError> {
+pub(crate) fn write_ld(
+    path: &Path,
+    header: &LdHeader,
+    channels: &[LdChannel],
+) -> Result<(), ImportError> {
     // The crate's writer lays channel metadata from byte 0x3448 on.
     const META_AT: u32 = 0x3448;
     let hdr = motec_i2::Header {

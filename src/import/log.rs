@@ -55,7 +55,7 @@ impl RawLog {
         self.channels.iter().map(|c| c.unit.clone()).collect()
     }
     /// True for a table (one row per time step, a time column).
-    pub fn tabular(&self) -> bool {
+    pub(crate) fn tabular(&self) -> bool {
         self.channels.iter().all(|c| c.rate_hz.is_none())
     }
 }

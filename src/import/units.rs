@@ -45,7 +45,7 @@ pub struct Conversion {
 }
 
 impl Conversion {
-    pub fn apply(&self, value: f64) -> f64 {
+    pub(crate) fn apply(&self, value: f64) -> f64 {
         value * self.scale + self.offset
     }
 }
@@ -55,7 +55,7 @@ pub const STANDARD_GRAVITY: f64 = 9.806_65;
 
 /// The conversion of `unit` (as written in a log or a channel map), or
 /// `None` when the unit is unknown.
-pub fn conversion(unit: &str) -> Option<Conversion> {
+pub(crate) fn conversion(unit: &str) -> Option<Conversion> {
     use Dimension::*;
     let key: String = unit
         .chars()

@@ -49,14 +49,14 @@ pub(crate) const MAX_REFERENCE_FREQUENCY_HZ: f64 = 1e12;
 
 impl Wlf {
     /// log10 of the shift factor a_T at temperature `t_c` (paper eq. 30).
-    pub fn log10_shift(&self, t_c: f64) -> f64 {
+    pub(crate) fn log10_shift(&self, t_c: f64) -> f64 {
         let dt = t_c - self.t_ref_c;
         -self.c1 * dt / (self.c2_k + dt)
     }
 
     /// Temperature whose shift factor is `10^log10_at` (paper eq. 31, the
     /// inverse of eq. 30): `T = T_ref - C2 x / (C1 + x)` with `x = log10 a_T`.
-    pub fn temperature_for_shift(&self, log10_at: f64) -> f64 {
+    pub(crate) fn temperature_for_shift(&self, log10_at: f64) -> f64 {
         self.t_ref_c - self.c2_k * log10_at / (self.c1 + log10_at)
     }
 }
@@ -90,7 +90,7 @@ impl Compound {
     }
 
     /// The file must describe the compound the manifest names it for.
-    pub fn check_id(&self, manifest_id: &str, path: &Path) -> Result<()> {
+    pub(crate) fn check_id(&self, manifest_id: &str, path: &Path) -> Result<()> {
         if self.id != manifest_id {
             return Err(IngestError::invalid(
                 path,
@@ -243,7 +243,7 @@ fn interp(xs: &[f64], ys: &[f64], x: f64, map: impl Fn(f64) -> f64) -> f64 {
 }
 
 /// Every `*.toml` compound file in `dir`, in file-name order.
-pub fn read_compounds(dir: &Path) -> Result<Vec<Compound>> {
+pub(crate) fn read_compounds(dir: &Path) -> Result<Vec<Compound>> {
     let mut files: Vec<std::path::PathBuf> = std::fs::read_dir(dir)
         .map_err(|e| IngestError::io(dir, e))?
         .filter_map(|e| e.ok().map(|e| e.path()))

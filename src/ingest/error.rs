@@ -44,7 +44,7 @@ impl IngestError {
         }
     }
 
-    pub fn invalid(
+    pub(crate) fn invalid(
         path: impl Into<PathBuf>,
         record: impl Into<String>,
         what: impl Into<String>,

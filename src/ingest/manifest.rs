@@ -197,7 +197,7 @@ impl Manifest {
 
     /// Paths must be relative and stay inside the archive folder (no `..`,
     /// no root, no drive prefix).
-    pub fn check_paths_inside(&self, path: &Path) -> Result<()> {
+    pub(crate) fn check_paths_inside(&self, path: &Path) -> Result<()> {
         use std::path::Component;
         for (record, p) in self.paths() {
             let outside = Path::new(p)

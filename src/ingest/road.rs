@@ -37,12 +37,8 @@ pub struct Profile {
 }
 
 impl Profile {
-    pub fn len_mm(&self) -> f64 {
-        self.dx_mm * self.z_mm.len() as f64
-    }
-
     /// Builds a profile from sample columns, checking that x is equally spaced.
-    pub fn from_columns(
+    pub(crate) fn from_columns(
         track: &str,
         location: &str,
         x: &[f64],

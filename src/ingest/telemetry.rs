@@ -64,12 +64,12 @@ macro_rules! series {
             pub fn is_empty(&self) -> bool {
                 self.time_ns.is_empty()
             }
-            pub fn push_sample(&mut self, time_ns: u64, s: &proto::$sample) {
+            pub(crate) fn push_sample(&mut self, time_ns: u64, s: &proto::$sample) {
                 self.time_ns.push(time_ns);
                 $(self.$ch.push(s.$ch);)*
             }
             /// Appends a block, or says which channel's length disagrees.
-            pub fn push_block(&mut self, b: &proto::$block) -> std::result::Result<(), String> {
+            pub(crate) fn push_block(&mut self, b: &proto::$block) -> std::result::Result<(), String> {
                 let n = b.$elem.len();
                 $(if b.$ch.len() != n {
                     return Err(format!(
@@ -142,7 +142,7 @@ macro_rules! series {
                 $(self.$ch.reserve(additional);)*
             }
             /// Appends another series (the next part of the same topic).
-            pub fn append(&mut self, mut other: Self) {
+            pub(crate) fn append(&mut self, mut other: Self) {
                 self.time_ns.append(&mut other.time_ns);
                 $(self.$ch.append(&mut other.$ch);)*
             }
@@ -316,7 +316,11 @@ impl TelemetryWriter {
 
     /// Adds an MCAP metadata record (the importer's source file, channel
     /// map and list of estimated channels).
-    pub fn write_metadata(&mut self, name: &str, metadata: BTreeMap<String, String>) -> Result<()> {
+    pub(crate) fn write_metadata(
+        &mut self,
+        name: &str,
+        metadata: BTreeMap<String, String>,
+    ) -> Result<()> {
         self.mcap
             .write_metadata(&mcap::records::Metadata {
                 name: name.into(),

@@ -43,7 +43,7 @@ impl Bins {
             0
         }
     }
-    pub fn lower_edge(&self, i: usize) -> f64 {
+    pub(crate) fn lower_edge(&self, i: usize) -> f64 {
         self.lo + self.width * i as f64
     }
     /// Mid-point of bin i: the value a bin stands for in sums over the map.
@@ -85,17 +85,19 @@ impl EnergyMaps {
 
     /// Adds lateral friction energy to the lateral map (the total maps take
     /// it through [`EnergyMaps::add`]).
-    pub fn add_lateral(&mut self, t_surface: f64, t_inner: f64, lateral_j: f64) {
+    #[cfg(test)]
+    pub(crate) fn add_lateral(&mut self, t_surface: f64, t_inner: f64, lateral_j: f64) {
         let s = T_SURFACE_BINS.index(t_surface);
         self.lateral_surface_inner[s * T_INNER_BINS.n + T_INNER_BINS.index(t_inner)] += lateral_j;
     }
 
     /// Whether the lateral map was filled (files from before it are not).
-    pub fn has_lateral(&self) -> bool {
+    pub(crate) fn has_lateral(&self) -> bool {
         self.lateral_surface_inner.iter().any(|e| *e != 0.0)
     }
 
-    pub fn add(&mut self, t_surface: f64, t_inner: f64, sliding_speed: f64, energy_j: f64) {
+    #[cfg(test)]
+    pub(crate) fn add(&mut self, t_surface: f64, t_inner: f64, sliding_speed: f64, energy_j: f64) {
         let s = T_SURFACE_BINS.index(t_surface);
         self.surface_inner[s * T_INNER_BINS.n + T_INNER_BINS.index(t_inner)] += energy_j;
         self.speed_surface[SLIDING_SPEED_BINS.index(sliding_speed) * T_SURFACE_BINS.n + s] +=
@@ -108,19 +110,19 @@ impl EnergyMaps {
 
     /// Σ E·f(T_surface, T_inner) over the non-empty bins of the
     /// surface × inner-liner map, at the bin mid-points (J).
-    pub fn weighted_surface_inner(&self, f: impl FnMut(f64, f64) -> f64) -> f64 {
+    pub(crate) fn weighted_surface_inner(&self, f: impl FnMut(f64, f64) -> f64) -> f64 {
         weighted(&self.surface_inner, T_SURFACE_BINS, T_INNER_BINS, f)
     }
 
     /// Σ E_y·f(T_surface, T_inner) over the non-empty bins of the lateral
     /// map, at the bin mid-points (J).
-    pub fn weighted_lateral_surface_inner(&self, f: impl FnMut(f64, f64) -> f64) -> f64 {
+    pub(crate) fn weighted_lateral_surface_inner(&self, f: impl FnMut(f64, f64) -> f64) -> f64 {
         weighted(&self.lateral_surface_inner, T_SURFACE_BINS, T_INNER_BINS, f)
     }
 
     /// Σ E·f(sliding speed, T_surface) over the non-empty bins of the
     /// sliding-speed × surface map, at the bin mid-points (J).
-    pub fn weighted_speed_surface(&self, f: impl FnMut(f64, f64) -> f64) -> f64 {
+    pub(crate) fn weighted_speed_surface(&self, f: impl FnMut(f64, f64) -> f64) -> f64 {
         weighted(&self.speed_surface, SLIDING_SPEED_BINS, T_SURFACE_BINS, f)
     }
 }

@@ -714,7 +714,7 @@ pub struct RoadCurvePoint {
 /// Reads the road-curve side table (`NAME.road.parquet`, as
 /// [`road_curves_batch`] writes it); a missing column or a null is an
 /// error naming the file, column and row.
-pub fn read_road_curves(path: &std::path::Path) -> Result<Vec<RoadCurvePoint>, IngestError> {
+pub(crate) fn read_road_curves(path: &std::path::Path) -> Result<Vec<RoadCurvePoint>, IngestError> {
     let mut out = Vec::new();
     for batch in super::table::side_batches(path)? {
         let batch = batch?;

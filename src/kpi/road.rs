@@ -237,7 +237,7 @@ impl RoadIndices {
     };
 
     /// Names (KPI columns) of the indices that are not finite.
-    pub fn undefined(&self) -> Vec<&'static str> {
+    pub(crate) fn undefined(&self) -> Vec<&'static str> {
         [
             ("macro_wavelength_mm", self.macro_wavelength_mm),
             ("micro_wavelength_mm", self.micro_wavelength_mm),

@@ -110,7 +110,7 @@ impl RoughnessBatch {
     }
 
     /// Segments a profile of `n` samples adds.
-    pub fn segments_of(n: usize) -> usize {
+    pub(crate) fn segments_of(n: usize) -> usize {
         (n - FFT_N) / (FFT_N / 2) + 1
     }
 
@@ -123,7 +123,7 @@ impl RoughnessBatch {
     }
 
     /// Per-profile reference heights for the first moments pass (first sample).
-    pub fn first_heights(&self) -> Vec<f32> {
+    pub(crate) fn first_heights(&self) -> Vec<f32> {
         self.spans
             .iter()
             .map(|&(o, _, _)| self.heights[o])

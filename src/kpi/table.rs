@@ -66,7 +66,7 @@ macro_rules! kpi_table {
             }
 
             /// Sets a numeric column by name; false if there is no such column.
-            pub fn set_number(&mut self, name: &str, v: f64) -> bool {
+            pub(crate) fn set_number(&mut self, name: &str, v: f64) -> bool {
                 match name {
                     $(stringify!($n) => { self.$n = v; true })*
                     _ => false,
@@ -76,7 +76,7 @@ macro_rules! kpi_table {
             /// Sets a text column by name: Ok(false) if there is no such
             /// column, an error if the value is not one the column holds
             /// (an unknown wheel position or axle).
-            pub fn set_text(&mut self, name: &str, v: &str) -> Result<bool, String> {
+            pub(crate) fn set_text(&mut self, name: &str, v: &str) -> Result<bool, String> {
                 match name {
                     $(stringify!($t) => { self.$t = <$tt as TextCell>::parse_text(v)?; Ok(true) })*
                     _ => Ok(false),
@@ -266,8 +266,10 @@ pub(crate) fn kpi_batch(rows: &[KpiRow]) -> RecordBatch {
     RecordBatch::try_new(schema(), KpiRow::arrays(rows)).expect("columns match the schema")
 }
 
-/// Writes the KPI rows as Parquet.
-pub fn write_parquet(path: &Path, rows: &[KpiRow]) -> Result<(), IngestError> {
+/// Writes the KPI rows as Parquet (the extraction writes its batches
+/// through `write_batch`; tests write rows directly).
+#[cfg(test)]
+pub(crate) fn write_parquet(path: &Path, rows: &[KpiRow]) -> Result<(), IngestError> {
     write_batch(path, &kpi_batch(rows))
 }
 
@@ -306,7 +308,7 @@ pub fn quality(row: &KpiRow, reasons: &[String]) -> String {
 /// The `quality` of a run `tirewear import` wrote: `estimated: CHANNELS`
 /// (the channels its virtual sensors estimated, from the telemetry's
 /// `tirewear.import` record) in place of `ok`, or after the other reasons.
-pub fn with_estimated(quality: &str, estimated: &str) -> String {
+pub(crate) fn with_estimated(quality: &str, estimated: &str) -> String {
     let names: Vec<&str> = estimated
         .split("; ")
         .filter_map(|part| part.split(':').next())

@@ -214,7 +214,7 @@ impl Ffnn {
     }
 
     /// Prediction in the target's units.
-    pub fn predict_one(&self, x: &[f64]) -> f64 {
+    pub(crate) fn predict_one(&self, x: &[f64]) -> f64 {
         let z: Vec<f64> = x
             .iter()
             .zip(self.input_mean.iter().zip(&self.input_std))

@@ -97,7 +97,7 @@ impl OlsFit {
         })
     }
 
-    pub fn predict_one(&self, x: &[f64]) -> f64 {
+    pub(crate) fn predict_one(&self, x: &[f64]) -> f64 {
         self.coef[0]
             + self.coef[1..]
                 .iter()

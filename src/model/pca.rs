@@ -129,7 +129,7 @@ impl PcaFit {
     }
 
     /// Scores y_i = Σ a_ij z_j of the kept components (eq. 3) for each row.
-    pub fn transform(&self, rows: &[Vec<f64>]) -> Vec<Vec<f64>> {
+    pub(crate) fn transform(&self, rows: &[Vec<f64>]) -> Vec<Vec<f64>> {
         rows.iter()
             .map(|r| {
                 (0..self.kept)

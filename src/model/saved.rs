@@ -120,7 +120,7 @@ impl SavedModel {
         Ok(p)
     }
 
-    pub fn to_json(&self) -> String {
+    pub(crate) fn to_json(&self) -> String {
         serde_json::to_string_pretty(self).expect("model serialises")
     }
 

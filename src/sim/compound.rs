@@ -54,13 +54,13 @@ impl CompoundModel {
     /// the rubber toward its rubbery state multiplies abrasion by 10^γ.
     /// It is 1 at [`WEAR_REFERENCE_C`] for every compound, so compounds differ
     /// in abradability only through `wear_mm_per_mj`.
-    pub fn wear_temperature_factor(&self, t_c: f64) -> f64 {
+    pub(crate) fn wear_temperature_factor(&self, t_c: f64) -> f64 {
         let decades = self.wlf.log10_shift(WEAR_REFERENCE_C) - self.wlf.log10_shift(t_c);
         10f64.powf(self.wear_shift_exponent * decades)
     }
 
     /// The compound file: master curves tabulated from −50 to 150 °C every 5 K.
-    pub fn to_file(&self) -> Compound {
+    pub(crate) fn to_file(&self) -> Compound {
         let temperature_c: Vec<f64> = (0..=40).map(|i| -50.0 + 5.0 * i as f64).collect();
         let (storage_modulus_mpa, loss_factor) = temperature_c
             .iter()

@@ -82,7 +82,7 @@ impl Effect {
     }
 
     /// Road factor of road abrasion: softplus growth above the threshold, in units of the width.
-    pub fn road_weight(&self, micro_rms_mm: f64) -> f64 {
+    pub(crate) fn road_weight(&self, micro_rms_mm: f64) -> f64 {
         let x = (micro_rms_mm - self.threshold) / self.width;
         (1.0 + x.exp()).ln()
     }

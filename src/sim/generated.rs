@@ -91,7 +91,7 @@ impl Quantity {
     ];
 
     /// Histogram range (values outside go to the end bins) and unit.
-    pub fn range(self) -> (f64, f64, &'static str) {
+    pub(crate) fn range(self) -> (f64, f64, &'static str) {
         match self {
             Quantity::SlipRatio | Quantity::SlipAngle => (0.0, 0.5, ""),
             Quantity::CombinedSlip => (0.0, 0.6, ""),
@@ -417,7 +417,7 @@ impl GeneratedEffect {
     }
 
     /// Form and scope in a word or two each, for grouping.
-    pub fn kind_label(&self) -> (&'static str, &'static str) {
+    pub(crate) fn kind_label(&self) -> (&'static str, &'static str) {
         let form = match self.form {
             Form::Onset { .. } => "onset",
             Form::Band { .. } => "band",
@@ -436,7 +436,7 @@ impl GeneratedEffect {
     }
 
     /// The quantities the simulator histograms for this effect (none, one or two).
-    pub fn quantities(&self) -> Vec<Quantity> {
+    pub(crate) fn quantities(&self) -> Vec<Quantity> {
         match self.form {
             Form::Onset { onset } => vec![onset.quantity],
             Form::Band { low, .. } => vec![low.quantity],
@@ -447,7 +447,7 @@ impl GeneratedEffect {
     }
 
     /// Length of a tire's histogram.
-    pub fn histogram_len(&self) -> usize {
+    pub(crate) fn histogram_len(&self) -> usize {
         match self.quantities().len() {
             0 => 1,
             1 => BINS_1D,
@@ -467,7 +467,7 @@ impl GeneratedEffect {
     /// Resolves the draw on a season of `cars` cars and its histograms
     /// (summed over every tire): the car, thresholds, widths and the power
     /// law's median.
-    pub fn resolve(&mut self, cars: usize, season: &[f64]) {
+    pub(crate) fn resolve(&mut self, cars: usize, season: &[f64]) {
         match &mut self.scope {
             Scope::Car { car } | Scope::CarAxle { car, .. } => *car %= cars.max(1),
             _ => {}
@@ -551,7 +551,7 @@ impl GeneratedEffect {
     /// magnitude 1: `unit`) has `variance_share` of the variance of
     /// `other + unit·m` (the rest of the wear): the positive root of
     /// m²·var(g)·(1 − s) − 2·s·cov(T, g)·m − s·var(T) = 0.
-    pub fn magnitude_for(&self, other: &[f64], unit: &[f64]) -> f64 {
+    pub(crate) fn magnitude_for(&self, other: &[f64], unit: &[f64]) -> f64 {
         let n = other.len() as f64;
         let mean = |v: &[f64]| v.iter().sum::<f64>() / n;
         let (mt, mg) = (mean(other), mean(unit));

@@ -49,7 +49,7 @@ pub(crate) struct TireTemps {
 
 impl ThermalParams {
     /// Heat flows (W) into the surface and inner nodes.
-    pub fn heat_flows(
+    pub(crate) fn heat_flows(
         &self,
         temps: TireTemps,
         friction_power_w: f64,

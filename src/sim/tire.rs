@@ -88,7 +88,7 @@ pub(crate) const FZ_NOMINAL: f64 = 4000.0;
 
 impl GripParams {
     /// Peak friction μ at surface temperature `t_c`, load `fz`, on a road of grip factor `road`.
-    pub fn mu(&self, t_c: f64, fz: f64, road: f64) -> f64 {
+    pub(crate) fn mu(&self, t_c: f64, fz: f64, road: f64) -> f64 {
         let dt = (t_c - self.t_opt_c) / self.window_c;
         let temp = (1.0 - 0.15 * dt * dt).max(0.8);
         let load = 1.0 - 0.1 * (fz / FZ_NOMINAL - 1.0);

@@ -47,12 +47,13 @@ pub struct TrackShape {
 }
 
 impl TrackShape {
-    pub fn length_m(&self) -> f64 {
+    pub(crate) fn length_m(&self) -> f64 {
         self.ds_m * self.curvature.len() as f64
     }
 
-    /// Net turning angle ∫κ ds (rad).
-    pub fn total_turning(&self) -> f64 {
+    /// Net turning angle ∫κ ds (rad): a closed track's is 2π.
+    #[cfg(test)]
+    pub(crate) fn total_turning(&self) -> f64 {
         self.curvature.iter().sum::<f64>() * self.ds_m
     }
 }
@@ -65,7 +66,7 @@ struct Corner {
 
 impl TrackDef {
     /// Builds the curvature profile on a grid of `ds_m`.
-    pub fn shape(&self, ds_m: f64) -> TrackShape {
+    pub(crate) fn shape(&self, ds_m: f64) -> TrackShape {
         let mut rng = ChaCha8Rng::seed_from_u64(self.seed);
         let mut corners: Vec<Corner> = (0..self.corners)
             .map(|_| {

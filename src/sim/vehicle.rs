@@ -53,7 +53,7 @@ pub struct WheelForces {
 
 impl CarParams {
     /// The reference single-seater; `variant` gives the cars of a team small differences.
-    pub fn single_seater(id: &str, name: &str, variant: f64) -> Self {
+    pub(crate) fn single_seater(id: &str, name: &str, variant: f64) -> Self {
         CarParams {
             id: id.into(),
             name: name.into(),
@@ -84,30 +84,30 @@ impl CarParams {
         }
     }
 
-    pub fn rolling_radius(&self, w: Wheel) -> f64 {
+    pub(crate) fn rolling_radius(&self, w: Wheel) -> f64 {
         self.rolling_radius_m[Self::axle(w)]
     }
 
-    pub fn tread_width(&self, w: Wheel) -> f64 {
+    pub(crate) fn tread_width(&self, w: Wheel) -> f64 {
         self.tread_width_mm[Self::axle(w)]
     }
 
-    pub fn track_width(&self, w: Wheel) -> f64 {
+    pub(crate) fn track_width(&self, w: Wheel) -> f64 {
         [self.front_track_m, self.rear_track_m][Self::axle(w)]
     }
 
-    pub fn downforce(&self, v: f64) -> f64 {
+    pub(crate) fn downforce(&self, v: f64) -> f64 {
         0.5 * AIR_DENSITY * self.cl_a_m2 * v * v
     }
 
-    pub fn drag(&self, v: f64) -> f64 {
+    pub(crate) fn drag(&self, v: f64) -> f64 {
         0.5 * AIR_DENSITY * self.cd_a_m2 * v * v
     }
 
     /// Vertical loads (N) at speed `v` with accelerations `ax`, `ay` (m/s²):
     /// static weight and downforce split by axle, longitudinal transfer
     /// `m·ax·h/L` and lateral transfer `m·ay·h/t` split by roll stiffness.
-    pub fn wheel_loads(&self, v: f64, ax: f64, ay: f64) -> [f64; 4] {
+    pub(crate) fn wheel_loads(&self, v: f64, ax: f64, ay: f64) -> [f64; 4] {
         let m = self.mass_kg;
         let df = self.downforce(v);
         let axle_static = [
@@ -136,7 +136,7 @@ impl CarParams {
     /// steady turn (`m·ay·b/L` front). On each axle both forces are split
     /// between the wheels by load (limited-slip differential, brakes that
     /// the driver modulates to the available grip).
-    pub fn wheel_forces(&self, v: f64, ax: f64, ay: f64) -> [WheelForces; 4] {
+    pub(crate) fn wheel_forces(&self, v: f64, ax: f64, ay: f64) -> [WheelForces; 4] {
         let m = self.mass_kg;
         let fz = self.wheel_loads(v, ax, ay);
         let fx_total = m * ax + self.drag(v);
@@ -170,7 +170,7 @@ impl CarParams {
     }
 
     /// Body roll (deg) at lateral acceleration `ay`; positive rolls to the right (outward in a left turn).
-    pub fn roll_deg(&self, ay: f64) -> f64 {
+    pub(crate) fn roll_deg(&self, ay: f64) -> f64 {
         self.roll_gradient_deg_per_g * ay / G
     }
 

@@ -123,7 +123,7 @@ pub(crate) struct TireWear {
 }
 
 impl TireWear {
-    pub fn total_pct(&self) -> f64 {
+    pub(crate) fn total_pct(&self) -> f64 {
         self.base_pct
             + self.irregular_pct
             + self.effect_pct.iter().sum::<f64>()
@@ -131,7 +131,7 @@ impl TireWear {
     }
 
     /// Wear (mm) at fraction `y` of the width from the inner edge.
-    pub fn wear_mm_at(&self, y: f64) -> f64 {
+    pub(crate) fn wear_mm_at(&self, y: f64) -> f64 {
         let to_mm = self.new_depth_mm / 100.0;
         let base = (1.0
             + self.camber_tilt * (1.0 - 2.0 * y)

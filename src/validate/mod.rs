@@ -26,7 +26,7 @@ mod score;
 
 pub use error::ValidateError;
 pub use render::render;
-pub use score::score_case;
+use score::score_case;
 
 use crate::gap::report::{Baseline, Diagnosis, GapSettings, diagnose};
 use crate::sim::{Effect, EffectKind, GeneratedEffect};

@@ -75,7 +75,7 @@ fn variance(v: &[f64]) -> f64 {
 }
 
 /// Scores a diagnosis of `rows` against the planted wear.
-pub fn score_case(
+pub(crate) fn score_case(
     planted_kind: &Planted,
     seed: u64,
     rows: &[KpiRow],

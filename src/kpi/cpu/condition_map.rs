@@ -268,7 +268,7 @@ const fn total_bins() -> usize {
 const _: () = assert!(CONDITION_BINS == total_bins());
 
 /// The conditions of pair `p` (indices into [`CONDITIONS`]).
-pub fn pair_conditions(p: usize) -> (usize, usize) {
+pub(crate) fn pair_conditions(p: usize) -> (usize, usize) {
     let index =
         |name| ConditionMaps::condition_index(name).expect("PAIRS name conditions (unit-tested)");
     (index(PAIRS[p].first), index(PAIRS[p].second))
@@ -484,7 +484,7 @@ impl Component {
         Component::Lateral,
     ];
     /// How candidate names call it: "energy", "longitudinal energy", "lateral energy".
-    pub fn energy_name(self) -> &'static str {
+    pub(crate) fn energy_name(self) -> &'static str {
         match self {
             Component::Total => "energy",
             Component::Longitudinal => "longitudinal energy",
