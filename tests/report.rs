@@ -43,25 +43,18 @@ fn the_demo_report_has_every_section_its_figures_and_no_external_url() {
     let (pca, _) = fit_method(Method::Pca, &s, &settings).unwrap();
     let (physical, _) = fit_method(Method::Physical, &s, &settings).unwrap();
     save_all(&[pca.clone(), physical.clone()], &dir.path().join("models")).unwrap();
-    let kpis = dir.path().join("kpis.parquet");
-    let maps = tirewear::kpi::energy_maps::read_tire_maps(&kpis).unwrap();
     let gap_settings = tirewear::gap::report::GapSettings {
         wlf: tirewear::ingest::compound::read_wlf(&dir.path().join("compounds")).unwrap(),
         ..Default::default()
     };
-    let d = tirewear::gap::report::diagnose(
-        &rows,
-        &maps,
-        &tirewear::gap::report::Baseline::Physics,
+    use tirewear::gap::report::{Baseline, diagnose_file, write_diagnosis};
+    let d = diagnose_file(
+        &dir.path().join("kpis.parquet"),
+        &Baseline::Physics,
         &gap_settings,
     )
     .unwrap();
-    std::fs::create_dir_all(dir.path().join("gap")).unwrap();
-    std::fs::write(
-        dir.path().join("gap/gap.json"),
-        serde_json::to_string(&d).unwrap(),
-    )
-    .unwrap();
+    write_diagnosis(&d, &dir.path().join("gap")).unwrap();
 
     let out = dir.path().join("report.html");
     let summary = tirewear::report::write_report(dir.path(), &out, None).unwrap();

@@ -201,12 +201,12 @@ pub(crate) fn run_gap(
     settings: &tirewear::gap::report::GapSettings,
     out: &std::path::Path,
 ) -> Result<()> {
-    use tirewear::gap::report::{Baseline, diagnose, render_markdown};
-    let rows = tirewear::kpi::table::read_parquet(kpis)?;
+    use tirewear::gap::report::{Baseline, diagnose_file, render_markdown, write_diagnosis};
     let base = if baseline == "physics" {
         Baseline::Physics
     } else if baseline.ends_with(".csv") {
         let p = tirewear::gap::report::Predictions::read(std::path::Path::new(baseline))?;
+        let rows = tirewear::kpi::table::read_parquet(kpis)?;
         let missing = rows
             .iter()
             .filter(|r| !p.wear_pct.contains_key(&r.tire_run()))
@@ -224,30 +224,11 @@ pub(crate) fn run_gap(
             .with_context(|| format!("{} against {baseline}", kpis.display()))?;
         Baseline::Model(Box::new(m))
     };
-    let maps = tirewear::kpi::energy_maps::read_tire_maps(kpis)?;
-    if maps.is_empty() {
-        tracing::warn!(
-            "{} not found: candidate effects and shrinkage are skipped",
-            tirewear::kpi::table::side_table_path(kpis, "energy_maps.parquet").display()
-        );
-    }
-    let d = diagnose(&rows, &maps, &base, settings)
+    let d = diagnose_file(kpis, &base, settings)
         .with_context(|| format!("diagnosing {}", kpis.display()))?;
     print!("{}", render_markdown(&d, 12));
-    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
-    tirewear::atomic::write_bytes(
-        &out.join("gap.json"),
-        serde_json::to_string_pretty(&d)?.as_bytes(),
-    )?;
-    tirewear::atomic::write_bytes(
-        &out.join("gap.md"),
-        render_markdown(&d, usize::MAX).as_bytes(),
-    )?;
-    println!(
-        "\nwrote {} and {}",
-        out.join("gap.json").display(),
-        out.join("gap.md").display()
-    );
+    let [json, md] = write_diagnosis(&d, out)?;
+    println!("\nwrote {} and {}", json.display(), md.display());
     Ok(())
 }
 

@@ -5,6 +5,7 @@
 
 use super::baseline::PhysicsBaseline;
 use super::candidates::{Candidate, Feature, LawRow, library};
+use super::error::GapError;
 use super::linear::weighted_fit;
 use super::recalibrate::Rows;
 pub use super::render::render_markdown;
@@ -253,6 +254,50 @@ impl Default for GapSettings {
             user_effects: Vec::new(),
         }
     }
+}
+
+/// Reads a KPI table and its energy and condition maps (missing maps leave
+/// the candidates and shrinkage out) and diagnoses it: what `tirewear gap`,
+/// `tirewear demo` and `process --then gap` run.
+pub fn diagnose_file(
+    kpis: &std::path::Path,
+    baseline: &Baseline,
+    settings: &GapSettings,
+) -> Result<Diagnosis, GapError> {
+    let rows = crate::kpi::table::read_parquet(kpis)?;
+    let maps = crate::kpi::energy_maps::read_tire_maps(kpis)?;
+    if maps.is_empty() {
+        tracing::warn!(
+            "{} not found: candidate effects and shrinkage are skipped",
+            crate::kpi::table::side_table_path(kpis, "energy_maps.parquet").display()
+        );
+    }
+    Ok(diagnose(&rows, &maps, baseline, settings)?)
+}
+
+/// Writes `OUT/gap.json` and `OUT/gap.md` (every slice), which become
+/// visible together; returns their paths.
+pub fn write_diagnosis(
+    d: &Diagnosis,
+    out: &std::path::Path,
+) -> Result<[std::path::PathBuf; 2], GapError> {
+    use std::io::Write;
+    let io = |path: &std::path::Path| {
+        let path = path.display().to_string();
+        move |source| GapError::Io { path, source }
+    };
+    std::fs::create_dir_all(out).map_err(io(out))?;
+    let paths = [out.join("gap.json"), out.join("gap.md")];
+    let json = serde_json::to_string_pretty(d).expect("a diagnosis serialises");
+    let md = super::render::render_markdown(d, usize::MAX);
+    let journal = out.join(".gap.journal");
+    let mut set = crate::atomic::OutputSet::new(&journal).map_err(io(&journal))?;
+    for (path, text) in paths.iter().zip([json, md]) {
+        set.add(path, |f| f.write_all(text.as_bytes()))
+            .map_err(io(path))?;
+    }
+    set.commit().map_err(io(out))?;
+    Ok(paths)
 }
 
 /// Runs the diagnosis on a KPI table: the gap's size and slices (step 1), the
