@@ -98,13 +98,27 @@ impl Feature {
             // with a season's handful of tracks, which index carries it
             // cannot be told apart (docs/gap.md).
             Feature::Kpi(c) if ROAD_KPIS.contains(c) => Some("road-abrasion"),
+            // A pair with a named mechanism's point on one side (surface
+            // above θ: thermal degradation; bulk below θ: graining) is that
+            // mechanism, acting only where the other condition holds too.
+            Feature::PairEnergy {
+                pair,
+                first_above,
+                second_above,
+            } => {
+                let (a, b) = pair_conditions(*pair);
+                NAMED_CONDITIONS.iter().find_map(|(name, above, f)| {
+                    let side = (CONDITIONS[a].name == *name && first_above == above)
+                        || (CONDITIONS[b].name == *name && second_above == above);
+                    side.then(|| f.mechanism()).flatten()
+                })
+            }
             Feature::FastSlidingEnergy
             | Feature::CamberEnergy
             | Feature::PressureEnergy
             | Feature::SmallPatchEnergy
             | Feature::Kpi(_)
             | Feature::ConditionEnergy { .. }
-            | Feature::PairEnergy { .. }
             | Feature::User
             | Feature::Group => None,
         }
@@ -1064,6 +1078,22 @@ mod tests {
         }
         let old_value = feature(named, &r, Some(&old), 23.0, KpiScale::NONE);
         assert!(old_value.is_nan());
+        // A named mechanism's point on one side names the pair's mechanism.
+        let quadrant = |name: &str, first_above, second_above| {
+            let pair = (0..N_PAIRS).find(|&p| pair_name(p) == name).unwrap();
+            Feature::PairEnergy {
+                pair,
+                first_above,
+                second_above,
+            }
+            .mechanism()
+        };
+        assert_eq!(quadrant("combined_slip:t_surface_c", true, true), Some("thermal"));
+        assert_eq!(quadrant("combined_slip:t_surface_c", true, false), None);
+        assert_eq!(quadrant("combined_slip:t_bulk_c", false, false), Some("graining"));
+        assert_eq!(quadrant("combined_slip:t_bulk_c", true, true), None);
+        // Sliding speed above is fast sliding, not a simulator mechanism.
+        assert_eq!(quadrant("sliding_speed_mps:t_surface_c", true, false), None);
         // Every pair and quadrant is a candidate on every scope.
         let cars = vec!["car1".to_string()];
         let generated = pair_candidates(&cars);
