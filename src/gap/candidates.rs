@@ -1088,9 +1088,15 @@ mod tests {
             }
             .mechanism()
         };
-        assert_eq!(quadrant("combined_slip:t_surface_c", true, true), Some("thermal"));
+        assert_eq!(
+            quadrant("combined_slip:t_surface_c", true, true),
+            Some("thermal")
+        );
         assert_eq!(quadrant("combined_slip:t_surface_c", true, false), None);
-        assert_eq!(quadrant("combined_slip:t_bulk_c", false, false), Some("graining"));
+        assert_eq!(
+            quadrant("combined_slip:t_bulk_c", false, false),
+            Some("graining")
+        );
         assert_eq!(quadrant("combined_slip:t_bulk_c", true, true), None);
         // Sliding speed above is fast sliding, not a simulator mechanism.
         assert_eq!(quadrant("sliding_speed_mps:t_surface_c", true, false), None);
