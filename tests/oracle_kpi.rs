@@ -161,3 +161,43 @@ fn road_indices_match_surfalize_and_scipy() {
         );
     }
 }
+
+/// The pair maps (docs/kpis.md, "Pair maps") against numpy: each wheel's
+/// energy binned by two conditions at once, computed by
+/// tests/oracles/read_our_mcap.py from the MCAP as Python `mcap` reads it,
+/// with the conditions' formulas and coarse bins transcribed from the docs.
+/// Both bin in f32 from the same f64 values, so every sample lands in the
+/// same cell; the tolerance (1e-9 of the wheel's |energy|, per cell) allows
+/// only for summation order.
+#[test]
+fn pair_maps_match_numpy() {
+    use tirewear::kpi::cpu::condition_map::{N_PAIRS, pair_name};
+    use tirewear::kpi::telemetry::wheel_condition_maps;
+    for fixture in ["tiny-sample", "tiny-block"] {
+        let run = read_telemetry(&root().join(format!("tests/fixtures/{fixture}.mcap"))).unwrap();
+        let g = golden(&format!("{fixture}.json"));
+        for w in Wheel::ALL {
+            let maps = wheel_condition_maps(&run.wheels[w.index()]).unwrap();
+            let want_maps = &g[w.topic()]["table4"]["pair_maps"];
+            for p in 0..N_PAIRS {
+                let name = pair_name(p);
+                let want: Vec<f64> = want_maps[&name]
+                    .as_array()
+                    .unwrap_or_else(|| panic!("{fixture} {w}: no '{name}' in the golden file"))
+                    .iter()
+                    .map(|v| v.as_f64().unwrap())
+                    .collect();
+                let got = maps.pair_map(p);
+                assert_eq!(got.len(), want.len(), "{name}");
+                let scale: f64 = want.iter().map(|e| e.abs()).sum();
+                assert!(scale > 0.0, "{fixture} {w} {name}: empty");
+                for (cell, (g_, w_)) in got.iter().zip(&want).enumerate() {
+                    assert!(
+                        (g_ - w_).abs() <= 1e-9 * scale,
+                        "{fixture} {w} {name} cell {cell}: {g_} vs {w_}"
+                    );
+                }
+            }
+        }
+    }
+}

@@ -350,6 +350,19 @@ pub fn wheel_indices(
     Ok((k, maps, p.report))
 }
 
+/// One wheel's condition and pair maps on the CPU (the twin of
+/// `shaders/condition_map.wgsl`), after the same cleaning as
+/// [`wheel_indices`]: what an independent reader checks them against.
+pub fn wheel_condition_maps(
+    s: &WheelSeries,
+) -> Result<crate::kpi::cpu::condition_map::ConditionMaps, String> {
+    use crate::kpi::cpu::condition_map::{condition_map, condition_maps_from_quanta};
+    let p = prepare_wheel(s)?;
+    let mut batch = ReduceBatch::default();
+    batch.push_wheel(&p.samples);
+    Ok(condition_maps_from_quanta(&condition_map(&batch)).remove(0))
+}
+
 /// Vehicle indices; samples with a non-finite or out-of-range value are skipped.
 pub(crate) fn vehicle_indices(v: &VehicleSeries) -> Result<VehicleIndices, String> {
     let ok = |x: f32, lo: f32, hi: f32| x.is_finite() && x >= lo && x <= hi;

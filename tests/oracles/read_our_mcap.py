@@ -94,6 +94,53 @@ def table4(s):
     out["camber_avg_deg"] = float(a["camber_deg"].mean())
     out["pressure_avg_pa"] = float(a["pressure_pa"].mean())
     out["contact_patch_mm2"] = float(np.mean(a["fz_n"] / (a["pressure_pa"] + 40000.0) * 1e6))
+    out["pair_maps"] = pair_maps(a, vsx, vsy, (px + py) * dt)
+    return out
+
+
+# The pair maps of docs/kpis.md ("Pair maps"), transcribed from the docs:
+# each condition's formula and its coarse bins (lo, width, 8 bins, clamped at
+# both ends, NaN to the first), binned in float32 as the docs say.
+COARSE = {
+    "slip_ratio": (-0.06, 0.015), "lateral_slip": (-0.06, 0.015), "combined_slip": (0.02, 0.01),
+    "sliding_speed_mps": (1.0, 0.5), "friction_utilisation": (1.0, 0.1), "t_surface_c": (45.0, 5.0),
+    "t_bulk_c": (65.0, 5.0), "relative_load": (0.5, 0.2), "camber_deg": (-4.0, 0.5),
+    "speed_mps": (24.0, 8.0),
+}
+PAIRS = [("combined_slip", "t_surface_c"), ("combined_slip", "t_bulk_c"),
+         ("sliding_speed_mps", "t_surface_c"), ("friction_utilisation", "t_surface_c"),
+         ("combined_slip", "relative_load"), ("slip_ratio", "relative_load"),
+         ("lateral_slip", "camber_deg"), ("combined_slip", "speed_mps")]
+
+
+def coarse_bin(x, name):
+    lo, width = COARSE[name]
+    i = (x.astype(np.float32) - np.float32(lo)) * np.float32(1.0 / width)
+    i = np.where(np.isnan(i), 0.0, np.floor(i))
+    return np.clip(i, 0, 7).astype(int)
+
+
+def pair_maps(a, vsx, vsy, energy_j):
+    v_ref = np.maximum(np.abs(a["vx_mps"]), 1.0)
+    v_s = np.sqrt(vsx * vsx + vsy * vsy)
+    mean_fz = max(a["fz_n"].mean(), 100.0)
+    cond = {
+        "slip_ratio": -vsx / v_ref,
+        "lateral_slip": vsy / v_ref,
+        "combined_slip": v_s / v_ref,
+        "sliding_speed_mps": v_s,
+        "friction_utilisation": np.hypot(a["fx_n"], a["fy_n"]) / np.maximum(a["fz_n"], 100.0),
+        "t_surface_c": a["t_surface_c"],
+        "t_bulk_c": 0.5 * (a["t_surface_c"] + a["t_inner_c"]),
+        # Stored as float32 by the host before binning (docs/kpis.md).
+        "relative_load": (a["fz_n"] / mean_fz).astype(np.float32).astype(np.float64),
+        "camber_deg": a["camber_deg"],
+        "speed_mps": a["vx_mps"],
+    }
+    out = {}
+    for first, second in PAIRS:
+        cell = coarse_bin(cond[first], first) * 8 + coarse_bin(cond[second], second)
+        out[f"{first}:{second}"] = np.bincount(cell, weights=energy_j, minlength=64).tolist()
     return out
 
 
