@@ -924,11 +924,10 @@ mod tests {
         }
     }
 
-    #[test]
-    fn pair_cell_of_one_sample_by_hand() {
-        // combined slip √(0.03² + 0.05²) = 0.0583 → coarse (0.0583 − 0.02)/0.01
-        // = 3.8 → 3; T_surface 91 °C → (91 − 45)/5 = 9.2 → last (7); cell 3·8 + 7 = 31.
-        let p = ReduceSample {
+    /// The hand-worked sample of the tests below: v_x 40, ω·r = 41.2 →
+    /// v_sx = −1.2; v_y = −2; F = (3000, −4000), F_z 4000; 91 °C and 104 °C.
+    fn sample_by_hand() -> ReduceSample {
+        ReduceSample {
             vx: 40.0,
             vy: -2.0,
             omega: 103.0,
@@ -938,8 +937,17 @@ mod tests {
             fz: 4000.0,
             t_surface: 91.0,
             t_inner: 104.0,
-            dt: 0.01,
             ..Default::default()
+        }
+    }
+
+    #[test]
+    fn pair_cell_of_one_sample_by_hand() {
+        // combined slip √(0.03² + 0.05²) = 0.0583 → coarse (0.0583 − 0.02)/0.01
+        // = 3.8 → 3; T_surface 91 °C → (91 − 45)/5 = 9.2 → last (7); cell 3·8 + 7 = 31.
+        let p = ReduceSample {
+            dt: 0.01,
+            ..sample_by_hand()
         };
         let mut batch = ReduceBatch::default();
         batch.push_wheel(&[p]);
@@ -967,15 +975,6 @@ mod tests {
         // v_x 40, ω·r = 41.2 → v_sx = −1.2, κ = 0.03; v_y = −2 → tan α = −0.05; |v_s| = √(1.44 + 4) = 2.332; F = (3000, −4000) → |F| = 5000,
         // F_z 4000 → μ-use 1.25.
         let p = ReduceSample {
-            vx: 40.0,
-            vy: -2.0,
-            omega: 103.0,
-            radius: 0.4,
-            fx: 3000.0,
-            fy: -4000.0,
-            fz: 4000.0,
-            t_surface: 91.0,
-            t_inner: 104.0,
             pressure: 172_000.0,
             camber: -3.1,
             t_surface_rate: 2.5,
@@ -983,7 +982,7 @@ mod tests {
             load_rel: 1.35,
             time_s: 700.0,
             distance_m: 31_000.0,
-            ..Default::default()
+            ..sample_by_hand()
         };
         let v = condition_values(&p);
         let close = |a: f64, b: f64| (a - b).abs() < 1e-5;
