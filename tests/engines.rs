@@ -10,9 +10,9 @@
 mod common;
 
 use tirewear::engine::{
-    CONDITION_MAP_TOLERANCE, CpuEngine, ENERGY_MAP_TOLERANCE, ROUGHNESS_TOLERANCE, ReduceEngine,
-    TELEMETRY_TOLERANCE, compare_condition_maps, compare_energy_maps, compare_roughness,
-    compare_telemetry, gpu_for_tests,
+    CONDITION_MAP_TOLERANCE, CpuEngine, ENERGY_MAP_TOLERANCE, PAIR_MAP_TOLERANCE,
+    ROUGHNESS_TOLERANCE, ReduceEngine, TELEMETRY_TOLERANCE, compare_condition_maps,
+    compare_energy_maps, compare_roughness, compare_telemetry, gpu_for_tests,
 };
 use tirewear::kpi::cpu::condition_map::{CONDITIONS, Component, ConditionMaps, N_PAIRS, pair_name};
 use tirewear::kpi::cpu::telemetry_reduce::{ReduceBatch, ReduceSample, merge};
@@ -137,12 +137,13 @@ fn full_length_run_matches_the_f64_reference() {
             e.name()
         );
         assert!(m <= ENERGY_MAP_TOLERANCE, "{}: {m}", e.name());
-        let c = compare_condition_maps(&CpuEngine, e.as_ref(), &batch).unwrap();
+        let (c, p) = compare_condition_maps(&CpuEngine, e.as_ref(), &batch).unwrap();
         eprintln!(
-            "{} engine: condition maps differ by {c:.2e} of the energy",
+            "{} engine: condition maps differ by {c:.2e} of the energy, pair maps by {p:.2e}",
             e.name()
         );
         assert!(c <= CONDITION_MAP_TOLERANCE, "{}: {c}", e.name());
+        assert!(p <= PAIR_MAP_TOLERANCE, "{}: pair maps {p}", e.name());
     }
 }
 
