@@ -290,6 +290,10 @@ fn kernel_lines(o: &BenchOptions, gpu: Option<&GpuEngine>, report: &mut BenchRep
 
     // Condition maps over the same samples.
     w.kernel = "condition_map";
+    let (d, _) = best(o.repeats, || {
+        one_thread(|| crate::kpi::cpu::condition_map::condition_map(&batch))
+    });
+    report.lines.push(w.line("cpu twin, 1 thread", d, None));
     let (d, _) = best(o.repeats, || one_thread(|| CpuEngine.condition_map(&batch)));
     report.lines.push(w.line("cpu, 1 thread", d, None));
     let (d, _) = best(o.repeats, || CpuEngine.condition_map(&batch));

@@ -4,7 +4,9 @@
 
 use crate::gpu::{GpuContext, GpuError, GpuTimings};
 use crate::ingest::road::Profile;
-use crate::kpi::cpu::condition_map::{ConditionMaps, condition_map, condition_maps_from_quanta};
+use crate::kpi::cpu::condition_map::{
+    ConditionMaps, condition_map_by_wheel, condition_maps_from_quanta,
+};
 use crate::kpi::cpu::energy_map::{energy_map, maps_from_quanta};
 use crate::kpi::cpu::telemetry_reduce::{ReduceBatch, SUMS, merge, telemetry_reduce};
 use crate::kpi::energy_maps::EnergyMaps;
@@ -85,7 +87,7 @@ impl ReduceEngine for CpuEngine {
         Ok(maps_from_quanta(&energy_map(batch)))
     }
     fn condition_map(&self, batch: &ReduceBatch) -> Result<Vec<ConditionMaps>, EngineError> {
-        Ok(condition_maps_from_quanta(&condition_map(batch)))
+        Ok(condition_maps_from_quanta(&condition_map_by_wheel(batch)))
     }
     fn roughness(&self, batch: &RoughnessBatch) -> Result<Vec<Spectral>, EngineError> {
         Ok(cpu_twins(batch))

@@ -267,24 +267,44 @@ const fn total_bins() -> usize {
 }
 const _: () = assert!(CONDITION_BINS == total_bins());
 
+/// Index of a condition by its side-table name, at compile time (a
+/// [`PAIRS`] name that is not a condition fails the build).
+const fn condition_at(name: &str) -> usize {
+    let mut c = 0;
+    while c < N_CONDITIONS {
+        let (a, b) = (CONDITIONS[c].name.as_bytes(), name.as_bytes());
+        if a.len() == b.len() {
+            let mut k = 0;
+            while k < a.len() && a[k] == b[k] {
+                k += 1;
+            }
+            if k == a.len() {
+                return c;
+            }
+        }
+        c += 1;
+    }
+    panic!("a PAIRS name is not a condition")
+}
+
 /// The conditions of pair `p` (indices into [`CONDITIONS`]).
-pub(crate) fn pair_conditions(p: usize) -> (usize, usize) {
-    let index =
-        |name| ConditionMaps::condition_index(name).expect("PAIRS name conditions (unit-tested)");
-    (index(PAIRS[p].first), index(PAIRS[p].second))
+pub(crate) const fn pair_conditions(p: usize) -> (usize, usize) {
+    (condition_at(PAIRS[p].first), condition_at(PAIRS[p].second))
 }
 
 /// Cells of pair `p`'s map.
-fn pair_cells(p: usize) -> usize {
+const fn pair_cells(p: usize) -> usize {
     let (a, b) = pair_conditions(p);
     CONDITIONS[a].coarse.n * CONDITIONS[b].coarse.n
 }
 
 /// First cell of each pair within the pair cells.
-fn pair_offsets() -> [usize; N_PAIRS] {
+const fn pair_offsets() -> [usize; N_PAIRS] {
     let mut o = [0; N_PAIRS];
-    for p in 1..N_PAIRS {
+    let mut p = 1;
+    while p < N_PAIRS {
         o[p] = o[p - 1] + pair_cells(p - 1);
+        p += 1;
     }
     o
 }
@@ -316,28 +336,54 @@ pub struct ConditionBins {
     pub value: u32,
 }
 
+/// Entries of [`CONDITION_TABLE`]: one per condition, two per pair.
+pub(crate) const TABLE_LEN: usize = N_CONDITIONS + 2 * N_PAIRS;
+
 /// The table the GPU engine uploads (binding 2): one entry per condition's
 /// 1-D map, in [`CONDITIONS`] order, then two per pair of [`PAIRS`] (its
 /// first condition's coarse bins with the pair's offset, then its second's).
-pub(crate) fn condition_table() -> Vec<ConditionBins> {
-    let entry = |bins: &Bins, offset: usize, value: usize| ConditionBins {
+/// A constant, so that the CPU routes bin with folded constants.
+pub(crate) const CONDITION_TABLE: [ConditionBins; TABLE_LEN] = condition_table_at_build();
+
+const fn table_entry(bins: &Bins, offset: usize, value: usize) -> ConditionBins {
+    ConditionBins {
         lo: bins.lo as f32,
         inv_width: (1.0 / bins.width) as f32,
         n: bins.n as u32,
         offset: offset as u32,
         value: value as u32,
+    }
+}
+
+const fn condition_table_at_build() -> [ConditionBins; TABLE_LEN] {
+    let zero = ConditionBins {
+        lo: 0.0,
+        inv_width: 0.0,
+        n: 0,
+        offset: 0,
+        value: 0,
     };
-    let mut out: Vec<ConditionBins> = offsets()
-        .iter()
-        .enumerate()
-        .map(|(c, &o)| entry(&CONDITIONS[c].bins, o, c))
-        .collect();
-    for (p, o) in pair_offsets().iter().enumerate() {
+    let mut out = [zero; TABLE_LEN];
+    let o = offsets();
+    let mut c = 0;
+    while c < N_CONDITIONS {
+        out[c] = table_entry(&CONDITIONS[c].bins, o[c], c);
+        c += 1;
+    }
+    let po = pair_offsets();
+    let mut p = 0;
+    while p < N_PAIRS {
         let (a, b) = pair_conditions(p);
-        out.push(entry(&CONDITIONS[a].coarse, *o, a));
-        out.push(entry(&CONDITIONS[b].coarse, 0, b));
+        out[N_CONDITIONS + 2 * p] = table_entry(&CONDITIONS[a].coarse, po[p], a);
+        out[N_CONDITIONS + 2 * p + 1] = table_entry(&CONDITIONS[b].coarse, 0, b);
+        p += 1;
     }
     out
+}
+
+/// [`CONDITION_TABLE`] as the GPU engine uploads it and the twin reads it.
+pub(crate) fn condition_table() -> Vec<ConditionBins> {
+    CONDITION_TABLE.to_vec()
 }
 
 impl ConditionBins {
@@ -356,10 +402,12 @@ impl ConditionBins {
 }
 
 /// First bin of each condition within a component.
-fn offsets() -> [usize; N_CONDITIONS] {
+const fn offsets() -> [usize; N_CONDITIONS] {
     let mut o = [0; N_CONDITIONS];
-    for c in 1..N_CONDITIONS {
+    let mut c = 1;
+    while c < N_CONDITIONS {
         o[c] = o[c - 1] + CONDITIONS[c - 1].bins.n;
+        c += 1;
     }
     o
 }
@@ -394,6 +442,18 @@ pub(crate) fn condition_values(p: &ReduceSample) -> [f64; N_CONDITIONS] {
     ]
 }
 
+/// A sample's friction energy as quanta: total, longitudinal, lateral.
+#[inline(always)]
+fn sample_quanta(p: &ReduceSample) -> [u64; COMPONENTS] {
+    let f = |x: f32| x as f64;
+    let dt = f(p.dt) + f(p.dt_lo);
+    let v_sx = f(p.vx) - f(p.omega) * f(p.radius); // eq. 21
+    let v_sy = f(p.vy); // eq. 22
+    let e_x = -f(p.fx) * v_sx * dt; // eq. 23
+    let e_y = -f(p.fy) * v_sy * dt; // eq. 24
+    [to_quanta(e_x + e_y), to_quanta(e_x), to_quanta(e_y)]
+}
+
 fn workgroup(batch: &ReduceBatch, chunk: &ReduceChunk, table: &[ConditionBins], maps: &mut [u64]) {
     let count = chunk.count as usize;
     // Phase 0.
@@ -404,13 +464,7 @@ fn workgroup(batch: &ReduceBatch, chunk: &ReduceChunk, table: &[ConditionBins], 
             let j = lid + k * WG_SIZE;
             if j < count {
                 let p = &batch.samples[chunk.start as usize + j];
-                let f = |x: f32| x as f64;
-                let dt = f(p.dt) + f(p.dt_lo);
-                let v_sx = f(p.vx) - f(p.omega) * f(p.radius); // eq. 21
-                let v_sy = f(p.vy); // eq. 22
-                let e_x = -f(p.fx) * v_sx * dt; // eq. 23
-                let e_y = -f(p.fy) * v_sy * dt; // eq. 24
-                let q = [to_quanta(e_x + e_y), to_quanta(e_x), to_quanta(e_y)];
+                let q = sample_quanta(p);
                 let values = condition_values(p);
                 for t in &table[..N_CONDITIONS] {
                     let b = t.offset as usize + t.index(values[t.value as usize]);
@@ -439,6 +493,122 @@ fn workgroup(batch: &ReduceBatch, chunk: &ReduceChunk, table: &[ConditionBins], 
 pub fn condition_map(batch: &ReduceBatch) -> Vec<u64> {
     let table = condition_table();
     per_wheel_sums(batch, MAP_BINS, |c, maps| workgroup(batch, c, &table, maps))
+}
+
+/// The CPU engine's route to [`condition_map`]'s sums, equal to them bit
+/// for bit (integer sums are exact in any order; tested against the twin):
+/// one private histogram per wheel rather than one per chunk of 1 024
+/// samples, a bin's three components side by side in one cache line, and
+/// the bin table a constant the compiler folds into the loop. The twin
+/// stays the shader's mirror and the reference in the parity tests.
+pub(crate) fn condition_map_by_wheel(batch: &ReduceBatch) -> Vec<u64> {
+    use rayon::prelude::*;
+    let mut out = vec![0u64; batch.wheels() * MAP_BINS];
+    out.par_chunks_mut(MAP_BINS)
+        .enumerate()
+        .for_each(|(w, maps)| {
+            let mut h = WheelHistogram::default();
+            for c in batch.chunks.iter().filter(|c| c.wheel as usize == w) {
+                h.add(&batch.samples[c.start as usize..(c.start + c.count) as usize]);
+            }
+            h.write_to(maps);
+        });
+    out
+}
+
+/// One wheel's private histogram of quanta: [bin][component] for the 1-D
+/// maps, then the pair cells (total only).
+struct WheelHistogram {
+    one_d: Vec<[u64; COMPONENTS]>,
+    pairs: Vec<u64>,
+}
+
+impl Default for WheelHistogram {
+    fn default() -> Self {
+        WheelHistogram {
+            one_d: vec![[0; COMPONENTS]; CONDITION_BINS],
+            pairs: vec![0; PAIR_BINS],
+        }
+    }
+}
+
+/// [`CONDITION_TABLE`] split into columns for [`WheelHistogram::add`],
+/// whose loops over them the compiler vectorises: the bins' lower edges,
+/// inverse widths, last bins (as f32, exact) and offsets.
+struct TableColumns {
+    lo: [f32; TABLE_LEN],
+    inv_width: [f32; TABLE_LEN],
+    last: [f32; TABLE_LEN],
+    offset: [u32; TABLE_LEN],
+    /// Which condition value each entry bins.
+    value: [usize; TABLE_LEN],
+}
+
+const COLUMNS: TableColumns = {
+    let mut c = TableColumns {
+        lo: [0.0; TABLE_LEN],
+        inv_width: [0.0; TABLE_LEN],
+        last: [0.0; TABLE_LEN],
+        offset: [0; TABLE_LEN],
+        value: [0; TABLE_LEN],
+    };
+    let mut k = 0;
+    while k < TABLE_LEN {
+        let t = &CONDITION_TABLE[k];
+        c.lo[k] = t.lo;
+        c.inv_width[k] = t.inv_width;
+        c.last[k] = (t.n - 1) as f32;
+        c.offset[k] = t.offset;
+        c.value[k] = t.value as usize;
+        k += 1;
+    }
+    c
+};
+
+impl WheelHistogram {
+    #[allow(clippy::needless_range_loop)] // k indexes the table's columns in lockstep
+    fn add(&mut self, samples: &[ReduceSample]) {
+        let t = &COLUMNS;
+        for p in samples {
+            let q = sample_quanta(p);
+            let values = condition_values(p).map(|v| v as f32);
+            // Every entry's bin as `ConditionBins::index` takes it: for
+            // i ≥ 0, ⌊min(i, n − 1)⌋ = min(⌊i⌋, n − 1); below 0 and NaN
+            // (f32::max drops a NaN), 0.
+            let mut x = [0f32; TABLE_LEN];
+            x[..N_CONDITIONS].copy_from_slice(&values);
+            for k in N_CONDITIONS..TABLE_LEN {
+                x[k] = values[t.value[k]];
+            }
+            let mut bin = [0u32; TABLE_LEN];
+            for k in 0..TABLE_LEN {
+                let i = (x[k] - t.lo[k]) * t.inv_width[k];
+                bin[k] = i.max(0.0).min(t.last[k]) as u32;
+            }
+            for k in 0..N_CONDITIONS {
+                let cell = &mut self.one_d[(t.offset[k] + bin[k]) as usize];
+                for (slot, &qm) in cell.iter_mut().zip(&q) {
+                    *slot = slot.wrapping_add(qm);
+                }
+            }
+            for k in 0..N_PAIRS {
+                let (a, b) = (N_CONDITIONS + 2 * k, N_CONDITIONS + 2 * k + 1);
+                let n_b = CONDITION_TABLE[b].n;
+                let slot = &mut self.pairs[(t.offset[a] + bin[a] * n_b + bin[b]) as usize];
+                *slot = slot.wrapping_add(q[0]);
+            }
+        }
+    }
+
+    /// The sums in the twin's layout (`MAP_BINS` per wheel).
+    fn write_to(&self, maps: &mut [u64]) {
+        for (b, cell) in self.one_d.iter().enumerate() {
+            for (m, &v) in cell.iter().enumerate() {
+                maps[m * CONDITION_BINS + b] = v;
+            }
+        }
+        maps[COMPONENTS * CONDITION_BINS..].copy_from_slice(&self.pairs);
+    }
 }
 
 /// One tire and run's condition maps (J per bin): for each component, the
@@ -901,6 +1071,57 @@ mod tests {
         let last = &t[N_CONDITIONS + 2 * (N_PAIRS - 1)..];
         assert_eq!(last[0].offset + last[0].n * last[1].n, PAIR_BINS as u32);
         assert_eq!((0..N_PAIRS).map(pair_cells).sum::<usize>(), PAIR_BINS);
+    }
+
+    /// The CPU engine's route sums exactly what the twin sums: random
+    /// samples spread over every bin and past both ends, edge values,
+    /// NaN and infinities, negative energies, wheels of one sample, of
+    /// several chunks, and none.
+    #[test]
+    fn route_by_wheel_equals_the_twin_bit_for_bit() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(16);
+        let odd = |rng: &mut rand_chacha::ChaCha8Rng, lo: f32, hi: f32| -> f32 {
+            match rng.random_range(0..40) {
+                0 => f32::NAN,
+                1 => f32::INFINITY,
+                2 => f32::NEG_INFINITY,
+                3 => -0.0,
+                _ => rng.random_range(lo..hi),
+            }
+        };
+        let sample = |rng: &mut rand_chacha::ChaCha8Rng| ReduceSample {
+            vx: odd(rng, -5.0, 110.0),
+            vy: odd(rng, -6.0, 6.0),
+            omega: odd(rng, 0.0, 330.0),
+            radius: 0.33,
+            fx: odd(rng, -9e3, 9e3),
+            fy: odd(rng, -9e3, 9e3),
+            fz: odd(rng, -500.0, 14e3),
+            t_surface: odd(rng, 0.0, 160.0),
+            t_inner: odd(rng, 20.0, 180.0),
+            pressure: odd(rng, 90e3, 260e3),
+            // A camber logged on a bin edge.
+            camber: if rng.random_bool(0.3) {
+                -1.5
+            } else {
+                odd(rng, -7.0, 1.0)
+            },
+            t_surface_rate: odd(rng, -20.0, 20.0),
+            t_inner_rate: odd(rng, -2.0, 2.0),
+            load_rel: odd(rng, 0.0, 3.5),
+            time_s: odd(rng, 0.0, 4000.0),
+            distance_m: odd(rng, 0.0, 160e3),
+            dt: rng.random_range(0.0..0.1),
+            dt_lo: rng.random_range(-1e-9..1e-9),
+        };
+        let mut batch = ReduceBatch::default();
+        use super::super::telemetry_reduce::CHUNK;
+        for n in [3000, 1, 0, 2 * CHUNK + 17, 5000] {
+            let samples: Vec<_> = (0..n).map(|_| sample(&mut rng)).collect();
+            batch.push_wheel(&samples);
+        }
+        assert_eq!(condition_map_by_wheel(&batch), condition_map(&batch));
     }
 
     #[test]
