@@ -115,6 +115,40 @@ impl Moments {
     }
 }
 
+/// Whether a logged value lies in its channel's range (finite, lo ≤ v ≤ hi).
+fn in_bounds(v: f32, lo: f64, hi: f64) -> bool {
+    let v = v as f64;
+    v.is_finite() && v >= lo && v <= hi
+}
+
+/// A range's bounds as f32: the least f32 ≥ lo and the greatest ≤ hi, so
+/// that for every f32 v, lo ≤ v ≤ hi in f64 ⇔ lo₃₂ ≤ v ≤ hi₃₂ in f32 (and
+/// NaN and ±∞ fail both: the bounds are finite).
+fn f32_bounds(lo: f64, hi: f64) -> (f32, f32) {
+    let (mut l, mut h) = (lo as f32, hi as f32);
+    if (l as f64) < lo {
+        l = l.next_up();
+    }
+    if (h as f64) > hi {
+        h = h.next_down();
+    }
+    (l, h)
+}
+
+/// Whether each sample has every channel in its range ([`in_bounds`]): one
+/// pass per channel in f32, which the compiler vectorises (a pass per
+/// sample with a branch per channel took most of the cleaning's time).
+fn in_range(channels: &[&[f32]; 11]) -> Vec<bool> {
+    let mut ok = vec![true; channels[0].len()];
+    for ((_, lo, hi), col) in WHEEL_RANGES.iter().zip(channels) {
+        let (lo, hi) = f32_bounds(*lo, *hi);
+        for (o, &v) in ok.iter_mut().zip(*col) {
+            *o &= (v >= lo) & (v <= hi);
+        }
+    }
+    ok
+}
+
 /// Indices of kept samples and, for each, the time (s) it stands for.
 fn clean(
     s: &WheelSeries,
@@ -122,24 +156,27 @@ fn clean(
     report: &mut CleaningReport,
 ) -> Vec<(usize, f64)> {
     report.samples = s.len() as u64;
+    let valid = in_range(channels);
     let mut kept: Vec<usize> = Vec::with_capacity(s.len());
     let mut last_t: Option<u64> = None;
-    #[allow(clippy::needless_range_loop)] // i indexes the time and all eleven channel columns
-    'samples: for i in 0..s.len() {
-        if let Some(t) = last_t
-            && s.time_ns[i] <= t
+    for (i, (&t, &ok)) in s.time_ns.iter().zip(&valid).enumerate() {
+        if let Some(last) = last_t
+            && t <= last
         {
             report.time_backwards += 1;
             continue;
         }
-        for (c, (_, lo, hi)) in WHEEL_RANGES.iter().enumerate() {
-            let v = channels[c][i] as f64;
-            if !(v.is_finite() && v >= *lo && v <= *hi) {
-                report.invalid_per_channel[c] += 1;
-                continue 'samples;
-            }
+        if !ok {
+            // The first channel out of its range is the one counted.
+            let c = WHEEL_RANGES
+                .iter()
+                .zip(channels)
+                .position(|((_, lo, hi), col)| !in_bounds(col[i], *lo, *hi))
+                .expect("a sample not in range has a channel out of range");
+            report.invalid_per_channel[c] += 1;
+            continue;
         }
-        last_t = Some(s.time_ns[i]);
+        last_t = Some(t);
         kept.push(i);
     }
     report.kept = kept.len() as u64;
@@ -211,9 +248,9 @@ pub(crate) fn prepare_wheel(s: &WheelSeries) -> Result<PreparedWheel, String> {
             report.kept, report.samples, report.time_backwards
         ));
     }
-    let derived = derived_conditions(s, &kept);
     let mut samples = Vec::with_capacity(kept.len());
-    for (&(i, dt), d) in kept.iter().zip(derived) {
+    for_each_derived(s, &kept, |k, d| {
+        let (i, dt) = kept[k];
         let (dt_hi, dt_lo) = ReduceSample::split_dt(dt);
         samples.push(ReduceSample {
             vx: s.vx_mps[i],
@@ -235,7 +272,7 @@ pub(crate) fn prepare_wheel(s: &WheelSeries) -> Result<PreparedWheel, String> {
             dt: dt_hi,
             dt_lo,
         });
-    }
+    });
     Ok(PreparedWheel { samples, report })
 }
 
@@ -263,10 +300,23 @@ pub(crate) struct DerivedConditions {
 
 /// [`DerivedConditions`] of each kept sample (`kept` from the cleaning
 /// rule: strictly increasing times).
+#[cfg(test)]
 pub(crate) fn derived_conditions(s: &WheelSeries, kept: &[(usize, f64)]) -> Vec<DerivedConditions> {
+    let mut out = Vec::with_capacity(kept.len());
+    for_each_derived(s, kept, |_, d| out.push(d));
+    out
+}
+
+/// Calls `emit(k, conditions)` for each kept sample k in order (what
+/// [`derived_conditions`] collects, without the vector).
+fn for_each_derived(
+    s: &WheelSeries,
+    kept: &[(usize, f64)],
+    mut emit: impl FnMut(usize, DerivedConditions),
+) {
     use super::cpu::condition_map::LOAD_FLOOR_N;
     let Some(&(first, _)) = kept.first() else {
-        return Vec::new();
+        return;
     };
     let time = |k: usize| s.time_ns[kept[k].0];
     let half_ns = (RATE_HALF_WINDOW_S * 1e9) as u64;
@@ -280,7 +330,6 @@ pub(crate) fn derived_conditions(s: &WheelSeries, kept: &[(usize, f64)]) -> Vec<
         (c[kept[hi].0] as f64 - c[kept[lo].0] as f64) / span_s
     };
     let (mut lo, mut hi, mut distance) = (0usize, 0usize, 0.0f64);
-    let mut out = Vec::with_capacity(kept.len());
     for (k, &(i, dt)) in kept.iter().enumerate() {
         let t = time(k);
         while time(lo) + half_ns < t {
@@ -289,16 +338,18 @@ pub(crate) fn derived_conditions(s: &WheelSeries, kept: &[(usize, f64)]) -> Vec<
         while hi + 1 < kept.len() && time(hi + 1) <= t + half_ns {
             hi += 1;
         }
-        out.push(DerivedConditions {
-            t_surface_rate: rate(&s.t_surface_c, lo, hi),
-            t_inner_rate: rate(&s.t_inner_c, lo, hi),
-            load_rel: s.fz_n[i] as f64 / load_ref,
-            time_s: (t - s.time_ns[first]) as f64 / 1e9,
-            distance_m: distance,
-        });
+        emit(
+            k,
+            DerivedConditions {
+                t_surface_rate: rate(&s.t_surface_c, lo, hi),
+                t_inner_rate: rate(&s.t_inner_c, lo, hi),
+                load_rel: s.fz_n[i] as f64 / load_ref,
+                time_s: (t - s.time_ns[first]) as f64 / 1e9,
+                distance_m: distance,
+            },
+        );
         distance += s.vx_mps[i] as f64 * dt;
     }
-    out
 }
 
 /// Table 4 indices from a wheel's merged sums.
@@ -390,6 +441,26 @@ pub(crate) fn vehicle_indices(v: &VehicleSeries) -> Result<VehicleIndices, Strin
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The f32 range test keeps exactly the values the f64 one keeps: at
+    /// and next to every bound (0.1 is not an f32), and NaN and ±∞.
+    #[test]
+    fn f32_range_test_is_the_f64_one() {
+        for (name, lo, hi) in WHEEL_RANGES {
+            let (l, h) = f32_bounds(lo, hi);
+            let mut probes = vec![f32::NAN, f32::INFINITY, f32::NEG_INFINITY, 0.0, -0.0];
+            for b in [lo as f32, hi as f32] {
+                let mut x = b.next_down().next_down();
+                for _ in 0..5 {
+                    probes.push(x);
+                    x = x.next_up();
+                }
+            }
+            for v in probes {
+                assert_eq!((v >= l) & (v <= h), in_bounds(v, lo, hi), "{name}: {v:e}");
+            }
+        }
+    }
 
     /// Constant slip: every quantity by hand.
     fn constant_series(n: usize, period_ns: u64) -> WheelSeries {
