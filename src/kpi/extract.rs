@@ -254,7 +254,6 @@ fn run_rows(
     };
     out.bytes = std::fs::metadata(&path).map(|m| m.len()).unwrap_or(0);
     // Clean every wheel, then reduce the run's four wheels in one batch.
-    let mut batch = ReduceBatch::default();
     let mut prepared = Vec::with_capacity(4);
     for w in Wheel::ALL {
         let series = &tel.wheels[w.index()];
@@ -268,8 +267,15 @@ fn run_rows(
         out.samples += series.len() as u64;
         let p = prepare_wheel(series)
             .map_err(|e| format!("{}: topic {}: {e}", path.display(), w.topic()))?;
-        batch.push_wheel(&p.samples);
         prepared.push(p);
+    }
+    // Sized once: growing it wheel by wheel copied the samples again.
+    let mut batch = ReduceBatch::default();
+    batch
+        .samples
+        .reserve_exact(prepared.iter().map(|p| p.samples.len()).sum());
+    for p in &prepared {
+        batch.push_wheel(&p.samples);
     }
     let all = engine
         .reductions(&batch)
