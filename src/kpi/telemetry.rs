@@ -115,15 +115,10 @@ impl Moments {
     }
 }
 
-/// Whether a logged value lies in its channel's range (finite, lo ≤ v ≤ hi).
-fn in_bounds(v: f32, lo: f64, hi: f64) -> bool {
-    let v = v as f64;
-    v.is_finite() && v >= lo && v <= hi
-}
-
 /// A range's bounds as f32: the least f32 ≥ lo and the greatest ≤ hi, so
 /// that for every f32 v, lo ≤ v ≤ hi in f64 ⇔ lo₃₂ ≤ v ≤ hi₃₂ in f32 (and
-/// NaN and ±∞ fail both: the bounds are finite).
+/// NaN and ±∞ fail both: the bounds are finite). A logged value is valid
+/// when it is finite and within its channel's range in f64.
 fn f32_bounds(lo: f64, hi: f64) -> (f32, f32) {
     let (mut l, mut h) = (lo as f32, hi as f32);
     if (l as f64) < lo {
@@ -135,15 +130,20 @@ fn f32_bounds(lo: f64, hi: f64) -> (f32, f32) {
     (l, h)
 }
 
-/// Whether each sample has every channel in its range ([`in_bounds`]): one
-/// pass per channel in f32, which the compiler vectorises (a pass per
-/// sample with a branch per channel took most of the cleaning's time).
-fn in_range(channels: &[&[f32]; 11]) -> Vec<bool> {
+/// Whether a value lies within f32 bounds from [`f32_bounds`].
+#[inline(always)]
+fn within(v: f32, (lo, hi): (f32, f32)) -> bool {
+    (v >= lo) & (v <= hi)
+}
+
+/// Whether each sample has every channel within its `bounds`: one pass
+/// per channel, which the compiler vectorises (a pass per sample with a
+/// branch per channel took most of the cleaning's time).
+fn in_range(channels: &[&[f32]; 11], bounds: &[(f32, f32); 11]) -> Vec<bool> {
     let mut ok = vec![true; channels[0].len()];
-    for ((_, lo, hi), col) in WHEEL_RANGES.iter().zip(channels) {
-        let (lo, hi) = f32_bounds(*lo, *hi);
+    for (&b, col) in bounds.iter().zip(channels) {
         for (o, &v) in ok.iter_mut().zip(*col) {
-            *o &= (v >= lo) & (v <= hi);
+            *o &= within(v, b);
         }
     }
     ok
@@ -156,7 +156,8 @@ fn clean(
     report: &mut CleaningReport,
 ) -> Vec<(usize, f64)> {
     report.samples = s.len() as u64;
-    let valid = in_range(channels);
+    let bounds = WHEEL_RANGES.map(|(_, lo, hi)| f32_bounds(lo, hi));
+    let valid = in_range(channels, &bounds);
     let mut kept: Vec<usize> = Vec::with_capacity(s.len());
     let mut last_t: Option<u64> = None;
     for (i, (&t, &ok)) in s.time_ns.iter().zip(&valid).enumerate() {
@@ -167,12 +168,13 @@ fn clean(
             continue;
         }
         if !ok {
-            // The first channel out of its range is the one counted.
-            let c = WHEEL_RANGES
+            // The first channel out of its range is the one counted (the
+            // same test as the mask's, so there is one).
+            let c = bounds
                 .iter()
                 .zip(channels)
-                .position(|((_, lo, hi), col)| !in_bounds(col[i], *lo, *hi))
-                .expect("a sample not in range has a channel out of range");
+                .position(|(&b, col)| !within(col[i], b))
+                .unwrap_or(0);
             report.invalid_per_channel[c] += 1;
             continue;
         }
@@ -444,6 +446,12 @@ mod tests {
 
     /// The f32 range test keeps exactly the values the f64 one keeps: at
     /// and next to every bound (0.1 is not an f32), and NaN and ±∞.
+    /// The rule in f64: finite and lo ≤ v ≤ hi.
+    fn in_bounds(v: f32, lo: f64, hi: f64) -> bool {
+        let v = v as f64;
+        v.is_finite() && v >= lo && v <= hi
+    }
+
     #[test]
     fn f32_range_test_is_the_f64_one() {
         for (name, lo, hi) in WHEEL_RANGES {
@@ -457,7 +465,7 @@ mod tests {
                 }
             }
             for v in probes {
-                assert_eq!((v >= l) & (v <= h), in_bounds(v, lo, hi), "{name}: {v:e}");
+                assert_eq!(within(v, (l, h)), in_bounds(v, lo, hi), "{name}: {v:e}");
             }
         }
     }

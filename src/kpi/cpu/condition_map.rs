@@ -267,9 +267,9 @@ const fn total_bins() -> usize {
 }
 const _: () = assert!(CONDITION_BINS == total_bins());
 
-/// Index of a condition by its side-table name, at compile time (a
-/// [`PAIRS`] name that is not a condition fails the build).
-const fn condition_at(name: &str) -> usize {
+/// Index of a condition by its side-table name (a const fn, so that the
+/// pairs' conditions are found at compile time).
+const fn condition_named(name: &str) -> Option<usize> {
     let mut c = 0;
     while c < N_CONDITIONS {
         let (a, b) = (CONDITIONS[c].name.as_bytes(), name.as_bytes());
@@ -279,12 +279,21 @@ const fn condition_at(name: &str) -> usize {
                 k += 1;
             }
             if k == a.len() {
-                return c;
+                return Some(c);
             }
         }
         c += 1;
     }
-    panic!("a PAIRS name is not a condition")
+    None
+}
+
+/// [`condition_named`] for the [`PAIRS`] table: a name that is not a
+/// condition fails the build.
+const fn condition_at(name: &str) -> usize {
+    match condition_named(name) {
+        Some(c) => c,
+        None => panic!("a PAIRS name is not a condition"),
+    }
 }
 
 /// The conditions of pair `p` (indices into [`CONDITIONS`]).
@@ -390,15 +399,17 @@ impl ConditionBins {
     /// The bin of a value (the shader's `bin_index`): the value is rounded
     /// to f32 first, then binned in f32.
     pub fn index(&self, x: f64) -> usize {
-        let i = (x as f32 - self.lo) * self.inv_width;
-        // For i ≥ 0 truncation is the shader's floor (and needs no SSE4.1
-        // libcall); below 0 and NaN go to bin 0.
-        if i >= 0.0 {
-            (i as usize).min(self.n as usize - 1)
-        } else {
-            0
-        }
+        bin_of(x as f32, self.lo, self.inv_width, (self.n - 1) as f32) as usize
     }
+}
+
+/// ⌊(x − lo)·inv_width⌋ clamped to 0..=last, NaN to 0, in f32. For i ≥ 0,
+/// ⌊min(i, last)⌋ = min(⌊i⌋, last), and truncation is the shader's floor
+/// (without the SSE4.1 libcall floor would be); `f32::max` drops a NaN.
+/// Branch-free, so that the CPU route's loop over the table vectorises.
+#[inline(always)]
+fn bin_of(x: f32, lo: f32, inv_width: f32, last: f32) -> u32 {
+    ((x - lo) * inv_width).max(0.0).min(last) as u32
 }
 
 /// First bin of each condition within a component.
@@ -572,9 +583,6 @@ impl WheelHistogram {
         for p in samples {
             let q = sample_quanta(p);
             let values = condition_values(p).map(|v| v as f32);
-            // Every entry's bin as `ConditionBins::index` takes it: for
-            // i ≥ 0, ⌊min(i, n − 1)⌋ = min(⌊i⌋, n − 1); below 0 and NaN
-            // (f32::max drops a NaN), 0.
             let mut x = [0f32; TABLE_LEN];
             x[..N_CONDITIONS].copy_from_slice(&values);
             for k in N_CONDITIONS..TABLE_LEN {
@@ -582,8 +590,7 @@ impl WheelHistogram {
             }
             let mut bin = [0u32; TABLE_LEN];
             for k in 0..TABLE_LEN {
-                let i = (x[k] - t.lo[k]) * t.inv_width[k];
-                bin[k] = i.max(0.0).min(t.last[k]) as u32;
+                bin[k] = bin_of(x[k], t.lo[k], t.inv_width[k], t.last[k]);
             }
             for k in 0..N_CONDITIONS {
                 let cell = &mut self.one_d[(t.offset[k] + bin[k]) as usize];
@@ -676,7 +683,7 @@ impl ConditionMaps {
     }
     /// Index of a condition by its side-table name.
     pub fn condition_index(name: &str) -> Option<usize> {
-        CONDITIONS.iter().position(|c| c.name == name)
+        condition_named(name)
     }
     /// Pair `p`'s map of the total energy (J per cell, [first's coarse
     /// bin][second's coarse bin], row-major).
