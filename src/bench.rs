@@ -561,6 +561,9 @@ fn season_decode_lines(
     let (e1, rows) = best(o.repeats, || one_thread(extract));
     rows.map_err(|e| format!("extract: {e}"))?;
     report.lines.push(w.line("extract, 1 thread", e1, None));
+    if o.gpu {
+        gpu_extract_lines(o, season, scratch, &w, report);
+    }
     let (zn, _) = best(o.repeats, zstd);
     let wn = Workload {
         memory_pass: zn,
@@ -578,6 +581,58 @@ fn season_decode_lines(
         .lines
         .push(wn.line(&format!("extract, {threads} threads"), en, None));
     Ok(())
+}
+
+/// The whole extraction on the GPU engine with one decoding thread, each
+/// run decoded and then reduced in turn against the pipelined route (the
+/// next run decoded while the GPU reduces), and a note on how much of the
+/// possible overlap the pipeline got: (in turn − pipelined) over the
+/// smaller of the two sides (decoding and cleaning on the CPU; upload,
+/// compute and readback on the GPU). Each extraction opens its own device,
+/// in both routes alike.
+fn gpu_extract_lines(
+    o: &BenchOptions,
+    season: &std::path::Path,
+    scratch: &std::path::Path,
+    w: &Workload,
+    report: &mut BenchReport,
+) {
+    use crate::kpi::{Engine, ExtractOptions, extract};
+    let mut times = Vec::new();
+    for (pipeline, engine) in [(false, "extract gpu, serial"), (true, "extract gpu, piped")] {
+        let run = || {
+            extract(&ExtractOptions {
+                engine: Engine::Gpu,
+                pipeline,
+                ..ExtractOptions::new(season, scratch.join("bench-gpu-kpis.parquet"))
+            })
+        };
+        let (d, summary) = best(o.repeats, || one_thread(run));
+        let summary = match summary {
+            Ok(s) => s,
+            Err(e) => {
+                report.notes.push(format!("{engine} skipped: {e}"));
+                return;
+            }
+        };
+        let gpu = summary.gpu_timings.unwrap_or_default();
+        let split = [gpu.upload, gpu.compute, gpu.readback].map(|t| t.as_secs_f64());
+        report.lines.push(w.line(engine, d, Some(split)));
+        let gpu_s = gpu.total().as_secs_f64();
+        let cpu_s = summary.decode_seconds + (summary.reduce_seconds - gpu_s).max(0.0);
+        times.push((summary.runs_seconds, cpu_s, gpu_s));
+    }
+    if let [(serial, cpu_s, gpu_s), (piped, ..)] = times[..] {
+        report.notes.push(format!(
+            "{}, GPU engine, 1 decoding thread: the runs took {serial:.3} s reduced in \
+             turn and {piped:.3} s pipelined, {:.3} s saved of at most {:.3} s (the smaller \
+             of decoding and cleaning, {cpu_s:.3} s, and the GPU's upload, compute and \
+             readback, {gpu_s:.3} s)",
+            w.kernel,
+            serial - piped,
+            cpu_s.min(gpu_s)
+        ));
+    }
 }
 
 /// What a diagnosis of the demo season may take on this machine (issue

@@ -385,6 +385,58 @@ fn extract_on_gpu_equals_extract_on_cpu() {
         worst.1, worst.0
     );
     assert!(worst.1 <= TELEMETRY_TOLERANCE, "{worst:?}");
+
+    // The GPU's pipelined route (the default: runs decoded while the device
+    // reduces others) gives what reducing each run in turn gives, bit for
+    // bit: the same kernels on the same batches.
+    let gpu_bits = |rows: &[KpiRow]| -> Vec<Vec<u64>> {
+        rows.iter()
+            .map(|r| {
+                KpiRow::NUMBER_COLUMNS
+                    .iter()
+                    .map(|n| r.number(n).unwrap().to_bits())
+                    .collect()
+            })
+            .collect()
+    };
+    let serial_out = dir.path().join("serial.parquet");
+    extract(&ExtractOptions {
+        engine: Engine::Gpu,
+        pipeline: false,
+        ..ExtractOptions::new(dir.path(), &serial_out)
+    })
+    .unwrap();
+    let serial = read_parquet(&serial_out).unwrap();
+    assert_eq!(gpu_bits(gpu), gpu_bits(&serial));
+    let maps = |p: &std::path::Path| tirewear::kpi::energy_maps::read_tire_maps(p).unwrap();
+    assert_eq!(
+        maps(&dir.path().join("Gpu.parquet")),
+        maps(&serial_out),
+        "energy maps"
+    );
+
+    // A run whose telemetry is cut short is skipped on the pipelined route
+    // too, naming its file, and the other runs' rows are unchanged.
+    let manifest = tirewear::ingest::manifest::Season::open(dir.path()).unwrap();
+    let victim = &manifest.manifest.runs[3];
+    let file = manifest.path(&victim.telemetry);
+    let bytes = std::fs::read(&file).unwrap();
+    std::fs::write(&file, &bytes[..bytes.len() / 2]).unwrap();
+    let cut_out = dir.path().join("cut.parquet");
+    let s = extract(&ExtractOptions {
+        engine: Engine::Gpu,
+        ..ExtractOptions::new(dir.path(), &cut_out)
+    })
+    .unwrap();
+    assert_eq!(s.skipped.len(), 1, "{:?}", s.skipped);
+    assert_eq!(s.skipped[0].run, victim.id);
+    assert!(
+        s.skipped[0].reason.contains(&victim.telemetry),
+        "{}",
+        s.skipped[0].reason
+    );
+    let kept: Vec<KpiRow> = gpu.iter().filter(|r| r.run != victim.id).cloned().collect();
+    assert_eq!(gpu_bits(&kept), gpu_bits(&read_parquet(&cut_out).unwrap()));
 }
 
 /// Simulated road profiles as the simulator writes them (self-affine,

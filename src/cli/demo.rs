@@ -60,6 +60,7 @@ pub(crate) fn run(a: DemoArgs, progress: bool) -> Result<()> {
         engine: tirewear::kpi::Engine::Auto,
         progress,
         allow_external_paths: false,
+        pipeline: true,
     })?;
     println!();
     run_fit(

@@ -107,5 +107,6 @@ pub(crate) fn run(a: ExtractArgs, progress: bool) -> Result<tirewear::kpi::Extra
         engine: a.engine.into(),
         progress,
         allow_external_paths: a.allow_external_paths,
+        pipeline: true,
     })
 }

@@ -15,11 +15,13 @@ use super::road::{RoadCurves, RoadIndices, mean_indices};
 use super::table::{
     KpiRow, kpi_batch, quality, side_table_path, with_estimated, with_extraction_id, write_batch_to,
 };
-use super::telemetry::{CleaningReport, finish_wheel, prepare_wheel, vehicle_indices};
+use super::telemetry::{
+    CleaningReport, VehicleIndices, finish_wheel, prepare_wheel, vehicle_indices,
+};
 use super::viscoelastic::{ViscoelasticIndices, viscoelastic_indices};
 use super::wear::{mean_wear, worn_through_readings};
 use crate::Wheel;
-use crate::engine::{CpuEngine, GpuEngine, ReduceEngine};
+use crate::engine::{CpuEngine, GpuEngine, ReduceEngine, Reductions};
 use crate::ingest::IngestError;
 use crate::ingest::compound::Compound;
 use crate::ingest::manifest::{Run, Season};
@@ -55,6 +57,10 @@ pub struct ExtractOptions {
     pub progress: bool,
     /// Accept manifest paths outside the archive folder (absolute or `..`).
     pub allow_external_paths: bool,
+    /// GPU engine: decode the next runs while the GPU reduces (true, the
+    /// default); false decodes and reduces each run in turn, the route
+    /// `tirewear bench` compares with.
+    pub pipeline: bool,
 }
 
 impl ExtractOptions {
@@ -69,6 +75,7 @@ impl ExtractOptions {
             engine: Engine::Cpu,
             progress: false,
             allow_external_paths: false,
+            pipeline: true,
         }
     }
 }
@@ -99,6 +106,9 @@ pub struct ExtractSummary {
     pub telemetry_samples: u64,
     pub telemetry_bytes: u64,
     pub seconds: f64,
+    /// Wall time of decoding and reducing the runs (the rest of `seconds`:
+    /// opening the engine, the road profiles, writing the outputs).
+    pub runs_seconds: f64,
     /// Seconds summed over runs (all threads): decoding MCAP vs reducing samples.
     pub decode_seconds: f64,
     pub reduce_seconds: f64,
@@ -218,43 +228,43 @@ impl RunOutput {
     }
 }
 
-#[allow(clippy::too_many_arguments)]
-fn run_rows(
-    season: &Season,
-    run: &Run,
-    compounds: &HashMap<String, Result<Compound, String>>,
-    roads: &TrackRoads,
-    // (mean wear %, worn-through readings) per tire.
-    wear: &BTreeMap<(String, Wheel), (f64, f64)>,
-    engine: &dyn ReduceEngine,
-) -> Result<RunOutput, String> {
-    let path = season.path(&run.telemetry);
-    let compound = compounds[&run.compound]
-        .as_ref()
-        .map_err(|e| format!("compound {}: {e}", run.compound))?;
+/// A run decoded and cleaned, its four wheels in one batch: what an engine
+/// reduces. Kept apart from the reduction so that the GPU engine reduces
+/// one run while the next is decoded (`extract`'s pipelined route).
+pub(crate) struct PreparedRun {
+    path: PathBuf,
+    vehicle: VehicleIndices,
+    /// Channels `tirewear import` estimated (the quality flag).
+    estimated: Option<String>,
+    reports: Vec<CleaningReport>,
+    batch: ReduceBatch,
+    samples: u64,
+    bytes: u64,
+    decode_s: f64,
+    /// Cleaning and batching, after the decode.
+    prepare_s: f64,
+}
+
+/// Decodes, checks and cleans one run's telemetry into its batch; a run
+/// that cannot make rows (its wear readings contradict the manifest, its
+/// compound file is unusable) is refused before its telemetry is read.
+fn prepare_run(ctx: &RunContext, run: &Run) -> Result<PreparedRun, String> {
+    if let Some(p) = ctx.wear_problems.get(&run.id) {
+        return Err(p.clone());
+    }
+    if let Some(Err(e)) = ctx.compounds.get(&run.compound) {
+        return Err(format!("compound {}: {e}", run.compound));
+    }
+    let path = ctx.season.path(&run.telemetry);
     let t0 = Instant::now();
     let tel = read_telemetry(&path).map_err(|e| e.to_string())?;
     let decode_s = t0.elapsed().as_secs_f64();
     let t1 = Instant::now();
-    let event = season.event(&run.event).expect("validated manifest");
     let vehicle = vehicle_indices(&tel.vehicle).map_err(|e| format!("{}: {e}", path.display()))?;
-    let road = roads
-        .means
-        .get(&event.track)
-        .copied()
-        .unwrap_or(RoadIndices::UNDEFINED);
-    let mut out = RunOutput {
-        rows: vec![],
-        maps: vec![],
-        cleaning: vec![],
-        samples: 0,
-        bytes: 0,
-        decode_s,
-        reduce_s: 0.0,
-    };
-    out.bytes = std::fs::metadata(&path).map(|m| m.len()).unwrap_or(0);
-    // Clean every wheel, then reduce the run's four wheels in one batch.
+    let bytes = std::fs::metadata(&path).map(|m| m.len()).unwrap_or(0);
+    // Clean every wheel, then put the run's four wheels in one batch.
     let mut prepared = Vec::with_capacity(4);
+    let mut samples = 0;
     for w in Wheel::ALL {
         let series = &tel.wheels[w.index()];
         if series.is_empty() {
@@ -264,7 +274,7 @@ fn run_rows(
                 w.topic()
             ));
         }
-        out.samples += series.len() as u64;
+        samples += series.len() as u64;
         let p = prepare_wheel(series)
             .map_err(|e| format!("{}: topic {}: {e}", path.display(), w.topic()))?;
         prepared.push(p);
@@ -277,15 +287,89 @@ fn run_rows(
     for p in &prepared {
         batch.push_wheel(&p.samples);
     }
+    Ok(PreparedRun {
+        path,
+        vehicle,
+        estimated: tel.estimated,
+        reports: prepared.into_iter().map(|p| p.report).collect(),
+        batch,
+        samples,
+        bytes,
+        decode_s,
+        prepare_s: t1.elapsed().as_secs_f64(),
+    })
+}
+
+/// What every run's rows are built from, apart from its own telemetry.
+pub(crate) struct RunContext<'a> {
+    pub season: &'a Season,
+    pub compounds: &'a HashMap<String, Result<Compound, String>>,
+    pub roads: &'a TrackRoads,
+    /// (mean wear %, worn-through readings) per tire.
+    pub wear: &'a BTreeMap<(String, Wheel), (f64, f64)>,
+    /// Runs whose wear readings contradict the manifest, and how.
+    pub wear_problems: &'a HashMap<String, String>,
+}
+
+/// Reduces a prepared run on `engine`.
+fn reduce_run(
+    ctx: &RunContext,
+    run: &Run,
+    p: PreparedRun,
+    engine: &dyn ReduceEngine,
+) -> Result<RunOutput, String> {
+    let t = Instant::now();
     let all = engine
-        .reductions(&batch)
-        .map_err(|e| format!("{}: {} engine: {e}", path.display(), engine.name()))?;
+        .reductions(&p.batch)
+        .map_err(|e| format!("{}: {} engine: {e}", p.path.display(), engine.name()))?;
+    let reduce_s = t.elapsed().as_secs_f64();
+    finish_run(ctx, run, p, all, reduce_s)
+}
+
+/// A run's rows from its reductions.
+fn finish_run(
+    ctx: &RunContext,
+    run: &Run,
+    p: PreparedRun,
+    all: Reductions,
+    reduce_s: f64,
+) -> Result<RunOutput, String> {
+    let t = Instant::now();
+    let PreparedRun {
+        path,
+        vehicle,
+        estimated,
+        reports,
+        batch,
+        samples,
+        bytes,
+        decode_s,
+        prepare_s,
+    } = p;
+    let compound = ctx.compounds[&run.compound]
+        .as_ref()
+        .map_err(|e| format!("compound {}: {e}", run.compound))?;
+    let event = ctx.season.event(&run.event).expect("validated manifest");
+    let roads = ctx.roads;
+    let road = roads
+        .means
+        .get(&event.track)
+        .copied()
+        .unwrap_or(RoadIndices::UNDEFINED);
+    let mut out = RunOutput {
+        rows: vec![],
+        maps: vec![],
+        cleaning: vec![],
+        samples,
+        bytes,
+        decode_s,
+        reduce_s: 0.0,
+    };
     let sums = merge(&batch, &all.partials);
     let maps = all.energy_maps.into_iter().zip(all.condition_maps);
-    for (i, ((w, p), (maps, conditions))) in
-        Wheel::ALL.into_iter().zip(prepared).zip(maps).enumerate()
+    for (i, ((w, rep), (maps, conditions))) in
+        Wheel::ALL.into_iter().zip(reports).zip(maps).enumerate()
     {
-        let rep = p.report;
         let k = finish_wheel(&sums[i], &batch.refs[i])
             .map_err(|e| format!("{}: topic {}: {e}", path.display(), w.topic()))?;
         let sliding_speed = k.sliding_distance_m / k.duration_s;
@@ -303,7 +387,7 @@ fn run_rows(
             reasons.push(format!("viscoelastic: {e}"));
             ViscoelasticIndices::UNDEFINED
         });
-        let wear_of_tire = wear.get(&(run.id.clone(), w));
+        let wear_of_tire = ctx.wear.get(&(run.id.clone(), w));
         if wear_of_tire.is_none() {
             reasons.push("no wear readings".into());
         }
@@ -363,14 +447,14 @@ fn run_rows(
             worn_through_readings: wear_of_tire.map_or(0.0, |t| t.1),
         };
         row.quality = quality(&row, &reasons);
-        if let Some(est) = &tel.estimated {
+        if let Some(est) = &estimated {
             row.quality = with_estimated(&row.quality, est);
         }
         out.rows.push(row);
         out.maps.push((w, maps, conditions));
         out.cleaning.push((format!("{}/{}", run.id, w), rep));
     }
-    out.reduce_s = t1.elapsed().as_secs_f64();
+    out.reduce_s = prepare_s + reduce_s + t.elapsed().as_secs_f64();
     Ok(out)
 }
 
@@ -442,21 +526,62 @@ pub(crate) fn season_inputs(season: &Season) -> Result<SeasonInputs, IngestError
     })
 }
 
-/// One run's rows and maps, or why it was skipped; a panic met by its data
-/// skips it too.
-pub(crate) fn extract_run(
-    season: &Season,
-    run: &Run,
-    compounds: &HashMap<String, Result<Compound, String>>,
-    roads: &TrackRoads,
-    wear: &BTreeMap<(String, Wheel), (f64, f64)>,
-    wear_problems: &HashMap<String, String>,
+/// Runs in flight between the decoding threads and the GPU: enough that
+/// the GPU finds the next batch ready, few enough to bound the memory
+/// (each is one run's cleaned samples, 48 bytes a wheel sample).
+const PIPELINE_DEPTH: usize = 2;
+
+/// Every run's rows and maps, or why it was skipped (a panic met by a run's
+/// data skips that run too), handed to `done` as each run finishes, whose
+/// answers come back in the order of `runs`.
+///
+/// The CPU engine decodes and reduces each run on the rayon threads. With
+/// `pipelined` (meant for the GPU engine) the rayon threads decode and
+/// clean while one more thread feeds the engine: the GPU reduces one run
+/// while the next is decoded, instead of the decoding thread waiting for
+/// the device (`tirewear bench` measures both routes).
+pub(crate) fn extract_runs<T: Send>(
+    ctx: &RunContext,
+    runs: &[&Run],
     engine: &dyn ReduceEngine,
-) -> Result<RunOutput, String> {
-    match wear_problems.get(&run.id) {
-        Some(p) => Err(p.clone()),
-        None => guarded(|| run_rows(season, run, compounds, roads, wear, engine)),
+    pipelined: bool,
+    done: impl Fn(usize, Result<RunOutput, String>) -> T + Sync,
+) -> Vec<T> {
+    if !pipelined {
+        return runs
+            .par_iter()
+            .enumerate()
+            .map(|(i, run)| {
+                let out = guarded(|| reduce_run(ctx, run, prepare_run(ctx, run)?, engine));
+                done(i, out)
+            })
+            .collect();
     }
+    let (tx, rx) =
+        std::sync::mpsc::sync_channel::<(usize, Result<PreparedRun, String>)>(PIPELINE_DEPTH);
+    std::thread::scope(|s| {
+        let reducer = s.spawn(|| {
+            let mut out: Vec<Option<T>> = (0..runs.len()).map(|_| None).collect();
+            for (i, prepared) in rx {
+                let r = prepared.and_then(|p| guarded(|| reduce_run(ctx, runs[i], p, engine)));
+                out[i] = Some(done(i, r));
+            }
+            out
+        });
+        runs.par_iter()
+            .enumerate()
+            .for_each_with(tx, |tx, (i, run)| {
+                // A send fails only when the reducer has stopped (its own
+                // panic, resumed below); the run is then lost with it.
+                let _ = tx.send((i, guarded(|| prepare_run(ctx, run))));
+            });
+        reducer
+            .join()
+            .unwrap_or_else(|p| std::panic::resume_unwind(p))
+            .into_iter()
+            .map(|t| t.expect("every run sent once"))
+            .collect()
+    })
 }
 
 /// The engine to use: `gpu` needs an adapter; `auto` takes a hardware GPU
@@ -514,24 +639,23 @@ pub fn extract(opts: &ExtractOptions) -> Result<ExtractSummary, IngestError> {
     let (roads, curves) = road_kpis(&season, None, &mut warnings, reducer)?;
 
     let pb = crate::progress::bar(opts.progress, m.runs.len() as u64, "extracting runs");
-    let results: Vec<(&Run, Result<RunOutput, String>)> = m
-        .runs
-        .par_iter()
-        .map(|run| {
-            let r = extract_run(
-                &season,
-                run,
-                &compounds,
-                &roads,
-                &wear,
-                &wear_problems,
-                reducer,
-            );
+    let ctx = RunContext {
+        season: &season,
+        compounds: &compounds,
+        roads: &roads,
+        wear: &wear,
+        wear_problems: &wear_problems,
+    };
+    let runs: Vec<&Run> = m.runs.iter().collect();
+    let pipelined = reducer_gpu.is_some() && opts.pipeline;
+    let runs_start = Instant::now();
+    let results: Vec<(&Run, Result<RunOutput, String>)> =
+        extract_runs(&ctx, &runs, reducer, pipelined, |i, r| {
             pb.inc(1);
-            (run, r)
-        })
-        .collect();
+            (runs[i], r)
+        });
     pb.finish_and_clear();
+    let runs_seconds = runs_start.elapsed().as_secs_f64();
 
     let mut rows = Vec::new();
     let mut maps = Vec::new();
@@ -577,6 +701,7 @@ pub fn extract(opts: &ExtractOptions) -> Result<ExtractSummary, IngestError> {
         telemetry_samples: samples,
         telemetry_bytes: bytes,
         seconds: start.elapsed().as_secs_f64(),
+        runs_seconds,
         decode_seconds: decode_s,
         reduce_seconds: reduce_s,
         cleaning,

@@ -29,8 +29,8 @@ use crate::engine::{CpuEngine, ReduceEngine};
 use crate::ingest::manifest::{Run, Season};
 use crate::kpi::Engine;
 use crate::kpi::extract::{
-    RunOutput, SeasonInputs, energy_maps_batch, extract_run, open_engine, road_curves_batch,
-    road_kpis, season_inputs,
+    RunContext, RunOutput, SeasonInputs, energy_maps_batch, extract_runs, open_engine,
+    road_curves_batch, road_kpis, season_inputs,
 };
 use crate::kpi::table::{kpi_batch, with_extraction_id, write_batch_to};
 use arrow_array::RecordBatch;
@@ -757,23 +757,22 @@ fn stage_runs<'a>(
             crate::atomic::write_file(&path, |f| write_batch_to(f, &batch))
                 .map_err(NightlyError::io(&path))?;
         }
-        let results: Vec<(&Planned, StagedRun)> = mine
-            .par_iter()
-            .map(|p| {
-                let out = extract_run(
-                    season,
-                    &p.run,
-                    &inp.compounds,
-                    &roads,
-                    &inp.wear,
-                    &inp.wear_problems,
-                    reducer,
-                );
-                let staged = stage_one(dataset, p, out);
+        let ctx = RunContext {
+            season,
+            compounds: &inp.compounds,
+            roads: &roads,
+            wear: &inp.wear,
+            wear_problems: &inp.wear_problems,
+        };
+        let plain: Vec<&Run> = mine.iter().map(|p| &p.run).collect();
+        // The GPU reduces one run while the next are decoded (`extract_runs`).
+        let pipelined = reducer.name() == "gpu";
+        let results: Vec<(&Planned, StagedRun)> =
+            extract_runs(&ctx, &plain, reducer, pipelined, |i, out| {
+                let staged = stage_one(dataset, mine[i], out);
                 pb.inc(1);
-                (*p, staged)
-            })
-            .collect();
+                (mine[i], staged)
+            });
         for (p, staged) in results {
             summary.warnings.extend(staged.warnings);
             summary.telemetry_bytes += staged.telemetry_bytes;
