@@ -1099,6 +1099,42 @@ mod tests {
         assert!(moved > 0);
     }
 
+    /// Null data's layout: 6 tracks × 8 runs × 4 wheels, row by row.
+    const TRACKS: usize = 6;
+    const RUNS: usize = 8;
+    const WHEELS: usize = 4;
+    const LAYOUT_ROWS: usize = TRACKS * RUNS * WHEELS;
+
+    fn layout_index(t: usize, r: usize, w: usize) -> usize {
+        (t * RUNS + r) * WHEELS + w
+    }
+
+    /// Row i's (track, axle).
+    fn track_axle(i: usize) -> (usize, usize) {
+        (i / (RUNS * WHEELS), (i % WHEELS) / 2)
+    }
+
+    /// The layout's track-and-axle indicator columns, and its whole runs as
+    /// exchangeable units within their track.
+    fn layout() -> (Vec<Vec<f64>>, Vec<Exchange>) {
+        let cells = (0..TRACKS)
+            .flat_map(|t| (0..2).map(move |a| (t, a)))
+            .map(|c| {
+                (0..LAYOUT_ROWS)
+                    .map(|i| (track_axle(i) == c) as u8 as f64)
+                    .collect()
+            })
+            .collect();
+        let whole_runs = (0..LAYOUT_ROWS)
+            .map(|i| Exchange {
+                block: i / (RUNS * WHEELS),
+                unit: i / WHEELS,
+                slot: i % WHEELS,
+            })
+            .collect();
+        (cells, whole_runs)
+    }
+
     #[test]
     fn whole_run_permutations_hold_the_level_where_single_tires_do_not() {
         // Null data with the realistic noise's structure: residuals = a
@@ -1113,24 +1149,12 @@ mod tests {
         // ignores that the tires of a run move together.
         use rand::Rng;
         use rand_distr::StandardNormal;
-        let (tracks, runs, wheels) = (6, 8, 4);
-        let n = tracks * runs * wheels;
-        let index = |t: usize, r: usize, w: usize| (t * runs + r) * wheels + w;
-        let cell = |i: usize| (i / (runs * wheels), (i % wheels) / 2);
-        let cells: Vec<Vec<f64>> = (0..tracks)
-            .flat_map(|t| (0..2).map(move |a| (t, a)))
-            .map(|c| (0..n).map(|i| (cell(i) == c) as u8 as f64).collect())
-            .collect();
+        let (tracks, runs, wheels, n) = (TRACKS, RUNS, WHEELS, LAYOUT_ROWS);
+        let (index, cell) = (layout_index, track_axle);
+        let (cells, whole_runs) = layout();
         let refs: Vec<&[f64]> = cells.iter().map(|c| c.as_slice()).collect();
         let all: Vec<usize> = (0..n).collect();
         let q = orthonormal_basis(&refs, &all);
-        let whole_runs: Vec<Exchange> = (0..n)
-            .map(|i| Exchange {
-                block: i / (runs * wheels),
-                unit: i / wheels,
-                slot: i % wheels,
-            })
-            .collect();
         let by_run = unit_permutations(&whole_runs, 99, 5);
         // Single tires within track and axle: the scheme this replaces.
         let single: Vec<Exchange> = (0..n)
@@ -1222,23 +1246,11 @@ mod tests {
         // rejects near 5 % (10 of 150 measured; binomial sd 1.8 %).
         use rand::Rng;
         use rand_distr::StandardNormal;
-        let (tracks, runs, wheels) = (6, 8, 4);
-        let n = tracks * runs * wheels;
-        let index = |t: usize, r: usize, w: usize| (t * runs + r) * wheels + w;
-        let cell = |i: usize| (i / (runs * wheels), (i % wheels) / 2);
-        let cells: Vec<Vec<f64>> = (0..tracks)
-            .flat_map(|t| (0..2).map(move |a| (t, a)))
-            .map(|c| (0..n).map(|i| (cell(i) == c) as u8 as f64).collect())
-            .collect();
+        let (tracks, runs, wheels, n) = (TRACKS, RUNS, WHEELS, LAYOUT_ROWS);
+        let index = layout_index;
+        let (cells, whole_runs) = layout();
         let all: Vec<usize> = (0..n).collect();
         let run_of: Vec<usize> = (0..n).map(|i| i / wheels).collect();
-        let whole_runs: Vec<Exchange> = (0..n)
-            .map(|i| Exchange {
-                block: i / (runs * wheels),
-                unit: i / wheels,
-                slot: i % wheels,
-            })
-            .collect();
         let perms = unit_permutations(&whole_runs, 99, 5);
         // The p-value of `x` against the null of the track-axle cells, on
         // the scale `on`.
