@@ -311,9 +311,8 @@ mod tests {
     use crate::gap::candidates::Feature;
 
     /// 7 tracks × 10 tires (alternating axles), each tire's relative wear
-    /// `1 + severity(Ra_micro, track)` plus a within-track wobble; the
-    /// baseline's design is one column of ones (relative scale).
-    fn p_of(severity: impl Fn(f64, usize) -> f64, draws: usize, seed: u64) -> f64 {
+    /// `1 + severity(Ra_micro, track)` plus a within-track wobble.
+    fn road_rows(severity: impl Fn(f64, usize) -> f64) -> (Vec<KpiRow>, Vec<f64>) {
         let mut rows = Vec::new();
         let mut y = Vec::new();
         for t in 0..7 {
@@ -330,11 +329,12 @@ mod tests {
                 y.push(1.0 + severity(ra, t) + 0.01 * ((k * 5 % 7) as f64 - 3.0));
             }
         }
-        let refs: Vec<&KpiRow> = rows.iter().collect();
-        let n = rows.len();
-        let base = vec![vec![1.0; n]];
-        let s = Severities::new(&refs, &y, &base, &[false], &vec![1.0; n]);
-        let road = Candidate {
+        (rows, y)
+    }
+
+    /// Road abrasion on both axles at three thresholds of Ra_micro.
+    fn road_candidate() -> Candidate {
+        Candidate {
             name: "road".into(),
             feature: Feature::RoughRoadEnergy,
             thresholds: vec![0.0, 0.008, 0.012],
@@ -342,7 +342,18 @@ mod tests {
             user: None,
             group: None,
             scopes: Vec::new(),
-        };
+        }
+    }
+
+    /// The road test's p on [`road_rows`]; the baseline's design is one
+    /// column of ones (relative scale).
+    fn p_of(severity: impl Fn(f64, usize) -> f64, draws: usize, seed: u64) -> f64 {
+        let (rows, y) = road_rows(severity);
+        let refs: Vec<&KpiRow> = rows.iter().collect();
+        let n = rows.len();
+        let base = vec![vec![1.0; n]];
+        let s = Severities::new(&refs, &y, &base, &[false], &vec![1.0; n]);
+        let road = road_candidate();
         s.p_value(&road, KpiScale::NONE, draws, seed)
     }
 
@@ -382,20 +393,21 @@ mod tests {
         assert!(between_p(0.0, &noise, 1999, 5) > 0.05);
     }
 
-    #[test]
-    fn a_term_between_tracks_holds_its_level_on_track_noise() {
-        // As for road terms: over 40 noise patterns about 5 % at or below
-        // 0.05 (at most 6 with 99 % odds), a fair share above one half.
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
+    /// Under the null, p is about uniform: over 40 patterns of normal track
+    /// noise (`tracks` tracks, sd `sd`, seeded), about 5 % fall at or below
+    /// 0.05 (binomial(40, 0.05): at most 6 with 99 % odds), and a fair
+    /// share lies above one half. `p_of(noise, rep)`: a pattern's p-value.
+    fn holds_its_level(seed: u64, tracks: usize, sd: f64, p_of: impl Fn(&[f64], u64) -> f64) {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
         let ps: Vec<f64> = (0..40)
             .map(|rep| {
-                let noise: Vec<f64> = (0..8)
+                let noise: Vec<f64> = (0..tracks)
                     .map(|_| {
                         let z: f64 = StandardNormal.sample(&mut rng);
-                        0.03 * z
+                        sd * z
                     })
                     .collect();
-                between_p(0.0, &noise, 499, rep)
+                p_of(&noise, rep)
             })
             .collect();
         let small = ps.iter().filter(|p| **p <= 0.05).count();
@@ -405,38 +417,22 @@ mod tests {
     }
 
     #[test]
+    fn a_term_between_tracks_holds_its_level_on_track_noise() {
+        holds_its_level(11, 8, 0.03, |noise, rep| between_p(0.0, noise, 499, rep));
+    }
+
+    #[test]
     fn a_track_level_column_between_tracks_is_the_road_test() {
         // A column constant within each track has its track value (less the
         // reference track's, which stage 2's intercept takes) as its own
         // scales: its between-track p equals the road test's, draw for draw.
         let noise = [0.004, -0.006, 0.002, 0.005, -0.003, -0.001, 0.003];
         let severity = |ra: f64, t: usize| 20.0 * (ra - 0.008).max(0.0) + noise[t];
-        let mut rows = Vec::new();
-        let mut y = Vec::new();
-        for t in 0..7 {
-            let ra = 0.005 + 0.002 * t as f64;
-            for k in 0..10 {
-                rows.push(KpiRow {
-                    track: format!("T{t}"),
-                    axle: if k % 2 == 0 { Axle::Front } else { Axle::Rear },
-                    ra_micro_mm: ra,
-                    ..Default::default()
-                });
-                y.push(1.0 + severity(ra, t) + 0.01 * ((k * 5 % 7) as f64 - 3.0));
-            }
-        }
+        let (rows, y) = road_rows(severity);
         let refs: Vec<&KpiRow> = rows.iter().collect();
         let n = rows.len();
         let s = Severities::new(&refs, &y, &[vec![1.0; n]], &[false], &vec![1.0; n]);
-        let road = Candidate {
-            name: "road".into(),
-            feature: Feature::RoughRoadEnergy,
-            thresholds: vec![0.0, 0.008, 0.012],
-            axle: None,
-            user: None,
-            group: None,
-            scopes: Vec::new(),
-        };
+        let road = road_candidate();
         let columns: Vec<Vec<f64>> = road
             .thresholds
             .iter()
@@ -487,24 +483,6 @@ mod tests {
 
     #[test]
     fn track_noise_alone_gives_about_uniform_p() {
-        // Under the null, p is about uniform: over 40 noise patterns, about
-        // 5 % fall at or below 0.05 (binomial(40, 0.05): at most 6 with 99 %
-        // odds), and a fair share lies above one half.
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
-        let ps: Vec<f64> = (0..40)
-            .map(|rep| {
-                let noise: Vec<f64> = (0..7)
-                    .map(|_| {
-                        let z: f64 = StandardNormal.sample(&mut rng);
-                        0.02 * z
-                    })
-                    .collect();
-                p_of(|_, t| noise[t], 499, rep)
-            })
-            .collect();
-        let small = ps.iter().filter(|p| **p <= 0.05).count();
-        let large = ps.iter().filter(|p| **p > 0.5).count();
-        assert!(small <= 6, "{small} of 40 at or below 0.05: {ps:?}");
-        assert!(large >= 10, "{large} of 40 above 0.5: {ps:?}");
+        holds_its_level(3, 7, 0.02, |noise, rep| p_of(|_, t| noise[t], 499, rep));
     }
 }
