@@ -941,7 +941,7 @@ impl FloorRefinement<'_> {
         let perms = unit_permutations(
             &run_exchange(self.rows),
             more,
-            self.settings.seed ^ 0x666c_6f6f_72,
+            self.settings.seed ^ 0x0066_6c6f_6f72,
         );
         let permuted = PermutedNull::new(self.e0, self.q, &perms);
         let refined: Vec<(usize, f64)> = todo

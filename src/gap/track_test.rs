@@ -357,14 +357,15 @@ mod tests {
         s.p_value(&road, KpiScale::NONE, draws, seed)
     }
 
-    /// 8 tracks × 12 tires (alternating axles) on the relative scale: a
+    /// 12 tires (alternating axles) per track of `track_noise` (8 in the
+    /// tests) on the relative scale: a
     /// term `x` whose level differs between tracks (0.1 … 0.8) with a small
     /// within-track spread, wear `1 + c·x + track noise + tire wobble`.
     /// The between-track p-value of `x` on both axles.
     fn between_p(c: f64, track_noise: &[f64], draws: usize, seed: u64) -> f64 {
         let mut rows = Vec::new();
         let (mut x, mut y) = (Vec::new(), Vec::new());
-        for t in 0..8 {
+        for (t, noise) in track_noise.iter().enumerate() {
             let level = 0.1 * (1 + (t * 5) % 8) as f64;
             for k in 0..12 {
                 rows.push(KpiRow {
@@ -374,7 +375,7 @@ mod tests {
                 });
                 let xi = level * (1.0 + 0.05 * ((k * 7 % 5) as f64 - 2.0));
                 x.push(xi);
-                y.push(1.0 + c * xi + track_noise[t] + 0.01 * ((k * 5 % 7) as f64 - 3.0));
+                y.push(1.0 + c * xi + noise + 0.01 * ((k * 5 % 7) as f64 - 3.0));
             }
         }
         let refs: Vec<&KpiRow> = rows.iter().collect();
