@@ -448,7 +448,7 @@ pub fn diagnose(
         let mut round = 0;
         while steps.len() <= settings.max_terms && round < 2 * settings.max_terms + 2 {
             round += 1;
-            let ranked = rank(&sel.problem(), &lib, &settings.scoring, fdr);
+            let ranked = rank(&sel.problem(), &lib, &settings.scoring);
             if round == 1 {
                 candidates = ranked.clone();
                 let named: Vec<(&str, Vec<bool>)> = slices
