@@ -141,6 +141,24 @@ impl Feature {
         }
     }
 
+    /// Energy under a per-sample condition (the named mechanisms, the
+    /// condition and pair maps' terms): its between-track part is tested on
+    /// the tracks' severities besides its within-track part
+    /// (`Severities::p_between`). Not a generic KPI (a straight line in a
+    /// run's average, which between tracks would stand in for any
+    /// track-level cause), a set-up group or a user's hypothesis.
+    pub(crate) fn tested_between_tracks(&self) -> bool {
+        matches!(
+            self,
+            Feature::ColdTreadLateralEnergy
+                | Feature::HotInnerEnergy
+                | Feature::HotSurfaceEnergy
+                | Feature::FastSlidingEnergy
+                | Feature::ConditionEnergy { .. }
+                | Feature::PairEnergy { .. }
+        )
+    }
+
     /// Unit of the threshold.
     pub(crate) fn threshold_unit(&self) -> &'static str {
         match self {

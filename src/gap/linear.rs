@@ -10,6 +10,31 @@ pub(crate) fn lstsq(cols: &[&[f64]], y: &[f64], idx: &[usize]) -> Vec<f64> {
     Cholesky::new(&g, cols.len()).solve(&b)
 }
 
+/// Least squares on fixed columns over fixed rows, factored once for many
+/// right-hand sides (every threshold and scope of a candidate, say).
+pub(crate) struct Solver {
+    gram: Cholesky,
+}
+
+impl Solver {
+    pub fn new(cols: &[&[f64]], idx: &[usize]) -> Solver {
+        let zeros = vec![0.0; cols.first().map_or(0, |c| c.len())];
+        let (g, _) = normal_equations(cols, &zeros, idx);
+        Solver {
+            gram: Cholesky::new(&g, cols.len()),
+        }
+    }
+
+    /// The coefficients of `y` on the columns (what [`lstsq`] gives).
+    pub fn coefficients(&self, cols: &[&[f64]], y: &[f64], idx: &[usize]) -> Vec<f64> {
+        let b: Vec<f64> = cols
+            .iter()
+            .map(|c| idx.iter().map(|&i| c[i] * y[i]).sum())
+            .collect();
+        self.gram.solve(&b)
+    }
+}
+
 /// XᵀX (p × p, row-major) and Xᵀy over the rows `idx`.
 fn normal_equations(cols: &[&[f64]], y: &[f64], idx: &[usize]) -> (Vec<f64>, Vec<f64>) {
     let p = cols.len();
@@ -256,6 +281,13 @@ mod tests {
         let idx: Vec<usize> = (0..10).collect();
         let k = lstsq(&[&a, &z, &b], &y, &idx);
         assert!((k[0] - 2.0).abs() < 1e-10 && k[1] == 0.0 && (k[2] + 3.0).abs() < 1e-10);
+        // Factored once, the same coefficients for any right-hand side.
+        let solver = Solver::new(&[&a, &z, &b], &idx);
+        assert_eq!(solver.coefficients(&[&a, &z, &b], &y, &idx), k);
+        assert_eq!(
+            solver.coefficients(&[&a, &z, &b], &b, &idx)[2],
+            lstsq(&[&a, &z, &b], &b, &idx)[2]
+        );
         let q = orthonormal_basis(&[&a, &b, &a], &idx);
         assert_eq!(q.len(), 2);
         let mut v = y.clone();

@@ -104,7 +104,7 @@ pub fn render_markdown(d: &Diagnosis, max_slices: usize) -> String {
                 s,
                 "| {}{} | {th} | {:+.4} | {:+.3} | {:.1e} | {} | {} |",
                 c.name,
-                if c.p_adjusted <= d.fdr && c.cv_gain > 0.0 {
+                if c.significant(d.fdr) {
                     " **(significant)**"
                 } else {
                     ""

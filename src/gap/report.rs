@@ -448,7 +448,19 @@ pub fn diagnose(
         let mut round = 0;
         while steps.len() <= settings.max_terms && round < 2 * settings.max_terms + 2 {
             round += 1;
-            let ranked = rank(&sel.problem(), &lib, &settings.scoring);
+            let ranked = rank(&sel.problem(), &lib, &settings.scoring, fdr);
+            for c in ranked.iter().take(8) {
+                tracing::trace!(
+                    round,
+                    candidate = %c.name,
+                    cv_gain = c.cv_gain,
+                    cv_gain_across = c.cv_gain_across,
+                    p = c.p,
+                    p_between = c.p_between,
+                    p_adjusted = c.p_adjusted,
+                    "ranked"
+                );
+            }
             if round == 1 {
                 candidates = ranked.clone();
                 let named: Vec<(&str, Vec<bool>)> = slices

@@ -90,6 +90,7 @@ impl<'a> Selection<'a> {
             track_level: self.track_level.clone(),
             law: &self.law[..n],
             relative: self.physics.is_some(),
+            between_tracks: self.terms.is_empty(),
         }
     }
 
@@ -234,7 +235,7 @@ pub(crate) fn next_term<'a>(
     let mechanism_in = terms
         .iter()
         .any(|t| t.candidate.feature.mechanism().is_some());
-    let significant = |s: &Score| s.p_adjusted <= fdr && s.cv_gain > 0.0;
+    let significant = |s: &Score| s.significant(fdr);
     let eligible = |s: &&Score| {
         significant(s)
             && s.cv_gain_across > 0.0
@@ -292,6 +293,7 @@ mod tests {
             cv_gain: cv,
             cv_gain_across: cv,
             p: 0.001,
+            p_between: f64::NAN,
             p_adjusted: 0.01,
             front_share: f64::NAN,
             kpi_scale: KpiScale::NONE,
