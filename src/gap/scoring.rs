@@ -16,9 +16,9 @@
 //!   is paid for. A per-sample mechanism (a named one, a condition or a
 //!   pair) also has its between-track part tested on the tracks'
 //!   severities (`Severities::p_between`) in step 2 on the baseline alone,
-//!   and the two p-values are combined by Tippett's method; a candidate whose statistic beats every
-//!   permutation and still falls short of the rate is tested again on more
-//!   (`FloorRefinement`). A road term is tested on the tracks' severities
+//!   and the two p-values are combined by Tippett's method; a candidate
+//!   whose statistic beats every permutation and still falls short of the
+//!   rate is tested again on more (`FloorRefinement`). A road term is tested on the tracks' severities
 //!   instead (`track_test`: exchanging six tracks' values cannot give
 //!   p < 1/720).
 //!   Benjamini–Hochberg over the candidates then controls the
@@ -1006,9 +1006,9 @@ fn combined(p_within: f64, p_between: f64) -> f64 {
 /// per track and axle), the between-track test at those scales. Tippett's
 /// method lets either part carry an effect alone and costs at most a
 /// factor 2 where the other part is empty: a found mechanism's refinement
-/// on its other axle has nothing between tracks (p ≈ 1), and Fisher's method,
-/// which rewards evidence in both, turned its within-track
-/// 1/2000 into 0.0043 there (docs/gap.md).
+/// on its other axle has nothing between tracks (p ≈ 1), and Fisher's
+/// method, which rewards evidence in both, turned its within-track 1/2000
+/// into 0.0043 there (docs/gap.md).
 fn tippett(p_within: f64, p_between: f64) -> f64 {
     let smaller = p_within.min(p_between).clamp(0.0, 1.0);
     1.0 - (1.0 - smaller) * (1.0 - smaller)
