@@ -227,6 +227,17 @@ pub(crate) struct PreparedWheel {
 
 /// Cleans one wheel (the rule above).
 pub(crate) fn prepare_wheel(s: &WheelSeries) -> Result<PreparedWheel, String> {
+    let mut samples = Vec::new();
+    let report = prepare_wheel_into(s, &mut samples)?;
+    Ok(PreparedWheel { samples, report })
+}
+
+/// [`prepare_wheel`] appending the kept samples to `samples` (a run's
+/// batch, filled wheel by wheel without a copy); returns the report.
+pub(crate) fn prepare_wheel_into(
+    s: &WheelSeries,
+    samples: &mut Vec<ReduceSample>,
+) -> Result<CleaningReport, String> {
     let mut report = CleaningReport::default();
     if s.is_empty() {
         return Err("no samples".into());
@@ -250,7 +261,7 @@ pub(crate) fn prepare_wheel(s: &WheelSeries) -> Result<PreparedWheel, String> {
             report.kept, report.samples, report.time_backwards
         ));
     }
-    let mut samples = Vec::with_capacity(kept.len());
+    samples.reserve(kept.len());
     for_each_derived(s, &kept, |k, d| {
         let (i, dt) = kept[k];
         let (dt_hi, dt_lo) = ReduceSample::split_dt(dt);
@@ -275,7 +286,7 @@ pub(crate) fn prepare_wheel(s: &WheelSeries) -> Result<PreparedWheel, String> {
             dt_lo,
         });
     });
-    Ok(PreparedWheel { samples, report })
+    Ok(report)
 }
 
 /// Half-width of the window temperature rates are taken over (s). One
@@ -324,13 +335,6 @@ fn for_each_derived(
     let half_ns = (RATE_HALF_WINDOW_S * 1e9) as u64;
     let mean_fz = kept.iter().map(|&(i, _)| s.fz_n[i] as f64).sum::<f64>() / kept.len() as f64;
     let load_ref = mean_fz.max(LOAD_FLOOR_N);
-    let rate = |c: &[f32], lo: usize, hi: usize| {
-        if hi == lo {
-            return 0.0;
-        }
-        let span_s = (time(hi) - time(lo)) as f64 / 1e9;
-        (c[kept[hi].0] as f64 - c[kept[lo].0] as f64) / span_s
-    };
     let (mut lo, mut hi, mut distance) = (0usize, 0usize, 0.0f64);
     for (k, &(i, dt)) in kept.iter().enumerate() {
         let t = time(k);
@@ -340,11 +344,20 @@ fn for_each_derived(
         while hi + 1 < kept.len() && time(hi + 1) <= t + half_ns {
             hi += 1;
         }
+        // Both rates over the same window (one span, computed once).
+        let (t_surface_rate, t_inner_rate) = if hi == lo {
+            (0.0, 0.0)
+        } else {
+            let span_s = (time(hi) - time(lo)) as f64 / 1e9;
+            let (a, b) = (kept[lo].0, kept[hi].0);
+            let rate = |c: &[f32]| (c[b] as f64 - c[a] as f64) / span_s;
+            (rate(&s.t_surface_c), rate(&s.t_inner_c))
+        };
         emit(
             k,
             DerivedConditions {
-                t_surface_rate: rate(&s.t_surface_c, lo, hi),
-                t_inner_rate: rate(&s.t_inner_c, lo, hi),
+                t_surface_rate,
+                t_inner_rate,
                 load_rel: s.fz_n[i] as f64 / load_ref,
                 time_s: (t - s.time_ns[first]) as f64 / 1e9,
                 distance_m: distance,

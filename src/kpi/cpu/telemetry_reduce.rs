@@ -116,7 +116,36 @@ pub struct ReduceBatch {
 impl ReduceBatch {
     /// Appends one wheel's kept samples; returns its index in the batch.
     pub fn push_wheel(&mut self, samples: &[ReduceSample]) -> usize {
+        let start = self.samples.len();
+        self.samples.extend_from_slice(samples);
+        self.register_wheel(start)
+    }
+
+    /// Appends one wheel whose samples `fill` writes straight onto the
+    /// batch's (no copy through a vector of its own); a wheel `fill`
+    /// rejects leaves the batch as it was.
+    pub(crate) fn push_wheel_with<R, E>(
+        &mut self,
+        fill: impl FnOnce(&mut Vec<ReduceSample>) -> Result<R, E>,
+    ) -> Result<R, E> {
+        let start = self.samples.len();
+        match fill(&mut self.samples) {
+            Ok(r) => {
+                self.register_wheel(start);
+                Ok(r)
+            }
+            Err(e) => {
+                self.samples.truncate(start);
+                Err(e)
+            }
+        }
+    }
+
+    /// Makes the samples from `start` on one more wheel: its reference and
+    /// chunks. Returns its index.
+    fn register_wheel(&mut self, start: usize) -> usize {
         let wheel = self.refs.len();
+        let samples = &self.samples[start..];
         let first = samples.first().copied().unwrap_or_default();
         let vsx = (first.vx - first.omega * first.radius).abs();
         self.refs.push(ReduceRef {
@@ -131,8 +160,6 @@ impl ReduceBatch {
                 0.0,
             ],
         });
-        let start = self.samples.len();
-        self.samples.extend_from_slice(samples);
         for (k, c) in samples.chunks(CHUNK).enumerate() {
             self.chunks.push(ReduceChunk {
                 start: (start + k * CHUNK) as u32,
@@ -240,6 +267,39 @@ pub fn moments(sums: &[f64; SUMS], r: &ReduceRef) -> [(f64, f64); 7] {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_wheel_filled_in_place_is_a_pushed_wheel_and_a_rejected_one_nothing() {
+        let s = |vx: f32| ReduceSample {
+            vx,
+            fz: 4000.0,
+            ..Default::default()
+        };
+        let first: Vec<_> = (0..3).map(|i| s(i as f32)).collect();
+        let second: Vec<_> = (0..CHUNK + 5).map(|i| s(10.0 + i as f32)).collect();
+        let mut pushed = ReduceBatch::default();
+        pushed.push_wheel(&first);
+        pushed.push_wheel(&second);
+        let mut filled = ReduceBatch::default();
+        filled.push_wheel(&first);
+        let rejected: Result<(), &str> = filled.push_wheel_with(|out| {
+            out.push(s(99.0));
+            Err("bad wheel")
+        });
+        assert_eq!(rejected, Err("bad wheel"));
+        filled
+            .push_wheel_with(|out| {
+                out.extend_from_slice(&second);
+                Ok::<(), ()>(())
+            })
+            .unwrap();
+        assert_eq!(filled.samples, pushed.samples);
+        assert_eq!(filled.refs, pushed.refs);
+        assert_eq!(
+            format!("{:?}", filled.chunks),
+            format!("{:?}", pushed.chunks)
+        );
+    }
 
     #[test]
     fn chunks_cover_each_wheel_and_merge_by_hand() {
