@@ -37,8 +37,11 @@ impl Bins {
         let i = (x - self.lo) / self.width;
         // For i ≥ 0 truncation is floor (without SSE4.1 floor is a libcall);
         // below 0 and NaN go to bin 0.
+        // min(⌊i⌋, n − 1) = ⌊min(i, n − 1)⌋ for i ≥ 0.
         if i >= 0.0 {
-            (i as usize).min(self.n - 1)
+            let i = i.min((self.n - 1) as f64);
+            // SAFETY: 0 ≤ i ≤ n − 1 (finite, a bin count) fits a u32.
+            unsafe { i.to_int_unchecked::<u32>() as usize }
         } else {
             0
         }
@@ -271,6 +274,8 @@ mod tests {
         assert_eq!(T_SURFACE_BINS.index(25.0), 1);
         assert_eq!(T_SURFACE_BINS.index(500.0), 23);
         assert_eq!(T_SURFACE_BINS.index(f64::NAN), 0);
+        assert_eq!(T_SURFACE_BINS.index(f64::INFINITY), 23);
+        assert_eq!(T_SURFACE_BINS.index(f64::NEG_INFINITY), 0);
         let mut m = EnergyMaps::new();
         m.add(72.0, 101.0, 1.2, 10.0);
         m.add(72.0, 131.0, 6.0, 5.0);

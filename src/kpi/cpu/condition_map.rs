@@ -409,7 +409,11 @@ impl ConditionBins {
 /// Branch-free, so that the CPU route's loop over the table vectorises.
 #[inline(always)]
 fn bin_of(x: f32, lo: f32, inv_width: f32, last: f32) -> u32 {
-    ((x - lo) * inv_width).max(0.0).min(last) as u32
+    let i = ((x - lo) * inv_width).max(0.0).min(last);
+    // SAFETY: `max` drops a NaN and the clamp keeps `i` in 0..=last, far
+    // inside i32, so the unchecked conversion is exact (and vectorises,
+    // where `as` adds a saturating check per value).
+    unsafe { i.to_int_unchecked::<i32>() as u32 }
 }
 
 /// First bin of each condition within a component.

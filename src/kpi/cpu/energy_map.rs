@@ -31,8 +31,23 @@ const _: () = assert!(BINS == LATERAL_BINS_AT + SURFACE_INNER_BINS);
 /// round(e · ENERGY_QUANTA_PER_J) in 64-bit two's complement (the shader's
 /// `to_quanta`: ties to even, magnitude rounded then negated).
 pub(crate) fn to_quanta(e: f64) -> u64 {
-    let m = round_ties_even(e.abs() * ENERGY_QUANTA_PER_J) as u64;
+    let m = magnitude_to_u64(round_ties_even(e.abs() * ENERGY_QUANTA_PER_J));
     if e < 0.0 { m.wrapping_neg() } else { m }
+}
+
+/// `x as u64` for an integral x ≥ 0 (or NaN): below 2^63 one signed
+/// conversion (what SSE2 has), where `as u64` takes two and a select
+/// for every value; the rare rest (and NaN) as `as u64` converts them.
+#[inline(always)]
+fn magnitude_to_u64(x: f64) -> u64 {
+    const TWO_63: f64 = 9_223_372_036_854_775_808.0;
+    if x < TWO_63 {
+        // SAFETY: 0 ≤ x < 2^63 here (NaN fails the test), so the value
+        // fits an i64 and the conversion is exact.
+        unsafe { x.to_int_unchecked::<i64>() as u64 }
+    } else {
+        x as u64
+    }
 }
 
 /// `x.round_ties_even()` for x ≥ 0 (and NaN) without the libcall that
@@ -148,6 +163,25 @@ pub(crate) fn maps_from_quanta(quanta: &[u64]) -> Vec<EnergyMaps> {
 mod tests {
     use super::*;
     use crate::kpi::cpu::telemetry_reduce::ReduceSample;
+
+    #[test]
+    fn magnitude_conversion_is_as_u64_at_every_edge() {
+        let two_63 = 9_223_372_036_854_775_808.0f64;
+        for x in [
+            0.0,
+            1.0,
+            4_503_599_627_370_496.0,
+            two_63 - 1024.0,
+            two_63,
+            two_63 * 1.5,
+            two_63 * 2.0,
+            1e300,
+            f64::INFINITY,
+            f64::NAN,
+        ] {
+            assert_eq!(magnitude_to_u64(x), x as u64, "{x}");
+        }
+    }
 
     #[test]
     fn quanta_by_hand() {
