@@ -999,7 +999,7 @@ fn read_indexed(path: &Path) -> Result<Option<RunTelemetry>> {
             |(order, scratch), ci| {
                 let records = chunk_records(path, bytes, ci, scratch)?;
                 let offset = ci.chunk_start_offset;
-                chunk_messages(path, offset, &records, order)?;
+                chunk_messages(path, offset, records, order)?;
                 let mut part = RunTelemetry::default();
                 reserve_for(&mut part, &kinds, order);
                 for m in order.iter() {
