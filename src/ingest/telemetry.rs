@@ -871,7 +871,7 @@ fn chunk_label(chunk_start_offset: u64) -> String {
 /// context and buffer per chunk cost a context's set-up and the page faults
 /// of touching new memory for every chunk.
 #[derive(Default)]
-pub(crate) struct ChunkScratch {
+struct ChunkScratch {
     zstd: Option<zstd::bulk::Decompressor<'static>>,
     buf: Vec<u8>,
 }
