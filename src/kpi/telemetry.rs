@@ -149,12 +149,13 @@ fn in_range(channels: &[&[f32]; 11], bounds: &[(f32, f32); 11]) -> Vec<bool> {
     ok
 }
 
-/// Indices of kept samples and, for each, the time (s) it stands for.
-fn clean(
+/// Indices of the samples the cleaning rule keeps, in order (their times
+/// strictly increase); the drops are counted in `report`.
+fn kept_samples(
     s: &WheelSeries,
     channels: &[&[f32]; 11],
     report: &mut CleaningReport,
-) -> Vec<(usize, f64)> {
+) -> Vec<usize> {
     report.samples = s.len() as u64;
     let bounds = WHEEL_RANGES.map(|(_, lo, hi)| f32_bounds(lo, hi));
     let valid = in_range(channels, &bounds);
@@ -182,40 +183,83 @@ fn clean(
         kept.push(i);
     }
     report.kept = kept.len() as u64;
-    // Nominal period: the median step between kept samples.
-    let mut steps: Vec<u64> = kept
-        .windows(2)
-        .map(|w| s.time_ns[w[1]] - s.time_ns[w[0]])
-        .collect();
+    kept
+}
+
+/// Which samples a wheel keeps, as the preparation reads them: all of them
+/// (the usual case: no index to follow) or a strictly increasing list.
+trait KeptSamples: Copy {
+    fn len(self) -> usize;
+    /// The sample index of the k-th kept sample.
+    fn at(self, k: usize) -> usize;
+}
+
+/// Every sample kept.
+#[derive(Clone, Copy)]
+struct AllSamples(usize);
+
+impl KeptSamples for AllSamples {
+    fn len(self) -> usize {
+        self.0
+    }
+    #[inline(always)]
+    fn at(self, k: usize) -> usize {
+        k
+    }
+}
+
+impl KeptSamples for &[usize] {
+    fn len(self) -> usize {
+        <[usize]>::len(self)
+    }
+    #[inline(always)]
+    fn at(self, k: usize) -> usize {
+        self[k]
+    }
+}
+
+/// A span of nanoseconds as f64, exactly as `d as f64` gives it: below
+/// 2^63 through i64, one instruction where the u64 conversion takes a
+/// dozen on baseline x86-64 (this runs several times per sample).
+#[inline(always)]
+fn ns_as_f64(d: u64) -> f64 {
+    match i64::try_from(d) {
+        Ok(v) => v as f64,
+        Err(_) => d as f64,
+    }
+}
+
+/// The nominal sample period (ns): the median step between kept samples.
+/// Counts the distinct periods up to [`MAX_BRIDGED_GAP_S`] (within 1 %)
+/// into `report`.
+fn nominal_period(s: &WheelSeries, kept: impl KeptSamples, report: &mut CleaningReport) -> u64 {
+    let time = |k: usize| s.time_ns[kept.at(k)];
+    let n = kept.len();
+    // Equally spaced samples (a logger's or a block's clock): the median
+    // and the one period without sorting the steps.
+    if n >= 2 {
+        let first = time(1) - time(0);
+        if (1..n - 1).all(|k| time(k + 1) - time(k) == first) {
+            report.sample_periods = u32::from(bridged_step(first));
+            return first;
+        }
+    }
+    sorted_period((1..n).map(|k| time(k) - time(k - 1)).collect(), report)
+}
+
+/// Whether a step between samples is bridged rather than a dropout.
+fn bridged_step(step_ns: u64) -> bool {
+    step_ns as f64 <= MAX_BRIDGED_GAP_S * 1e9
+}
+
+/// [`nominal_period`] from the steps, by sorting them.
+fn sorted_period(mut steps: Vec<u64>, report: &mut CleaningReport) -> u64 {
     steps.sort_unstable();
     let period_ns = steps.get(steps.len() / 2).copied().unwrap_or(0);
-    let mut periods: Vec<u64> = steps
-        .iter()
-        .copied()
-        .filter(|&d| d as f64 <= MAX_BRIDGED_GAP_S * 1e9)
-        .collect();
+    let mut periods: Vec<u64> = steps.into_iter().filter(|&d| bridged_step(d)).collect();
     periods.dedup_by(|a, b| (*a as f64 - *b as f64).abs() <= 0.01 * *b as f64);
     report.sample_periods = periods.len() as u32;
-    let period_s = period_ns as f64 / 1e9;
-    let mut out = Vec::with_capacity(kept.len());
-    for (k, &i) in kept.iter().enumerate() {
-        let dt = match kept.get(k + 1) {
-            Some(&j) => (s.time_ns[j] - s.time_ns[i]) as f64 / 1e9,
-            None => period_s,
-        };
-        let dt = if dt > MAX_BRIDGED_GAP_S {
-            report.dropouts += 1;
-            report.dropout_time_s += dt - period_s;
-            period_s
-        } else {
-            if dt > 1.5 * period_s {
-                report.bridged_gaps += 1;
-            }
-            dt
-        };
-        out.push((i, dt));
-    }
-    out
+    period_ns
 }
 
 /// A wheel cleaned and ready for the engines: its kept samples as the
@@ -248,7 +292,7 @@ pub(crate) fn prepare_wheel_into(
             return Err(format!("channel {name} is missing (every sample is 0)"));
         }
     }
-    let kept = clean(s, &channels, &mut report);
+    let kept = kept_samples(s, &channels, &mut report);
     if (report.kept as f64) < MIN_VALID_SHARE * report.samples as f64 {
         let worst = WHEEL_RANGES
             .iter()
@@ -262,8 +306,7 @@ pub(crate) fn prepare_wheel_into(
         ));
     }
     samples.reserve(kept.len());
-    for_each_derived(s, &kept, |k, d| {
-        let (i, dt) = kept[k];
+    let push = |_k: usize, i: usize, dt: f64, d: DerivedConditions| {
         let (dt_hi, dt_lo) = ReduceSample::split_dt(dt);
         samples.push(ReduceSample {
             vx: s.vx_mps[i],
@@ -285,7 +328,13 @@ pub(crate) fn prepare_wheel_into(
             dt: dt_hi,
             dt_lo,
         });
-    });
+    };
+    // Every sample kept is the usual case: read without the index.
+    if kept.len() == s.len() {
+        for_each_kept(s, AllSamples(s.len()), &mut report, push);
+    } else {
+        for_each_kept(s, kept.as_slice(), &mut report, push);
+    }
     Ok(report)
 }
 
@@ -311,55 +360,93 @@ pub(crate) struct DerivedConditions {
     pub distance_m: f64,
 }
 
-/// [`DerivedConditions`] of each kept sample (`kept` from the cleaning
-/// rule: strictly increasing times).
+/// The time each kept sample stands for (s) and its [`DerivedConditions`].
 #[cfg(test)]
-pub(crate) fn derived_conditions(s: &WheelSeries, kept: &[(usize, f64)]) -> Vec<DerivedConditions> {
+pub(crate) fn derived_conditions(s: &WheelSeries, kept: &[usize]) -> Vec<(f64, DerivedConditions)> {
+    let mut report = CleaningReport::default();
     let mut out = Vec::with_capacity(kept.len());
-    for_each_derived(s, kept, |_, d| out.push(d));
+    for_each_kept(s, kept, &mut report, |_, _, dt, d| out.push((dt, d)));
     out
 }
 
-/// Calls `emit(k, conditions)` for each kept sample k in order (what
-/// [`derived_conditions`] collects, without the vector).
-fn for_each_derived(
+/// Calls `emit(k, i, dt, conditions)` for each kept sample in order: k
+/// its rank among the kept, i its index in the series, dt the time it
+/// stands for (s) by the cleaning rule — up to the next kept sample; a
+/// gap above [`MAX_BRIDGED_GAP_S`] (a dropout, counted with its missing
+/// time in `report`) and the last sample count one nominal period.
+fn for_each_kept(
     s: &WheelSeries,
-    kept: &[(usize, f64)],
-    mut emit: impl FnMut(usize, DerivedConditions),
+    kept: impl KeptSamples,
+    report: &mut CleaningReport,
+    mut emit: impl FnMut(usize, usize, f64, DerivedConditions),
 ) {
     use super::cpu::condition_map::LOAD_FLOOR_N;
-    let Some(&(first, _)) = kept.first() else {
+    let n = kept.len();
+    if n == 0 {
         return;
-    };
-    let time = |k: usize| s.time_ns[kept[k].0];
+    }
+    let period_s = nominal_period(s, kept, report) as f64 / 1e9;
+    let time = |k: usize| s.time_ns[kept.at(k)];
+    let start = time(0);
     let half_ns = (RATE_HALF_WINDOW_S * 1e9) as u64;
-    let mean_fz = kept.iter().map(|&(i, _)| s.fz_n[i] as f64).sum::<f64>() / kept.len() as f64;
+    let mean_fz = (0..n).map(|k| s.fz_n[kept.at(k)] as f64).sum::<f64>() / n as f64;
     let load_ref = mean_fz.max(LOAD_FLOOR_N);
     let (mut lo, mut hi, mut distance) = (0usize, 0usize, 0.0f64);
-    for (k, &(i, dt)) in kept.iter().enumerate() {
+    // The window's span changes only where the sampling does: its
+    // division is done again only then (0 ns is never a span or a step).
+    let (mut span_ns, mut span_s) = (0u64, 0.0f64);
+    // So does the step to the next sample (its time in seconds).
+    let (mut step_ns, mut step_s) = (0u64, 0.0f64);
+    for k in 0..n {
+        let i = kept.at(k);
         let t = time(k);
+        let dt = match k + 1 < n {
+            true => {
+                let step = time(k + 1) - t;
+                if step != step_ns {
+                    (step_ns, step_s) = (step, ns_as_f64(step) / 1e9);
+                }
+                step_s
+            }
+            false => period_s,
+        };
+        let dt = if dt > MAX_BRIDGED_GAP_S {
+            report.dropouts += 1;
+            report.dropout_time_s += dt - period_s;
+            period_s
+        } else {
+            if dt > 1.5 * period_s {
+                report.bridged_gaps += 1;
+            }
+            dt
+        };
         while time(lo) + half_ns < t {
             lo += 1;
         }
-        while hi + 1 < kept.len() && time(hi + 1) <= t + half_ns {
+        while hi + 1 < n && time(hi + 1) <= t + half_ns {
             hi += 1;
         }
-        // Both rates over the same window (one span, computed once).
+        // Both rates over the same window.
         let (t_surface_rate, t_inner_rate) = if hi == lo {
             (0.0, 0.0)
         } else {
-            let span_s = (time(hi) - time(lo)) as f64 / 1e9;
-            let (a, b) = (kept[lo].0, kept[hi].0);
+            let span = time(hi) - time(lo);
+            if span != span_ns {
+                (span_ns, span_s) = (span, ns_as_f64(span) / 1e9);
+            }
+            let (a, b) = (kept.at(lo), kept.at(hi));
             let rate = |c: &[f32]| (c[b] as f64 - c[a] as f64) / span_s;
             (rate(&s.t_surface_c), rate(&s.t_inner_c))
         };
         emit(
             k,
+            i,
+            dt,
             DerivedConditions {
                 t_surface_rate,
                 t_inner_rate,
                 load_rel: s.fz_n[i] as f64 / load_ref,
-                time_s: (t - s.time_ns[first]) as f64 / 1e9,
+                time_s: ns_as_f64(t - start) / 1e9,
                 distance_m: distance,
             },
         );
@@ -535,32 +622,85 @@ mod tests {
         // Sample 20 is lost (a NaN): its neighbours stand for 0.2 s.
         s.vx_mps[20] = f32::NAN;
         let mut report = CleaningReport::default();
-        let kept = clean(&s, &s.channels(), &mut report);
+        let kept = kept_samples(&s, &s.channels(), &mut report);
         assert_eq!(kept.len(), 39);
         let d = derived_conditions(&s, &kept);
         // Sample 10 (k = 10): window t ± 0.5 s = samples 5..=15, 1 s apart.
-        assert!((d[10].t_surface_rate - 20.0).abs() < 1e-4, "{:?}", d[10]);
-        assert!((d[10].t_inner_rate - 1.0).abs() < 1e-3, "{:?}", d[10]);
+        assert!(
+            (d[10].1.t_surface_rate - 20.0).abs() < 1e-4,
+            "{:?}",
+            d[10].1
+        );
+        assert!((d[10].1.t_inner_rate - 1.0).abs() < 1e-3, "{:?}", d[10].1);
         // First sample: window 0..=5, rate over 0.5 s, the same slope.
-        assert!((d[0].t_surface_rate - 20.0).abs() < 1e-4);
+        assert!((d[0].1.t_surface_rate - 20.0).abs() < 1e-4);
         // Mean load of the 39 kept samples: the lost sample 20 is an even
         // one (3000 N), so 19 × 3000 + 20 × 5000 = 157000 N over 39.
         let mean = 157_000.0 / 39.0;
-        assert!((d[1].load_rel - 5000.0 / mean).abs() < 1e-12);
+        assert!((d[1].1.load_rel - 5000.0 / mean).abs() < 1e-12);
         // Time and distance: kept index 25 is sample 26, 2.6 s in; before
         // it 25 kept samples of 0.1 s at 50 m/s, one of them (19) standing
         // for 0.2 s across the lost one: 26 × 0.1 × 50 = 130 m.
-        assert!((d[25].time_s - 2.6).abs() < 1e-12);
+        assert!((d[25].1.time_s - 2.6).abs() < 1e-12);
         assert!(
-            (d[25].distance_m - 130.0).abs() < 1e-9,
+            (d[25].1.distance_m - 130.0).abs() < 1e-9,
             "{}",
-            d[25].distance_m
+            d[25].1.distance_m
         );
-        assert_eq!(d[0].distance_m, 0.0);
+        assert_eq!(d[0].1.distance_m, 0.0);
         // The prepared samples carry them.
         let p = prepare_wheel(&s).unwrap();
         assert_eq!(p.samples[25].distance_m, 130.0);
         assert_eq!(p.samples[25].time_s, 2.6f32);
+    }
+
+    /// Every sample kept is read without the index; the result is the
+    /// indexed route's bit for bit, on uneven steps (jitter, a bridged gap,
+    /// a dropout, a rate change), and the equal-step shortcut for the
+    /// period is the sorted median's.
+    #[test]
+    fn every_sample_kept_reads_as_the_indexed_route() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+        let mut s = constant_series(3000, 10_000_000);
+        let mut t = 1_000_000_000u64;
+        for i in 0..s.len() {
+            s.time_ns[i] = t;
+            t += match i {
+                1000 => 300_000_000, // bridged
+                2000 => 900_000_000, // a dropout
+                _ if i > 2500 => 20_000_000,
+                _ => 10_000_000 + rng.random_range(0..200_000),
+            };
+            s.t_surface_c[i] = 60.0 + rng.random_range(-5.0..5.0);
+            s.t_inner_c[i] = 90.0 + rng.random_range(-1.0..1.0);
+            s.fz_n[i] = rng.random_range(2000.0..6000.0);
+            s.vx_mps[i] = rng.random_range(20.0..80.0);
+        }
+        let all: Vec<usize> = (0..s.len()).collect();
+        let (mut by_index, mut direct) = (Vec::new(), Vec::new());
+        let (mut report_by_index, mut report) = Default::default();
+        for_each_kept(&s, all.as_slice(), &mut report_by_index, |_, i, dt, d| {
+            by_index.push((i, dt, d))
+        });
+        for_each_kept(&s, AllSamples(s.len()), &mut report, |_, i, dt, d| {
+            direct.push((i, dt, d))
+        });
+        assert_eq!(report_by_index, report);
+        assert_eq!(by_index, direct);
+        // Bridged: the 0.3 s gap and the 498 steps of 20 ms after sample
+        // 2500 (twice the median period); one dropout.
+        assert_eq!((report.bridged_gaps, report.dropouts), (499, 1));
+        assert!(report.sample_periods >= 2);
+        // Equal steps, bridged or not: the shortcut and the sort agree.
+        for step in [10_000_000u64, 500_000_000, 500_000_001, 2_000_000_000] {
+            let even = constant_series(50, step);
+            let (mut a, mut b) = (CleaningReport::default(), CleaningReport::default());
+            let shortcut = nominal_period(&even, AllSamples(even.len()), &mut a);
+            let steps = even.time_ns.windows(2).map(|w| w[1] - w[0]).collect();
+            assert_eq!(shortcut, sorted_period(steps, &mut b), "{step}");
+            assert_eq!(a.sample_periods, b.sample_periods, "{step}");
+        }
     }
 
     #[test]
