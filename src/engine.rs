@@ -5,7 +5,7 @@
 use crate::gpu::{GpuContext, GpuError, GpuTimings};
 use crate::ingest::road::Profile;
 use crate::kpi::cpu::condition_map::{
-    ConditionMaps, condition_map_by_wheel, condition_maps_from_quanta,
+    ConditionMaps, condition_map_by_wheel, condition_maps_from_quanta, histograms_by_wheel,
 };
 use crate::kpi::cpu::energy_map::{energy_map, maps_from_quanta};
 use crate::kpi::cpu::telemetry_reduce::{ReduceBatch, SUMS, merge, telemetry_reduce};
@@ -88,6 +88,16 @@ impl ReduceEngine for CpuEngine {
     }
     fn condition_map(&self, batch: &ReduceBatch) -> Result<Vec<ConditionMaps>, EngineError> {
         Ok(condition_maps_from_quanta(&condition_map_by_wheel(batch)))
+    }
+    /// Both histograms in one pass over the samples (the same sums as
+    /// `energy_map` and `condition_map`, bit for bit).
+    fn reductions(&self, batch: &ReduceBatch) -> Result<Reductions, EngineError> {
+        let (energy, conditions) = histograms_by_wheel(batch);
+        Ok(Reductions {
+            partials: self.telemetry_reduce(batch)?,
+            energy_maps: maps_from_quanta(&energy),
+            condition_maps: condition_maps_from_quanta(&conditions),
+        })
     }
     fn roughness(&self, batch: &RoughnessBatch) -> Result<Vec<Spectral>, EngineError> {
         Ok(cpu_twins(batch))

@@ -17,7 +17,9 @@
 //! exactly as in `energy_map` (see `energy_map`), so both engines'
 //! maps are deterministic and differ only by f32 against f64 per sample.
 
-use super::energy_map::{add_to_wheel, from_quanta, per_wheel_sums, to_quanta};
+use super::energy_map::{
+    BINS as ENERGY_BINS, add_to_wheel, from_quanta, per_wheel_sums, sample_energy, to_quanta,
+};
 use super::telemetry_reduce::{ITEMS, ReduceBatch, ReduceChunk, ReduceSample, WG_SIZE};
 use crate::kpi::energy_maps::Bins;
 use bytemuck::{Pod, Zeroable};
@@ -517,32 +519,56 @@ pub fn condition_map(batch: &ReduceBatch) -> Vec<u64> {
 /// the bin table a constant the compiler folds into the loop. The twin
 /// stays the shader's mirror and the reference in the parity tests.
 pub(crate) fn condition_map_by_wheel(batch: &ReduceBatch) -> Vec<u64> {
+    maps_by_wheel::<false>(batch).1
+}
+
+/// [`condition_map_by_wheel`] and, in the same pass over the samples,
+/// `energy_map`'s sums (equal to that twin's bit for bit, tested): the
+/// CPU engine's route to both histogram kernels, which reads each sample
+/// once and computes its slips and sliding speed once for both.
+pub(crate) fn histograms_by_wheel(batch: &ReduceBatch) -> (Vec<u64>, Vec<u64>) {
+    maps_by_wheel::<true>(batch)
+}
+
+/// Energy maps (`ENERGY`; empty otherwise) and condition maps, per wheel.
+fn maps_by_wheel<const ENERGY: bool>(batch: &ReduceBatch) -> (Vec<u64>, Vec<u64>) {
     use rayon::prelude::*;
-    let mut out = vec![0u64; batch.wheels() * MAP_BINS];
-    out.par_chunks_mut(MAP_BINS)
+    let wheels = batch.wheels();
+    let mut energy = vec![0u64; if ENERGY { wheels * ENERGY_BINS } else { 0 }];
+    let mut conditions = vec![0u64; wheels * MAP_BINS];
+    let energy_chunks: Vec<&mut [u64]> = match ENERGY {
+        true => energy.chunks_mut(ENERGY_BINS).collect(),
+        false => (0..wheels).map(|_| <&mut [u64]>::default()).collect(),
+    };
+    conditions
+        .par_chunks_mut(MAP_BINS)
+        .zip(energy_chunks)
         .enumerate()
-        .for_each(|(w, maps)| {
-            let mut h = WheelHistogram::default();
+        .for_each(|(w, (maps, energy_maps))| {
+            let mut h = WheelHistogram::<ENERGY>::default();
             for c in batch.chunks.iter().filter(|c| c.wheel as usize == w) {
                 h.add(&batch.samples[c.start as usize..(c.start + c.count) as usize]);
             }
-            h.write_to(maps);
+            h.write_to(maps, energy_maps);
         });
-    out
+    (energy, conditions)
 }
 
 /// One wheel's private histogram of quanta: [bin][component] for the 1-D
-/// maps, then the pair cells (total only).
-struct WheelHistogram {
+/// maps, then the pair cells (total only); and with `ENERGY` the energy
+/// maps' bins (`energy_map`'s layout).
+struct WheelHistogram<const ENERGY: bool> {
     one_d: Vec<[u64; COMPONENTS]>,
     pairs: Vec<u64>,
+    energy: Vec<u64>,
 }
 
-impl Default for WheelHistogram {
+impl<const ENERGY: bool> Default for WheelHistogram<ENERGY> {
     fn default() -> Self {
         WheelHistogram {
             one_d: vec![[0; COMPONENTS]; CONDITION_BINS],
             pairs: vec![0; PAIR_BINS],
+            energy: vec![0; if ENERGY { ENERGY_BINS } else { 0 }],
         }
     }
 }
@@ -580,11 +606,18 @@ const COLUMNS: TableColumns = {
     c
 };
 
-impl WheelHistogram {
+impl<const ENERGY: bool> WheelHistogram<ENERGY> {
     #[allow(clippy::needless_range_loop)] // k indexes the table's columns in lockstep
     fn add(&mut self, samples: &[ReduceSample]) {
         let t = &COLUMNS;
         for p in samples {
+            if ENERGY {
+                let e = sample_energy(p);
+                let [a, b, c] = e.cells;
+                self.energy[a] = self.energy[a].wrapping_add(e.total);
+                self.energy[b] = self.energy[b].wrapping_add(e.total);
+                self.energy[c] = self.energy[c].wrapping_add(e.lateral);
+            }
             let q = sample_quanta(p);
             let values = condition_values(p).map(|v| v as f32);
             let mut x = [0f32; TABLE_LEN];
@@ -611,8 +644,10 @@ impl WheelHistogram {
         }
     }
 
-    /// The sums in the twin's layout (`MAP_BINS` per wheel).
-    fn write_to(&self, maps: &mut [u64]) {
+    /// The sums in the twins' layouts (`MAP_BINS` per wheel; the energy
+    /// maps' `BINS`, with `ENERGY`).
+    fn write_to(&self, maps: &mut [u64], energy_maps: &mut [u64]) {
+        energy_maps.copy_from_slice(&self.energy);
         for (b, cell) in self.one_d.iter().enumerate() {
             for (m, &v) in cell.iter().enumerate() {
                 maps[m * CONDITION_BINS + b] = v;
@@ -1133,6 +1168,10 @@ mod tests {
             batch.push_wheel(&samples);
         }
         assert_eq!(condition_map_by_wheel(&batch), condition_map(&batch));
+        // Both histograms in one pass: each twin's sums.
+        let (energy, conditions) = histograms_by_wheel(&batch);
+        assert_eq!(conditions, condition_map(&batch));
+        assert_eq!(energy, super::super::energy_map::energy_map(&batch));
     }
 
     #[test]

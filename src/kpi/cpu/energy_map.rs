@@ -8,7 +8,7 @@
 //! where an f32 energy (GPU) and an f64 one (here) round to different quanta
 //! or land on different sides of a bin edge.
 
-use super::telemetry_reduce::{ITEMS, ReduceBatch, ReduceChunk, WG_SIZE};
+use super::telemetry_reduce::{ITEMS, ReduceBatch, ReduceChunk, ReduceSample, WG_SIZE};
 use crate::kpi::energy_maps::{EnergyMaps, SLIDING_SPEED_BINS, T_INNER_BINS, T_SURFACE_BINS};
 use rayon::prelude::*;
 
@@ -64,6 +64,39 @@ pub(crate) fn from_quanta(q: u64) -> f64 {
     q as i64 as f64 / ENERGY_QUANTA_PER_J
 }
 
+/// Where one sample's energy goes in the maps, and how much: its friction
+/// energy (eqs. 23–25) lands in `cells[0]` (surface × inner) and
+/// `cells[1]` (speed × surface), its lateral part (eq. 24) in `cells[2]`.
+pub(crate) struct SampleEnergy {
+    pub cells: [usize; 3],
+    /// Quanta of the friction energy and of its lateral part.
+    pub total: u64,
+    pub lateral: u64,
+}
+
+/// One sample's [`SampleEnergy`] (the shader's phase 1 for one sample).
+#[inline(always)]
+pub(crate) fn sample_energy(p: &ReduceSample) -> SampleEnergy {
+    let f = |x: f32| x as f64;
+    let dt = f(p.dt) + f(p.dt_lo);
+    let v_sx = f(p.vx) - f(p.omega) * f(p.radius); // eq. 21
+    let v_sy = f(p.vy); // eq. 22
+    let power = -f(p.fx) * v_sx - f(p.fy) * v_sy; // eqs. 23–25
+    let s = T_SURFACE_BINS.index(f(p.t_surface));
+    let i = T_INNER_BINS.index(f(p.t_inner));
+    let v = SLIDING_SPEED_BINS.index((v_sx * v_sx + v_sy * v_sy).sqrt());
+    let a = s * T_INNER_BINS.n + i;
+    SampleEnergy {
+        cells: [
+            a,
+            SURFACE_INNER_BINS + v * T_SURFACE_BINS.n + s,
+            LATERAL_BINS_AT + a,
+        ],
+        total: to_quanta(power * dt),
+        lateral: to_quanta(-f(p.fy) * v_sy * dt), // eq. 24
+    }
+}
+
 fn workgroup(batch: &ReduceBatch, chunk: &ReduceChunk, maps: &mut [u64]) {
     let count = chunk.count as usize;
     // Phase 0.
@@ -73,22 +106,11 @@ fn workgroup(batch: &ReduceBatch, chunk: &ReduceChunk, maps: &mut [u64]) {
         for k in 0..ITEMS {
             let j = lid + k * WG_SIZE;
             if j < count {
-                let p = &batch.samples[chunk.start as usize + j];
-                let f = |x: f32| x as f64;
-                let dt = f(p.dt) + f(p.dt_lo);
-                let v_sx = f(p.vx) - f(p.omega) * f(p.radius); // eq. 21
-                let v_sy = f(p.vy); // eq. 22
-                let power = -f(p.fx) * v_sx - f(p.fy) * v_sy; // eqs. 23–25
-                let s = T_SURFACE_BINS.index(f(p.t_surface));
-                let i = T_INNER_BINS.index(f(p.t_inner));
-                let v = SLIDING_SPEED_BINS.index((v_sx * v_sx + v_sy * v_sy).sqrt());
-                let a = s * T_INNER_BINS.n + i;
-                let q = to_quanta(power * dt);
-                bins[a] = bins[a].wrapping_add(q);
-                let b = SURFACE_INNER_BINS + v * T_SURFACE_BINS.n + s;
-                bins[b] = bins[b].wrapping_add(q);
-                let c = LATERAL_BINS_AT + a;
-                bins[c] = bins[c].wrapping_add(to_quanta(-f(p.fy) * v_sy * dt)); // eq. 24
+                let e = sample_energy(&batch.samples[chunk.start as usize + j]);
+                let [a, b, c] = e.cells;
+                bins[a] = bins[a].wrapping_add(e.total);
+                bins[b] = bins[b].wrapping_add(e.total);
+                bins[c] = bins[c].wrapping_add(e.lateral);
             }
         }
     }
