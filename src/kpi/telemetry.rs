@@ -420,10 +420,12 @@ fn for_each_kept(
             }
             dt
         };
-        while time(lo) + half_ns < t {
+        // As differences from t, which cannot overflow (times near the
+        // end of the u64 range would wrap a sum and run past the end).
+        while t - time(lo) > half_ns {
             lo += 1;
         }
-        while hi + 1 < n && time(hi + 1) <= t + half_ns {
+        while hi + 1 < n && time(hi + 1) - t <= half_ns {
             hi += 1;
         }
         // Both rates over the same window.
@@ -701,6 +703,28 @@ mod tests {
             assert_eq!(shortcut, sorted_period(steps, &mut b), "{step}");
             assert_eq!(a.sample_periods, b.sample_periods, "{step}");
         }
+    }
+
+    /// Times up to the end of the u64 range (a damaged or hand-written
+    /// log time): the rate window neither wraps nor runs past the last
+    /// sample, and the rates are those of the same samples anywhere else.
+    #[test]
+    fn times_at_the_end_of_the_range_prepare_like_any_others() {
+        let mut s = constant_series(200, 10_000_000);
+        for i in 0..200 {
+            s.t_surface_c[i] = 60.0 + 0.5 * i as f32;
+        }
+        // The last sample 0.6 s after the one before: a window's start
+        // then steps from 0.5 s below it to it.
+        s.time_ns[199] = s.time_ns[198] + 600_000_000;
+        let early = prepare_wheel(&s).unwrap();
+        let last = u64::MAX - 100_000_000;
+        let shift = last - s.time_ns[199];
+        s.time_ns.iter_mut().for_each(|t| *t += shift);
+        let late = prepare_wheel(&s).unwrap();
+        assert_eq!(late.samples, early.samples);
+        // 0.5 K per 10 ms sample.
+        assert!((late.samples[150].t_surface_rate - 50.0).abs() < 1e-3);
     }
 
     #[test]
