@@ -306,7 +306,7 @@ pub(crate) fn prepare_wheel_into(
         ));
     }
     samples.reserve(kept.len());
-    let push = |_k: usize, i: usize, dt: f64, d: DerivedConditions| {
+    let push = |i: usize, dt: f64, d: DerivedConditions| {
         let (dt_hi, dt_lo) = ReduceSample::split_dt(dt);
         samples.push(ReduceSample {
             vx: s.vx_mps[i],
@@ -365,12 +365,12 @@ pub(crate) struct DerivedConditions {
 pub(crate) fn derived_conditions(s: &WheelSeries, kept: &[usize]) -> Vec<(f64, DerivedConditions)> {
     let mut report = CleaningReport::default();
     let mut out = Vec::with_capacity(kept.len());
-    for_each_kept(s, kept, &mut report, |_, _, dt, d| out.push((dt, d)));
+    for_each_kept(s, kept, &mut report, |_, dt, d| out.push((dt, d)));
     out
 }
 
-/// Calls `emit(k, i, dt, conditions)` for each kept sample in order: k
-/// its rank among the kept, i its index in the series, dt the time it
+/// Calls `emit(i, dt, conditions)` for each kept sample in order: i its
+/// index in the series, dt the time it
 /// stands for (s) by the cleaning rule — up to the next kept sample; a
 /// gap above [`MAX_BRIDGED_GAP_S`] (a dropout, counted with its missing
 /// time in `report`) and the last sample count one nominal period.
@@ -378,7 +378,7 @@ fn for_each_kept(
     s: &WheelSeries,
     kept: impl KeptSamples,
     report: &mut CleaningReport,
-    mut emit: impl FnMut(usize, usize, f64, DerivedConditions),
+    mut emit: impl FnMut(usize, f64, DerivedConditions),
 ) {
     use super::cpu::condition_map::LOAD_FLOOR_N;
     let n = kept.len();
@@ -441,7 +441,6 @@ fn for_each_kept(
             (rate(&s.t_surface_c), rate(&s.t_inner_c))
         };
         emit(
-            k,
             i,
             dt,
             DerivedConditions {
@@ -682,10 +681,10 @@ mod tests {
         let all: Vec<usize> = (0..s.len()).collect();
         let (mut by_index, mut direct) = (Vec::new(), Vec::new());
         let (mut report_by_index, mut report) = Default::default();
-        for_each_kept(&s, all.as_slice(), &mut report_by_index, |_, i, dt, d| {
+        for_each_kept(&s, all.as_slice(), &mut report_by_index, |i, dt, d| {
             by_index.push((i, dt, d))
         });
-        for_each_kept(&s, AllSamples(s.len()), &mut report, |_, i, dt, d| {
+        for_each_kept(&s, AllSamples(s.len()), &mut report, |i, dt, d| {
             direct.push((i, dt, d))
         });
         assert_eq!(report_by_index, report);

@@ -534,23 +534,25 @@ pub(crate) fn histograms_by_wheel(batch: &ReduceBatch) -> (Vec<u64>, Vec<u64>) {
 fn maps_by_wheel<const ENERGY: bool>(batch: &ReduceBatch) -> (Vec<u64>, Vec<u64>) {
     use rayon::prelude::*;
     let wheels = batch.wheels();
-    let mut energy = vec![0u64; if ENERGY { wheels * ENERGY_BINS } else { 0 }];
-    let mut conditions = vec![0u64; wheels * MAP_BINS];
-    let energy_chunks: Vec<&mut [u64]> = match ENERGY {
-        true => energy.chunks_mut(ENERGY_BINS).collect(),
-        false => (0..wheels).map(|_| <&mut [u64]>::default()).collect(),
-    };
-    conditions
-        .par_chunks_mut(MAP_BINS)
-        .zip(energy_chunks)
-        .enumerate()
-        .for_each(|(w, (maps, energy_maps))| {
-            let mut h = WheelHistogram::<ENERGY>::default();
+    let histograms: Vec<WheelHistogram<ENERGY>> = (0..wheels)
+        .into_par_iter()
+        .map(|w| {
+            let mut h = WheelHistogram::default();
             for c in batch.chunks.iter().filter(|c| c.wheel as usize == w) {
                 h.add(&batch.samples[c.start as usize..(c.start + c.count) as usize]);
             }
-            h.write_to(maps, energy_maps);
-        });
+            h
+        })
+        .collect();
+    let mut energy = vec![0u64; if ENERGY { wheels * ENERGY_BINS } else { 0 }];
+    let mut conditions = vec![0u64; wheels * MAP_BINS];
+    for (w, h) in histograms.iter().enumerate() {
+        let energy_maps = energy.get_mut(w * ENERGY_BINS..(w + 1) * ENERGY_BINS);
+        h.write_to(
+            &mut conditions[w * MAP_BINS..(w + 1) * MAP_BINS],
+            energy_maps.unwrap_or_default(),
+        );
+    }
     (energy, conditions)
 }
 
