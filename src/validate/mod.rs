@@ -85,6 +85,13 @@ pub struct Case {
     pub rmse_ideal_pct: f64,
     /// (baseline − diagnosed) / (baseline − ideal).
     pub shrinkage_ratio: f64,
+    /// The planted shape itself, its size fitted with the law on the
+    /// training events (`score::exact_shape_sized`): that size (1 = the
+    /// planted one), the testing RMSE (%) and its shrinkage against the
+    /// ideal. What the best term could do once its size is estimated.
+    pub oracle_size: f64,
+    pub rmse_oracle_pct: f64,
+    pub oracle_shrinkage: f64,
     /// Pearson correlation, over the tires diagnosed, of the wear the
     /// diagnosis's terms add with the planted wear (0 without terms).
     pub terms_correlation: f64,
@@ -250,6 +257,9 @@ pub fn validate(s: &ValidateSettings) -> Vec<Case> {
                     rmse_diagnosed_pct: f64::NAN,
                     rmse_ideal_pct: f64::NAN,
                     shrinkage_ratio: f64::NAN,
+                    oracle_size: f64::NAN,
+                    rmse_oracle_pct: f64::NAN,
+                    oracle_shrinkage: f64::NAN,
                     error: Some(e.to_string()),
                 }
             }

@@ -162,15 +162,16 @@ fn render_generated(s: &mut String, cases: &[Case]) {
         let hits = g.iter().filter(|c| c.hit).count();
         let _ = writeln!(
             s,
-            "| {label} | {n} | {hits}/{n} ({:.0} %) | {:.2} | {:.2} | {} |",
+            "| {label} | {n} | {hits}/{n} ({:.0} %) | {:.2} | {:.2} | {:.2} | {} |",
             100.0 * hits as f64 / n as f64,
             median(g.iter().map(|c| c.terms_correlation).collect()),
             median(g.iter().map(|c| c.shrinkage_ratio).collect()),
+            median(g.iter().map(|c| c.oracle_shrinkage).collect()),
             g.iter().filter(|c| c.significant_terms == 0).count(),
         );
     };
     s.push_str(
-        "\nGenerated effects (targets over those at ≥ 10 % of the wear variance: hit ≥ 80 %, median shrinkage ≥ 0.8 of the ideal; hit: the terms' wear correlates ≥ 0.8 with the planted wear):\n\n| seasons | n | hit | correlation (median) | shrinkage / ideal (median) | no term |\n|---|---|---|---|---|---|\n",
+        "\nGenerated effects (targets over those at ≥ 10 % of the wear variance: hit ≥ 80 %, median shrinkage ≥ 0.8 of the ideal; hit: the terms' wear correlates ≥ 0.8 with the planted wear; exact shape, sized: the planted wear itself as the term, its size fitted with the law on the training events, what the best term could reach):\n\n| seasons | n | hit | correlation (median) | shrinkage / ideal (median) | exact shape, sized: shrinkage (median) | no term |\n|---|---|---|---|---|---|---|\n",
     );
     line(s, "all generated", &generated);
     line(s, "≥ 10 % of the variance", &big);
@@ -188,13 +189,13 @@ fn render_generated(s: &mut String, cases: &[Case]) {
         }
     }
     s.push_str(
-        "\n| effect | variance share | terms | correlation | RMSE baseline / diagnosed / ideal | shrinkage / ideal |\n|---|---|---|---|---|---|\n",
+        "\n| effect | variance share | terms | correlation | RMSE baseline / diagnosed / ideal | shrinkage / ideal | exact shape: size, shrinkage |\n|---|---|---|---|---|---|---|\n",
     );
     for c in &generated {
         let g = c.generated.as_ref().expect("generated");
         let _ = writeln!(
             s,
-            "| {g} | {:.1} % | {} | {:.2} | {:.3} / {:.3} / {:.3} | {:.2} |",
+            "| {g} | {:.1} % | {} | {:.2} | {:.3} / {:.3} / {:.3} | {:.2} | {:.3}, {:.2} |",
             100.0 * c.variance_share,
             c.first_term
                 .as_deref()
@@ -207,6 +208,8 @@ fn render_generated(s: &mut String, cases: &[Case]) {
             c.rmse_diagnosed_pct,
             c.rmse_ideal_pct,
             c.shrinkage_ratio,
+            c.oracle_size,
+            c.oracle_shrinkage,
         );
     }
 }
@@ -232,6 +235,9 @@ mod tests {
             rmse_diagnosed_pct: 9.0 - shrinkage * 7.0,
             rmse_ideal_pct: 2.0,
             shrinkage_ratio: shrinkage,
+            oracle_size: f64::NAN,
+            rmse_oracle_pct: f64::NAN,
+            oracle_shrinkage: f64::NAN,
             terms_correlation: f64::NAN,
             generated: None,
             error: None,

@@ -121,6 +121,33 @@ pub(crate) fn score_case(
         },
     )?;
     let rmse_ideal = ideal.testing.map_or(f64::NAN, |t| t.rmse_pct);
+    let (oracle_size, rmse_oracle) = if matches!(planted_kind, Planted::Clean) {
+        (f64::NAN, f64::NAN)
+    } else {
+        exact_shape_sized(rows, &p, |y| {
+            let cleaned: Vec<KpiRow> = rows
+                .iter()
+                .zip(y)
+                .map(|(r, v)| KpiRow {
+                    wear_mean_pct: *v,
+                    ..r.clone()
+                })
+                .collect();
+            let fit = diagnose(
+                &cleaned,
+                maps,
+                &Baseline::Physics,
+                &GapSettings {
+                    max_terms: 0,
+                    ..gap.clone()
+                },
+            )?;
+            Ok((
+                fit.training.rmse_pct,
+                fit.testing.map_or(f64::NAN, |t| t.rmse_pct),
+            ))
+        })?
+    };
     let rmse_base = d.testing.map_or(f64::NAN, |t| t.rmse_pct);
     let last = d.steps.last().expect("the baseline step");
     let rmse_diag = last.testing.map_or(f64::NAN, |t| t.rmse_pct);
@@ -167,8 +194,51 @@ pub(crate) fn score_case(
         rmse_diagnosed_pct: rmse_diag,
         rmse_ideal_pct: rmse_ideal,
         shrinkage_ratio: (rmse_base - rmse_diag) / (rmse_base - rmse_ideal),
+        oracle_size,
+        rmse_oracle_pct: rmse_oracle,
+        oracle_shrinkage: (rmse_base - rmse_oracle) / (rmse_base - rmse_ideal),
         error: None,
     })
+}
+
+/// The best any term of the planted effect's exact shape can do when its
+/// size is estimated, as a diagnosis must estimate it: the law calibrated
+/// on the measured wear less c times the planted wear, c chosen by the
+/// training events' RMSE (a grid of 0.25 on 0…3, then 0.025 within ±0.125
+/// of the best), the planted wear then added back at that size. `fit(y)`:
+/// the law calibrated on wear `y`, its (training, testing) RMSE (%).
+/// Returns (c, testing RMSE). The ideal is this at c = 1, the size no
+/// diagnosis can know; between the two lies what estimating the size costs,
+/// between this and the diagnosis what the term's shape costs.
+fn exact_shape_sized(
+    rows: &[KpiRow],
+    planted: &[f64],
+    fit: impl Fn(&[f64]) -> Result<(f64, f64), ValidateError>,
+) -> Result<(f64, f64), ValidateError> {
+    let at = |c: f64| -> Result<(f64, f64), ValidateError> {
+        let y: Vec<f64> = rows
+            .iter()
+            .zip(planted)
+            .map(|(r, p)| r.wear_mean_pct - c * p)
+            .collect();
+        fit(&y)
+    };
+    let mut best = (0.0, at(0.0)?);
+    // The coarse grid puts the best within ±0.125 of its step's best.
+    for (step, reach) in [(0.25, 12), (0.025, 5)] {
+        let centre = best.0;
+        for i in -reach..=reach {
+            let c = centre + step * i as f64;
+            if !(0.0..=3.0).contains(&c) || i == 0 {
+                continue;
+            }
+            let r = at(c)?;
+            if r.0 < best.1.0 {
+                best = (c, r);
+            }
+        }
+    }
+    Ok((best.0, best.1.1))
 }
 
 /// Pearson correlation of the wear the diagnosis's terms add with the
@@ -209,4 +279,44 @@ pub(super) fn read_generated(settings: &Path) -> Result<GeneratedEffect, Validat
     let s: Settings = toml::from_str(&text).map_err(|e| truth(e.to_string()))?;
     s.generated
         .ok_or_else(|| truth("no [generated] effect".into()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Wear = 3 % + 1.6 × planted: a "law" that fits a constant leaves a
+    /// training RMSE of |1.6 − c| × sd(planted), smallest at c = 1.6, which
+    /// the fine grid holds (1.5 + 4 × 0.025).
+    #[test]
+    fn the_exact_shape_is_sized_where_the_training_fit_is_best() {
+        let planted = [0.0, 2.0, 5.0, 1.0, 4.0, 3.0];
+        let rows: Vec<KpiRow> = planted
+            .iter()
+            .map(|p| KpiRow {
+                wear_mean_pct: 3.0 + 1.6 * p,
+                ..Default::default()
+            })
+            .collect();
+        let sd = |y: &[f64]| {
+            let m = y.iter().sum::<f64>() / y.len() as f64;
+            (y.iter().map(|v| (v - m).powi(2)).sum::<f64>() / y.len() as f64).sqrt()
+        };
+        // Training: the first four rows; testing: the rest.
+        let (c, testing) =
+            exact_shape_sized(&rows, &planted, |y| Ok((sd(&y[..4]), sd(&y[4..])))).unwrap();
+        assert!((c - 1.6).abs() < 1e-9, "{c}");
+        assert!(testing < 1e-9, "{testing}");
+        // Without the planted shape in the wear, the size found is 0.
+        let flat: Vec<KpiRow> = rows
+            .iter()
+            .map(|r| KpiRow {
+                wear_mean_pct: 3.0,
+                ..r.clone()
+            })
+            .collect();
+        let (c, _) =
+            exact_shape_sized(&flat, &planted, |y| Ok((sd(&y[..4]), sd(&y[4..])))).unwrap();
+        assert_eq!(c, 0.0);
+    }
 }
