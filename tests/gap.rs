@@ -100,6 +100,11 @@ fn planted_graining_is_found_on_the_front_axle() {
         d.steps[1]
     );
     assert!(case.rmse_diagnosed_pct < case.rmse_baseline_pct, "{case:?}");
+    // The planted wear itself, its size fitted with the law on the training
+    // events, is sized near the planted size (the simulator's truth) and
+    // shrinks the testing gap about as far as the ideal, which knows it.
+    assert!((case.oracle_size - 1.0).abs() <= 0.15, "{case:?}");
+    assert!(case.oracle_shrinkage > 0.9, "{case:?}");
     // Step 3 measures each flagged slice on the very tires step 1 flagged
     // (quantile edges are not re-read from the slice's printed name).
     assert!(!d.slices.is_empty());
