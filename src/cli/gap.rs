@@ -121,7 +121,10 @@ pub(crate) enum GapAction {
         /// "Generated effects"): a condition, pair, band, power law or set-up
         /// factor on a random scope with 5-40 % of the wear variance, drawn
         /// from seeds RANDOM_FROM, RANDOM_FROM+1, ... A hit is a diagnosis
-        /// whose terms' wear correlates >= 0.8 with the planted wear.
+        /// whose terms' wear correlates >= 0.8 with the planted wear. Beside
+        /// each season's shrinkage, the planted wear itself as the term,
+        /// sized with the law on the training events: the best a term of
+        /// the right shape could reach.
         #[arg(long, default_value_t = 0)]
         random: u64,
         /// First seed of the generated effects (docs/gap.md keeps the seeds

@@ -18,7 +18,11 @@
 //! (`sim::generated`: conditions, pairs, bands, power laws and set-up
 //! factors on random scopes, outside the candidate space); a hit there is
 //! a diagnosis whose terms' wear correlates ≥ 0.8 with the planted wear
-//! over the tires diagnosed. `render` writes the tables of docs/gap.md.
+//! over the tires diagnosed, and beside its shrinkage stands that of the
+//! planted wear itself as the term, sized with the law on the training
+//! events (`score::exact_shape_sized`: what the term's shape costs, apart
+//! from what estimating its size costs). `render` writes the tables of
+//! docs/gap.md.
 
 mod error;
 mod render;
