@@ -232,24 +232,22 @@ mod tests {
     /// source at an odd address, an empty array), for both element types.
     #[test]
     fn the_packed_copy_reads_as_the_element_loop() {
+        fn agree<T: Scalar + bytemuck::Pod, const N: usize>(src: &[u8], from: fn([u8; N]) -> T) {
+            let (mut by_copy, mut by_loop) = (vec![T::default()], vec![T::default()]);
+            T::extend_packed(&mut by_copy, src);
+            extend_le(&mut by_loop, src, from);
+            let bytes = |v: &[T]| bytemuck::cast_slice::<T, u8>(v).to_vec();
+            assert_eq!(bytes(&by_copy), bytes(&by_loop));
+            assert_eq!(by_copy.len(), 1 + src.len() / N);
+        }
         let raw: Vec<u8> = (0u8..=255).cycle().take(1 + 8 * 37).collect();
         // Offset 1: no element of the source is aligned.
         let bytes = &raw[1..];
         let mut nan = f64::NAN.to_le_bytes().to_vec();
         nan[0] = 0x5a;
         for src in [bytes, &nan[..], &[][..]] {
-            let (mut by_copy, mut by_loop) = (vec![1.0f32], vec![1.0f32]);
-            f32::extend_packed(&mut by_copy, src);
-            extend_le(&mut by_loop, src, f32::from_le_bytes);
-            let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
-            assert_eq!(bits(&by_copy), bits(&by_loop));
-            assert_eq!(by_copy.len(), 1 + src.len() / 4);
-            let (mut by_copy, mut by_loop) = (vec![2.0f64], vec![2.0f64]);
-            f64::extend_packed(&mut by_copy, src);
-            extend_le(&mut by_loop, src, f64::from_le_bytes);
-            let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
-            assert_eq!(bits(&by_copy), bits(&by_loop));
-            assert_eq!(by_copy.len(), 1 + src.len() / 8);
+            agree(src, f32::from_le_bytes);
+            agree(src, f64::from_le_bytes);
         }
     }
 }

@@ -101,52 +101,43 @@ pub(crate) fn score_case(
         .filter(|(r, _)| r.axle == crate::Axle::Front)
         .map(|(_, v)| v)
         .sum();
+    // The law alone calibrated on wear `y` (per row): its (training,
+    // testing) RMSE (%).
+    let law_alone = |y: &[f64]| -> Result<(f64, f64), ValidateError> {
+        let rows: Vec<KpiRow> = rows
+            .iter()
+            .zip(y)
+            .map(|(r, v)| KpiRow {
+                wear_mean_pct: *v,
+                ..r.clone()
+            })
+            .collect();
+        let fit = diagnose(
+            &rows,
+            maps,
+            &Baseline::Physics,
+            &GapSettings {
+                max_terms: 0,
+                ..gap.clone()
+            },
+        )?;
+        Ok((
+            fit.training.rmse_pct,
+            fit.testing.map_or(f64::NAN, |t| t.rmse_pct),
+        ))
+    };
     // Ideal: the same baseline calibrated on wear minus the planted part,
     // the planted part then added back exactly.
-    let cleaned: Vec<KpiRow> = rows
+    let cleaned: Vec<f64> = rows
         .iter()
         .zip(&p)
-        .map(|(r, v)| KpiRow {
-            wear_mean_pct: r.wear_mean_pct - v,
-            ..r.clone()
-        })
+        .map(|(r, v)| r.wear_mean_pct - v)
         .collect();
-    let ideal = diagnose(
-        &cleaned,
-        maps,
-        &Baseline::Physics,
-        &GapSettings {
-            max_terms: 0,
-            ..gap.clone()
-        },
-    )?;
-    let rmse_ideal = ideal.testing.map_or(f64::NAN, |t| t.rmse_pct);
+    let (_, rmse_ideal) = law_alone(&cleaned)?;
     let (oracle_size, rmse_oracle) = if matches!(planted_kind, Planted::Clean) {
         (f64::NAN, f64::NAN)
     } else {
-        exact_shape_sized(rows, &p, |y| {
-            let cleaned: Vec<KpiRow> = rows
-                .iter()
-                .zip(y)
-                .map(|(r, v)| KpiRow {
-                    wear_mean_pct: *v,
-                    ..r.clone()
-                })
-                .collect();
-            let fit = diagnose(
-                &cleaned,
-                maps,
-                &Baseline::Physics,
-                &GapSettings {
-                    max_terms: 0,
-                    ..gap.clone()
-                },
-            )?;
-            Ok((
-                fit.training.rmse_pct,
-                fit.testing.map_or(f64::NAN, |t| t.rmse_pct),
-            ))
-        })?
+        exact_shape_sized(rows, &p, law_alone)?
     };
     let rmse_base = d.testing.map_or(f64::NAN, |t| t.rmse_pct);
     let last = d.steps.last().expect("the baseline step");
