@@ -67,6 +67,7 @@ fn settings(work: &std::path::Path) -> ValidateSettings {
         scatter: tirewear::sim::WearScatter::NONE,
         work: work.to_path_buf(),
         keep: false,
+        reuse: false,
         gap: GapSettings {
             scoring: ScoringSettings {
                 permutations: 999,

@@ -64,6 +64,19 @@ pub(crate) struct GapStatsArgs {
     /// Most terms forward selection adds.
     #[arg(long, default_value_t = 4)]
     max_terms: usize,
+    /// Tires whose tread wore through (their wear only a lower bound):
+    /// `leave-out`, or `impute` the training events' ones by Buckley-James
+    /// regression on the law (its prediction times the Kaplan-Meier mean of
+    /// the relative residuals beyond their own).
+    /// Measured side by side in docs/gap.md ("Worn-through tires imputed").
+    #[arg(long, value_enum, default_value = "leave-out")]
+    worn_through: WornThroughArg,
+}
+
+#[derive(Clone, Copy, clap::ValueEnum)]
+pub(crate) enum WornThroughArg {
+    LeaveOut,
+    Impute,
 }
 
 impl GapStatsArgs {
@@ -82,6 +95,10 @@ impl GapStatsArgs {
             max_terms: self.max_terms,
             wlf: Default::default(),
             user_effects: Vec::new(),
+            worn_through: match self.worn_through {
+                WornThroughArg::LeaveOut => tirewear::gap::report::WornThrough::LeaveOut,
+                WornThroughArg::Impute => tirewear::gap::report::WornThrough::Impute,
+            },
         }
     }
 }
@@ -154,6 +171,13 @@ pub(crate) enum GapAction {
         /// Keep each season's files.
         #[arg(long)]
         keep: bool,
+        /// Diagnose the seasons a run with --keep left in the scratch
+        /// folder again instead of simulating them again (each where it was
+        /// simulated with the same settings by this version; the others are
+        /// simulated afresh): for comparing diagnosis settings on the same
+        /// seasons.
+        #[arg(long, requires = "keep")]
+        reuse: bool,
         #[command(flatten)]
         stats: GapStatsArgs,
         #[arg(long, default_value = "gap-validate")]
@@ -260,6 +284,7 @@ pub(crate) fn run(a: GapArgs, progress: bool) -> Result<()> {
         wear_scatter,
         work,
         keep,
+        reuse,
         stats,
         out,
     }) = action
@@ -290,6 +315,7 @@ pub(crate) fn run(a: GapArgs, progress: bool) -> Result<()> {
             scatter: wear_scatter.into(),
             work: work.unwrap_or_else(|| out.join("seasons")),
             keep,
+            reuse,
             gap: stats.settings(None),
             progress,
         };

@@ -17,6 +17,7 @@
 //! Without an energy map the factor uses the run's mean surface temperature.
 
 use super::candidates::LawRow;
+use super::stats::KaplanMeier;
 use crate::ingest::compound::Wlf;
 use crate::kpi::KpiRow;
 use crate::kpi::energy_maps::EnergyMaps;
@@ -94,6 +95,42 @@ pub struct PhysicsBaseline {
 /// A row the law can be calibrated on: finite energy, temperature and skewness.
 fn usable(r: &KpiRow) -> bool {
     r.friction_energy_j.is_finite() && r.t_surface_avg_c.is_finite() && r.skewness.is_finite()
+}
+
+/// Rounds of imputation and calibration in [`PhysicsBaseline::fit_censored`].
+pub const BUCKLEY_JAMES_ROUNDS: usize = 5;
+
+/// Each row's wear with the censored rows' imputed from `predicted` (%):
+/// predicted · (1 + E[e | e > e_i]), the Kaplan–Meier mean of the relative
+/// residuals e = wear/predicted − 1 of every row (the censored ones as
+/// lower bounds) beyond the row's own e_i. One distribution for all rows,
+/// as Buckley–James assume: the heavily worn tires, most of which wear
+/// through, show nothing beyond their own lower bounds, so their tail can
+/// only be learnt from the rest (a window of the rows nearest in predicted
+/// wear was tried: docs/gap.md, "Worn-through tires imputed"). NaN where a
+/// censored row has no positive prediction.
+pub fn impute_censored(rows: &[&KpiRow], censored: &[bool], predicted: &[f64]) -> Vec<f64> {
+    let wear: Vec<f64> = rows.iter().map(|r| r.wear_mean_pct).collect();
+    impute_censored_values(&wear, censored, predicted)
+}
+
+/// [`impute_censored`] on the wear itself: `wear[i]` measured, or its
+/// lower bound where `censored[i]`.
+fn impute_censored_values(wear: &[f64], censored: &[bool], predicted: &[f64]) -> Vec<f64> {
+    let e: Vec<f64> = wear
+        .iter()
+        .zip(predicted)
+        .map(|(y, p)| if *p > 0.0 { y / p - 1.0 } else { f64::NAN })
+        .collect();
+    let km = KaplanMeier::new(&e, censored);
+    wear.iter()
+        .enumerate()
+        .map(|(i, y)| match censored[i] {
+            false => *y,
+            true if e[i].is_finite() => predicted[i] * (1.0 + km.mean_beyond(e[i])),
+            true => f64::NAN,
+        })
+        .collect()
 }
 
 /// The calibration group of a row: `compound/axle`.
@@ -181,6 +218,60 @@ impl PhysicsBaseline {
         let grid = LawGrid::new(&ok_rows, &ok_maps, wlf);
         let y: Vec<f64> = ok_rows.iter().map(|r| r.wear_mean_pct).collect();
         PhysicsBaseline::fit_grid(&grid, &ok_rows, &y)
+    }
+
+    /// Calibrates on rows some of whose wear is censored (`censored[i]`: the
+    /// tire wore through, so its wear is at least `wear_mean_pct`), by
+    /// Buckley–James regression on the law's relative scale: calibrated on
+    /// the measured rows, each censored row's wear is imputed as the law's
+    /// prediction times 1 + E[e | e > e_i], the Kaplan–Meier mean of the
+    /// relative residuals e = wear/prediction − 1 beyond its own lower
+    /// bound e_i ([`impute_censored`]), and the law is calibrated again on
+    /// every row, [`BUCKLEY_JAMES_ROUNDS`] times. Leaving worn-through tires
+    /// out selects on the residual: the tires that wore most for their
+    /// energy go, which biases wear per joule down where wear is high and
+    /// hides an effect's strongest tires. Returns the law and each row's wear
+    /// (the censored ones imputed; NaN where the law has no prediction).
+    pub fn fit_censored(
+        rows: &[&KpiRow],
+        maps: &[Option<&EnergyMaps>],
+        wlf: &BTreeMap<String, Wlf>,
+        censored: &[bool],
+    ) -> (PhysicsBaseline, Vec<f64>) {
+        // The rows `fit` would calibrate on, and the censored ones beside.
+        let ok: Vec<usize> = (0..rows.len())
+            .filter(|&i| (censored[i] || rows[i].wear_mean_pct.is_finite()) && usable(rows[i]))
+            .collect();
+        let ok_rows: Vec<&KpiRow> = ok.iter().map(|&i| rows[i]).collect();
+        let ok_maps: Vec<Option<&EnergyMaps>> = ok.iter().map(|&i| maps[i]).collect();
+        let ok_censored: Vec<bool> = ok.iter().map(|&i| censored[i]).collect();
+        let grid = LawGrid::new(&ok_rows, &ok_maps, wlf);
+        let mut y: Vec<f64> = ok_rows
+            .iter()
+            .zip(&ok_censored)
+            .map(|(r, &c)| if c { f64::NAN } else { r.wear_mean_pct })
+            .collect();
+        let mut law = PhysicsBaseline::fit_grid(&grid, &ok_rows, &y);
+        if ok_censored.contains(&true) {
+            for _ in 0..BUCKLEY_JAMES_ROUNDS {
+                let predicted: Vec<f64> = ok_rows
+                    .iter()
+                    .zip(&ok_maps)
+                    .map(|(r, m)| law.predict(r, *m))
+                    .collect();
+                y = impute_censored(&ok_rows, &ok_censored, &predicted);
+                law = PhysicsBaseline::fit_grid(&grid, &ok_rows, &y);
+            }
+        }
+        let mut wear: Vec<f64> = rows
+            .iter()
+            .zip(censored)
+            .map(|(r, &c)| if c { f64::NAN } else { r.wear_mean_pct })
+            .collect();
+        for (&i, v) in ok.iter().zip(&y) {
+            wear[i] = *v;
+        }
+        (law, wear)
     }
 
     /// Calibrates on `y` (% per row) with the precomputed [`LawGrid`] of the
@@ -335,6 +426,56 @@ mod tests {
         assert!((b.skewness_coefficient - 0.2).abs() < 1e-9);
         assert!((b.k_pct_per_mj["soft/front"] - 1.5).abs() < 1e-9);
         assert!((b.k_pct_per_mj["hard/rear"] - 0.8).abs() < 1e-9);
+    }
+
+    #[test]
+    fn worn_through_tires_imputed_remove_the_selection_bias() {
+        // wear = E·(1 + ε) (k = 1 %/MJ), ε the 200 normal quantiles of sd
+        // 0.2 in a scrambled order; a tire above 20 % reads 20 % and is
+        // censored, 44 of 200. Left out, they take the tires that wore most
+        // for their energy and k falls to 0.95; imputed, k is 1 within 1 %.
+        let normal = statrs::distribution::Normal::new(0.0, 0.2).unwrap();
+        let n = 200;
+        let rows: Vec<KpiRow> = (0..n)
+            .map(|i| {
+                let q = (((i * 7) % n) as f64 + 0.5) / n as f64;
+                let eps = statrs::distribution::ContinuousCDF::inverse_cdf(&normal, q);
+                let e = 5.0 + (i % 20) as f64;
+                KpiRow {
+                    compound: "soft".into(),
+                    axle: Axle::Front,
+                    friction_energy_j: e * 1e6,
+                    t_surface_avg_c: 60.0,
+                    skewness: 0.0,
+                    wear_mean_pct: (e * (1.0 + eps)).min(20.0),
+                    ..Default::default()
+                }
+            })
+            .collect();
+        let censored: Vec<bool> = rows.iter().map(|r| r.wear_mean_pct >= 20.0).collect();
+        assert_eq!(censored.iter().filter(|c| **c).count(), 44);
+        let refs: Vec<&KpiRow> = rows.iter().collect();
+        let maps = vec![None; n];
+        let measured: Vec<&KpiRow> = refs
+            .iter()
+            .zip(&censored)
+            .filter(|(_, c)| !**c)
+            .map(|(r, _)| *r)
+            .collect();
+        let left_out = PhysicsBaseline::fit(&measured, &maps[..measured.len()], &BTreeMap::new());
+        let k_left_out = left_out.k_pct_per_mj["soft/front"];
+        let (law, wear) = PhysicsBaseline::fit_censored(&refs, &maps, &BTreeMap::new(), &censored);
+        let k = law.k_pct_per_mj["soft/front"];
+        assert!(k_left_out < 0.96, "{k_left_out}");
+        assert!((k - 1.0).abs() < 0.01, "{k}");
+        // Each imputed wear lies beyond its reading; the measured ones stay.
+        for ((r, w), c) in rows.iter().zip(&wear).zip(&censored) {
+            if *c {
+                assert!(*w > r.wear_mean_pct, "{w}");
+            } else {
+                assert_eq!(*w, r.wear_mean_pct);
+            }
+        }
     }
 
     #[test]

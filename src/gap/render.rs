@@ -14,10 +14,8 @@ pub fn render_markdown(d: &Diagnosis, max_slices: usize) -> String {
         let _ = writeln!(s, "Calibrated on the training events: {}", describe_law(p));
     }
     if !d.censored.is_empty() {
-        let _ = writeln!(
-            s,
-            "\n{} tires left out: tread worn through (depth readings at ≤ 5 % of the new depth), so their wear is only a lower bound: {}{}",
-            d.censored.len(),
+        let listed = format!(
+            "{}{}",
             d.censored
                 .iter()
                 .take(10)
@@ -26,6 +24,21 @@ pub fn render_markdown(d: &Diagnosis, max_slices: usize) -> String {
                 .join(", "),
             if d.censored.len() > 10 { ", …" } else { "" }
         );
+        let _ = if d.imputed.is_empty() {
+            writeln!(
+                s,
+                "\n{} tires left out: tread worn through (depth readings at ≤ 5 % of the new depth), so their wear is only a lower bound: {listed}",
+                d.censored.len(),
+            )
+        } else {
+            writeln!(
+                s,
+                "\n{} tires worn through (depth readings at ≤ 5 % of the new depth), so their wear is only a lower bound: {listed}. {} of them, of the training events, enter with their wear imputed (Buckley–James: the model's prediction times the Kaplan–Meier mean of the relative residuals beyond their own); the other {} are left out.",
+                d.censored.len(),
+                d.imputed.len(),
+                d.censored.len() - d.imputed.len(),
+            )
+        };
     }
     let _ = writeln!(
         s,

@@ -3,7 +3,7 @@
 //! 2) and how far it shrinks as terms are added (step 3); written as JSON
 //! and Markdown.
 
-use super::baseline::PhysicsBaseline;
+use super::baseline::{PhysicsBaseline, impute_censored};
 use super::candidates::{Candidate, Feature, LawRow, library};
 use super::error::GapError;
 use super::linear::weighted_fit;
@@ -128,8 +128,14 @@ pub struct Diagnosis {
     pub physics_with_terms: Option<PhysicsBaseline>,
     pub training_events: Vec<String>,
     pub testing_events: Vec<String>,
-    /// Tires left out because their tread was worn through (run/wheel).
+    /// Tires whose tread was worn through (run/wheel): their measured wear
+    /// is a lower bound.
     pub censored: Vec<String>,
+    /// Those of the training events, which entered the calibration and the
+    /// tests with their wear imputed (Buckley–James,
+    /// `PhysicsBaseline::fit_censored`); the rest (the testing events') are
+    /// left out of the gap's measure.
+    pub imputed: Vec<String>,
     pub training: GapSize,
     pub testing: Option<GapSize>,
     /// False-discovery rate of the slice tests.
@@ -241,6 +247,24 @@ pub struct GapSettings {
     /// User hypotheses (`effects.toml`), scored beside the library.
     #[serde(skip)]
     pub user_effects: Vec<Candidate>,
+    /// What becomes of the tires whose tread wore through.
+    pub worn_through: WornThrough,
+}
+
+/// What the diagnosis does with the tires whose tread wore through: their
+/// measured wear is only a lower bound (docs/gap.md, "Worn-through tires
+/// imputed"). Either way the testing events' ones are left out of the
+/// gap's measure.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum WornThrough {
+    /// Left out of the whole diagnosis.
+    #[default]
+    LeaveOut,
+    /// The training events' ones enter the calibration, the slices and the
+    /// tests with their wear imputed by Buckley–James regression on the
+    /// law (`PhysicsBaseline::fit_censored`).
+    Impute,
 }
 
 impl Default for GapSettings {
@@ -252,6 +276,7 @@ impl Default for GapSettings {
             max_terms: 4,
             wlf: BTreeMap::new(),
             user_effects: Vec::new(),
+            worn_through: WornThrough::default(),
         }
     }
 }
@@ -309,36 +334,45 @@ pub fn diagnose(
     settings: &GapSettings,
 ) -> Result<Diagnosis, ModelError> {
     let fdr = settings.fdr;
-    // A tire with readings at the worn-through depth (5 % of new): its measured wear
-    // is a lower bound, which no law can be calibrated on.
-    let (rows, censored): (Vec<KpiRow>, Vec<KpiRow>) = rows
+    // A tire with readings at the worn-through depth (5 % of new): its
+    // measured wear is a lower bound. In the training events it enters
+    // with its wear imputed (Buckley–James, `PhysicsBaseline::fit_censored`);
+    // in the testing events it is left out of the gap's measure.
+    let (rows, worn): (Vec<KpiRow>, Vec<KpiRow>) = rows
         .iter()
         .cloned()
         .partition(|r| r.worn_through_readings <= 0.0);
-    let censored: Vec<String> = censored
+    let censored: Vec<String> = worn
         .iter()
         .map(|r| format!("{}/{}", r.run, r.wheel))
         .collect();
-    if !censored.is_empty() {
-        tracing::warn!(
-            tires = censored.len(),
-            "left out: tread worn through (readings at ≤ 5 % of the new depth), wear censored"
-        );
-    }
     let rows = rows.as_slice();
-    let s = split(rows, settings.test_events.as_deref())?;
+    let mut s = split(rows, settings.test_events.as_deref())?;
+    let worn_train: Vec<&KpiRow> = match settings.worn_through {
+        WornThrough::Impute => worn
+            .iter()
+            .filter(|r| s.train_events.contains(&r.event))
+            .collect(),
+        WornThrough::LeaveOut => Vec::new(),
+    };
     let map_of = |r: &KpiRow| maps.get(&r.tire_run());
-    let (name, physics) = match baseline {
+    let (physics, imputed_wear) = match baseline {
         Baseline::Physics => {
-            let train_maps: Vec<Option<&EnergyMaps>> = s.train.iter().map(|r| map_of(r)).collect();
-            (
-                "physics (wear = k_compound,axle · Σ E_bin·φ_compound(T_bin) · exp(s·Sk))"
-                    .to_string(),
-                Some(PhysicsBaseline::fit(&s.train, &train_maps, &settings.wlf)),
-            )
+            let train: Vec<&KpiRow> = s.train.iter().chain(&worn_train).copied().collect();
+            let train_maps: Vec<Option<&EnergyMaps>> = train.iter().map(|r| map_of(r)).collect();
+            let is_worn: Vec<bool> = (0..train.len()).map(|i| i >= s.train.len()).collect();
+            let (p, y) =
+                PhysicsBaseline::fit_censored(&train, &train_maps, &settings.wlf, &is_worn);
+            (Some(p), y[s.train.len()..].to_vec())
         }
-        Baseline::Model(m) => (format!("{} model", m.method()), None),
-        Baseline::Predictions(p) => (format!("predictions from {}", p.source), None),
+        _ => (None, Vec::new()),
+    };
+    let name = match baseline {
+        Baseline::Physics => {
+            "physics (wear = k_compound,axle · Σ E_bin·φ_compound(T_bin) · exp(s·Sk))".to_string()
+        }
+        Baseline::Model(m) => format!("{} model", m.method()),
+        Baseline::Predictions(p) => format!("predictions from {}", p.source),
     };
     let predict = |r: &KpiRow| -> f64 {
         match (baseline, &physics) {
@@ -355,6 +389,37 @@ pub fn diagnose(
             .filter(|&i| (set[i].wear_mean_pct - predict(set[i])).is_finite())
             .collect()
     };
+    // A fixed baseline's worn-through tires: imputed once from its own
+    // predictions (nothing to calibrate again).
+    let imputed_wear = if physics.is_some() || worn_train.is_empty() {
+        imputed_wear
+    } else {
+        let train: Vec<&KpiRow> = s.train.iter().chain(&worn_train).copied().collect();
+        let is_worn: Vec<bool> = (0..train.len()).map(|i| i >= s.train.len()).collect();
+        let predicted: Vec<f64> = train.iter().map(|r| predict(r)).collect();
+        impute_censored(&train, &is_worn, &predicted)[s.train.len()..].to_vec()
+    };
+    let imputed: Vec<KpiRow> = worn_train
+        .iter()
+        .zip(&imputed_wear)
+        .filter(|(_, y)| y.is_finite())
+        .map(|(r, y)| KpiRow {
+            wear_mean_pct: *y,
+            ..(*r).clone()
+        })
+        .collect();
+    if !censored.is_empty() {
+        tracing::warn!(
+            tires = censored.len(),
+            imputed = imputed.len(),
+            "tread worn through (readings at ≤ 5 % of the new depth), wear censored: the imputed ones enter with their wear imputed, the others are left out"
+        );
+    }
+    let imputed_tires: Vec<String> = imputed
+        .iter()
+        .map(|r| format!("{}/{}", r.run, r.wheel))
+        .collect();
+    s.train.extend(imputed.iter());
     let (tr, te) = (usable(&s.train), usable(&s.test));
     if tr.len() < 20 {
         return Err(ModelError::TooFewObservations {
@@ -498,6 +563,7 @@ pub fn diagnose(
         training_events: s.train_events.clone(),
         testing_events: s.test_events.clone(),
         censored,
+        imputed: imputed_tires,
         training: size(trv),
         testing: (!tev.is_empty()).then(|| size(tev)),
         fdr,

@@ -1,6 +1,7 @@
 //! Small statistics of the gap diagnosis: the difference of a slice's mean
 //! residual from the rest's for residuals clustered in events (a random
-//! intercept per event), and Benjamini–Hochberg false-discovery control.
+//! intercept per event), Benjamini–Hochberg false-discovery control, and
+//! the Kaplan–Meier tail means that impute worn-through tires' wear.
 
 use statrs::distribution::{ContinuousCDF, StudentsT};
 
@@ -135,9 +136,87 @@ pub fn benjamini_hochberg(p: &[f64]) -> Vec<f64> {
     adj
 }
 
+/// The Kaplan–Meier estimate of a distribution from right-censored values:
+/// each value is observed, or censored (the true value is at least it).
+/// What Buckley–James regression needs of it: the mean of the distribution
+/// beyond a censored value, [`KaplanMeier::mean_beyond`].
+#[derive(Debug, Clone)]
+pub struct KaplanMeier {
+    /// The observed values in ascending order and the probability mass the
+    /// estimate puts on each; where the largest value is censored, the mass
+    /// left beyond it sits on it (Efron's convention: treated as observed).
+    atoms: Vec<(f64, f64)>,
+}
+
+impl KaplanMeier {
+    /// From values and whether each is censored; non-finite values are
+    /// left out. Ties: the observed before the censored (a censored value
+    /// is still at risk at its own value).
+    pub fn new(values: &[f64], censored: &[bool]) -> KaplanMeier {
+        let mut v: Vec<(f64, bool)> = values
+            .iter()
+            .zip(censored)
+            .filter(|(x, _)| x.is_finite())
+            .map(|(x, c)| (*x, *c))
+            .collect();
+        v.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+        let mut atoms = Vec::new();
+        let mut survival = 1.0;
+        let n = v.len();
+        for (i, &(x, c)) in v.iter().enumerate() {
+            let at_risk = (n - i) as f64;
+            let last = i + 1 == n;
+            if !c || last {
+                // Mass S(x−)·(1/at_risk) for an observed value; the whole
+                // remaining mass on the largest value.
+                let mass = if last { survival } else { survival / at_risk };
+                atoms.push((x, mass));
+                survival -= mass;
+            }
+        }
+        KaplanMeier { atoms }
+    }
+
+    /// E[X | X > c] under the estimate; `c` itself where it puts no mass
+    /// beyond `c` (nothing larger was observed).
+    pub fn mean_beyond(&self, c: f64) -> f64 {
+        let (mut mass, mut moment) = (0.0, 0.0);
+        for &(x, m) in self.atoms.iter().filter(|(x, _)| *x > c) {
+            mass += m;
+            moment += m * x;
+        }
+        if mass > 0.0 { moment / mass } else { c }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn kaplan_meier_tail_means_by_hand() {
+        // 0.1, 0.2+, 0.3, 0.5+, 0.6 (+: censored). S drops at 0.1 by 1/5 to
+        // 0.8; at 0.3, three at risk, to 0.8·2/3 = 8/15; at 0.6, one at
+        // risk, to 0. Masses 1/5, 4/15, 8/15.
+        let km = KaplanMeier::new(
+            &[0.3, 0.5, 0.1, 0.6, 0.2, f64::NAN],
+            &[false, true, false, false, true, false],
+        );
+        // Beyond 0.2: (0.3·4/15 + 0.6·8/15)/(12/15) = 0.5.
+        assert!((km.mean_beyond(0.2) - 0.5).abs() < 1e-12);
+        assert!((km.mean_beyond(0.5) - 0.6).abs() < 1e-12);
+        // Beyond everything: the value itself.
+        assert_eq!(km.mean_beyond(0.7), 0.7);
+        // Below everything: the estimate's mean, 0.1/5 + 0.3·4/15 + 0.6·8/15.
+        assert!((km.mean_beyond(-1.0) - (0.02 + 0.08 + 0.32)).abs() < 1e-12);
+        // The largest value censored: 0.1, 0.4+ → mass 1/2 each (Efron).
+        let km = KaplanMeier::new(&[0.1, 0.4], &[false, true]);
+        assert!((km.mean_beyond(0.0) - 0.25).abs() < 1e-12);
+        assert!((km.mean_beyond(0.2) - 0.4).abs() < 1e-12);
+        // Without censoring: the sample mean of what lies beyond.
+        let km = KaplanMeier::new(&[1.0, 2.0, 3.0, 4.0], &[false; 4]);
+        assert!((km.mean_beyond(1.5) - 3.0).abs() < 1e-12);
+    }
 
     #[test]
     fn clustered_difference_by_hand() {

@@ -59,6 +59,10 @@ pub struct ValidateSettings {
     pub work: PathBuf,
     /// Keep each season's files instead of deleting them after scoring.
     pub keep: bool,
+    /// Diagnose a season kept by an earlier run (`keep`) again instead of
+    /// simulating it again, where its stamp (`REUSE_STAMP`) shows it was
+    /// simulated with the same settings and this version of tirewear.
+    pub reuse: bool,
     pub gap: GapSettings,
     pub progress: bool,
 }
@@ -161,6 +165,43 @@ pub(crate) fn simulate_and_extract(
     Ok(kpis)
 }
 
+/// A kept season's record of what it was simulated with (`--reuse`).
+const REUSE_STAMP: &str = "validate-season.txt";
+
+/// What a season's files depend on: the simulator's settings and the
+/// version of tirewear that wrote them (the folder and the progress bar
+/// aside).
+fn reuse_stamp(opts: &crate::sim::SimOptions) -> String {
+    let o = crate::sim::SimOptions {
+        out: PathBuf::new(),
+        progress: false,
+        ..opts.clone()
+    };
+    format!("tirewear {}\n{o:?}\n", env!("CARGO_PKG_VERSION"))
+}
+
+/// The season's KPI file: the kept one where `reuse` is asked for and its
+/// stamp matches, else simulated and extracted afresh (and stamped).
+fn simulated_season(opts: &crate::sim::SimOptions, reuse: bool) -> Result<PathBuf, ValidateError> {
+    let stamp_path = opts.out.join(REUSE_STAMP);
+    let kpis = opts.out.join("kpis.parquet");
+    let stamp = reuse_stamp(opts);
+    if reuse
+        && kpis.is_file()
+        && std::fs::read_to_string(&stamp_path).is_ok_and(|kept| kept == stamp)
+    {
+        tracing::info!(season = %opts.out.display(), "reusing the kept season");
+        return Ok(kpis);
+    }
+    let _ = std::fs::remove_dir_all(&opts.out);
+    let kpis = simulate_and_extract(opts)?;
+    crate::atomic::write_bytes(&stamp_path, stamp.as_bytes()).map_err(|e| ValidateError::Io {
+        path: stamp_path.display().to_string(),
+        source: e,
+    })?;
+    Ok(kpis)
+}
+
 /// Simulates, extracts, diagnoses and scores one season.
 pub fn run_case(
     planted_kind: &Planted,
@@ -178,8 +219,7 @@ pub fn run_case(
         Planted::Clean => format!("clean-s{seed}"),
     };
     let dir = s.work.join(name);
-    let _ = std::fs::remove_dir_all(&dir);
-    let kpis = simulate_and_extract(&crate::sim::SimOptions {
+    let opts = crate::sim::SimOptions {
         preset: s.preset,
         scale: s.scale,
         seed,
@@ -198,7 +238,8 @@ pub fn run_case(
         sensor_noise: true,
         logger_export: None,
         progress: false,
-    })?;
+    };
+    let kpis = simulated_season(&opts, s.reuse)?;
     let rows = crate::kpi::table::read_parquet(&kpis)?;
     let maps = crate::kpi::energy_maps::read_tire_maps(&kpis)?;
     // The diagnosis sees the KPI tables and the compound files only.
@@ -282,4 +323,53 @@ pub fn validate(s: &ValidateSettings) -> Vec<Case> {
     }
     pb.finish_and_clear();
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn options(out: &std::path::Path, seed: u64) -> crate::sim::SimOptions {
+        crate::sim::SimOptions {
+            preset: crate::sim::Preset::Tiny,
+            scale: 1.0,
+            seed,
+            effects: Vec::new(),
+            generated: None,
+            scatter: crate::sim::WearScatter::NONE,
+            encoding: crate::ingest::telemetry::Encoding::Block,
+            rate_hz: Some(5.0),
+            out: out.to_path_buf(),
+            sensor_noise: true,
+            logger_export: None,
+            progress: false,
+        }
+    }
+
+    #[test]
+    fn a_kept_season_is_reused_only_with_its_own_stamp() {
+        let dir = tempfile::tempdir().unwrap();
+        let opts = options(dir.path(), 7);
+        // The stamp names the settings, not the folder or the progress bar.
+        let elsewhere = crate::sim::SimOptions {
+            out: PathBuf::from("/elsewhere"),
+            progress: true,
+            ..opts.clone()
+        };
+        assert_eq!(reuse_stamp(&opts), reuse_stamp(&elsewhere));
+        assert_ne!(reuse_stamp(&opts), reuse_stamp(&options(dir.path(), 8)));
+        // A kept KPI file with its stamp is taken as it is (a simulation
+        // would have replaced the folder and this file with it).
+        std::fs::write(dir.path().join("kpis.parquet"), b"kept").unwrap();
+        std::fs::write(dir.path().join(REUSE_STAMP), reuse_stamp(&opts)).unwrap();
+        let kpis = simulated_season(&opts, true).unwrap();
+        assert_eq!(std::fs::read(kpis).unwrap(), b"kept");
+        // Another seed's stamp, or no --reuse: simulated afresh.
+        let fresh = simulated_season(&options(dir.path(), 8), true).unwrap();
+        assert_ne!(std::fs::read(&fresh).unwrap(), b"kept");
+        assert_eq!(
+            std::fs::read_to_string(dir.path().join(REUSE_STAMP)).unwrap(),
+            reuse_stamp(&options(dir.path(), 8))
+        );
+    }
 }
