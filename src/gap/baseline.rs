@@ -98,7 +98,7 @@ fn usable(r: &KpiRow) -> bool {
 }
 
 /// Rounds of imputation and calibration in [`PhysicsBaseline::fit_censored`].
-pub const BUCKLEY_JAMES_ROUNDS: usize = 5;
+const BUCKLEY_JAMES_ROUNDS: usize = 5;
 
 /// Each row's wear with the censored rows' imputed from `predicted` (%):
 /// predicted · (1 + E[e | e > e_i]), the Kaplan–Meier mean of the relative
@@ -110,23 +110,22 @@ pub const BUCKLEY_JAMES_ROUNDS: usize = 5;
 /// wear was tried: docs/gap.md, "Worn-through tires imputed"). NaN where a
 /// censored row has no positive prediction.
 pub fn impute_censored(rows: &[&KpiRow], censored: &[bool], predicted: &[f64]) -> Vec<f64> {
-    let wear: Vec<f64> = rows.iter().map(|r| r.wear_mean_pct).collect();
-    impute_censored_values(&wear, censored, predicted)
-}
-
-/// [`impute_censored`] on the wear itself: `wear[i]` measured, or its
-/// lower bound where `censored[i]`.
-fn impute_censored_values(wear: &[f64], censored: &[bool], predicted: &[f64]) -> Vec<f64> {
-    let e: Vec<f64> = wear
+    let e: Vec<f64> = rows
         .iter()
         .zip(predicted)
-        .map(|(y, p)| if *p > 0.0 { y / p - 1.0 } else { f64::NAN })
+        .map(|(r, p)| {
+            if *p > 0.0 {
+                r.wear_mean_pct / p - 1.0
+            } else {
+                f64::NAN
+            }
+        })
         .collect();
     let km = KaplanMeier::new(&e, censored);
-    wear.iter()
+    rows.iter()
         .enumerate()
-        .map(|(i, y)| match censored[i] {
-            false => *y,
+        .map(|(i, r)| match censored[i] {
+            false => r.wear_mean_pct,
             true if e[i].is_finite() => predicted[i] * (1.0 + km.mean_beyond(e[i])),
             true => f64::NAN,
         })

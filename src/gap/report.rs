@@ -335,17 +335,16 @@ pub fn diagnose(
 ) -> Result<Diagnosis, ModelError> {
     let fdr = settings.fdr;
     // A tire with readings at the worn-through depth (5 % of new): its
-    // measured wear is a lower bound. In the training events it enters
-    // with its wear imputed (Buckley–James, `PhysicsBaseline::fit_censored`);
-    // in the testing events it is left out of the gap's measure.
+    // measured wear is a lower bound. Left out, or (`WornThrough::Impute`)
+    // in the training events entered with its wear imputed (Buckley–James,
+    // `PhysicsBaseline::fit_censored`); in the testing events always left
+    // out of the gap's measure.
     let (rows, worn): (Vec<KpiRow>, Vec<KpiRow>) = rows
         .iter()
         .cloned()
         .partition(|r| r.worn_through_readings <= 0.0);
-    let censored: Vec<String> = worn
-        .iter()
-        .map(|r| format!("{}/{}", r.run, r.wheel))
-        .collect();
+    let tire = |r: &KpiRow| format!("{}/{}", r.run, r.wheel);
+    let censored: Vec<String> = worn.iter().map(tire).collect();
     let rows = rows.as_slice();
     let mut s = split(rows, settings.test_events.as_deref())?;
     let worn_train: Vec<&KpiRow> = match settings.worn_through {
@@ -356,13 +355,15 @@ pub fn diagnose(
         WornThrough::LeaveOut => Vec::new(),
     };
     let map_of = |r: &KpiRow| maps.get(&r.tire_run());
+    // The training rows with the worn-through ones last, flagged.
+    let train_all: Vec<&KpiRow> = s.train.iter().chain(&worn_train).copied().collect();
+    let is_worn: Vec<bool> = (0..train_all.len()).map(|i| i >= s.train.len()).collect();
     let (physics, imputed_wear) = match baseline {
         Baseline::Physics => {
-            let train: Vec<&KpiRow> = s.train.iter().chain(&worn_train).copied().collect();
-            let train_maps: Vec<Option<&EnergyMaps>> = train.iter().map(|r| map_of(r)).collect();
-            let is_worn: Vec<bool> = (0..train.len()).map(|i| i >= s.train.len()).collect();
+            let train_maps: Vec<Option<&EnergyMaps>> =
+                train_all.iter().map(|r| map_of(r)).collect();
             let (p, y) =
-                PhysicsBaseline::fit_censored(&train, &train_maps, &settings.wlf, &is_worn);
+                PhysicsBaseline::fit_censored(&train_all, &train_maps, &settings.wlf, &is_worn);
             (Some(p), y[s.train.len()..].to_vec())
         }
         _ => (None, Vec::new()),
@@ -394,10 +395,8 @@ pub fn diagnose(
     let imputed_wear = if physics.is_some() || worn_train.is_empty() {
         imputed_wear
     } else {
-        let train: Vec<&KpiRow> = s.train.iter().chain(&worn_train).copied().collect();
-        let is_worn: Vec<bool> = (0..train.len()).map(|i| i >= s.train.len()).collect();
-        let predicted: Vec<f64> = train.iter().map(|r| predict(r)).collect();
-        impute_censored(&train, &is_worn, &predicted)[s.train.len()..].to_vec()
+        let predicted: Vec<f64> = train_all.iter().map(|r| predict(r)).collect();
+        impute_censored(&train_all, &is_worn, &predicted)[s.train.len()..].to_vec()
     };
     let imputed: Vec<KpiRow> = worn_train
         .iter()
@@ -412,13 +411,11 @@ pub fn diagnose(
         tracing::warn!(
             tires = censored.len(),
             imputed = imputed.len(),
-            "tread worn through (readings at ≤ 5 % of the new depth), wear censored: the imputed ones enter with their wear imputed, the others are left out"
+            left_out = censored.len() - imputed.len(),
+            "tread worn through (readings at ≤ 5 % of the new depth), wear censored"
         );
     }
-    let imputed_tires: Vec<String> = imputed
-        .iter()
-        .map(|r| format!("{}/{}", r.run, r.wheel))
-        .collect();
+    let imputed_tires: Vec<String> = imputed.iter().map(tire).collect();
     s.train.extend(imputed.iter());
     let (tr, te) = (usable(&s.train), usable(&s.test));
     if tr.len() < 20 {
