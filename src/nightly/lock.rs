@@ -71,6 +71,13 @@ impl Drop for DatasetLock {
     fn drop(&mut self) {
         // An exclusive holder leaves no name behind; shared holders wrote none.
         let _ = self._file.set_len(0);
+        // Released explicitly, not by closing the file: a process spawned by
+        // another thread holds a copy of every descriptor between its fork
+        // and its exec, and a `flock` lives until the last copy is closed, so
+        // closing alone could leave the dataset locked for a moment after
+        // this holder is done (seen in CI as a commit refused by a finished
+        // shard). Unlocking through any copy releases it for all.
+        let _ = self._file.unlock();
     }
 }
 
@@ -79,4 +86,47 @@ fn hostname() -> String {
         .or_else(|_| std::fs::read_to_string("/etc/hostname"))
         .map(|s| s.trim().to_string())
         .unwrap_or_else(|_| "this host".into())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A copy of the descriptor, as a child process holds one between fork
+    /// and exec, must not keep a released lock alive.
+    #[test]
+    fn a_released_lock_stays_released_while_a_copy_of_its_file_is_open() {
+        let dir = tempfile::tempdir().unwrap();
+        let shard = acquire(dir.path(), false).unwrap();
+        let copy = shard._file.try_clone().unwrap();
+        drop(shard);
+        let commit = acquire(dir.path(), true);
+        assert!(commit.is_ok(), "{commit:?}");
+        drop(copy);
+    }
+
+    #[test]
+    fn shards_share_the_lock_and_a_commit_is_refused_beside_them() {
+        let dir = tempfile::tempdir().unwrap();
+        let a = acquire(dir.path(), false).unwrap();
+        let b = acquire(dir.path(), false).unwrap();
+        match acquire(dir.path(), true) {
+            Err(NightlyError::Locked { holder, .. }) => {
+                assert!(holder.contains("shard"), "{holder}")
+            }
+            other => panic!("{other:?}"),
+        }
+        drop((a, b));
+        let whole = acquire(dir.path(), true).unwrap();
+        match acquire(dir.path(), false) {
+            Err(NightlyError::Locked { holder, .. }) => {
+                assert!(
+                    holder.starts_with(&format!("pid {}", std::process::id())),
+                    "{holder}"
+                )
+            }
+            other => panic!("{other:?}"),
+        }
+        drop(whole);
+    }
 }
