@@ -14,11 +14,11 @@
 // ENERGY_QUANTA_PER_J, to_quanta, carried.
 
 // Must match src/kpi/cpu/condition_map.rs (checked by tests/shader_contract.rs).
-const N_CONDITIONS: u32 = 17u;
+const N_CONDITIONS: u32 = 19u;
 const N_PAIRS: u32 = 8u;
-const CONDITION_BINS: u32 = 468u; // 1-D bins of one component over all conditions
+const CONDITION_BINS: u32 = 508u; // 1-D bins of one component over all conditions
 const PAIR_BINS: u32 = 512u; // 2-D cells over all pairs (total energy only)
-const MAP_BINS: u32 = 1916u; // 3 components' CONDITION_BINS, then PAIR_BINS
+const MAP_BINS: u32 = 2036u; // 3 components' CONDITION_BINS, then PAIR_BINS
 const SLIP_SPEED_FLOOR_MPS: f32 = 1.0;
 const LOAD_FLOOR_N: f32 = 100.0;
 
@@ -39,7 +39,7 @@ struct ConditionBins {
 @group(0) @binding(3) var<storage, read_write> maps: array<atomic<u32>>;
 
 var<workgroup> bin_lo: array<atomic<u32>, MAP_BINS>;
-var<workgroup> bin_hi: array<atomic<u32>, MAP_BINS>; // 15 KiB with bin_lo (limit 16 KiB)
+var<workgroup> bin_hi: array<atomic<u32>, MAP_BINS>; // 15.9 KiB with bin_lo (limit 16 KiB)
 
 // Equal-width bins clamped at both ends, NaN to bin 0; subtraction and
 // multiplication only (correctly rounded), as ConditionBins::index.
@@ -92,6 +92,8 @@ fn condition_values(p: Sample) -> array<f32, N_CONDITIONS> {
         p.load_rel,
         p.time_s,
         p.distance_m,
+        p.accel_x,
+        p.accel_y,
     );
 }
 

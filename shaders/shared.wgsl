@@ -27,6 +27,8 @@ struct Sample {
     load_rel: f32, // F_z / the wheel's mean F_z
     time_s: f32, // since the wheel's first kept sample
     distance_m: f32, // Σ v_x·Δt before this sample
+    accel_x: f32, // dv_x/dt over ±0.5 s (m/s²)
+    accel_y: f32, // |Σ F_y| / m of the car (m/s²)
     dt: f32,
     dt_lo: f32, // f64 remainder of dt, used by the CPU twins only
 }

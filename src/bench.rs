@@ -146,6 +146,8 @@ pub fn telemetry_batch(samples: usize) -> ReduceBatch {
                     load_rel: 1.0 + 0.25 * (0.3 * t).sin(),
                     time_s: i as f32 * 1e-3,
                     distance_m: i as f32 * 0.045,
+                    accel_x: 20.0 * 0.05 * (0.05 * t).cos(),
+                    accel_y: 15.0 * (0.9 * t).sin().abs(),
                     dt,
                     dt_lo,
                 }

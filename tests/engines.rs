@@ -110,6 +110,8 @@ fn full_length_run() -> Vec<ReduceSample> {
                 load_rel: (1.0 + 0.25 * (0.3 * t).sin()) as f32,
                 time_s: t as f32,
                 distance_m: (45.0 * t) as f32,
+                accel_x: (20.0 * 0.05 * (0.05 * t).cos()) as f32,
+                accel_y: (15.0 * (0.9 * t).sin().abs()) as f32,
                 ..sample(1e-3)
             }
         })

@@ -179,6 +179,8 @@ fn telemetry_reduce_matches_its_cpu_twin() {
             load_rel: f32,
             time_s: f32,
             distance_m: f32,
+            accel_x: f32,
+            accel_y: f32,
             dt: f32,
             dt_lo: f32,
         ]

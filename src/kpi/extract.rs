@@ -16,7 +16,8 @@ use super::table::{
     KpiRow, kpi_batch, quality, side_table_path, with_estimated, with_extraction_id, write_batch_to,
 };
 use super::telemetry::{
-    CleaningReport, VehicleIndices, finish_wheel, prepare_wheel_into, vehicle_indices,
+    CleaningReport, VehicleIndices, finish_wheel, lateral_acceleration, prepare_wheel_into,
+    vehicle_indices,
 };
 use super::viscoelastic::{ViscoelasticIndices, viscoelastic_indices};
 use super::wear::{mean_wear, worn_through_readings};
@@ -270,6 +271,14 @@ fn prepare_run(ctx: &RunContext, run: &Run) -> Result<PreparedRun, String> {
         .reserve_exact(tel.wheels.iter().map(|s| s.len()).sum());
     let mut reports = Vec::with_capacity(4);
     let mut samples = 0;
+    let lateral = ctx
+        .season
+        .manifest
+        .cars
+        .iter()
+        .find(|c| c.id == run.car)
+        .map(|car| lateral_acceleration(&tel.wheels, car.mass_kg))
+        .unwrap_or_default();
     for w in Wheel::ALL {
         let series = &tel.wheels[w.index()];
         if series.is_empty() {
@@ -281,7 +290,10 @@ fn prepare_run(ctx: &RunContext, run: &Run) -> Result<PreparedRun, String> {
         }
         samples += series.len() as u64;
         let report = batch
-            .push_wheel_with(|out| prepare_wheel_into(series, out))
+            .push_wheel_with(|out| {
+                let accel = lateral.get(w.index()).map_or(&[][..], |a| a.as_slice());
+                prepare_wheel_into(series, accel, out)
+            })
             .map_err(|e| format!("{}: topic {}: {e}", path.display(), w.topic()))?;
         reports.push(report);
     }

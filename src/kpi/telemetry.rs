@@ -269,17 +269,21 @@ pub(crate) struct PreparedWheel {
     pub report: CleaningReport,
 }
 
-/// Cleans one wheel (the rule above).
+/// Cleans one wheel (the rule above), alone: the car's lateral
+/// acceleration, which needs the other wheels, is unknown (NaN).
 pub(crate) fn prepare_wheel(s: &WheelSeries) -> Result<PreparedWheel, String> {
     let mut samples = Vec::new();
-    let report = prepare_wheel_into(s, &mut samples)?;
+    let report = prepare_wheel_into(s, &[], &mut samples)?;
     Ok(PreparedWheel { samples, report })
 }
 
 /// [`prepare_wheel`] appending the kept samples to `samples` (a run's
-/// batch, filled wheel by wheel without a copy); returns the report.
+/// batch, filled wheel by wheel without a copy), with the car's lateral
+/// acceleration at each of the wheel's samples ([`lateral_acceleration`];
+/// empty: unknown); returns the report.
 pub(crate) fn prepare_wheel_into(
     s: &WheelSeries,
+    lateral_accel: &[f32],
     samples: &mut Vec<ReduceSample>,
 ) -> Result<CleaningReport, String> {
     let mut report = CleaningReport::default();
@@ -306,6 +310,10 @@ pub(crate) fn prepare_wheel_into(
         ));
     }
     samples.reserve(kept.len());
+    let lateral = |i: usize| match lateral_accel.len() == s.len() {
+        true => lateral_accel[i],
+        false => f32::NAN,
+    };
     let push = |i: usize, dt: f64, d: DerivedConditions| {
         let (dt_hi, dt_lo) = ReduceSample::split_dt(dt);
         samples.push(ReduceSample {
@@ -325,6 +333,8 @@ pub(crate) fn prepare_wheel_into(
             load_rel: d.load_rel as f32,
             time_s: d.time_s as f32,
             distance_m: d.distance_m as f32,
+            accel_x: d.accel_x_mps2 as f32,
+            accel_y: lateral(i),
             dt: dt_hi,
             dt_lo,
         });
@@ -336,6 +346,56 @@ pub(crate) fn prepare_wheel_into(
         for_each_kept(s, kept.as_slice(), &mut report, push);
     }
     Ok(report)
+}
+
+/// The car's lateral acceleration |Σ F_y| / m (m/s²) at each sample of
+/// each of `wheels` (a run's four): Newton's second law over the tires'
+/// lateral forces, which the telemetry logs where it logs no acceleration
+/// (docs/kpis.md, `accel_y_mps2`). Another wheel's force is taken at the
+/// same index where the wheels share their clock (the usual case), else at
+/// its latest sample not after this one (its first before it starts); a
+/// non-finite force counts as that wheel's last finite one (0 before any),
+/// so one wheel's lost sample does not lose the others'.
+pub(crate) fn lateral_acceleration(wheels: &[WheelSeries], mass_kg: f64) -> Vec<Vec<f32>> {
+    let forces: Vec<Vec<f32>> = wheels
+        .iter()
+        .map(|w| {
+            let mut last = 0.0f32;
+            w.fy_n
+                .iter()
+                .map(|&f| {
+                    if f.is_finite() {
+                        last = f;
+                    }
+                    last
+                })
+                .collect()
+        })
+        .collect();
+    let mut out: Vec<Vec<f32>> = Vec::with_capacity(wheels.len());
+    for (k, target) in wheels.iter().enumerate() {
+        // Wheels on one clock share one sum.
+        if let Some(same) = (0..k).find(|&j| wheels[j].time_ns == target.time_ns) {
+            out.push(out[same].clone());
+            continue;
+        }
+        let mut sum = vec![0.0f64; target.len()];
+        for (src, f) in wheels.iter().zip(&forces) {
+            if src.time_ns == target.time_ns {
+                sum.iter_mut().zip(f).for_each(|(s, &f)| *s += f as f64);
+            } else if !src.time_ns.is_empty() {
+                let mut j = 0;
+                for (s, &t) in sum.iter_mut().zip(&target.time_ns) {
+                    while j + 1 < src.time_ns.len() && src.time_ns[j + 1] <= t {
+                        j += 1;
+                    }
+                    *s += f[j] as f64;
+                }
+            }
+        }
+        out.push(sum.iter().map(|s| (s.abs() / mass_kg) as f32).collect());
+    }
+    out
 }
 
 /// Half-width of the window temperature rates are taken over (s). One
@@ -358,6 +418,8 @@ pub(crate) struct DerivedConditions {
     /// Σ v_x·Δt over the kept samples before this one (m), Δt as the
     /// cleaning rule gives it (a dropout counts one period).
     pub distance_m: f64,
+    /// dv_x/dt over the same window as the temperature rates (m/s²).
+    pub accel_x_mps2: f64,
 }
 
 /// The time each kept sample stands for (s) and its [`DerivedConditions`].
@@ -428,9 +490,9 @@ fn for_each_kept(
         while hi + 1 < n && time(hi + 1) - t <= half_ns {
             hi += 1;
         }
-        // Both rates over the same window.
-        let (t_surface_rate, t_inner_rate) = if hi == lo {
-            (0.0, 0.0)
+        // The rates over the same window.
+        let (t_surface_rate, t_inner_rate, accel_x_mps2) = if hi == lo {
+            (0.0, 0.0, 0.0)
         } else {
             let span = time(hi) - time(lo);
             if span != span_ns {
@@ -438,7 +500,7 @@ fn for_each_kept(
             }
             let (a, b) = (kept.at(lo), kept.at(hi));
             let rate = |c: &[f32]| (c[b] as f64 - c[a] as f64) / span_s;
-            (rate(&s.t_surface_c), rate(&s.t_inner_c))
+            (rate(&s.t_surface_c), rate(&s.t_inner_c), rate(&s.vx_mps))
         };
         emit(
             i,
@@ -449,6 +511,7 @@ fn for_each_kept(
                 load_rel: s.fz_n[i] as f64 / load_ref,
                 time_s: ns_as_f64(t - start) / 1e9,
                 distance_m: distance,
+                accel_x_mps2,
             },
         );
         distance += s.vx_mps[i] as f64 * dt;
@@ -506,7 +569,9 @@ pub fn wheel_indices(
 
 /// One wheel's condition and pair maps on the CPU (the twin of
 /// `shaders/condition_map.wgsl`), after the same cleaning as
-/// [`wheel_indices`]: what an independent reader checks them against.
+/// [`wheel_indices`]: what an independent reader checks them against. The
+/// wheel alone gives no lateral acceleration (it needs the car's four
+/// wheels and mass): its map holds the energy in its first bin (NaN).
 pub fn wheel_condition_maps(
     s: &WheelSeries,
 ) -> Result<crate::kpi::cpu::condition_map::ConditionMaps, String> {
@@ -655,6 +720,73 @@ mod tests {
         assert_eq!(p.samples[25].time_s, 2.6f32);
     }
 
+    #[test]
+    fn longitudinal_acceleration_by_hand() {
+        // 10 Hz; braking 0.5 m/s per sample (−5 m/s²) from 60 m/s for 20
+        // samples, then 50 m/s.
+        let mut s = constant_series(40, 100_000_000);
+        for i in 0..40 {
+            s.vx_mps[i] = 60.0 - 0.5 * i.min(20) as f32;
+        }
+        let mut report = CleaningReport::default();
+        let kept = kept_samples(&s, &s.channels(), &mut report);
+        let d = derived_conditions(&s, &kept);
+        let a = |k: usize| d[k].1.accel_x_mps2;
+        // Sample 10: window 5..=15, (52.5 − 57.5) / 1 s.
+        assert!((a(10) + 5.0).abs() < 1e-9, "{}", a(10));
+        // The first sample's window is 0..=5 (0.5 s), the same slope.
+        assert!((a(0) + 5.0).abs() < 1e-9, "{}", a(0));
+        // Sample 20, where the braking ends: (50 − 52.5) / 1 s.
+        assert!((a(20) + 2.5).abs() < 1e-9, "{}", a(20));
+        assert_eq!(a(30), 0.0);
+        let p = prepare_wheel(&s).unwrap();
+        assert_eq!(p.samples[20].accel_x, -2.5);
+    }
+
+    #[test]
+    fn lateral_acceleration_by_hand() {
+        // 10 Hz, a 800 kg car; F_y 3000, 2000, 2500, 500 N → 8000 N, 10 m/s².
+        let mut wheels: Vec<WheelSeries> =
+            (0..4).map(|_| constant_series(6, 100_000_000)).collect();
+        for (w, f) in [3000.0, 2000.0, 2500.0, 500.0].into_iter().enumerate() {
+            wheels[w].fy_n.iter_mut().for_each(|x| *x = f);
+        }
+        // A left turn's sign does not matter: |Σ F_y|.
+        wheels.iter_mut().for_each(|w| w.fy_n[5] *= -1.0);
+        // FR loses sample 2: its 2000 N from sample 1 stand in.
+        wheels[1].fy_n[2] = f32::NAN;
+        wheels[1].fy_n[1] = 2000.0;
+        // RR logs on its own clock, 50 ms late, and its force steps to
+        // 1300 N at its sample 3 (t = 0.35 s): the others see it from their
+        // sample 4 (0.4 s) on.
+        for t in &mut wheels[3].time_ns {
+            *t += 50_000_000;
+        }
+        wheels[3].fy_n[3] = 1300.0;
+        wheels[3].fy_n[4] = 1300.0;
+        let a = lateral_acceleration(&wheels, 800.0);
+        let close = |x: f32, y: f64| ((x as f64) - y).abs() < 1e-5;
+        // Sample 0: RR's first sample (0.05 s) is after it; its first counts.
+        assert!(close(a[0][0], 10.0), "{:?}", a[0]);
+        assert!(close(a[0][2], 10.0) && close(a[1][2], 10.0), "{:?}", a[0]);
+        assert!(close(a[0][3], 10.0), "{:?}", a[0]);
+        assert!(close(a[0][4], 11.0), "{:?}", a[0]);
+        // Sample 5 (0.5 s): −3000 − 2000 − 2500 and RR's 1300 N of 0.45 s.
+        assert!(close(a[0][5], 6200.0 / 800.0), "{:?}", a[0]);
+        // RR at its sample 3 (0.35 s) takes the others' sample 3 (0.3 s).
+        assert!(close(a[3][3], 11.0) && close(a[3][0], 10.0), "{:?}", a[3]);
+        assert_eq!(a[0], a[2], "wheels on one clock share the sum");
+        // The prepared samples carry it; a wheel cleaned alone has none.
+        let mut batch = Vec::new();
+        prepare_wheel_into(&wheels[0], &a[0], &mut batch).unwrap();
+        assert_eq!(batch[4].accel_y, a[0][4]);
+        assert!(
+            prepare_wheel(&wheels[0]).unwrap().samples[4]
+                .accel_y
+                .is_nan()
+        );
+    }
+
     /// Every sample kept is read without the index; the result is the
     /// indexed route's bit for bit, on uneven steps (jitter, a bridged gap,
     /// a dropout, a rate change), and the equal-step shortcut for the
@@ -716,14 +848,22 @@ mod tests {
         // The last sample 0.6 s after the one before: a window's start
         // then steps from 0.5 s below it to it.
         s.time_ns[199] = s.time_ns[198] + 600_000_000;
-        let early = prepare_wheel(&s).unwrap();
+        // With a lateral acceleration (a wheel alone has NaN, never equal).
+        let prepare = |s: &WheelSeries| {
+            let a = lateral_acceleration(std::slice::from_ref(s), 800.0);
+            let mut out = Vec::new();
+            prepare_wheel_into(s, &a[0], &mut out).unwrap();
+            out
+        };
+        let early = prepare(&s);
         let last = u64::MAX - 100_000_000;
         let shift = last - s.time_ns[199];
         s.time_ns.iter_mut().for_each(|t| *t += shift);
-        let late = prepare_wheel(&s).unwrap();
-        assert_eq!(late.samples, early.samples);
-        // 0.5 K per 10 ms sample.
-        assert!((late.samples[150].t_surface_rate - 50.0).abs() < 1e-3);
+        let late = prepare(&s);
+        assert_eq!(late, early);
+        // 0.5 K per 10 ms sample; 3000 N over 800 kg.
+        assert!((late[150].t_surface_rate - 50.0).abs() < 1e-3);
+        assert_eq!(late[150].accel_y, 3.75);
     }
 
     #[test]

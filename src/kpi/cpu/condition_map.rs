@@ -174,10 +174,27 @@ pub const CONDITIONS: [Condition; N_CONDITIONS] = [
         coarse: bins(0.0, 10000.0, 8),
         formula: "Σ v_x·Δt over the tire's kept samples before this one",
     },
+    // From format version 4 on.
+    Condition {
+        name: "accel_x_mps2",
+        unit: "m/s²",
+        bins: bins(-45.0, 3.0, 20),
+        coarse: bins(-30.0, 6.0, 8),
+        formula: "dv_x/dt = (v_x(j₁) − v_x(j₀)) / (t(j₁) − t(j₀)), over the window of t_surface_rate_kps (the wheel centre's longitudinal acceleration, braking negative)",
+    },
+    Condition {
+        name: "accel_y_mps2",
+        unit: "m/s²",
+        bins: bins(0.0, 3.0, 20),
+        coarse: bins(6.0, 6.0, 8),
+        formula: "|a_y| = |Σ F_y| / m, the four wheels' lateral forces at this sample over the car's mass (the car's lateral acceleration)",
+    },
 ];
 
 /// Conditions a format-version-1 side table holds (the first ones).
 pub const V1_CONDITIONS: usize = 11;
+/// Conditions a format-version-2 or 3 side table holds (the first ones).
+pub const V3_CONDITIONS: usize = 17;
 
 /// A pair of conditions with a 2-D map: the friction energy (the total
 /// only) binned by both at once, on their coarse bins, [first's coarse
@@ -245,10 +262,10 @@ pub const PAIRS: [Pair; N_PAIRS] = [
 pub const N_PAIRS: usize = 8;
 
 /// Number of conditions. Must match `N_CONDITIONS` in the shader (checked by tests/shader_contract.rs).
-pub const N_CONDITIONS: usize = 17;
+pub const N_CONDITIONS: usize = 19;
 /// Bins of one energy component over all conditions' 1-D maps. Must match
 /// `CONDITION_BINS` in the shader (checked by tests/shader_contract.rs).
-pub const CONDITION_BINS: usize = 468;
+pub const CONDITION_BINS: usize = 508;
 /// Cells of all pair maps (total energy only). Must match `PAIR_BINS` in
 /// the shader (checked by tests/shader_contract.rs).
 pub const PAIR_BINS: usize = 512;
@@ -456,6 +473,8 @@ pub(crate) fn condition_values(p: &ReduceSample) -> [f64; N_CONDITIONS] {
         f(p.load_rel),
         f(p.time_s),
         f(p.distance_m),
+        f(p.accel_x),
+        f(p.accel_y),
     ]
 }
 
@@ -669,7 +688,8 @@ pub struct ConditionMaps {
     /// [PAIR_BINS]: the pair maps of the total energy.
     pub pairs_j: Vec<f64>,
     /// How many of [`CONDITIONS`] (the first ones) the maps hold: all, or
-    /// [`V1_CONDITIONS`] when read from a format-version-1 side table.
+    /// [`V1_CONDITIONS`] or [`V3_CONDITIONS`] when read from an older side
+    /// table.
     pub held: usize,
     /// Whether the maps hold the pair maps (not read from a side table
     /// older than format version 3).
@@ -758,9 +778,10 @@ pub(crate) fn condition_maps_from_quanta(quanta: &[u64]) -> Vec<ConditionMaps> {
 /// Schema-metadata key of the side table's format version.
 pub(crate) const VERSION_KEY: &str = "tirewear.condition_maps.version";
 /// The side table's format version this build writes. It also reads
-/// version 2, which has no pair maps, and version 1, which also holds only
-/// the first [`V1_CONDITIONS`] conditions.
-pub(crate) const VERSION: u32 = 3;
+/// version 3, which holds the first [`V3_CONDITIONS`] conditions (no
+/// longitudinal acceleration), version 2, which also has no pair maps, and
+/// version 1, which holds only the first [`V1_CONDITIONS`] conditions.
+pub(crate) const VERSION: u32 = 4;
 
 /// Side table of condition maps (`NAME.condition_maps.parquet`): one row per
 /// tire, run, condition and non-empty bin: run, wheel, condition, unit, bin,
@@ -941,7 +962,7 @@ pub fn read_condition_maps(
     let builder = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file)
         .map_err(perr)?;
     let version: u32 = match builder.schema().metadata().get(VERSION_KEY) {
-        Some(v) if matches!(v.as_str(), "1" | "2" | "3") => v.parse().expect("a digit"),
+        Some(v) if matches!(v.as_str(), "1" | "2" | "3" | "4") => v.parse().expect("a digit"),
         Some(v) => {
             return Err(IngestError::invalid(
                 path,
@@ -959,10 +980,10 @@ pub fn read_condition_maps(
             ));
         }
     };
-    let held = if version == 1 {
-        V1_CONDITIONS
-    } else {
-        N_CONDITIONS
+    let held = match version {
+        1 => V1_CONDITIONS,
+        2 | 3 => V3_CONDITIONS,
+        _ => N_CONDITIONS,
     };
     let pairs_held = version >= 3;
     // The maps a file of this version may hold, by name.
@@ -1160,6 +1181,8 @@ mod tests {
             load_rel: odd(rng, 0.0, 3.5),
             time_s: odd(rng, 0.0, 4000.0),
             distance_m: odd(rng, 0.0, 160e3),
+            accel_x: odd(rng, -50.0, 20.0),
+            accel_y: odd(rng, 0.0, 70.0),
             dt: rng.random_range(0.0..0.1),
             dt_lo: rng.random_range(-1e-9..1e-9),
         };
@@ -1255,6 +1278,8 @@ mod tests {
             load_rel: 1.35,
             time_s: 700.0,
             distance_m: 31_000.0,
+            accel_x: -13.0,
+            accel_y: 31.0,
             ..sample_by_hand()
         };
         let v = condition_values(&p);
@@ -1280,7 +1305,19 @@ mod tests {
         // → 5; 31 km → 6.2 → 6.
         assert!(close(v[11], 97.5) && close(v[12], 2.5) && close(v[13], -0.25));
         assert!(close(v[14], 1.35) && close(v[15], 700.0) && close(v[16], 31_000.0));
-        let want = [(11, 13), (12, 17), (13, 12), (14, 13), (15, 5), (16, 6)];
+        // Braking at 13 m/s² → (−13 + 45)/3 = 10.67 → 10.
+        // Cornering at 31 m/s² → 31/3 = 10.3 → 10.
+        assert!(close(v[17], -13.0) && close(v[18], 31.0));
+        let want = [
+            (11, 13),
+            (12, 17),
+            (13, 12),
+            (14, 13),
+            (15, 5),
+            (16, 6),
+            (17, 10),
+            (18, 10),
+        ];
         for (c, b) in want {
             assert_eq!(t[c].index(v[c]), b, "{}", CONDITIONS[c].name);
         }
@@ -1293,7 +1330,9 @@ mod tests {
         m.energy_j[0][3] = 12.5;
         m.energy_j[1][3] = 10.0;
         m.energy_j[2][3] = 2.5;
-        m.energy_j[0][CONDITION_BINS - 1] = -1.0;
+        // The last bin of the last condition a version-3 table holds.
+        let distance_last = offsets()[V3_CONDITIONS - 1] + CONDITIONS[V3_CONDITIONS - 1].bins.n - 1;
+        m.energy_j[0][distance_last] = -1.0;
         m.pairs_j[PAIR_BINS - 1] = 4.0; // the last pair's last cell
         let batch = side_table(&[("r1".into(), crate::Wheel::FL, m.clone())]);
         assert_eq!(batch.num_rows(), 3);
@@ -1320,8 +1359,27 @@ mod tests {
         let last = &back[&("r1".to_string(), crate::Wheel::FL)];
         assert_eq!(last.pair_map(N_PAIRS - 1)[63], 4.0);
         // A later format version is refused.
-        let e = read_condition_maps(&write("v4.parquet", &with_version(&batch, "4"))).unwrap_err();
-        assert!(e.to_string().contains("format version 4"), "{e}");
+        let e = read_condition_maps(&write("v5.parquet", &with_version(&batch, "5"))).unwrap_err();
+        assert!(e.to_string().contains("format version 5"), "{e}");
+        // Version 3 has no accelerations: the lateral one's map in one is
+        // an error, and its maps say they lack them.
+        let mut m4 = m.clone();
+        m4.energy_j[2][CONDITION_BINS - 1] = -2.0;
+        let batch4 = side_table(&[("r1".into(), crate::Wheel::FL, m4.clone())]);
+        let back = read_condition_maps(&write("v4.parquet", &batch4)).unwrap();
+        assert_eq!(back[&("r1".to_string(), crate::Wheel::FL)], m4);
+        let e = read_condition_maps(&write("v3bad.parquet", &with_version(&batch4, "3")))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("record 3") && e.contains("'accel_y_mps2' in a version-3"),
+            "{e}"
+        );
+        let back = read_condition_maps(&write("v3.parquet", &with_version(&batch, "3"))).unwrap();
+        let got = &back[&("r1".to_string(), crate::Wheel::FL)];
+        assert!(got.pairs_held && got.held == V3_CONDITIONS);
+        assert!(got.holds(V3_CONDITIONS - 1) && !got.holds(V3_CONDITIONS));
+        assert_eq!(got.energy_j[0][distance_last], -1.0);
         // Version 2 has no pair maps: a pair in it is an error, and its
         // maps say they lack the pairs.
         let e = read_condition_maps(&write("v2bad.parquet", &with_version(&batch, "2")))
@@ -1334,8 +1392,8 @@ mod tests {
         let v2 = with_version(&batch.slice(0, 2), "2");
         let got = read_condition_maps(&write("v2.parquet", &v2)).unwrap();
         let got = &got[&("r1".to_string(), crate::Wheel::FL)];
-        assert!(!got.pairs_held && got.held == N_CONDITIONS);
-        assert_eq!(got.energy_j[0][CONDITION_BINS - 1], -1.0);
+        assert!(!got.pairs_held && got.held == V3_CONDITIONS);
+        assert_eq!(got.energy_j[0][distance_last], -1.0);
         // A pair cell whose second edges differ from this build's.
         let mut cols = batch.columns().to_vec();
         cols[10] = Arc::new(arrow_array::Float64Array::from(vec![

@@ -68,6 +68,12 @@ pub struct ReduceSample {
     pub time_s: f32,
     /// Σ v_x·Δt over the kept samples before this one (m).
     pub distance_m: f32,
+    /// dv_x/dt over the kept samples within ±0.5 s (m/s²): the wheel
+    /// centre's longitudinal acceleration, braking negative.
+    pub accel_x: f32,
+    /// |Σ F_y| / m over the car's four wheels at this sample (m/s²): the
+    /// car's lateral acceleration; NaN where the wheel was reduced alone.
+    pub accel_y: f32,
     /// Time this sample stands for (s), from the cleaning rule, as f32 …
     pub dt: f32,
     /// … and the rest of the f64 value (dt − dt as f32): the CPU adds it, so
