@@ -16,7 +16,7 @@ use super::table::{
     KpiRow, kpi_batch, quality, side_table_path, with_estimated, with_extraction_id, write_batch_to,
 };
 use super::telemetry::{
-    CleaningReport, VehicleIndices, finish_wheel, lateral_acceleration, prepare_wheel_into,
+    CleaningReport, LateralAcceleration, VehicleIndices, finish_wheel, prepare_wheel_into,
     vehicle_indices,
 };
 use super::viscoelastic::{ViscoelasticIndices, viscoelastic_indices};
@@ -277,8 +277,7 @@ fn prepare_run(ctx: &RunContext, run: &Run) -> Result<PreparedRun, String> {
         .cars
         .iter()
         .find(|c| c.id == run.car)
-        .map(|car| lateral_acceleration(&tel.wheels, car.mass_kg))
-        .unwrap_or_default();
+        .map(|car| LateralAcceleration::new(&tel.wheels, car.mass_kg));
     for w in Wheel::ALL {
         let series = &tel.wheels[w.index()];
         if series.is_empty() {
@@ -291,7 +290,7 @@ fn prepare_run(ctx: &RunContext, run: &Run) -> Result<PreparedRun, String> {
         samples += series.len() as u64;
         let report = batch
             .push_wheel_with(|out| {
-                let accel = lateral.get(w.index()).map_or(&[][..], |a| a.as_slice());
+                let accel = lateral.as_ref().map_or(&[][..], |a| a.of(w.index()));
                 prepare_wheel_into(series, accel, out)
             })
             .map_err(|e| format!("{}: topic {}: {e}", path.display(), w.topic()))?;

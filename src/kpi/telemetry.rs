@@ -279,7 +279,7 @@ pub(crate) fn prepare_wheel(s: &WheelSeries) -> Result<PreparedWheel, String> {
 
 /// [`prepare_wheel`] appending the kept samples to `samples` (a run's
 /// batch, filled wheel by wheel without a copy), with the car's lateral
-/// acceleration at each of the wheel's samples ([`lateral_acceleration`];
+/// acceleration at each of the wheel's samples ([`LateralAcceleration`];
 /// empty: unknown); returns the report.
 pub(crate) fn prepare_wheel_into(
     s: &WheelSeries,
@@ -349,53 +349,72 @@ pub(crate) fn prepare_wheel_into(
 }
 
 /// The car's lateral acceleration |Σ F_y| / m (m/s²) at each sample of
-/// each of `wheels` (a run's four): Newton's second law over the tires'
-/// lateral forces, which the telemetry logs where it logs no acceleration
+/// each of a run's wheels: Newton's second law over the tires' lateral
+/// forces, which the telemetry logs where it logs no acceleration
 /// (docs/kpis.md, `accel_y_mps2`). Another wheel's force is taken at the
 /// same index where the wheels share their clock (the usual case), else at
 /// its latest sample not after this one (its first before it starts); a
 /// non-finite force counts as that wheel's last finite one (0 before any),
 /// so one wheel's lost sample does not lose the others'.
-pub(crate) fn lateral_acceleration(wheels: &[WheelSeries], mass_kg: f64) -> Vec<Vec<f32>> {
-    let forces: Vec<Vec<f32>> = wheels
-        .iter()
-        .map(|w| {
-            let mut last = 0.0f32;
-            w.fy_n
-                .iter()
-                .map(|&f| {
+pub(crate) struct LateralAcceleration {
+    /// One series per distinct clock among the wheels.
+    series: Vec<Vec<f32>>,
+    /// Which series each wheel reads.
+    of_wheel: Vec<usize>,
+}
+
+impl LateralAcceleration {
+    pub(crate) fn new(wheels: &[WheelSeries], mass_kg: f64) -> LateralAcceleration {
+        // Forces with the lost samples held; copied only where one is lost.
+        let forces: Vec<std::borrow::Cow<[f32]>> = wheels
+            .iter()
+            .map(|w| {
+                if w.fy_n.iter().all(|f| f.is_finite()) {
+                    return std::borrow::Cow::Borrowed(w.fy_n.as_slice());
+                }
+                let mut last = 0.0f32;
+                let held = w.fy_n.iter().map(|&f| {
                     if f.is_finite() {
                         last = f;
                     }
                     last
-                })
-                .collect()
-        })
-        .collect();
-    let mut out: Vec<Vec<f32>> = Vec::with_capacity(wheels.len());
-    for (k, target) in wheels.iter().enumerate() {
-        // Wheels on one clock share one sum.
-        if let Some(same) = (0..k).find(|&j| wheels[j].time_ns == target.time_ns) {
-            out.push(out[same].clone());
-            continue;
-        }
-        let mut sum = vec![0.0f64; target.len()];
-        for (src, f) in wheels.iter().zip(&forces) {
-            if src.time_ns == target.time_ns {
-                sum.iter_mut().zip(f).for_each(|(s, &f)| *s += f as f64);
-            } else if !src.time_ns.is_empty() {
-                let mut j = 0;
-                for (s, &t) in sum.iter_mut().zip(&target.time_ns) {
-                    while j + 1 < src.time_ns.len() && src.time_ns[j + 1] <= t {
-                        j += 1;
+                });
+                std::borrow::Cow::Owned(held.collect())
+            })
+            .collect();
+        let (mut series, mut of_wheel) = (Vec::new(), Vec::with_capacity(wheels.len()));
+        for (k, target) in wheels.iter().enumerate() {
+            // Wheels on one clock share one series.
+            if let Some(j) = (0..k).find(|&j| wheels[j].time_ns == target.time_ns) {
+                of_wheel.push(of_wheel[j]);
+                continue;
+            }
+            let mut sum = vec![0.0f64; target.len()];
+            for (src, f) in wheels.iter().zip(&forces) {
+                if src.time_ns == target.time_ns {
+                    sum.iter_mut()
+                        .zip(f.iter())
+                        .for_each(|(s, &f)| *s += f as f64);
+                } else if !src.time_ns.is_empty() {
+                    let mut j = 0;
+                    for (s, &t) in sum.iter_mut().zip(&target.time_ns) {
+                        while j + 1 < src.time_ns.len() && src.time_ns[j + 1] <= t {
+                            j += 1;
+                        }
+                        *s += f[j] as f64;
                     }
-                    *s += f[j] as f64;
                 }
             }
+            of_wheel.push(series.len());
+            series.push(sum.iter().map(|s| (s.abs() / mass_kg) as f32).collect());
         }
-        out.push(sum.iter().map(|s| (s.abs() / mass_kg) as f32).collect());
+        LateralAcceleration { series, of_wheel }
     }
-    out
+
+    /// At each sample of wheel `k` (the index into the wheels given).
+    pub(crate) fn of(&self, k: usize) -> &[f32] {
+        self.of_wheel.get(k).map_or(&[], |&i| &self.series[i])
+    }
 }
 
 /// Half-width of the window temperature rates are taken over (s). One
@@ -764,7 +783,8 @@ mod tests {
         }
         wheels[3].fy_n[3] = 1300.0;
         wheels[3].fy_n[4] = 1300.0;
-        let a = lateral_acceleration(&wheels, 800.0);
+        let lateral = LateralAcceleration::new(&wheels, 800.0);
+        let a: Vec<&[f32]> = (0..4).map(|k| lateral.of(k)).collect();
         let close = |x: f32, y: f64| ((x as f64) - y).abs() < 1e-5;
         // Sample 0: RR's first sample (0.05 s) is after it; its first counts.
         assert!(close(a[0][0], 10.0), "{:?}", a[0]);
@@ -778,7 +798,7 @@ mod tests {
         assert_eq!(a[0], a[2], "wheels on one clock share the sum");
         // The prepared samples carry it; a wheel cleaned alone has none.
         let mut batch = Vec::new();
-        prepare_wheel_into(&wheels[0], &a[0], &mut batch).unwrap();
+        prepare_wheel_into(&wheels[0], a[0], &mut batch).unwrap();
         assert_eq!(batch[4].accel_y, a[0][4]);
         assert!(
             prepare_wheel(&wheels[0]).unwrap().samples[4]
@@ -850,9 +870,9 @@ mod tests {
         s.time_ns[199] = s.time_ns[198] + 600_000_000;
         // With a lateral acceleration (a wheel alone has NaN, never equal).
         let prepare = |s: &WheelSeries| {
-            let a = lateral_acceleration(std::slice::from_ref(s), 800.0);
+            let a = LateralAcceleration::new(std::slice::from_ref(s), 800.0);
             let mut out = Vec::new();
-            prepare_wheel_into(s, &a[0], &mut out).unwrap();
+            prepare_wheel_into(s, a.of(0), &mut out).unwrap();
             out
         };
         let early = prepare(&s);
