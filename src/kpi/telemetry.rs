@@ -310,7 +310,8 @@ pub(crate) fn prepare_wheel_into(
         ));
     }
     samples.reserve(kept.len());
-    let lateral = |i: usize| match lateral_accel.len() == s.len() {
+    let lateral_known = lateral_accel.len() == s.len();
+    let lateral = |i: usize| match lateral_known {
         true => lateral_accel[i],
         false => f32::NAN,
     };
@@ -382,16 +383,24 @@ impl LateralAcceleration {
                 std::borrow::Cow::Owned(held.collect())
             })
             .collect();
+        // Each wheel's clock: the first wheel with the same timestamps.
+        let clock: Vec<usize> = (0..wheels.len())
+            .map(|k| {
+                (0..k)
+                    .find(|&j| wheels[j].time_ns == wheels[k].time_ns)
+                    .unwrap_or(k)
+            })
+            .collect();
         let (mut series, mut of_wheel) = (Vec::new(), Vec::with_capacity(wheels.len()));
         for (k, target) in wheels.iter().enumerate() {
             // Wheels on one clock share one series.
-            if let Some(j) = (0..k).find(|&j| wheels[j].time_ns == target.time_ns) {
-                of_wheel.push(of_wheel[j]);
+            if clock[k] != k {
+                of_wheel.push(of_wheel[clock[k]]);
                 continue;
             }
             let mut sum = vec![0.0f64; target.len()];
-            for (src, f) in wheels.iter().zip(&forces) {
-                if src.time_ns == target.time_ns {
+            for ((src, f), &c) in wheels.iter().zip(&forces).zip(&clock) {
+                if c == k {
                     sum.iter_mut()
                         .zip(f.iter())
                         .for_each(|(s, &f)| *s += f as f64);
