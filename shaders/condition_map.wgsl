@@ -6,7 +6,8 @@
 // its only definition); the conditions are computed here in the table's
 // order. Sums are exact 64-bit fixed-point quanta, as in energy_map.wgsl:
 // a private histogram per workgroup, then its non-zero bins added to the
-// wheel's maps.
+// wheel's maps. The 1-D maps sum the longitudinal and lateral parts only;
+// the host takes a bin's total as their sum.
 // CPU twin: src/kpi/cpu/condition_map.rs; chunks and samples are those of
 // telemetry_reduce.
 
@@ -18,7 +19,7 @@ const N_CONDITIONS: u32 = 19u;
 const N_PAIRS: u32 = 8u;
 const CONDITION_BINS: u32 = 508u; // 1-D bins of one component over all conditions
 const PAIR_BINS: u32 = 512u; // 2-D cells over all pairs (total energy only)
-const MAP_BINS: u32 = 2036u; // 3 components' CONDITION_BINS, then PAIR_BINS
+const MAP_BINS: u32 = 1528u; // longitudinal, lateral CONDITION_BINS, then PAIR_BINS
 const SLIP_SPEED_FLOOR_MPS: f32 = 1.0;
 const LOAD_FLOOR_N: f32 = 100.0;
 
@@ -39,7 +40,7 @@ struct ConditionBins {
 @group(0) @binding(3) var<storage, read_write> maps: array<atomic<u32>>;
 
 var<workgroup> bin_lo: array<atomic<u32>, MAP_BINS>;
-var<workgroup> bin_hi: array<atomic<u32>, MAP_BINS>; // 15.9 KiB with bin_lo (limit 16 KiB)
+var<workgroup> bin_hi: array<atomic<u32>, MAP_BINS>; // 11.9 KiB with bin_lo (limit 16 KiB)
 
 // Equal-width bins clamped at both ends, NaN to bin 0; subtraction and
 // multiplication only (correctly rounded), as ConditionBins::index.
@@ -57,6 +58,12 @@ fn add_to_workgroup(bin: u32, q: vec2<u32>) {
     if hi != 0u {
         atomicAdd(&bin_hi[bin], hi);
     }
+}
+
+// Two 64-bit quanta (lo, hi) added, wrapping as the host's u64.
+fn add_quanta(a: vec2<u32>, b: vec2<u32>) -> vec2<u32> {
+    let lo = a.x + b.x;
+    return vec2<u32>(lo, a.y + b.y + select(0u, 1u, lo < a.x));
 }
 
 fn add_to_map(slot: u32, lo: u32, hi: u32) {
@@ -128,23 +135,22 @@ fn main(
             let v_sy = p.vy; // eq. 22
             let e_x = -p.fx * v_sx * p.dt; // eq. 23
             let e_y = -p.fy * v_sy * p.dt; // eq. 24
-            let q_total = to_quanta(e_x + e_y);
             let q_x = to_quanta(e_x);
             let q_y = to_quanta(e_y);
+            let q_total = add_quanta(q_x, q_y);
             var values = condition_values(p); // var: indexed by a loop counter
             for (var c = 0u; c < N_CONDITIONS; c++) {
                 let t = conditions[c];
                 let b = t.offset + bin_index(values[t.value], t);
-                add_to_workgroup(b, q_total);
-                add_to_workgroup(CONDITION_BINS + b, q_x);
-                add_to_workgroup(2u * CONDITION_BINS + b, q_y);
+                add_to_workgroup(b, q_x);
+                add_to_workgroup(CONDITION_BINS + b, q_y);
             }
             for (var pr = 0u; pr < N_PAIRS; pr++) {
                 let ta = conditions[N_CONDITIONS + 2u * pr];
                 let tb = conditions[N_CONDITIONS + 2u * pr + 1u];
                 let ia = bin_index(values[ta.value], ta);
                 let ib = bin_index(values[tb.value], tb);
-                add_to_workgroup(3u * CONDITION_BINS + ta.offset + ia * tb.n + ib, q_total);
+                add_to_workgroup(2u * CONDITION_BINS + ta.offset + ia * tb.n + ib, q_total);
             }
         }
     }

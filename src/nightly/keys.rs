@@ -15,7 +15,7 @@ use std::collections::BTreeMap;
 use std::path::Path;
 
 /// Changes whenever the parts' contents would change for the same inputs.
-const KEY_VERSION: &str = concat!("tirewear-process-3 ", env!("CARGO_PKG_VERSION"));
+const KEY_VERSION: &str = concat!("tirewear-process-4 ", env!("CARGO_PKG_VERSION"));
 
 /// Size, modification time and content hash of one input file.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

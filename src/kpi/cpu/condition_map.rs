@@ -271,9 +271,15 @@ pub const CONDITION_BINS: usize = 508;
 pub const PAIR_BINS: usize = 512;
 /// Energy components: total, longitudinal (−F_x·v_sx·Δt), lateral (−F_y·v_sy·Δt).
 pub(crate) const COMPONENTS: usize = 3;
-/// Bins of one wheel's maps: each component's 1-D maps, then the pair
-/// maps. Must match `MAP_BINS` in the shader (checked by tests/shader_contract.rs).
-pub const MAP_BINS: usize = COMPONENTS * CONDITION_BINS + PAIR_BINS;
+/// Components whose quanta the kernels sum: longitudinal and lateral. A
+/// bin's total is their sum, taken when the sums are read
+/// ([`condition_maps_from_quanta`]): a third of the additions fewer per
+/// sample, and a third of the 1-D maps' workgroup memory free.
+const SUMMED: usize = 2;
+/// Bins of one wheel's sums: the longitudinal, then the lateral 1-D maps,
+/// then the pair maps. Must match `MAP_BINS` in the shader (checked by
+/// tests/shader_contract.rs).
+pub const MAP_BINS: usize = SUMMED * CONDITION_BINS + PAIR_BINS;
 
 const fn total_bins() -> usize {
     let mut n = 0;
@@ -478,16 +484,17 @@ pub(crate) fn condition_values(p: &ReduceSample) -> [f64; N_CONDITIONS] {
     ]
 }
 
-/// A sample's friction energy as quanta: total, longitudinal, lateral.
+/// A sample's friction energy as quanta: longitudinal, lateral (the
+/// total is their sum).
 #[inline(always)]
-fn sample_quanta(p: &ReduceSample) -> [u64; COMPONENTS] {
+fn sample_quanta(p: &ReduceSample) -> [u64; SUMMED] {
     let f = |x: f32| x as f64;
     let dt = f(p.dt) + f(p.dt_lo);
     let v_sx = f(p.vx) - f(p.omega) * f(p.radius); // eq. 21
     let v_sy = f(p.vy); // eq. 22
     let e_x = -f(p.fx) * v_sx * dt; // eq. 23
     let e_y = -f(p.fy) * v_sy * dt; // eq. 24
-    [to_quanta(e_x + e_y), to_quanta(e_x), to_quanta(e_y)]
+    [to_quanta(e_x), to_quanta(e_y)]
 }
 
 fn workgroup(batch: &ReduceBatch, chunk: &ReduceChunk, table: &[ConditionBins], maps: &mut [u64]) {
@@ -501,6 +508,7 @@ fn workgroup(batch: &ReduceBatch, chunk: &ReduceChunk, table: &[ConditionBins], 
             if j < count {
                 let p = &batch.samples[chunk.start as usize + j];
                 let q = sample_quanta(p);
+                let q_total = q[0].wrapping_add(q[1]);
                 let values = condition_values(p);
                 for t in &table[..N_CONDITIONS] {
                     let b = t.offset as usize + t.index(values[t.value as usize]);
@@ -514,8 +522,8 @@ fn workgroup(batch: &ReduceBatch, chunk: &ReduceChunk, table: &[ConditionBins], 
                     let ia = ta.index(values[ta.value as usize]);
                     let ib = tb.index(values[tb.value as usize]);
                     let cell = ta.offset as usize + ia * tb.n as usize + ib;
-                    let slot = &mut bins[COMPONENTS * CONDITION_BINS + cell];
-                    *slot = slot.wrapping_add(q[0]);
+                    let slot = &mut bins[SUMMED * CONDITION_BINS + cell];
+                    *slot = slot.wrapping_add(q_total);
                 }
             }
         }
@@ -534,7 +542,7 @@ pub fn condition_map(batch: &ReduceBatch) -> Vec<u64> {
 /// The CPU engine's route to [`condition_map`]'s sums, equal to them bit
 /// for bit (integer sums are exact in any order; tested against the twin):
 /// one private histogram per wheel rather than one per chunk of 1 024
-/// samples, a bin's three components side by side in one cache line, and
+/// samples, a bin's two summed components side by side (16 bytes), and
 /// the bin table a constant the compiler folds into the loop. The twin
 /// stays the shader's mirror and the reference in the parity tests.
 pub(crate) fn condition_map_by_wheel(batch: &ReduceBatch) -> Vec<u64> {
@@ -575,11 +583,11 @@ fn maps_by_wheel<const ENERGY: bool>(batch: &ReduceBatch) -> (Vec<u64>, Vec<u64>
     (energy, conditions)
 }
 
-/// One wheel's private histogram of quanta: [bin][component] for the 1-D
-/// maps, then the pair cells (total only); and with `ENERGY` the energy
-/// maps' bins (`energy_map`'s layout).
+/// One wheel's private histogram of quanta: [bin][longitudinal, lateral]
+/// for the 1-D maps, then the pair cells (total only); and with `ENERGY`
+/// the energy maps' bins (`energy_map`'s layout).
 struct WheelHistogram<const ENERGY: bool> {
-    one_d: Vec<[u64; COMPONENTS]>,
+    one_d: Vec<[u64; SUMMED]>,
     pairs: Vec<u64>,
     energy: Vec<u64>,
 }
@@ -587,7 +595,7 @@ struct WheelHistogram<const ENERGY: bool> {
 impl<const ENERGY: bool> Default for WheelHistogram<ENERGY> {
     fn default() -> Self {
         WheelHistogram {
-            one_d: vec![[0; COMPONENTS]; CONDITION_BINS],
+            one_d: vec![[0; SUMMED]; CONDITION_BINS],
             pairs: vec![0; PAIR_BINS],
             energy: vec![0; if ENERGY { ENERGY_BINS } else { 0 }],
         }
@@ -640,6 +648,7 @@ impl<const ENERGY: bool> WheelHistogram<ENERGY> {
                 self.energy[c] = self.energy[c].wrapping_add(e.lateral);
             }
             let q = sample_quanta(p);
+            let q_total = q[0].wrapping_add(q[1]);
             let values = condition_values(p).map(|v| v as f32);
             let mut x = [0f32; TABLE_LEN];
             x[..N_CONDITIONS].copy_from_slice(&values);
@@ -660,7 +669,7 @@ impl<const ENERGY: bool> WheelHistogram<ENERGY> {
                 let (a, b) = (N_CONDITIONS + 2 * k, N_CONDITIONS + 2 * k + 1);
                 let n_b = CONDITION_TABLE[b].n;
                 let slot = &mut self.pairs[(t.offset[a] + bin[a] * n_b + bin[b]) as usize];
-                *slot = slot.wrapping_add(q[0]);
+                *slot = slot.wrapping_add(q_total);
             }
         }
     }
@@ -674,7 +683,7 @@ impl<const ENERGY: bool> WheelHistogram<ENERGY> {
                 maps[m * CONDITION_BINS + b] = v;
             }
         }
-        maps[COMPONENTS * CONDITION_BINS..].copy_from_slice(&self.pairs);
+        maps[SUMMED * CONDITION_BINS..].copy_from_slice(&self.pairs);
     }
 }
 
@@ -754,23 +763,25 @@ impl ConditionMaps {
     }
 }
 
-/// Each wheel's condition maps (J per bin) from its `MAP_BINS` sums of quanta.
+/// Each wheel's condition maps (J per bin) from its `MAP_BINS` sums of
+/// quanta: the total of a bin is the sum of its longitudinal and lateral
+/// quanta (exact, as every sum of quanta).
 pub(crate) fn condition_maps_from_quanta(quanta: &[u64]) -> Vec<ConditionMaps> {
     quanta
         .chunks_exact(MAP_BINS)
-        .map(|q| ConditionMaps {
-            energy_j: std::array::from_fn(|m| {
-                q[m * CONDITION_BINS..(m + 1) * CONDITION_BINS]
-                    .iter()
-                    .map(|&v| from_quanta(v))
-                    .collect()
-            }),
-            pairs_j: q[COMPONENTS * CONDITION_BINS..]
-                .iter()
-                .map(|&v| from_quanta(v))
-                .collect(),
-            held: N_CONDITIONS,
-            pairs_held: true,
+        .map(|q| {
+            let (x, y) = (
+                &q[..CONDITION_BINS],
+                &q[CONDITION_BINS..SUMMED * CONDITION_BINS],
+            );
+            let total: Vec<u64> = x.iter().zip(y).map(|(&a, &b)| a.wrapping_add(b)).collect();
+            let joules = |v: &[u64]| v.iter().map(|&v| from_quanta(v)).collect();
+            ConditionMaps {
+                energy_j: [joules(&total), joules(x), joules(y)],
+                pairs_j: joules(&q[SUMMED * CONDITION_BINS..]),
+                held: N_CONDITIONS,
+                pairs_held: true,
+            }
         })
         .collect()
 }
