@@ -322,6 +322,8 @@ fn a_planted_set_up_effect_is_named_by_its_car_and_axle() {
         "{:?}",
         added(&d)
     );
+    assert!(d.steps[1].set_up);
+    assert_eq!(d.steps[1].scope, Some(format!("{car}'s rear axle")));
     let factor = 1.0 + d.steps[1].coefficient;
     assert!((factor - 1.3).abs() < 0.1, "factor {factor}");
     // The final model's factor with its event-bootstrap interval.

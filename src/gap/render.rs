@@ -2,7 +2,7 @@
 //! gap.md (the JSON is the `Diagnosis` itself).
 
 use super::baseline::PhysicsBaseline;
-use super::candidates::{Feature, significant};
+use super::candidates::{Feature, SET_UP_SHARE, significant};
 use super::report::Diagnosis;
 use std::fmt::Write;
 
@@ -298,16 +298,34 @@ fn findings(s: &mut String, d: &Diagnosis) {
                 )
             })
             .unwrap_or_default();
-        let name = match name.strip_prefix("set-up: ") {
-            Some(group) => format!("Set-up effect: {group}"),
-            None => {
+        let component = st.feature.and_then(|f| f.energy_component());
+        let scope = st.scope.as_deref().unwrap_or("its tires");
+        // A condition that leaves out next to none of the energy.
+        let unlimited = st.energy_share.filter(|x| *x >= SET_UP_SHARE);
+        let name = match (name.strip_prefix("set-up: "), component, st.energy_share) {
+            (Some(group), _, _) => format!("Set-up effect: {group}"),
+            (None, Some(component), Some(x)) if unlimited.is_some() => format!(
+                "{}he {component} of {scope} under nearly every condition (the term found, \"{name}\", holds {:.1} % of that energy)",
+                if st.set_up { "Set-up effect: t" } else { "T" },
+                100.0 * x
+            ),
+            (None, component, x) => {
                 let mut c = name.chars();
+                let held = match (component, x) {
+                    (Some(component), Some(x)) => {
+                        format!(" ({:.0} % of the {component} of {scope})", 100.0 * x)
+                    }
+                    _ => String::new(),
+                };
                 c.next()
                     .map_or(String::new(), |f| f.to_uppercase().chain(c).collect())
+                    + &held
             }
         };
-        let advice = if st.feature == Some(Feature::Group) {
+        let advice = if st.set_up {
             " The telemetry does not show why: look at the alignment (toe, camber settings), a suspension setting or the tire batch of that group."
+        } else if unlimited.is_some() {
+            " No condition sets it apart: the law's one rate per joule does not fit this energy on these tires as it fits the rest (how the law weighs longitudinal against lateral energy, say)."
         } else {
             ""
         };

@@ -4,10 +4,10 @@
 //! and Markdown.
 
 use super::baseline::{PhysicsBaseline, impute_censored};
-use super::candidates::{Candidate, Feature, LawRow, library};
+use super::candidates::{Candidate, Feature, LawRow, SET_UP_SHARE, library};
 use super::error::GapError;
 use super::linear::weighted_fit;
-use super::recalibrate::Rows;
+use super::recalibrate::{Rows, Term};
 pub use super::render::render_markdown;
 use super::scoring::{Score, ScoringSettings, rank};
 use super::selection::{Selection, next_term};
@@ -113,6 +113,18 @@ pub struct Step {
     /// The term's held-out gain and adjusted p-value when it was added.
     pub cv_gain: f64,
     pub p_adjusted: f64,
+    /// A condition or pair term's share of its energy component on the
+    /// tires it acts on (training events) at its threshold
+    /// ([`Candidate::energy_share`]); None for other terms.
+    pub energy_share: Option<f64>,
+    /// The tires the term acts on, in words
+    /// ([`Candidate::scope_description`]); None for the baseline.
+    pub scope: Option<String>,
+    /// Whether the term reads as a set-up effect: a set-up group's term, or
+    /// a condition or pair term on a car, a car's axle or a wheel position
+    /// whose threshold leaves out at most 5 % of that energy
+    /// ([`SET_UP_SHARE`]).
+    pub set_up: bool,
     pub training: GapSize,
     pub testing: Option<GapSize>,
     /// The gap inside each slice of `Diagnosis::slices` (same order).
@@ -465,29 +477,40 @@ pub fn diagnose(
     let track_level: Vec<bool> = (0..base.len())
         .map(|j| physics.is_some() && j + 1 == base.len())
         .collect();
-    let step_of = |added: String, score: Option<&Score>, res: &[f64]| Step {
-        added,
-        feature: score.map(|s| s.feature),
-        threshold: score.map_or(f64::NAN, |s| s.threshold),
-        coefficient: score.map_or(f64::NAN, |s| s.coefficient),
-        cv_gain: score.map_or(f64::NAN, |s| s.cv_gain),
-        p_adjusted: score.map_or(f64::NAN, |s| s.p_adjusted),
-        training: size(&res[..n_train]),
-        testing: (res.len() > n_train).then(|| size(&res[n_train..])),
-        slices: slices
-            .iter()
-            .map(|sl| {
-                let v: Vec<f64> = res
-                    .iter()
-                    .zip(&sl.members)
-                    .filter(|(_, k)| **k)
-                    .map(|(r, _)| *r)
-                    .collect();
-                size(&v)
-            })
-            .collect(),
+    let step_of = |added: String, score: Option<&Score>, term: Option<&Term>, res: &[f64]| {
+        let energy_share = term.and_then(|t| {
+            t.candidate
+                .energy_share(&all_rows[..n_train], &row_maps[..n_train], t.threshold)
+        });
+        Step {
+            added,
+            feature: score.map(|s| s.feature),
+            threshold: score.map_or(f64::NAN, |s| s.threshold),
+            coefficient: score.map_or(f64::NAN, |s| s.coefficient),
+            cv_gain: score.map_or(f64::NAN, |s| s.cv_gain),
+            p_adjusted: score.map_or(f64::NAN, |s| s.p_adjusted),
+            energy_share,
+            scope: term.map(|t| t.candidate.scope_description()),
+            set_up: score.is_some_and(|s| s.feature == Feature::Group)
+                || (energy_share.is_some_and(|x| x >= SET_UP_SHARE)
+                    && term.is_some_and(|t| t.candidate.group.is_some())),
+            training: size(&res[..n_train]),
+            testing: (res.len() > n_train).then(|| size(&res[n_train..])),
+            slices: slices
+                .iter()
+                .map(|sl| {
+                    let v: Vec<f64> = res
+                        .iter()
+                        .zip(&sl.members)
+                        .filter(|(_, k)| **k)
+                        .map(|(r, _)| *r)
+                        .collect();
+                    size(&v)
+                })
+                .collect(),
+        }
     };
-    let mut steps = vec![step_of("baseline".into(), None, &all_res)];
+    let mut steps = vec![step_of("baseline".into(), None, None, &all_res)];
     let mut candidates = Vec::new();
     let data = Rows {
         rows: &all_rows,
@@ -544,7 +567,12 @@ pub fn diagnose(
                 "best significant candidate"
             );
             if let Some((refitted, res)) = sel.add(best, &lib) {
-                steps.push(step_of(best.name.clone(), Some(&refitted), &res));
+                steps.push(step_of(
+                    best.name.clone(),
+                    Some(&refitted),
+                    sel.terms.last(),
+                    &res,
+                ));
             }
         }
     }

@@ -178,6 +178,20 @@ impl<'a> Selection<'a> {
             );
             return None;
         }
+        // The law calibrated again around the term must still abrade: a
+        // term that drives a compound's abrasion per joule on an axle to
+        // zero or below has taken the law's own energy, not an effect beside
+        // it, and extrapolates as the term alone (docs/gap.md, "A term may
+        // not take the law's place").
+        if let Some((group, k)) = law_refit.as_ref().and_then(|r| not_abrading(&r.law)) {
+            tracing::info!(
+                term = %best.name,
+                group = %group,
+                k_pct_per_mj = k,
+                "refused: with the term in, the law's abrasion per joule is not positive"
+            );
+            return None;
+        }
         let residual: Vec<f64> = y.iter().zip(&fitted).map(|(a, b)| a - b).collect();
         self.track_level.push(cand.feature.track_level());
         if let Some(with) = with {
@@ -199,6 +213,15 @@ impl<'a> Selection<'a> {
         refitted.coefficient = coefficient;
         Some((refitted, residual))
     }
+}
+
+/// The first compound and axle whose abrasion per joule the law holds at
+/// zero or below (or NaN), with that k.
+fn not_abrading(law: &PhysicsBaseline) -> Option<(String, f64)> {
+    law.k_pct_per_mj
+        .iter()
+        .find(|(_, k)| k.is_nan() || **k <= 0.0)
+        .map(|(g, k)| (g.clone(), *k))
 }
 
 /// The candidate of `ranked` (this round's step 2, sorted by CV gain) that
@@ -315,6 +338,32 @@ mod tests {
             threshold: s.threshold,
             kpi_scale: KpiScale::NONE,
         }
+    }
+
+    #[test]
+    fn a_law_that_no_longer_abrades_is_named() {
+        use crate::gap::baseline::TemperatureFactor;
+        let law = |medium_rear: f64| PhysicsBaseline {
+            k_pct_per_mj: [
+                ("hard/front".to_string(), 2.7),
+                ("hard/rear".to_string(), 7.9),
+                ("medium/rear".to_string(), medium_rear),
+            ]
+            .into(),
+            temperature_factor: TemperatureFactor::Exponential { beta_per_k: 0.0 },
+            skewness_coefficient: -0.2,
+        };
+        // Seed 289 at real-data noise (docs/gap.md): medium/rear −0.27 %/MJ.
+        assert_eq!(
+            not_abrading(&law(-0.2672)),
+            Some(("medium/rear".to_string(), -0.2672))
+        );
+        assert_eq!(
+            not_abrading(&law(0.0)).map(|(g, _)| g).as_deref(),
+            Some("medium/rear")
+        );
+        assert!(not_abrading(&law(f64::NAN)).is_some());
+        assert_eq!(not_abrading(&law(1e-3)), None);
     }
 
     #[test]

@@ -268,6 +268,19 @@ pub enum Scope {
 }
 
 impl Scope {
+    /// The tires in words, as the gap diagnosis names a term's scope:
+    /// "every tire", "the front axle", "the FL tire of every car", "car2",
+    /// "car2's front axle" (cars by their id, `car{index+1}`).
+    pub fn describe(&self) -> String {
+        match *self {
+            Scope::All => "every tire".into(),
+            Scope::Axle { axle } => format!("the {axle} axle"),
+            Scope::Wheel { wheel } => format!("the {wheel} tire of every car"),
+            Scope::Car { car } => format!("car{}", car + 1),
+            Scope::CarAxle { car, axle } => format!("car{}'s {axle} axle", car + 1),
+        }
+    }
+
     pub fn contains(&self, car: usize, wheel: Wheel) -> bool {
         match *self {
             Scope::All => true,

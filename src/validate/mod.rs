@@ -82,6 +82,12 @@ pub struct Case {
     pub truth_front_share: f64,
     /// The first term forward selection added (None: nothing significant).
     pub first_term: Option<String>,
+    /// Whether the first term reads as a set-up effect (a set-up group, or
+    /// a condition that leaves out at most 5 % of its energy: the
+    /// diagnosis's `Step::set_up`).
+    pub first_set_up: bool,
+    /// The tires the first term acts on, in words (`Step::scope`).
+    pub first_scope: Option<String>,
     pub first_mechanism: Option<String>,
     pub first_front_share: f64,
     pub significant_terms: usize,
@@ -293,6 +299,8 @@ pub fn validate(s: &ValidateSettings) -> Vec<Case> {
                     variance_share: f64::NAN,
                     truth_front_share: f64::NAN,
                     first_term: None,
+                    first_set_up: false,
+                    first_scope: None,
                     first_mechanism: None,
                     first_front_share: f64::NAN,
                     significant_terms: 0,

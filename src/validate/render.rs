@@ -5,6 +5,7 @@
 use super::Case;
 use crate::gap::candidates::significant;
 use crate::model::metrics::median;
+use crate::sim::generated::Form;
 use std::collections::BTreeMap;
 use std::fmt::Write;
 
@@ -188,6 +189,25 @@ fn render_generated(s: &mut String, cases: &[Case]) {
             line(s, &format!("≥ 10 %: {label}"), g);
         }
     }
+    // Set-up effects: reported as one, on their own tires?
+    let set_ups: Vec<&&Case> = big
+        .iter()
+        .filter(|c| matches!(c.generated.as_ref().map(|g| g.form), Some(Form::SetUp)))
+        .collect();
+    if !set_ups.is_empty() {
+        let named = set_ups
+            .iter()
+            .filter(|c| {
+                let planted = c.generated.as_ref().map(|g| g.scope.describe());
+                c.first_set_up && c.first_scope == planted
+            })
+            .count();
+        let _ = writeln!(
+            s,
+            "\nSet-up effects at ≥ 10 % of the variance: {named} of {} reported first as a set-up effect of the planted tires.",
+            set_ups.len()
+        );
+    }
     s.push_str(
         "\n| effect | variance share | terms | correlation | RMSE baseline / diagnosed / ideal | shrinkage / ideal | exact shape: size, shrinkage |\n|---|---|---|---|---|---|---|\n",
     );
@@ -200,8 +220,10 @@ fn render_generated(s: &mut String, cases: &[Case]) {
             c.first_term
                 .as_deref()
                 .map_or("none".to_string(), |t| format!(
-                    "{} (of {})",
-                    t, c.significant_terms
+                    "{}{} (of {})",
+                    t,
+                    if c.first_set_up { " [set-up]" } else { "" },
+                    c.significant_terms
                 )),
             c.terms_correlation,
             c.rmse_baseline_pct,
@@ -226,6 +248,8 @@ mod tests {
             variance_share: share,
             truth_front_share: 0.32,
             first_term: Some("road abrasion (energy × squared micro-roughness)".into()),
+            first_set_up: false,
+            first_scope: None,
             first_mechanism: Some(kind.name().into()),
             first_front_share: 0.35,
             significant_terms: 1,

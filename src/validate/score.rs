@@ -174,6 +174,8 @@ pub(crate) fn score_case(
         },
         truth_front_share,
         first_term: first.map(|s| s.added.clone()),
+        first_set_up: first.is_some_and(|s| s.set_up),
+        first_scope: first.and_then(|s| s.scope.clone()),
         first_mechanism,
         first_front_share,
         significant_terms: d.steps.len() - 1,
