@@ -396,8 +396,7 @@ impl Feature {
 /// The energy share ([`Candidate::energy_share`]) from which a condition
 /// or pair term is reported as acting under (nearly) every condition — on
 /// a car, a car's axle or a wheel position, a set-up effect: its threshold
-/// leaves out
-/// at most 5 % of the energy of its component on its tires, so what it
+/// leaves out at most 5 % of the energy of its component on its tires, so what it
 /// says is that those tires wear more per joule under (nearly) every
 /// condition. (A set-up factor planted on car2's front axle was taken as
 /// "energy with accel_x_mps2 above −39 m/s²", 96 % of that energy, among a

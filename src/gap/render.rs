@@ -301,12 +301,16 @@ fn findings(s: &mut String, d: &Diagnosis) {
         let component = st.feature.and_then(|f| f.energy_component());
         let scope = st.scope.as_deref().unwrap_or("its tires");
         // A condition that leaves out next to none of the energy.
-        let unlimited = st.energy_share.filter(|x| *x >= SET_UP_SHARE);
+        let unlimited = st.energy_share.is_some_and(|x| x >= SET_UP_SHARE);
         let name = match (name.strip_prefix("set-up: "), component, st.energy_share) {
             (Some(group), _, _) => format!("Set-up effect: {group}"),
-            (None, Some(component), Some(x)) if unlimited.is_some() => format!(
-                "{}he {component} of {scope} under nearly every condition (the term found, \"{name}\", holds {:.1} % of that energy)",
-                if st.set_up { "Set-up effect: t" } else { "T" },
+            (None, Some(component), Some(x)) if unlimited => format!(
+                "{} {component} of {scope} under nearly every condition (the term found, \"{name}\", holds {:.1} % of that energy)",
+                if st.set_up {
+                    "Set-up effect: the"
+                } else {
+                    "The"
+                },
                 100.0 * x
             ),
             (None, component, x) => {
@@ -324,7 +328,7 @@ fn findings(s: &mut String, d: &Diagnosis) {
         };
         let advice = if st.set_up {
             " The telemetry does not show why: look at the alignment (toe, camber settings), a suspension setting or the tire batch of that group."
-        } else if unlimited.is_some() {
+        } else if unlimited {
             " No condition sets it apart: the law's one rate per joule does not fit this energy on these tires as it fits the rest (how the law weighs longitudinal against lateral energy, say)."
         } else {
             ""

@@ -82,9 +82,9 @@ pub struct Case {
     pub truth_front_share: f64,
     /// The first term forward selection added (None: nothing significant).
     pub first_term: Option<String>,
-    /// Whether the first term reads as a set-up effect (a set-up group, or
-    /// a condition that leaves out at most 5 % of its energy: the
-    /// diagnosis's `Step::set_up`).
+    /// Whether the first term reads as a set-up effect (the diagnosis's
+    /// `Step::set_up`: a set-up group, or a condition on a car, a car's axle
+    /// or a wheel position that leaves out at most 5 % of its energy).
     pub first_set_up: bool,
     /// The tires the first term acts on, in words (`Step::scope`).
     pub first_scope: Option<String>,
