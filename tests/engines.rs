@@ -341,6 +341,50 @@ fn gpu_splits_batches_and_spreads_grids_in_2d() {
     assert_eq!(all.condition_maps, g.condition_map(&batch).unwrap());
 }
 
+/// The pipelined extraction blocks rayon's threads while they hand decoded
+/// runs to the thread that feeds the GPU, so the GPU engine may not wait for
+/// them: it once copied its uploads on the rayon pool and hung on the first
+/// season with more runs than threads (H200, 2026-11-26). Here every rayon
+/// thread is held while the GPU reduces a batch large enough to be copied
+/// by several threads (16 MB), which must still come back, and right.
+#[test]
+fn gpu_uploads_while_every_rayon_thread_is_blocked() {
+    use std::sync::atomic::{AtomicUsize, Ordering};
+    use std::sync::{Arc, RwLock};
+    let Some(g) = gpu_for_tests("gpu_uploads_while_every_rayon_thread_is_blocked") else {
+        return;
+    };
+    let mut batch = ReduceBatch::default();
+    batch.push_wheel(&full_length_run()[..200_000]);
+    // The CPU engine runs on the rayon pool: compared before the pool is held.
+    let c = compare_telemetry(&CpuEngine, &g as &dyn ReduceEngine, &batch).unwrap();
+    assert!(c.passes(), "{:?}", c.errors);
+    let want = g.telemetry_reduce(&batch).unwrap();
+    let gate = Arc::new(RwLock::new(()));
+    let closed = gate.write().unwrap();
+    let held = Arc::new(AtomicUsize::new(0));
+    let threads = rayon::current_num_threads();
+    for _ in 0..threads {
+        let (gate, held) = (gate.clone(), held.clone());
+        rayon::spawn(move || {
+            held.fetch_add(1, Ordering::SeqCst);
+            drop(gate.read().unwrap());
+        });
+    }
+    while held.load(Ordering::SeqCst) < threads {
+        std::thread::yield_now();
+    }
+    let (tx, rx) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        let _ = tx.send(g.telemetry_reduce(&batch).map_err(|e| e.to_string()));
+    });
+    // Minutes on lavapipe would mean a hang: the reduction takes a second.
+    let got = rx.recv_timeout(std::time::Duration::from_secs(120));
+    drop(closed);
+    let got = got.expect("the GPU engine waited for the blocked rayon threads");
+    assert_eq!(got.unwrap(), want);
+}
+
 #[test]
 fn extract_on_gpu_equals_extract_on_cpu() {
     if gpu_for_tests("extract_on_gpu_equals_extract_on_cpu").is_none() {

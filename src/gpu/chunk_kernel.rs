@@ -33,7 +33,19 @@ pub(crate) type InputScratch = Mutex<Option<(u64, u64, Inputs)>>;
 pub(crate) struct Inputs {
     samples: wgpu::Buffer,
     chunks: wgpu::Buffer,
+    /// Host-visible copy source: the samples at 0, the chunks at the samples'
+    /// capacity. Reused across uploads: `queue.write_buffer` allocates fresh
+    /// staging memory on every call, and first touching a gigabyte of it cost
+    /// most of the upload on an H200 (docs/performance.md).
+    staging: wgpu::Buffer,
 }
+
+/// Bytes per copy thread's share of the staging buffer, at least (smaller
+/// uploads are copied by the calling thread).
+const COPY_PIECE: usize = 4 << 20;
+
+/// Copy threads at most: a few saturate the memory bus.
+const COPY_THREADS: usize = 8;
 
 /// A chunk kernel's binding 2, where it has one (then the output is binding 3).
 #[derive(Clone, Copy, PartialEq)]
@@ -66,6 +78,42 @@ fn storage(
         size: size.max(16),
         usage,
         mapped_at_creation: false,
+    })
+}
+
+/// Copies `src` into the mapped `staging` buffer at `offset`, spread over
+/// short-lived threads of its own (one core's memcpy is slower than the
+/// bus); each maps its own disjoint range of the buffer. Not the rayon
+/// pool: in a pipelined extraction its threads can all be blocked handing
+/// decoded runs to the thread that called this (a deadlock at season scale,
+/// `tests/engines.rs`, `gpu_uploads_while_every_rayon_thread_is_blocked`).
+fn fill(staging: &wgpu::Buffer, offset: u64, src: &[u8]) -> Result<(), GpuError> {
+    let copy = |at: usize, piece: &[u8]| -> Result<(), GpuError> {
+        let at = offset + at as u64;
+        staging
+            .slice(at..at + piece.len() as u64)
+            .get_mapped_range_mut()
+            .map_err(|e| GpuError::Map(e.to_string()))?
+            .copy_from_slice(piece);
+        Ok(())
+    };
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let threads = cores.min(COPY_THREADS).min(src.len() / COPY_PIECE).max(1);
+    if threads == 1 {
+        return if src.is_empty() { Ok(()) } else { copy(0, src) };
+    }
+    // Shares in whole pieces keep every mapped range 8-byte aligned.
+    let share = src.len().div_ceil(threads).div_ceil(COPY_PIECE) * COPY_PIECE;
+    std::thread::scope(|s| {
+        let copies: Vec<_> = src
+            .chunks(share)
+            .enumerate()
+            .map(|(i, piece)| s.spawn(move || copy(i * share, piece)))
+            .collect();
+        copies.into_iter().try_for_each(|c| {
+            c.join()
+                .map_err(|_| GpuError::Map("a staging copy thread panicked".into()))?
+        })
     })
 }
 
@@ -280,8 +328,9 @@ impl GpuContext {
     }
 
     /// Writes one piece's samples and chunks into the shared input buffers
-    /// (grown to the next power of two when too small) and waits until the
-    /// queue is idle, so the upload is timed on its own.
+    /// (grown to the next power of two when too small) through the reused
+    /// staging buffer, and waits until the queue is idle, so the upload is
+    /// timed on its own.
     fn upload<'a>(
         &self,
         guard: &'a mut Option<(u64, u64, Inputs)>,
@@ -293,25 +342,43 @@ impl GpuContext {
         let fits = matches!(&*guard, Some((s, c, _)) if *s >= sample_bytes && *c >= chunk_bytes);
         if !fits {
             let (s, c) = (
-                sample_bytes.next_power_of_two(),
-                chunk_bytes.next_power_of_two(),
+                sample_bytes.next_power_of_two().max(16),
+                chunk_bytes.next_power_of_two().max(16),
             );
             use wgpu::BufferUsages as U;
+            *guard = None; // the old buffers go before the new ones are made
             *guard = Some((
                 s,
                 c,
                 Inputs {
                     samples: storage(&self.device, "samples", s, U::STORAGE | U::COPY_DST),
                     chunks: storage(&self.device, "chunks", c, U::STORAGE | U::COPY_DST),
+                    staging: storage(&self.device, "staging", s + c, U::MAP_WRITE | U::COPY_SRC),
                 },
             ));
         }
-        let input = &guard.as_ref().expect("inputs").2;
-        self.queue
-            .write_buffer(&input.samples, 0, bytemuck::cast_slice(samples));
-        self.queue
-            .write_buffer(&input.chunks, 0, bytemuck::cast_slice(chunks));
-        self.queue.submit([]);
+        let (capacity, _, input) = guard.as_ref().expect("inputs");
+        let chunks_at = *capacity;
+        if sample_bytes + chunk_bytes == 0 {
+            return Ok(input);
+        }
+        let slice = input.staging.slice(..chunks_at + chunk_bytes);
+        let (tx, rx) = std::sync::mpsc::channel();
+        slice.map_async(wgpu::MapMode::Write, move |r| {
+            let _ = tx.send(r);
+        });
+        self.wait()?;
+        rx.recv()
+            .map_err(|e| GpuError::Map(e.to_string()))?
+            .map_err(|e| GpuError::Map(e.to_string()))?;
+        let filled = fill(&input.staging, 0, bytemuck::cast_slice(samples))
+            .and_then(|()| fill(&input.staging, chunks_at, bytemuck::cast_slice(chunks)));
+        input.staging.unmap();
+        filled?;
+        let mut enc = self.device.create_command_encoder(&Default::default());
+        enc.copy_buffer_to_buffer(&input.staging, 0, &input.samples, 0, sample_bytes);
+        enc.copy_buffer_to_buffer(&input.staging, chunks_at, &input.chunks, 0, chunk_bytes);
+        self.queue.submit([enc.finish()]);
         self.wait()?;
         Ok(input)
     }
