@@ -83,7 +83,8 @@ fn storage(
 
 /// Copies `src` into the mapped `staging` buffer at `offset`, spread over
 /// short-lived threads of its own (one core's memcpy is slower than the
-/// bus); each maps its own disjoint range of the buffer. Not the rayon
+/// bus), at most as many as the rayon pool has; each maps its own disjoint
+/// range of the buffer. Not the rayon
 /// pool: in a pipelined extraction its threads can all be blocked handing
 /// decoded runs to the thread that called this (a deadlock at season scale,
 /// `tests/engines.rs`, `gpu_uploads_while_every_rayon_thread_is_blocked`).
@@ -97,8 +98,11 @@ fn fill(staging: &wgpu::Buffer, offset: u64, src: &[u8]) -> Result<(), GpuError>
             .copy_from_slice(piece);
         Ok(())
     };
-    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
-    let threads = cores.min(COPY_THREADS).min(src.len() / COPY_PIECE).max(1);
+    // As many as the global pool has threads (`--jobs`), though none of them.
+    let threads = rayon::current_num_threads()
+        .min(COPY_THREADS)
+        .min(src.len() / COPY_PIECE)
+        .max(1);
     if threads == 1 {
         return if src.is_empty() { Ok(()) } else { copy(0, src) };
     }
