@@ -33,11 +33,12 @@ pub(crate) type InputScratch = Mutex<Option<(u64, u64, Inputs)>>;
 pub(crate) struct Inputs {
     samples: wgpu::Buffer,
     chunks: wgpu::Buffer,
-    /// Host-visible copy source: the samples at 0, the chunks at the samples'
-    /// capacity. Reused across uploads: `queue.write_buffer` allocates fresh
-    /// staging memory on every call, and first touching a gigabyte of it cost
-    /// most of the upload on an H200 (docs/performance.md).
-    staging: wgpu::Buffer,
+    /// Host-visible copy sources of the same sizes, reused across uploads:
+    /// `queue.write_buffer` allocates fresh staging memory on every call, and
+    /// first touching a gigabyte of it cost most of the upload on an H200
+    /// (docs/performance.md).
+    staging_samples: wgpu::Buffer,
+    staging_chunks: wgpu::Buffer,
 }
 
 /// Bytes per copy thread's share of the staging buffer, at least (smaller
@@ -81,16 +82,16 @@ fn storage(
     })
 }
 
-/// Copies `src` into the mapped `staging` buffer at `offset`, spread over
+/// Copies `src` to the start of the mapped `staging` buffer, spread over
 /// short-lived threads of its own (one core's memcpy is slower than the
 /// bus), at most as many as the rayon pool has; each maps its own disjoint
 /// range of the buffer. Not the rayon
 /// pool: in a pipelined extraction its threads can all be blocked handing
 /// decoded runs to the thread that called this (a deadlock at season scale,
 /// `tests/engines.rs`, `gpu_uploads_while_every_rayon_thread_is_blocked`).
-fn fill(staging: &wgpu::Buffer, offset: u64, src: &[u8]) -> Result<(), GpuError> {
+fn fill(staging: &wgpu::Buffer, src: &[u8]) -> Result<(), GpuError> {
     let copy = |at: usize, piece: &[u8]| -> Result<(), GpuError> {
-        let at = offset + at as u64;
+        let at = at as u64;
         staging
             .slice(at..at + piece.len() as u64)
             .get_mapped_range_mut()
@@ -357,31 +358,55 @@ impl GpuContext {
                 Inputs {
                     samples: storage(&self.device, "samples", s, U::STORAGE | U::COPY_DST),
                     chunks: storage(&self.device, "chunks", c, U::STORAGE | U::COPY_DST),
-                    staging: storage(&self.device, "staging", s + c, U::MAP_WRITE | U::COPY_SRC),
+                    staging_samples: storage(
+                        &self.device,
+                        "staged samples",
+                        s,
+                        U::MAP_WRITE | U::COPY_SRC,
+                    ),
+                    staging_chunks: storage(
+                        &self.device,
+                        "staged chunks",
+                        c,
+                        U::MAP_WRITE | U::COPY_SRC,
+                    ),
                 },
             ));
         }
-        let (capacity, _, input) = guard.as_ref().expect("inputs");
-        let chunks_at = *capacity;
-        if sample_bytes + chunk_bytes == 0 {
-            return Ok(input);
-        }
-        let slice = input.staging.slice(..chunks_at + chunk_bytes);
+        let input = &guard.as_ref().expect("inputs").2;
+        let staged = [
+            (&input.staging_samples, &input.samples, sample_bytes),
+            (&input.staging_chunks, &input.chunks, chunk_bytes),
+        ];
+        let staged = staged.into_iter().filter(|(_, _, bytes)| *bytes > 0);
         let (tx, rx) = std::sync::mpsc::channel();
-        slice.map_async(wgpu::MapMode::Write, move |r| {
-            let _ = tx.send(r);
-        });
+        for (staging, _, bytes) in staged.clone() {
+            let tx = tx.clone();
+            staging
+                .slice(..bytes)
+                .map_async(wgpu::MapMode::Write, move |r| {
+                    let _ = tx.send(r);
+                });
+        }
+        drop(tx);
         self.wait()?;
-        rx.recv()
-            .map_err(|e| GpuError::Map(e.to_string()))?
-            .map_err(|e| GpuError::Map(e.to_string()))?;
-        let filled = fill(&input.staging, 0, bytemuck::cast_slice(samples))
-            .and_then(|()| fill(&input.staging, chunks_at, bytemuck::cast_slice(chunks)));
-        input.staging.unmap();
-        filled?;
+        // Every mapping answered once the device is idle; a failed one
+        // leaves the buffers as they are (the device is then likely lost).
+        let answers: Vec<_> = rx.try_iter().collect();
+        if answers.len() != staged.clone().count() {
+            return Err(GpuError::Map("a staging buffer was not mapped".into()));
+        }
+        for answer in answers {
+            answer.map_err(|e| GpuError::Map(e.to_string()))?;
+        }
+        let filled = fill(&input.staging_samples, bytemuck::cast_slice(samples))
+            .and_then(|()| fill(&input.staging_chunks, bytemuck::cast_slice(chunks)));
         let mut enc = self.device.create_command_encoder(&Default::default());
-        enc.copy_buffer_to_buffer(&input.staging, 0, &input.samples, 0, sample_bytes);
-        enc.copy_buffer_to_buffer(&input.staging, chunks_at, &input.chunks, 0, chunk_bytes);
+        for (staging, target, bytes) in staged {
+            staging.unmap();
+            enc.copy_buffer_to_buffer(staging, 0, target, 0, bytes);
+        }
+        filled?;
         self.queue.submit([enc.finish()]);
         self.wait()?;
         Ok(input)
