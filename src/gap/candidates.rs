@@ -306,12 +306,17 @@ impl Candidate {
             .collect()
     }
 
-    /// Only positive coefficients count: built-in mechanisms, and user
-    /// hypotheses unless they say otherwise.
+    /// Only positive coefficients count: built-in mechanisms, user
+    /// hypotheses unless they say otherwise, and the set-up of a wheel
+    /// position on every car. The law is calibrated per axle, so the other
+    /// wheel of the axle is the same fit with the sign turned (equal CV gain
+    /// and p): of the two readings the one that adds wear is kept, naming the
+    /// tire that wears more, where the other said "wears −0.01 times the law".
     pub(crate) fn adds_wear_only(&self) -> bool {
-        match &self.user {
-            Some(u) => u.adds_wear,
-            None => self.feature.adds_wear_only(),
+        match (&self.user, &self.group) {
+            (Some(u), _) => u.adds_wear,
+            (None, Some(g)) if self.feature == Feature::Group => g.car.is_none(),
+            (None, _) => self.feature.adds_wear_only(),
         }
     }
 
@@ -1130,6 +1135,28 @@ mod tests {
 
     /// The diagnosis names a term's tires as the validation names a
     /// planted effect's, so that the two can be compared.
+    #[test]
+    fn a_wheel_positions_set_up_is_read_as_the_tire_that_wears_more() {
+        let set_up = |car: Option<&str>, wheel: Option<Wheel>| Candidate {
+            name: String::new(),
+            feature: Feature::Group,
+            thresholds: vec![f64::NAN],
+            axle: None,
+            user: None,
+            group: Some(Group {
+                car: car.map(str::to_string),
+                wheel,
+            }),
+            scopes: Vec::new(),
+        };
+        // FL on every car is FR on every car with the sign turned (one law per axle).
+        assert!(set_up(None, Some(Wheel::FL)).adds_wear_only());
+        assert!(set_up(None, Some(Wheel::RR)).adds_wear_only());
+        // A car, or one car's wheel, has no such twin: it may wear less.
+        assert!(!set_up(Some("car1"), None).adds_wear_only());
+        assert!(!set_up(Some("car1"), Some(Wheel::FL)).adds_wear_only());
+    }
+
     #[test]
     fn scopes_are_named_as_the_generator_names_them() {
         use crate::sim::generated::Scope as Planted;
