@@ -85,10 +85,10 @@ fn storage(
 /// Copies `src` to the start of the mapped `staging` buffer, spread over
 /// short-lived threads of its own (one core's memcpy is slower than the
 /// bus), at most as many as the rayon pool has; each maps its own disjoint
-/// range of the buffer. Not the rayon
-/// pool: in a pipelined extraction its threads can all be blocked handing
-/// decoded runs to the thread that called this (a deadlock at season scale,
-/// `tests/engines.rs`, `gpu_uploads_while_every_rayon_thread_is_blocked`).
+/// range of the buffer. Not the pool's threads: in a pipelined extraction
+/// they can all be blocked handing decoded runs to the thread that called
+/// this (a deadlock at season scale; `tests/engines.rs`,
+/// `gpu_uploads_while_every_rayon_thread_is_blocked`).
 fn fill(staging: &wgpu::Buffer, src: &[u8]) -> Result<(), GpuError> {
     let copy = |at: usize, piece: &[u8]| -> Result<(), GpuError> {
         let at = at as u64;
@@ -334,7 +334,7 @@ impl GpuContext {
 
     /// Writes one piece's samples and chunks into the shared input buffers
     /// (grown to the next power of two when too small) through the reused
-    /// staging buffer, and waits until the queue is idle, so the upload is
+    /// staging buffers, and waits until the queue is idle, so the upload is
     /// timed on its own.
     fn upload<'a>(
         &self,
