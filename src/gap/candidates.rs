@@ -1133,8 +1133,6 @@ mod tests {
         assert_eq!(share(&c, &row_maps), None);
     }
 
-    /// The diagnosis names a term's tires as the validation names a
-    /// planted effect's, so that the two can be compared.
     #[test]
     fn a_wheel_positions_set_up_is_read_as_the_tire_that_wears_more() {
         let set_up = |car: Option<&str>, wheel: Option<Wheel>| Candidate {
@@ -1157,6 +1155,8 @@ mod tests {
         assert!(!set_up(Some("car1"), Some(Wheel::FL)).adds_wear_only());
     }
 
+    /// The diagnosis names a term's tires as the validation names a
+    /// planted effect's, so that the two can be compared.
     #[test]
     fn scopes_are_named_as_the_generator_names_them() {
         use crate::sim::generated::Scope as Planted;

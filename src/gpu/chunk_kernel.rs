@@ -347,8 +347,8 @@ impl GpuContext {
         let fits = matches!(&*guard, Some((s, c, _)) if *s >= sample_bytes && *c >= chunk_bytes);
         if !fits {
             let (s, c) = (
-                sample_bytes.next_power_of_two().max(16),
-                chunk_bytes.next_power_of_two().max(16),
+                sample_bytes.next_power_of_two(),
+                chunk_bytes.next_power_of_two(),
             );
             use wgpu::BufferUsages as U;
             *guard = None; // the old buffers go before the new ones are made
@@ -374,13 +374,15 @@ impl GpuContext {
             ));
         }
         let input = &guard.as_ref().expect("inputs").2;
-        let staged = [
+        let staged: Vec<_> = [
             (&input.staging_samples, &input.samples, sample_bytes),
             (&input.staging_chunks, &input.chunks, chunk_bytes),
-        ];
-        let staged = staged.into_iter().filter(|(_, _, bytes)| *bytes > 0);
+        ]
+        .into_iter()
+        .filter(|(_, _, bytes)| *bytes > 0)
+        .collect();
         let (tx, rx) = std::sync::mpsc::channel();
-        for (staging, _, bytes) in staged.clone() {
+        for &(staging, _, bytes) in &staged {
             let tx = tx.clone();
             staging
                 .slice(..bytes)
@@ -393,7 +395,7 @@ impl GpuContext {
         // Every mapping answered once the device is idle; a failed one
         // leaves the buffers as they are (the device is then likely lost).
         let answers: Vec<_> = rx.try_iter().collect();
-        if answers.len() != staged.clone().count() {
+        if answers.len() != staged.len() {
             return Err(GpuError::Map("a staging buffer was not mapped".into()));
         }
         for answer in answers {
