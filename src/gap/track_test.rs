@@ -71,6 +71,9 @@ pub(crate) struct Severities<'a> {
     tracks: Tracks<'a>,
     /// Both axles, front, rear.
     designs: [Option<Design>; 3],
+    /// Front less rear, rear less front: a one-axle term's between-track
+    /// part ([`Severities::p_between`]).
+    contrasts: [Option<Design>; 2],
     /// Stage 1's columns: the base columns that vary within tracks, then the
     /// (track, axle) scales.
     stage1: Vec<Vec<f64>>,
@@ -90,6 +93,86 @@ fn slot(axle: Option<Axle>) -> usize {
         None => 0,
         Some(Axle::Front) => 1,
         Some(Axle::Rear) => 2,
+    }
+}
+
+impl Design {
+    /// The design of `kept` tracks' `severity` against the null's
+    /// `covariates` (one value per kept track each); None when too few
+    /// tracks are left beyond the null's columns.
+    fn new(kept: Vec<usize>, severity: Vec<f64>, covariates: &[Vec<f64>]) -> Option<Design> {
+        let idx: Vec<usize> = (0..kept.len()).collect();
+        let refs: Vec<&[f64]> = covariates.iter().map(|c| c.as_slice()).collect();
+        let q = orthonormal_basis(&refs, &idx);
+        (kept.len() >= MIN_TRACKS && kept.len() > q.len() + 1).then_some(Design {
+            severity,
+            kept,
+            q,
+        })
+    }
+}
+
+/// The other axle.
+fn other_axle(axle: Axle) -> Axle {
+    match axle {
+        Axle::Front => Axle::Rear,
+        Axle::Rear => Axle::Front,
+    }
+}
+
+/// Per track and axle scope: the rows counted and the sums of the base's
+/// track-level columns (stage 2's null).
+struct TrackMeans {
+    /// Per slot (both, front, rear): rows per track.
+    count: [Vec<usize>; 3],
+    /// Per slot, per track-level column: its sum per track.
+    sums: [Vec<Vec<f64>>; 3],
+}
+
+impl TrackMeans {
+    fn new(s: &Severities, base: &[Vec<f64>], track_level: &[bool]) -> TrackMeans {
+        let nt = s.tracks.rows.len();
+        let columns: Vec<&Vec<f64>> = base
+            .iter()
+            .zip(track_level)
+            .filter(|(_, t)| **t)
+            .map(|(c, _)| c)
+            .collect();
+        let mut count: [Vec<usize>; 3] = Default::default();
+        let mut sums: [Vec<Vec<f64>>; 3] = Default::default();
+        for axle in [None, Some(Axle::Front), Some(Axle::Rear)] {
+            let (n, sum) = (&mut count[slot(axle)], &mut sums[slot(axle)]);
+            *n = vec![0; nt];
+            *sum = vec![vec![0.0; nt]; columns.len()];
+            for (i, &t) in s.tracks.of_row.iter().enumerate() {
+                if axle.is_none_or(|a| s.axle_of_row[i] == a) {
+                    n[t] += 1;
+                    for (j, c) in columns.iter().enumerate() {
+                        sum[j][t] += c[i];
+                    }
+                }
+            }
+        }
+        TrackMeans { count, sums }
+    }
+
+    /// The tracks with rows in every one of `scopes`.
+    fn kept(&self, scopes: &[Option<Axle>]) -> Vec<usize> {
+        (0..self.count[0].len())
+            .filter(|&t| scopes.iter().all(|&a| self.count[slot(a)][t] > 0))
+            .collect()
+    }
+
+    /// The null's columns on `kept` for `axle`: an intercept, then each
+    /// track-level column's mean per track.
+    fn covariates(&self, axle: Option<Axle>, kept: &[usize]) -> Vec<Vec<f64>> {
+        let (n, sums) = (&self.count[slot(axle)], &self.sums[slot(axle)]);
+        let mut out = vec![vec![1.0; kept.len()]];
+        out.extend(
+            sums.iter()
+                .map(|sum| kept.iter().map(|&t| sum[t] / n[t] as f64).collect()),
+        );
+        out
     }
 }
 
@@ -130,43 +213,42 @@ impl<'a> Severities<'a> {
         let mut s = Severities {
             tracks,
             designs: [None, None, None],
+            contrasts: [None, None],
             n_within,
             solver,
             cell_of_row,
             axle_of_row: rows.iter().map(|r| r.axle).collect(),
             stage1: Vec::new(),
         };
-        let nt = s.tracks.rows.len();
+        let means = TrackMeans::new(&s, base, track_level);
         for axle in [None, Some(Axle::Front), Some(Axle::Rear)] {
-            let mut count = vec![0usize; nt];
-            let mut cov_sum = vec![vec![0.0; nt]; base.len()];
-            for i in 0..rows.len() {
-                if axle.is_none_or(|a| s.axle_of_row[i] == a) {
-                    let t = s.tracks.of_row[i];
-                    count[t] += 1;
-                    for (j, c) in base.iter().enumerate() {
-                        cov_sum[j][t] += c[i];
-                    }
-                }
-            }
-            let kept: Vec<usize> = (0..nt).filter(|&t| count[t] > 0).collect();
-            let mut covariates = vec![vec![1.0; kept.len()]];
-            for (j, _) in track_level.iter().enumerate().filter(|(_, t)| **t) {
-                covariates.push(
-                    kept.iter()
-                        .map(|&t| cov_sum[j][t] / count[t] as f64)
-                        .collect(),
-                );
-            }
-            let idx: Vec<usize> = (0..kept.len()).collect();
-            let refs: Vec<&[f64]> = covariates.iter().map(|c| c.as_slice()).collect();
-            let q = orthonormal_basis(&refs, &idx);
+            let kept = means.kept(&[axle]);
+            let covariates = means.covariates(axle, &kept);
             let severity = s.track_means(&k[n_within..], axle, &kept);
-            s.designs[slot(axle)] = (kept.len() >= MIN_TRACKS && kept.len() > q.len() + 1)
-                .then_some(Design { severity, kept, q });
+            s.designs[slot(axle)] = Design::new(kept, severity, &covariates);
+        }
+        for axle in Axle::ALL {
+            let other = Some(other_axle(axle));
+            let kept = means.kept(&[Some(axle), other]);
+            let mut covariates = means.covariates(Some(axle), &kept);
+            for (c, o) in covariates.iter_mut().zip(means.covariates(other, &kept)) {
+                c.iter_mut().zip(o).for_each(|(a, b)| *a -= b);
+            }
+            // The intercept: a constant ratio of the axles' severities.
+            covariates[0] = vec![1.0; kept.len()];
+            let severity = s.track_contrast(&k[n_within..], axle, &kept);
+            s.contrasts[slot(Some(axle)) - 1] = Design::new(kept, severity, &covariates);
         }
         s.stage1 = stage1;
         s
+    }
+
+    /// Per track of `kept`: the severity (`scales` as in
+    /// [`Severities::track_means`]) on `axle` less that on the other axle.
+    fn track_contrast(&self, scales: &[f64], axle: Axle, kept: &[usize]) -> Vec<f64> {
+        let on = self.track_means(scales, Some(axle), kept);
+        let off = self.track_means(scales, Some(other_axle(axle)), kept);
+        on.iter().zip(off).map(|(a, b)| a - b).collect()
     }
 
     /// Per track of `kept`: the mean over its rows on `axle` (None: both)
@@ -215,6 +297,15 @@ impl<'a> Severities<'a> {
         monte_carlo_p(d, &values, c.adds_wear_only(), draws, None, seed)
     }
 
+    /// The design a within-track term of `axle`'s scope is tested on
+    /// between tracks: the severities of both axles, or the axles' contrast.
+    fn design_between(&self, axle: Option<Axle>) -> Option<&Design> {
+        match axle {
+            None => self.designs[0].as_ref(),
+            Some(a) => self.contrasts[slot(Some(a)) - 1].as_ref(),
+        }
+    }
+
     /// p-value of a within-track term's **between-track part**: how the
     /// tracks' severities follow the term's own track scales.
     ///
@@ -233,6 +324,14 @@ impl<'a> Severities<'a> {
     /// axle, weighs it against the run-level scatter alone (docs/gap.md,
     /// "At real-data noise"). This is the other half of its evidence.
     ///
+    /// A term on one axle is tested on the tracks' **contrast** of the
+    /// axles, its axle's severity less the other's: what a track and its
+    /// day do to every tire (the road's hidden abrasiveness, the grip, the
+    /// drivers' runs) cancels there, and what is left is the tires' own
+    /// scatter and the term. Its null has an intercept (the axles' ratio
+    /// the baseline's calibration sets) and the contrasts of the base's
+    /// track-level columns.
+    ///
     /// The Monte Carlo stops at 20 exceedances (Besag and Clifford's
     /// sequential p-value): most candidates are far from significant.
     pub(crate) fn p_between(
@@ -246,21 +345,24 @@ impl<'a> Severities<'a> {
         let all: Vec<usize> = (0..self.axle_of_row.len()).collect();
         let mut values: [Vec<Vec<f64>>; 3] = Default::default();
         for (axle, x) in columns {
-            let Some(d) = &self.designs[slot(*axle)] else {
+            let Some(d) = self.design_between(*axle) else {
                 continue;
             };
             let k = self.solver.coefficients(&refs, x, &all);
-            let v = self.track_means(&k[self.n_within..], *axle, &d.kept);
+            let v = match axle {
+                None => self.track_means(&k[self.n_within..], None, &d.kept),
+                Some(a) => self.track_contrast(&k[self.n_within..], *a, &d.kept),
+            };
             if v.iter().all(|x| x.is_finite()) {
                 values[slot(*axle)].push(v);
             }
         }
         let tested: Vec<f64> = values
             .iter()
-            .zip(&self.designs)
+            .zip([None, Some(Axle::Front), Some(Axle::Rear)])
             .enumerate()
-            .filter_map(|(s, (v, d))| {
-                let d = d.as_ref()?;
+            .filter_map(|(s, (v, axle))| {
+                let d = self.design_between(axle)?;
                 (!v.is_empty())
                     .then(|| monte_carlo_p(d, v, positive, draws, Some(20), seed ^ s as u64))
             })
@@ -420,6 +522,73 @@ mod tests {
     #[test]
     fn a_term_between_tracks_holds_its_level_on_track_noise() {
         holds_its_level(11, 8, 0.03, |noise, rep| between_p(0.0, noise, 499, rep));
+    }
+
+    /// 12 tires (alternating axles) per track: wear `1 + shared[t] +
+    /// own[t]·(±1 by axle) + c·x` with a term `x` on the rear tires only
+    /// (0.1 … 0.8 by track). `shared`: what a track does to every tire,
+    /// `own`: each axle's own track noise. (p of the rear term on the axles'
+    /// contrast, p on the rears' severities alone.)
+    fn rear_term_p(c: f64, shared: &[f64], own: &[f64], draws: usize, seed: u64) -> (f64, f64) {
+        let mut rows = Vec::new();
+        let (mut x, mut y) = (Vec::new(), Vec::new());
+        for (t, (s, o)) in shared.iter().zip(own).enumerate() {
+            let level = 0.1 * (1 + (t * 5) % 8) as f64;
+            for k in 0..12 {
+                let axle = if k % 2 == 0 { Axle::Front } else { Axle::Rear };
+                rows.push(KpiRow {
+                    track: format!("T{t}"),
+                    axle,
+                    ..Default::default()
+                });
+                let xi = if axle == Axle::Rear {
+                    level * (1.0 + 0.05 * ((k * 7 % 5) as f64 - 2.0))
+                } else {
+                    0.0
+                };
+                let sign = if axle == Axle::Rear { 1.0 } else { -1.0 };
+                x.push(xi);
+                y.push(1.0 + s + sign * o + c * xi + 0.01 * ((k * 5 % 7) as f64 - 3.0));
+            }
+        }
+        let refs: Vec<&KpiRow> = rows.iter().collect();
+        let n = rows.len();
+        let sev = Severities::new(&refs, &y, &[vec![1.0; n]], &[false], &vec![1.0; n]);
+        let contrast = sev.p_between(&[(Some(Axle::Rear), &x)], true, draws, seed);
+        // The same term's track values on the rears' severities alone.
+        let stage1: Vec<&[f64]> = sev.stage1.iter().map(|c| c.as_slice()).collect();
+        let all: Vec<usize> = (0..n).collect();
+        let k = sev.solver.coefficients(&stage1, &x, &all);
+        let d = sev.designs[slot(Some(Axle::Rear))]
+            .as_ref()
+            .expect("8 tracks");
+        let v = sev.track_means(&k[sev.n_within..], Some(Axle::Rear), &d.kept);
+        let alone = monte_carlo_p(d, &[v], true, draws, None, seed);
+        (contrast, alone)
+    }
+
+    #[test]
+    fn a_term_on_one_axle_is_tested_on_the_axles_contrast() {
+        // What each track does to every tire (sd 0.2) hides a rear term
+        // of 0.03 … 0.24 on the rears' severities; on the contrast it
+        // cancels, and the axles' own noise (sd 0.02) is all that is left.
+        let shared = [0.25, -0.3, 0.1, -0.2, 0.35, -0.05, 0.15, -0.25];
+        let own = [0.02, -0.03, 0.01, 0.025, -0.015, -0.005, 0.015, -0.02];
+        let (contrast, alone) = rear_term_p(0.3, &shared, &own, 1999, 5);
+        assert_eq!(contrast, 1.0 / 2000.0);
+        assert!(alone > 0.05, "{alone}");
+        // Without the term: nothing to see on either.
+        let (contrast, _) = rear_term_p(0.0, &shared, &own, 1999, 5);
+        assert!(contrast > 0.05, "{contrast}");
+    }
+
+    #[test]
+    fn the_axles_contrast_holds_its_level_on_track_noise() {
+        // Large shared track noise, the axles' own noise normal (sd 0.03).
+        let shared = [0.25, -0.3, 0.1, -0.2, 0.35, -0.05, 0.15, -0.25];
+        holds_its_level(13, 8, 0.03, |own, rep| {
+            rear_term_p(0.0, &shared, own, 499, rep).0
+        });
     }
 
     #[test]
