@@ -64,6 +64,17 @@ pub enum Feature {
         above: bool,
         component: Component,
     },
+    /// Generated from the condition energy maps: the friction energy (total,
+    /// longitudinal or lateral) of the samples whose condition
+    /// `CONDITIONS[condition]` lies in a band [θ₁, θ₂), both ends bin edges
+    /// of [`band_edges`] (MJ). θ is the index of the edge pair
+    /// ([`band_thresholds`]): wear per joule that is higher in a window of
+    /// the condition and not beyond it (a working range of the compound's
+    /// temperature, say), which a single threshold extrapolates.
+    BandEnergy {
+        condition: usize,
+        component: Component,
+    },
     /// Generated from a pair map (`PAIRS[pair]`): the friction energy of
     /// the samples whose first condition lies above θ₁ (or below,
     /// `first_above` false) *and* whose second lies above θ₂ (or below),
@@ -119,6 +130,7 @@ impl Feature {
             | Feature::SmallPatchEnergy
             | Feature::Kpi(_)
             | Feature::ConditionEnergy { .. }
+            | Feature::BandEnergy { .. }
             | Feature::User
             | Feature::Group => None,
         }
@@ -155,6 +167,7 @@ impl Feature {
                 | Feature::HotSurfaceEnergy
                 | Feature::FastSlidingEnergy
                 | Feature::ConditionEnergy { .. }
+                | Feature::BandEnergy { .. }
                 | Feature::PairEnergy { .. }
         )
     }
@@ -174,7 +187,11 @@ impl Feature {
                 "1" => "",
                 u => u,
             },
-            Feature::Kpi(_) | Feature::PairEnergy { .. } | Feature::User | Feature::Group => "",
+            Feature::Kpi(_)
+            | Feature::BandEnergy { .. }
+            | Feature::PairEnergy { .. }
+            | Feature::User
+            | Feature::Group => "",
         }
     }
 }
@@ -201,6 +218,66 @@ pub(crate) fn pair_thresholds(pair: usize, theta: f64) -> Option<(usize, usize)>
     (k < (na - 1) * (nb - 1)).then(|| (k / (nb - 1) + 1, k % (nb - 1) + 1))
 }
 
+/// How many edges a band candidate's ends are chosen from, at most
+/// ([`band_edges`]): 9 edges give 36 bands, about as many columns as a
+/// pair's 7 × 7 edge pairs.
+const BAND_EDGES: usize = 9;
+
+/// The fine bin edges (indices into the condition's bins) a band's ends
+/// take: every ⌈n/10⌉-th inner edge of the condition's n bins.
+pub(crate) fn band_edges(condition: usize) -> Vec<usize> {
+    let n = CONDITIONS[condition].bins.n;
+    let step = n.div_ceil(BAND_EDGES + 1).max(1);
+    (step..n).step_by(step).take(BAND_EDGES).collect()
+}
+
+/// The edges (k₁, k₂), bin indices with k₁ < k₂, a band candidate's
+/// threshold index stands for: the bands of [`band_edges`] in order (first
+/// end, then second).
+pub(crate) fn band_thresholds(condition: usize, theta: f64) -> Option<(usize, usize)> {
+    if theta.is_nan() || theta < 0.0 || theta.fract() != 0.0 {
+        return None;
+    }
+    let edges = band_edges(condition);
+    let mut k = theta as usize;
+    for (i, &lo) in edges.iter().enumerate() {
+        let after = edges.len() - i - 1;
+        if k < after {
+            return Some((lo, edges[i + 1 + k]));
+        }
+        k -= after;
+    }
+    None
+}
+
+/// The least share of a band candidate's energy component (over the rows
+/// scored) that each side beyond the band must hold for the band to be
+/// scanned ([`band_admissible`]).
+pub(crate) const BAND_TAIL_SHARE: f64 = 0.05;
+
+/// Whether band θ of `condition` leaves at least [`BAND_TAIL_SHARE`] of
+/// `energy` (per bin, [`Candidate::band_energy`]) on each side of it.
+///
+/// A band whose low end lies below (nearly) all of the energy is, on these
+/// tires, the one-sided threshold at its high end, and the data cannot
+/// tell the two apart; they differ only where a testing track runs past
+/// the end the training events never reached, and there the one-sided
+/// form — the simpler assumption — keeps the effect going where the band
+/// would cut it off. (Clean-noise seed 317, an onset of camber below
+/// −1.9° on every tire: "energy with camber_deg between −5° and −2°",
+/// 0.005 of CV gain ahead of "below −1.5°", left the testing events worse
+/// than the baseline, −0.29 of the ideal against 0.66; docs/gap.md,
+/// "Bands".)
+pub(crate) fn band_admissible(energy: &[f64], condition: usize, theta: f64) -> bool {
+    let total: f64 = energy.iter().sum();
+    let least = BAND_TAIL_SHARE * total;
+    band_thresholds(condition, theta).is_some_and(|(lo, hi)| {
+        total > 0.0
+            && energy[..lo].iter().sum::<f64>() >= least
+            && energy[hi..].iter().sum::<f64>() >= least
+    })
+}
+
 /// `x` with four significant digits (thresholds: 0.009022, 84.00, 1234).
 pub fn significant(x: f64) -> String {
     if x == 0.0 || !x.is_finite() {
@@ -213,6 +290,17 @@ pub fn significant(x: f64) -> String {
 impl Feature {
     /// θ with its unit, as the report prints it (pressure in kPa).
     pub(crate) fn format_threshold(&self, theta: f64) -> String {
+        if let Feature::BandEnergy { condition, .. } = *self {
+            let cd = &CONDITIONS[condition];
+            return match band_thresholds(condition, theta) {
+                Some((lo, hi)) => format!(
+                    "{} and {}",
+                    format_with_unit(cd.unit, cd.bins.lower_edge(lo)),
+                    format_with_unit(cd.unit, cd.bins.lower_edge(hi))
+                ),
+                None => significant(theta),
+            };
+        }
         if let Feature::PairEnergy { pair, .. } = *self {
             let (a, b) = pair_conditions(pair);
             return match pair_thresholds(pair, theta) {
@@ -345,6 +433,36 @@ impl Candidate {
         self.axle.is_none_or(|a| r.axle == a) && self.group.as_ref().is_none_or(|g| g.contains(r))
     }
 
+    /// A band candidate's energy component per bin of its condition,
+    /// summed over the maps of the tires of `rows` it acts on; None for
+    /// other candidates, or where no such tire has that condition's map.
+    pub(crate) fn band_energy(
+        &self,
+        rows: &[&KpiRow],
+        maps: &[Option<&EnergyMaps>],
+    ) -> Option<Vec<f64>> {
+        let Feature::BandEnergy {
+            condition,
+            component,
+        } = self.feature
+        else {
+            return None;
+        };
+        let mut energy = vec![0.0; CONDITIONS[condition].bins.n];
+        let mut any = false;
+        for (r, m) in rows.iter().zip(maps) {
+            let Some(cm) = m.and_then(|m| m.conditions.as_deref()) else {
+                continue;
+            };
+            if self.acts_on(r) && cm.holds(condition) {
+                let map = cm.map(component, condition);
+                energy.iter_mut().zip(map).for_each(|(a, b)| *a += b);
+                any = true;
+            }
+        }
+        any.then_some(energy)
+    }
+
     /// A condition or pair term's share of its energy component at
     /// threshold θ over `rows` (the tires it acts on): the energy its bins
     /// hold over all the energy of that component (its map's total). None
@@ -372,7 +490,13 @@ impl Candidate {
                     ..
                 } if cm.holds(condition) => cm.map(component, condition).iter().sum(),
                 Feature::PairEnergy { pair, .. } if cm.pairs_held => cm.pair_map(pair).iter().sum(),
-                Feature::ConditionEnergy { .. } | Feature::PairEnergy { .. } => continue,
+                Feature::BandEnergy {
+                    condition,
+                    component,
+                } if cm.holds(condition) => cm.map(component, condition).iter().sum(),
+                Feature::ConditionEnergy { .. }
+                | Feature::BandEnergy { .. }
+                | Feature::PairEnergy { .. } => continue,
                 _ => return None,
             };
             let part = feature(self.feature, r, *m, theta, KpiScale::NONE) * 1e6;
@@ -391,7 +515,9 @@ impl Feature {
     /// kinds.
     pub(crate) fn energy_component(&self) -> Option<&'static str> {
         match *self {
-            Feature::ConditionEnergy { component, .. } => Some(component.energy_name()),
+            Feature::ConditionEnergy { component, .. } | Feature::BandEnergy { component, .. } => {
+                Some(component.energy_name())
+            }
             Feature::PairEnergy { .. } => Some("energy"),
             _ => None,
         }
@@ -505,6 +631,7 @@ pub fn library(rows: &[&KpiRow]) -> Vec<Candidate> {
         }
     }
     out.extend(condition_candidates(&setup_cars(rows)));
+    out.extend(band_candidates(&setup_cars(rows)));
     out.extend(pair_candidates(&setup_cars(rows)));
     // Set-up mechanisms, on both axles (the generic KPI candidates below
     // cover them linearly too); thresholds at the deciles of the rows.
@@ -628,6 +755,35 @@ fn condition_candidates(cars: &[String]) -> Vec<Candidate> {
                     scopes: condition_scopes(cars),
                 });
             }
+        }
+    }
+    out
+}
+
+/// Candidates generated from the condition energy maps' bands: for every
+/// condition and energy component, the energy with the condition between
+/// θ₁ and θ₂ (every band between two of [`band_edges`], scanned as one
+/// threshold), on the condition candidates' scopes. A window's effect
+/// taken by a one-sided threshold reaches beyond the window on tracks
+/// where the condition runs past it (docs/gap.md, "Bands").
+fn band_candidates(cars: &[String]) -> Vec<Candidate> {
+    let mut out = Vec::new();
+    for (c, cd) in CONDITIONS.iter().enumerate() {
+        let edges = band_edges(c).len();
+        let bands = edges * edges.saturating_sub(1) / 2;
+        for component in Component::ALL {
+            out.push(Candidate {
+                name: format!("{} with {} between θ", component.energy_name(), cd.name),
+                feature: Feature::BandEnergy {
+                    condition: c,
+                    component,
+                },
+                thresholds: (0..bands).map(|k| k as f64).collect(),
+                axle: None,
+                user: None,
+                group: None,
+                scopes: condition_scopes(cars),
+            });
         }
     }
     out
@@ -893,6 +1049,16 @@ pub(crate) fn feature(
                     .map(|(_, e)| e)
                     .sum::<f64>()
                     * mj
+            }),
+        Feature::BandEnergy {
+            condition,
+            component,
+        } => maps
+            .and_then(|m| m.conditions.as_deref())
+            .filter(|cm| cm.holds(condition))
+            .zip(band_thresholds(condition, theta))
+            .map_or(f64::NAN, |(cm, (lo, hi))| {
+                cm.map(component, condition)[lo..hi].iter().sum::<f64>() * mj
             }),
         Feature::PairEnergy {
             pair,
@@ -1357,6 +1523,165 @@ mod tests {
                 .iter()
                 .all(|c| c.thresholds.len() == 49 && c.scopes.len() == 10)
         );
+    }
+
+    #[test]
+    fn band_candidates_sum_the_energy_between_their_ends() {
+        // Slip ratio: 30 bins 0.02 wide from −0.3; band ends every third
+        // inner edge (3, 6, …, 27: −0.24, −0.18, …, 0.24), 9 ends, 36 bands.
+        // 2 MJ in bin 20 ([0.10, 0.12)), 1 MJ in bin 5 ([−0.20, −0.18)),
+        // 4 MJ in bin 29 (0.28 and above).
+        use crate::kpi::cpu::condition_map::ConditionMaps;
+        let slip = ConditionMaps::condition_index("slip_ratio").unwrap();
+        assert_eq!(band_edges(slip), vec![3, 6, 9, 12, 15, 18, 21, 24, 27]);
+        let mut cm = ConditionMaps::default();
+        let o: usize = CONDITIONS[..slip].iter().map(|c| c.bins.n).sum();
+        cm.energy_j[0][o + 20] = 2e6;
+        cm.energy_j[0][o + 5] = 1e6;
+        cm.energy_j[0][o + 29] = 4e6;
+        let mut m = EnergyMaps::new();
+        m.conditions = Some(Box::new(cm));
+        let r = KpiRow::default();
+        let band = Feature::BandEnergy {
+            condition: slip,
+            component: Component::Total,
+        };
+        let f = |theta: f64| feature(band, &r, Some(&m), theta, KpiScale::NONE);
+        let close = |a: f64, b: f64| (a - b).abs() < 1e-9;
+        // Index k runs over the first end, then the second: k 0 is (3, 6),
+        // k 7 is (3, 27), k 8 is (6, 9), k 35 is (24, 27).
+        assert_eq!(band_thresholds(slip, 0.0), Some((3, 6)));
+        assert_eq!(band_thresholds(slip, 7.0), Some((3, 27)));
+        assert_eq!(band_thresholds(slip, 8.0), Some((6, 9)));
+        assert_eq!(band_thresholds(slip, 35.0), Some((24, 27)));
+        assert_eq!(band_thresholds(slip, 36.0), None);
+        assert_eq!(band_thresholds(slip, 0.5), None);
+        // [−0.24, −0.18) holds bin 5: 1 MJ; [−0.24, 0.24) bins 5 and 20: 3 MJ.
+        assert!(close(f(0.0), 1.0));
+        assert!(close(f(7.0), 3.0));
+        // [−0.18, −0.12) and [0.12, 0.18): nothing; [0.06, 0.12) = (18, 21), bin 20.
+        assert!(close(f(8.0), 0.0));
+        let k = (0..36)
+            .find(|&k| band_thresholds(slip, k as f64) == Some((18, 21)))
+            .unwrap();
+        assert!(close(f(k as f64), 2.0));
+        // The top bin (beyond every end) is in no band.
+        let all: f64 = (0..36).map(|k| f(k as f64)).fold(0.0, f64::max);
+        assert!(close(all, 3.0));
+        assert_eq!(band.format_threshold(0.0), "-0.2400 and -0.1800");
+        // Every band is listed once, ends increasing, inside the bins.
+        for (c, cd) in CONDITIONS.iter().enumerate() {
+            let edges = band_edges(c);
+            assert!(edges.len() >= 2 && edges.len() <= BAND_EDGES, "{}", cd.name);
+            assert!(edges.windows(2).all(|w| w[0] < w[1]) && edges[0] > 0);
+            assert!(*edges.last().unwrap() < cd.bins.n);
+            let n = edges.len() * (edges.len() - 1) / 2;
+            let mut seen: Vec<(usize, usize)> = (0..n)
+                .map(|k| band_thresholds(c, k as f64).unwrap())
+                .collect();
+            assert!(seen.iter().all(|(a, b)| a < b));
+            seen.sort();
+            seen.dedup();
+            assert_eq!(seen.len(), n);
+            assert_eq!(band_thresholds(c, n as f64), None);
+        }
+        // Without condition maps the term is undefined.
+        assert!(feature(band, &r, Some(&EnergyMaps::new()), 0.0, KpiScale::NONE).is_nan());
+        // Every condition and component is a band candidate on every scope.
+        let cars = vec!["car1".to_string()];
+        let generated = band_candidates(&cars);
+        assert_eq!(generated.len(), CONDITIONS.len() * 3);
+        assert!(generated.iter().all(|c| c.scopes.len() == 10));
+        assert_eq!(
+            generated[0].name.replace('θ', &band.format_threshold(0.0)),
+            "energy with slip_ratio between -0.2400 and -0.1800"
+        );
+    }
+
+    #[test]
+    fn a_band_is_scanned_only_where_each_side_holds_energy() {
+        // Slip ratio (30 bins, band ends 3, 6, …, 27): 1 MJ in bin 1, 18 in
+        // bin 10, 1 in bin 25 on the rear tire; 50 MJ in bin 28 on the
+        // front one, which a rear-axle band does not count. Each side must
+        // hold 5 % of the rear's 20 MJ: 1 MJ.
+        use crate::kpi::cpu::condition_map::ConditionMaps;
+        let slip = ConditionMaps::condition_index("slip_ratio").unwrap();
+        let o: usize = CONDITIONS[..slip].iter().map(|c| c.bins.n).sum();
+        let maps = |bins: &[(usize, f64)]| {
+            let mut cm = ConditionMaps::default();
+            for &(b, mj) in bins {
+                cm.energy_j[0][o + b] = mj * 1e6;
+            }
+            let mut m = EnergyMaps::new();
+            m.conditions = Some(Box::new(cm));
+            m
+        };
+        let rear = maps(&[(1, 1.0), (10, 18.0), (25, 1.0)]);
+        let front = maps(&[(28, 50.0)]);
+        let rows = [
+            KpiRow {
+                axle: Axle::Rear,
+                ..Default::default()
+            },
+            KpiRow {
+                axle: Axle::Front,
+                ..Default::default()
+            },
+        ];
+        let refs: Vec<&KpiRow> = rows.iter().collect();
+        let band = Candidate {
+            name: "band".into(),
+            feature: Feature::BandEnergy {
+                condition: slip,
+                component: Component::Total,
+            },
+            thresholds: vec![],
+            axle: Some(Axle::Rear),
+            user: None,
+            group: None,
+            scopes: Vec::new(),
+        };
+        let e = band
+            .band_energy(&refs, &[Some(&rear), Some(&front)])
+            .unwrap();
+        assert!((e.iter().sum::<f64>() - 20e6).abs() < 1e-3);
+        let index = |lo: usize, hi: usize| {
+            (0..36)
+                .find(|&k| band_thresholds(slip, k as f64) == Some((lo, hi)))
+                .unwrap() as f64
+        };
+        // (3, 6): 1 MJ below, 19 above; (3, 24): 1 and 1: both scanned.
+        assert!(band_admissible(&e, slip, index(3, 6)));
+        assert!(band_admissible(&e, slip, index(3, 24)));
+        // (6, 27): nothing above 27 on the rears (the front's 50 MJ does not
+        // count); (6, 9): 1 below, 19 above — but (12, 15): 19 below, 1 above.
+        assert!(!band_admissible(&e, slip, index(6, 27)));
+        assert!(band_admissible(&e, slip, index(12, 15)));
+        // 0.9 MJ below is short of 5 % of 19.9 MJ.
+        let thin = maps(&[(1, 0.9), (10, 18.0), (25, 1.0)]);
+        let e = band.band_energy(&refs, &[Some(&thin), None]).unwrap();
+        assert!(!band_admissible(&e, slip, index(3, 6)));
+        // No maps on the band's tires: nothing to scan on; other kinds: None.
+        assert!(band.band_energy(&refs, &[None, Some(&front)]).is_none());
+        let mut both = band.clone();
+        both.axle = None;
+        // On both axles (70 MJ, 3.5 each side): (12, 27) holds 19 below and
+        // the front's 50 above; on the rears alone nothing above.
+        let e = both
+            .band_energy(&refs, &[Some(&rear), Some(&front)])
+            .unwrap();
+        assert!(band_admissible(&e, slip, index(12, 27)));
+        assert!(!band_admissible(&e, slip, index(3, 6)));
+        let rear_only = band
+            .band_energy(&refs, &[Some(&rear), Some(&front)])
+            .unwrap();
+        assert!(!band_admissible(&rear_only, slip, index(12, 27)));
+        assert!(!band_admissible(&[0.0; 30], slip, index(3, 6)));
+        let not_band = Candidate {
+            feature: Feature::HotSurfaceEnergy,
+            ..band
+        };
+        assert!(not_band.band_energy(&refs, &[Some(&rear), None]).is_none());
     }
 
     #[test]

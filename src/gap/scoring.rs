@@ -29,7 +29,7 @@
 
 use super::acts::ActsIn;
 use super::candidates::{
-    Candidate, Feature, Group, KpiScale, LawRow, candidate_feature, kpi_scale,
+    Candidate, Feature, Group, KpiScale, LawRow, band_admissible, candidate_feature, kpi_scale,
 };
 use super::linear::{BaseFit, dot, lstsq, orthonormal_basis, project_out, residual, weighted};
 use super::stats::{VarianceComponents, benjamini_hochberg, levels};
@@ -737,10 +737,23 @@ pub(crate) fn rank(
             // the max-F run over all of them, so the test pays for both.
             let scopes = c.resolved();
             let n_thresholds = c.thresholds.len();
+            // A band on a scope's tires is scanned only where they can tell
+            // it from a one-sided threshold (`band_admissible`): the others
+            // are zero columns, which no fit or test takes.
+            let bands: Vec<Option<Vec<f64>>> = scopes
+                .iter()
+                .map(|sc| sc.band_energy(rows, problem.maps))
+                .collect();
             let x: Vec<Vec<f64>> = scopes
                 .iter()
-                .flat_map(|sc| c.thresholds.iter().map(move |&t| (sc, t)))
-                .map(|(sc, t)| {
+                .zip(&bands)
+                .flat_map(|(sc, b)| c.thresholds.iter().map(move |&t| (sc, b, t)))
+                .map(|(sc, b, t)| {
+                    if let (Some(e), Feature::BandEnergy { condition, .. }) = (b, sc.feature)
+                        && !band_admissible(e, condition, t)
+                    {
+                        return vec![0.0; n];
+                    }
                     (0..n)
                         .map(|i| {
                             let law = problem.law[i];

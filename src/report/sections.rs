@@ -1206,10 +1206,19 @@ fn short(v: f64) -> String {
     }
 }
 
-/// A candidate's threshold from gap.json: a pair candidate's is the index
-/// of its two edges, printed as the edges.
+/// A candidate's threshold from gap.json: a pair or band candidate's is the
+/// index of its two edges, printed as the edges.
 fn threshold_text(c: &Value) -> String {
     let theta = f(&c["threshold"]);
+    if let Some(condition) = c["feature"]["BandEnergy"]["condition"].as_u64()
+        && (condition as usize) < crate::kpi::cpu::condition_map::N_CONDITIONS
+    {
+        return crate::gap::candidates::Feature::BandEnergy {
+            condition: condition as usize,
+            component: crate::kpi::cpu::condition_map::Component::Total,
+        }
+        .format_threshold(theta);
+    }
     let pair = &c["feature"]["PairEnergy"];
     match (
         pair["pair"].as_u64(),
@@ -1600,5 +1609,27 @@ mod tests {
         // measured (1, 2, 3), predicted (1, 2, 5): SSE 4, SST 2: R² −1, RMSE √(4/3).
         let (r2, rmse) = fit_quality(&[(1.0, 1.0), (2.0, 2.0), (3.0, 5.0)]);
         assert!((r2 + 1.0).abs() < 1e-12 && (rmse - (4.0f64 / 3.0).sqrt()).abs() < 1e-12);
+    }
+
+    #[test]
+    fn band_and_pair_thresholds_print_as_their_edges() {
+        // A band of slip ratio (condition 0), index 0: bins 3 to 6 of 0.02
+        // from −0.3; a pair's index 23: edges (4, 3) of combined slip and
+        // surface temperature (as in gap::candidates' tests).
+        let band = serde_json::json!({
+            "threshold": 0.0,
+            "feature": {"BandEnergy": {"condition": 0, "component": "Lateral"}}
+        });
+        assert_eq!(threshold_text(&band), "-0.2400 and -0.1800");
+        let pair = (0..crate::kpi::cpu::condition_map::N_PAIRS)
+            .find(|&p| crate::kpi::cpu::condition_map::pair_name(p) == "combined_slip:t_surface_c")
+            .unwrap();
+        let pair = serde_json::json!({
+            "threshold": 23.0,
+            "feature": {"PairEnergy": {"pair": pair, "first_above": true, "second_above": false}}
+        });
+        assert_eq!(threshold_text(&pair), "(0.06000, 60.00 °C)");
+        let plain = serde_json::json!({"threshold": 84.5, "feature": "HotSurfaceEnergy"});
+        assert_eq!(threshold_text(&plain), "84.5");
     }
 }
