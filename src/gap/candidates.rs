@@ -226,9 +226,16 @@ const BAND_EDGES: usize = 9;
 /// The fine bin edges (indices into the condition's bins) a band's ends
 /// take: every ⌈n/10⌉-th inner edge of the condition's n bins.
 pub(crate) fn band_edges(condition: usize) -> Vec<usize> {
+    let (step, ends) = band_grid(condition);
+    (1..=ends).map(|i| i * step).collect()
+}
+
+/// (step, number of ends) of [`band_edges`], without building the list:
+/// [`band_thresholds`] runs for every row a band's term is computed on.
+fn band_grid(condition: usize) -> (usize, usize) {
     let n = CONDITIONS[condition].bins.n;
     let step = n.div_ceil(BAND_EDGES + 1).max(1);
-    (step..n).step_by(step).take(BAND_EDGES).collect()
+    (step, ((n - 1) / step).min(BAND_EDGES))
 }
 
 /// The edges (k₁, k₂), bin indices with k₁ < k₂, a band candidate's
@@ -238,12 +245,12 @@ pub(crate) fn band_thresholds(condition: usize, theta: f64) -> Option<(usize, us
     if theta.is_nan() || theta < 0.0 || theta.fract() != 0.0 {
         return None;
     }
-    let edges = band_edges(condition);
+    let (step, ends) = band_grid(condition);
     let mut k = theta as usize;
-    for (i, &lo) in edges.iter().enumerate() {
-        let after = edges.len() - i - 1;
+    for i in 1..ends {
+        let after = ends - i;
         if k < after {
-            return Some((lo, edges[i + 1 + k]));
+            return Some((i * step, (i + 1 + k) * step));
         }
         k -= after;
     }
