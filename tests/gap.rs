@@ -350,6 +350,14 @@ fn a_planted_set_up_effect_is_named_by_its_car_and_axle() {
         tirewear::gap::report::render_markdown(&d, 12)
             .contains(&format!("Set-up effect: {car}, rear axle wears"))
     );
+    // gap.json carries the same finding in words (what `tirewear report` shows).
+    assert!(
+        d.findings
+            .first()
+            .is_some_and(|l| l.starts_with(&format!("1. Set-up effect: {car}, rear axle wears"))),
+        "{:?}",
+        d.findings
+    );
     // Without the effect the season's testing RMSE is the ideal.
     let ideal = clean.steps[0].testing.as_ref().unwrap().rmse_pct;
     let shrink = (rmse(0) - rmse(1)) / (rmse(0) - ideal);

@@ -38,7 +38,7 @@ fn leads(candidates: &[Score]) -> Option<Leads> {
         .map(|c| c.cv_gain)
         .filter(|g| g.is_finite())
         .fold(f64::NEG_INFINITY, f64::max);
-    if !(best > 0.0) {
+    if best <= 0.0 {
         return None;
     }
     let mut within: Vec<usize> = (0..candidates.len())
@@ -126,6 +126,7 @@ pub fn render_markdown(d: &Diagnosis, max_slices: usize) -> String {
             t.rmse_pct
         );
     }
+    s.push_str("\n## Findings\n\n");
     findings(&mut s, d);
     let _ = writeln!(
         s,
@@ -263,11 +264,21 @@ pub fn render_markdown(d: &Diagnosis, max_slices: usize) -> String {
     s
 }
 
+/// The Findings of [`render_markdown`] as lines: each paragraph or numbered
+/// term one line (`Diagnosis::findings`).
+pub(crate) fn findings_lines(d: &Diagnosis) -> Vec<String> {
+    let mut s = String::new();
+    findings(&mut s, d);
+    s.lines()
+        .filter(|l| !l.trim().is_empty())
+        .map(str::to_string)
+        .collect()
+}
+
 /// What the diagnosis found, in words: each term step 3 added with its
 /// threshold, its rate against the law's and its part of the wear where it
 /// acts; then the flagged slices the terms leave unexplained.
 fn findings(s: &mut String, d: &Diagnosis) {
-    s.push_str("\n## Findings\n\n");
     let terms = &d.steps[1.min(d.steps.len())..];
     if terms.is_empty() {
         let _ = writeln!(

@@ -164,6 +164,9 @@ pub struct Diagnosis {
     pub terms_wear: Vec<TermsWear>,
     /// Step 3's terms in the final model, in the order they were added.
     pub final_terms: Vec<FinalTerm>,
+    /// What the diagnosis found, in words: gap.md's Findings, one line per
+    /// paragraph or numbered term (what `tirewear report` shows).
+    pub findings: Vec<String>,
 }
 
 /// A term of the final model: its coefficient and a 95 % interval.
@@ -579,7 +582,7 @@ pub fn diagnose(
     let terms_wear = terms_wear(&sel);
     let final_terms = final_terms(&sel, &steps, settings.scoring.seed);
     let refitted_law = sel.refitted_law;
-    Ok(Diagnosis {
+    let mut d = Diagnosis {
         terms_wear,
         final_terms,
         baseline: name,
@@ -596,7 +599,10 @@ pub fn diagnose(
         slices,
         candidates,
         steps,
-    })
+        findings: Vec::new(),
+    };
+    d.findings = super::render::findings_lines(&d);
+    Ok(d)
 }
 
 /// Each tire's wear from the final model's terms (none without terms).

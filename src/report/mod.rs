@@ -322,6 +322,31 @@ mod tests {
         assert!(s.html.contains("<td class=\"n\">–</td>"));
     }
 
+    /// The diagnosis's findings in words, each line a paragraph, escaped.
+    #[test]
+    fn the_gap_section_shows_the_findings_in_words() {
+        let inputs = Inputs {
+            dir: "season".into(),
+            rows: Vec::new(),
+            extraction: None,
+            models: Vec::new(),
+            gap: Some(serde_json::json!({
+                "findings": [
+                    "1. Energy with slip_ratio above 0.07 abrades 2.30 times the law's rate",
+                    "Not explained by any term: wheel = FR & t < 80"
+                ]
+            })),
+            road: Vec::new(),
+            maps: Default::default(),
+            compounds: Vec::new(),
+            bench: None,
+        };
+        let s = sections::gap(&inputs).unwrap();
+        assert!(s.html.contains(
+            "<h3>Findings</h3>\n<p>1. Energy with slip_ratio above 0.07 abrades 2.30 times the law&#39;s rate</p>\n<p>Not explained by any term: wheel = FR &amp; t &lt; 80</p>"
+        ), "{}", s.html);
+    }
+
     #[test]
     fn a_process_summary_lists_its_failed_runs() {
         let inputs = Inputs {

@@ -1265,6 +1265,19 @@ pub(super) fn gap(inputs: &Inputs) -> Result<Section, ReportError> {
         g["testing_events"].as_array().map_or(0, |a| a.len()),
         num(f(&g["testing"]["rmse_pct"]), 2),
     );
+    // What it found, in words (gap.json from before 2026-11-26 has none).
+    let findings: Vec<&str> = g["findings"]
+        .as_array()
+        .into_iter()
+        .flatten()
+        .filter_map(Value::as_str)
+        .collect();
+    if !findings.is_empty() {
+        html += "<h3>Findings</h3>\n";
+        for line in findings {
+            html += &format!("<p>{}</p>\n", escape(line));
+        }
+    }
     let mut figures = 0;
     // Where: the flagged slices' mean residual with its 95 % interval.
     let slices: Vec<&Value> = g["slices"].as_array().into_iter().flatten().collect();
