@@ -63,6 +63,18 @@ fn leads(candidates: &[Score]) -> Option<Leads> {
     })
 }
 
+/// The tires the leads share where Findings prints leads (no term, and
+/// step 1 flagged slices): what `gap validate` compares with the planted
+/// scope.
+pub(crate) fn leads_scope(d: &Diagnosis) -> Option<String> {
+    if d.steps.len() > 1 || d.slices.is_empty() {
+        return None;
+    }
+    leads(&d.candidates)
+        .and_then(|l| l.shared_scope)
+        .map(|(scope, _)| scope)
+}
+
 /// A candidate's name with its threshold in place of θ.
 fn named_at_threshold(c: &Score) -> String {
     if c.threshold.is_finite() {

@@ -90,6 +90,9 @@ pub struct Case {
     pub first_scope: Option<String>,
     pub first_mechanism: Option<String>,
     pub first_front_share: f64,
+    /// Without a term: the tires most of the report's leads act on, where
+    /// it names them (docs/gap.md, "Leads, when nothing is significant").
+    pub leads_scope: Option<String>,
     pub significant_terms: usize,
     pub hit: bool,
     pub hit_axle: bool,
@@ -301,6 +304,7 @@ pub fn validate(s: &ValidateSettings) -> Vec<Case> {
                     first_term: None,
                     first_set_up: false,
                     first_scope: None,
+                    leads_scope: None,
                     first_mechanism: None,
                     first_front_share: f64::NAN,
                     significant_terms: 0,

@@ -125,6 +125,21 @@ pub fn render(cases: &[Case]) -> String {
                 c.first_term.as_deref().unwrap_or("?")
             );
         }
+        let leads: Vec<&&Case> = clean.iter().filter(|c| c.leads_scope.is_some()).collect();
+        let _ = writeln!(
+            s,
+            "\nClean seasons whose leads name the tires they share: {} of {}{}",
+            leads.len(),
+            clean.len(),
+            leads
+                .iter()
+                .map(|c| format!(
+                    "; seed {}: {}",
+                    c.seed,
+                    c.leads_scope.as_deref().unwrap_or("")
+                ))
+                .collect::<String>()
+        );
     }
     let failed: Vec<&Case> = cases.iter().filter(|c| c.error.is_some()).collect();
     for c in failed {
@@ -208,6 +223,21 @@ fn render_generated(s: &mut String, cases: &[Case]) {
             set_ups.len()
         );
     }
+    // Without a term: do the leads name the planted tires?
+    let no_term: Vec<&&Case> = big.iter().filter(|c| c.significant_terms == 0).collect();
+    if !no_term.is_empty() {
+        let named: Vec<&&&Case> = no_term.iter().filter(|c| c.leads_scope.is_some()).collect();
+        let right = named
+            .iter()
+            .filter(|c| c.leads_scope == c.generated.as_ref().map(|g| g.scope.describe()))
+            .count();
+        let _ = writeln!(
+            s,
+            "\nWithout a term at ≥ 10 % of the variance: {} seasons; their leads name the tires they share in {}, the planted ones in {right}.",
+            no_term.len(),
+            named.len()
+        );
+    }
     s.push_str(
         "\n| effect | variance share | terms | correlation | RMSE baseline / diagnosed / ideal | shrinkage / ideal | exact shape: size, shrinkage |\n|---|---|---|---|---|---|---|\n",
     );
@@ -217,14 +247,17 @@ fn render_generated(s: &mut String, cases: &[Case]) {
             s,
             "| {g} | {:.1} % | {} | {:.2} | {:.3} / {:.3} / {:.3} | {:.2} | {:.3}, {:.2} |",
             100.0 * c.variance_share,
-            c.first_term
-                .as_deref()
-                .map_or("none".to_string(), |t| format!(
+            c.first_term.as_deref().map_or(
+                c.leads_scope
+                    .as_ref()
+                    .map_or("none".to_string(), |l| format!("none (leads: {l})")),
+                |t| format!(
                     "{}{} (of {})",
                     t,
                     if c.first_set_up { " [set-up]" } else { "" },
                     c.significant_terms
-                )),
+                )
+            ),
             c.terms_correlation,
             c.rmse_baseline_pct,
             c.rmse_diagnosed_pct,
@@ -250,6 +283,7 @@ mod tests {
             first_term: Some("road abrasion (energy × squared micro-roughness)".into()),
             first_set_up: false,
             first_scope: None,
+            leads_scope: None,
             first_mechanism: Some(kind.name().into()),
             first_front_share: 0.35,
             significant_terms: 1,
@@ -285,5 +319,50 @@ mod tests {
         assert!(!md.contains("| road-abrasion (2, 0.03000) | 2 |"), "{md}");
         assert!(!md.contains("| road-abrasion (2, 0.03000) | 3 |"), "{md}");
         assert!(md.contains("| road-abrasion | 2 | 2/2 (100 %) | 2/2 (100 %) | 1/2 (50 %) |"));
+    }
+
+    /// Seasons without a term: the tires their leads share are counted
+    /// against the planted tires; clean seasons' leads are listed.
+    #[test]
+    fn the_leads_of_seasons_without_a_term_are_scored_against_the_planted_tires() {
+        use crate::Axle;
+        use crate::sim::generated::{GeneratedEffect, Scope};
+        let no_term = |seed: u64, planted: Option<Scope>, leads: Option<&str>| {
+            let generated = planted.map(|scope| {
+                let mut g = GeneratedEffect::draw(seed);
+                g.scope = scope;
+                g
+            });
+            Case {
+                effect: None,
+                generated,
+                first_term: None,
+                first_mechanism: None,
+                significant_terms: 0,
+                hit: false,
+                leads_scope: leads.map(String::from),
+                ..case(EffectKind::Graining, seed, 0.2, 0.0)
+            }
+        };
+        let rear = Scope::Axle { axle: Axle::Rear };
+        let cases = [
+            no_term(1, Some(rear), Some("the rear axle")),
+            no_term(2, Some(Scope::All), Some("the rear axle")),
+            no_term(3, Some(rear), None),
+            no_term(4, None, None),
+            no_term(5, None, Some("every tire")),
+        ];
+        let md = render(&cases);
+        assert!(
+            md.contains("Without a term at ≥ 10 % of the variance: 3 seasons; their leads name the tires they share in 2, the planted ones in 1."),
+            "{md}"
+        );
+        assert!(md.contains("| none (leads: the rear axle) |"), "{md}");
+        assert!(
+            md.contains(
+                "Clean seasons whose leads name the tires they share: 1 of 2; seed 5: every tire"
+            ),
+            "{md}"
+        );
     }
 }

@@ -176,6 +176,7 @@ pub(crate) fn score_case(
         first_term: first.map(|s| s.added.clone()),
         first_set_up: first.is_some_and(|s| s.set_up),
         first_scope: first.and_then(|s| s.scope.clone()),
+        leads_scope: crate::gap::render::leads_scope(d),
         first_mechanism,
         first_front_share,
         significant_terms: d.steps.len() - 1,
