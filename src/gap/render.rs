@@ -303,7 +303,7 @@ fn findings(s: &mut String, d: &Diagnosis) {
             }
         );
         if !d.slices.is_empty() {
-            write_leads(s, &d.candidates);
+            write_leads(s, &d.candidates, d.fdr);
         }
     }
     for (t, st) in terms.iter().enumerate() {
@@ -457,7 +457,7 @@ fn findings(s: &mut String, d: &Diagnosis) {
 
 /// The leads when nothing is significant, marked as such: the candidates
 /// that best predict the held-out tracks and the tires most of them act on.
-fn write_leads(s: &mut String, candidates: &[Score]) {
+fn write_leads(s: &mut String, candidates: &[Score], fdr: f64) {
     let Some(l) = leads(candidates) else {
         return;
     };
@@ -476,12 +476,17 @@ fn write_leads(s: &mut String, candidates: &[Score]) {
             )
         })
         .collect();
-    let _ = write!(
-        s,
-        "\nLeads, not findings (none of the {} candidates holds its p-value once adjusted for their number): {}",
-        candidates.len(),
-        listed.join("; ")
-    );
+    // A significant candidate that step 3 refused (its law no longer
+    // abrading, say) leaves no term either.
+    let why = if candidates.iter().any(|c| c.significant(fdr)) {
+        "no term passed step 3's checks".to_string()
+    } else {
+        format!(
+            "none of the {} candidates holds its p-value once adjusted for their number",
+            candidates.len()
+        )
+    };
+    let _ = write!(s, "\nLeads, not findings ({why}): {}", listed.join("; "));
     let more = l.within.len().saturating_sub(listed.len());
     if more > 0 {
         let _ = write!(s, "; {more} more within {LEADS_WITHIN} of the best CV gain");
@@ -566,7 +571,7 @@ mod tests {
         assert_eq!(l.within, vec![2, 0, 1, 5, 3, 6]);
         assert_eq!(l.shared_scope, Some(("the rear axle".to_string(), 4)));
         let mut s = String::new();
-        write_leads(&mut s, &c);
+        write_leads(&mut s, &c, 0.05);
         assert!(s.contains("\"c\" (CV gain +0.610"), "{s}");
         assert!(s.contains("; 3 more within 0.05"), "{s}");
         assert!(s.contains("4 of these 6 act on the rear axle alone"), "{s}");
@@ -595,15 +600,21 @@ mod tests {
             Some(("the rear axle".to_string(), 6))
         );
         let mut s = String::new();
-        write_leads(&mut s, &axles(6, 1));
+        write_leads(&mut s, &axles(6, 1), 0.05);
         assert!(
             s.contains("All 6 of these act on the rear axle alone"),
             "{s}"
         );
+        // A significant candidate that step 3 refused: the leads say so.
+        let mut refused = axles(2, 1);
+        refused[0].p_adjusted = 0.01;
+        let mut s = String::new();
+        write_leads(&mut s, &refused, 0.05);
+        assert!(s.contains("(no term passed step 3's checks)"), "{s}");
         let none = vec![score("a", None, -0.01), score("b", None, f64::NAN)];
         assert_eq!(leads(&none), None);
         let mut s = String::new();
-        write_leads(&mut s, &none);
+        write_leads(&mut s, &none, 0.05);
         assert!(s.is_empty());
     }
 }
