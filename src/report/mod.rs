@@ -292,31 +292,36 @@ mod tests {
         assert_eq!(newest(d, "gap", "gap.json"), d.join("gap/gap.json"));
     }
 
+    /// A folder with nothing but this gap.json.
+    fn with_gap(gap: serde_json::Value) -> Inputs {
+        Inputs {
+            dir: "season".into(),
+            rows: Vec::new(),
+            extraction: None,
+            models: Vec::new(),
+            gap: Some(gap),
+            road: Vec::new(),
+            maps: Default::default(),
+            compounds: Vec::new(),
+            bench: None,
+        }
+    }
+
     #[test]
     fn a_malformed_gap_file_renders_without_panicking() {
         // Slices with an empty or missing interval, non-numeric fields,
         // steps without slices, terms without their parts: every figure is
         // still drawn, missing numbers shown as "–".
-        let inputs = Inputs {
-            dir: "season".into(),
-            rows: Vec::new(),
-            extraction: None,
-            models: Vec::new(),
-            gap: Some(serde_json::json!({
-                "slices": [
-                    {"name": "a", "n": 3, "difference_pct": 1.0, "ci_pct": []},
-                    {"name": 7, "difference_pct": "x"}
-                ],
-                "candidates": [{"name": null}],
-                "steps": [{"added": "baseline"}, {"added": "t", "training": {"rmse_pct": 1.0}}],
-                "terms_wear": [{"run": "r", "wheel": "FL", "by_term_pct": []}],
-                "final_terms": []
-            })),
-            road: Vec::new(),
-            maps: Default::default(),
-            compounds: Vec::new(),
-            bench: None,
-        };
+        let inputs = with_gap(serde_json::json!({
+            "slices": [
+                {"name": "a", "n": 3, "difference_pct": 1.0, "ci_pct": []},
+                {"name": 7, "difference_pct": "x"}
+            ],
+            "candidates": [{"name": null}],
+            "steps": [{"added": "baseline"}, {"added": "t", "training": {"rmse_pct": 1.0}}],
+            "terms_wear": [{"run": "r", "wheel": "FL", "by_term_pct": []}],
+            "final_terms": []
+        }));
         let s = sections::gap(&inputs).unwrap();
         assert_eq!(s.figures, 2, "the slices' bars and the shrink chart");
         assert!(s.html.contains("<td class=\"n\">–</td>"));
@@ -325,22 +330,12 @@ mod tests {
     /// The diagnosis's findings in words, each line a paragraph, escaped.
     #[test]
     fn the_gap_section_shows_the_findings_in_words() {
-        let inputs = Inputs {
-            dir: "season".into(),
-            rows: Vec::new(),
-            extraction: None,
-            models: Vec::new(),
-            gap: Some(serde_json::json!({
-                "findings": [
-                    "1. Energy with slip_ratio above 0.07 abrades 2.30 times the law's rate",
-                    "Not explained by any term: wheel = FR & t < 80"
-                ]
-            })),
-            road: Vec::new(),
-            maps: Default::default(),
-            compounds: Vec::new(),
-            bench: None,
-        };
+        let inputs = with_gap(serde_json::json!({
+            "findings": [
+                "1. Energy with slip_ratio above 0.07 abrades 2.30 times the law's rate",
+                "Not explained by any term: wheel = FR & t < 80"
+            ]
+        }));
         let s = sections::gap(&inputs).unwrap();
         assert!(s.html.contains(
             "<h3>Findings</h3>\n<p>1. Energy with slip_ratio above 0.07 abrades 2.30 times the law&#39;s rate</p>\n<p>Not explained by any term: wheel = FR &amp; t &lt; 80</p>"
