@@ -139,7 +139,7 @@ pub fn render_markdown(d: &Diagnosis, max_slices: usize) -> String {
         );
     }
     s.push_str("\n## Findings\n\n");
-    findings(&mut s, d);
+    write_findings(&mut s, &d.findings);
     let _ = writeln!(
         s,
         "\n## Where the gap lies\n\n{} distinct slices tested (singly and in pairs, against the rest, t-test allowing for the residuals' correlation within events); {} survive Benjamini–Hochberg at FDR {}. Ranked by the part of the squared gap their offset accounts for (n·mean²/Σr²).\n",
@@ -285,6 +285,22 @@ pub(crate) fn findings_lines(d: &Diagnosis) -> Vec<String> {
         .filter(|l| !l.trim().is_empty())
         .map(str::to_string)
         .collect()
+}
+
+/// `Diagnosis::findings` as Markdown: paragraphs apart, numbered terms
+/// one list.
+fn write_findings(s: &mut String, lines: &[String]) {
+    let numbered = |l: &str| {
+        l.split_once(". ")
+            .is_some_and(|(n, _)| !n.is_empty() && n.bytes().all(|b| b.is_ascii_digit()))
+    };
+    for (i, line) in lines.iter().enumerate() {
+        if i > 0 && !(numbered(line) && numbered(&lines[i - 1])) {
+            s.push('\n');
+        }
+        s.push_str(line);
+        s.push('\n');
+    }
 }
 
 /// What the diagnosis found, in words: each term step 3 added with its
@@ -551,6 +567,21 @@ mod tests {
             kpi_scale: KpiScale::NONE,
             acts_in: Vec::new(),
         }
+    }
+
+    /// Paragraphs apart, numbered terms one list (as gap.md always had it).
+    #[test]
+    fn findings_print_as_paragraphs_and_one_numbered_list() {
+        let lines = |v: &[&str]| v.iter().map(|l| l.to_string()).collect::<Vec<_>>();
+        let mut s = String::new();
+        write_findings(&mut s, &lines(&["1. A.", "2. B.", "Not explained: x."]));
+        assert_eq!(s, "1. A.\n2. B.\n\nNot explained: x.\n");
+        let mut s = String::new();
+        write_findings(
+            &mut s,
+            &lines(&["No candidate.", "Leads, not findings (1. a)."]),
+        );
+        assert_eq!(s, "No candidate.\n\nLeads, not findings (1. a).\n");
     }
 
     /// Six candidates within 0.05 of the best CV gain (0.61): four of them
