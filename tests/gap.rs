@@ -385,6 +385,49 @@ fn a_planted_set_up_effect_is_named_by_its_car_and_axle() {
         Some(format!("set-up: {}, FR", cars[0]).as_str())
     );
     assert!((d.steps[1].coefficient + 0.25).abs() < 0.1);
+
+    // A toe-like set-up: the last car's lateral sliding abrades more. Its
+    // tires gain wear in proportion to their lateral friction energy (the
+    // KPI, J), 30 % of their mean wear on average; the law's wear and the
+    // total energy do not follow it.
+    let car = cars.last().unwrap().clone();
+    let mut rows = tirewear::kpi::table::read_parquet(&season.join("kpis.parquet")).unwrap();
+    let of_car = |rows: &[tirewear::kpi::KpiRow], f: fn(&tirewear::kpi::KpiRow) -> f64| {
+        let v: Vec<f64> = rows.iter().filter(|r| r.car == car).map(f).collect();
+        v.iter().sum::<f64>() / v.len() as f64
+    };
+    let per_joule =
+        0.3 * of_car(&rows, |r| r.wear_mean_pct) / of_car(&rows, |r| r.friction_energy_y_j);
+    for r in rows.iter_mut().filter(|r| r.car == car) {
+        r.wear_mean_pct += per_joule * r.friction_energy_y_j;
+    }
+    let d = diagnose(&rows, &maps, &Baseline::Physics, &gap).unwrap();
+    println!(
+        "set-up {car} lateral energy: terms {:?}, form {}",
+        added(&d),
+        d.steps.get(1).map_or(f64::NAN, |s| s.threshold)
+    );
+    assert_eq!(
+        added(&d).get(1).copied(),
+        Some(format!("set-up: {car}").as_str())
+    );
+    assert_eq!(d.steps[1].threshold, 3.0, "the lateral-energy form");
+    assert!(d.steps[1].set_up);
+    assert!(
+        d.findings.first().is_some_and(|l| l.starts_with(&format!(
+            "1. Set-up effect: the lateral energy of {car} abrades"
+        ))),
+        "{:?}",
+        d.findings
+    );
+    let rmse = |i: usize| d.steps[i].testing.as_ref().unwrap().rmse_pct;
+    let shrink = (rmse(0) - rmse(1)) / (rmse(0) - ideal);
+    println!(
+        "testing RMSE {:.3} -> {:.3} %, shrinkage {shrink:.2} of the ideal",
+        rmse(0),
+        rmse(1)
+    );
+    assert!(shrink > 0.8, "{shrink}");
 }
 
 /// `--baseline predictions.csv`: the "sim" side from any tool. Predictions of

@@ -2,7 +2,7 @@
 //! gap.md (the JSON is the `Diagnosis` itself).
 
 use super::baseline::PhysicsBaseline;
-use super::candidates::{Feature, SET_UP_SHARE, significant};
+use super::candidates::{Feature, SET_UP_SHARE, SetUpForm, significant};
 use super::report::Diagnosis;
 use super::scoring::Score;
 use std::fmt::Write;
@@ -18,6 +18,14 @@ const LEADS_WITHIN: f64 = 0.05;
 /// leads shared a scope by chance; the no-term seasons whose leads named
 /// the planted scope had 12 to 59 (docs/gap.md, "Leads").
 const LEADS_SHARING: usize = 6;
+
+/// How many standard errors (`Score::cv_gain_se`) of its own the best
+/// lead's CV gain must exceed before the report names the tires the leads
+/// share: where the best gains next to nothing, the window of
+/// [`LEADS_WITHIN`] around it holds half the library, and the tires most of
+/// it acts on say nothing (5 of 20 clean seasons at clean noise named a
+/// scope, with best gains of 0.02 to 0.10; docs/gap.md, "Leads").
+const LEADS_CLEAR_SE: f64 = 2.0;
 
 /// The candidates that best predict the held-out tracks when none is
 /// significant: not findings, but where a next test should look.
@@ -53,10 +61,15 @@ fn leads(candidates: &[Score]) -> Option<Leads> {
             None => counts.push((scope, 1)),
         }
     }
+    // The best must itself stand clear of no gain: near zero, every
+    // candidate lies within the window of it.
+    let top = &candidates[within[0]];
+    let se = top.cv_gain_se();
+    let clear = se.is_nan() || top.cv_gain > LEADS_CLEAR_SE * se;
     let shared_scope = counts
         .into_iter()
         .max_by_key(|(_, n)| *n)
-        .filter(|(_, n)| within.len() >= LEADS_SHARING && 2 * n > within.len());
+        .filter(|(_, n)| clear && within.len() >= LEADS_SHARING && 2 * n > within.len());
     Some(Leads {
         within,
         shared_scope,
@@ -350,11 +363,19 @@ fn findings(s: &mut String, d: &Diagnosis) {
                 String::new()
             }
         };
+        // A set-up factor on one component of the energy, not the law's wear.
+        let set_up_energy = match (st.feature, SetUpForm::of(st.threshold)) {
+            (Some(Feature::Group), Some(SetUpForm::Energy(k))) => Some(k.energy_name()),
+            _ => None,
+        };
         let rate = match st.feature {
             Some(Feature::Kpi(k)) => format!(
                 "wear per MJ changes by {c:+.4} %{} per standard deviation of {k}",
                 ci(0.0, 4)
             ),
+            Some(Feature::Group) if set_up_energy.is_some() => {
+                format!("abrades {:.2}{} times the law's rate", 1.0 + c, ci(1.0, 2))
+            }
             Some(Feature::Group) => format!(
                 "wears {:.2}{} times what the law predicts from its telemetry",
                 1.0 + c,
@@ -411,8 +432,12 @@ fn findings(s: &mut String, d: &Diagnosis) {
         let scope = st.scope.as_deref().unwrap_or("its tires");
         // A condition that leaves out next to none of the energy.
         let unlimited = st.energy_share.is_some_and(|x| x >= SET_UP_SHARE);
-        let name = match (name.strip_prefix("set-up: "), component, st.energy_share) {
-            (Some(group), _, _) => format!("Set-up effect: {group}"),
+        let set_up = name.strip_prefix("set-up: ").map(|g| match set_up_energy {
+            Some(energy) => format!("Set-up effect: the {energy} of {scope}"),
+            None => format!("Set-up effect: {g}"),
+        });
+        let name = match (set_up, component, st.energy_share) {
+            (Some(set_up), _, _) => set_up,
             (None, Some(component), Some(x)) if unlimited => format!(
                 "{} {component} of {scope} under nearly every condition (the term found, \"{name}\", holds {:.1} % of that energy)",
                 if st.set_up {
@@ -559,6 +584,7 @@ mod tests {
             threshold: f64::NAN,
             coefficient: 1.0,
             cv_gain,
+            cv_sse_by_fold: Vec::new(),
             cv_gain_across: cv_gain,
             p: 0.1,
             p_between: f64::NAN,
@@ -630,6 +656,17 @@ mod tests {
             leads(&axles(6, 1)).unwrap().shared_scope,
             Some(("the rear axle".to_string(), 6))
         );
+        // The best gain (0.30) within two of its standard errors of none:
+        // two left-out tracks at 0.5 and 0.5 of the SSE without, 0.2 and
+        // 0.5 with it (r = 0.7, u = ∓0.15, SE = √(2 · 0.045) = 0.30).
+        let mut unclear = axles(6, 1);
+        unclear[0].cv_sse_by_fold = vec![(0.5, 0.2), (0.5, 0.5)];
+        assert!((unclear[0].cv_gain_se() - 0.09f64.sqrt()).abs() < 1e-12);
+        assert_eq!(leads(&unclear).unwrap().shared_scope, None);
+        // Clear of it (SE 0.03): named.
+        unclear[0].cv_sse_by_fold = vec![(0.5, 0.335), (0.5, 0.365)];
+        assert!(unclear[0].cv_gain_se() < 0.15);
+        assert!(leads(&unclear).unwrap().shared_scope.is_some());
         let mut s = String::new();
         write_leads(&mut s, &axles(6, 1), 0.05);
         assert!(

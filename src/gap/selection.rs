@@ -248,6 +248,15 @@ fn not_abrading(law: &PhysicsBaseline) -> Option<(String, f64)> {
 ///   rests on a handful of track means, which an unmodelled within-track
 ///   effect also moves, and its own CV gain counts the tracks' severities
 ///   that a within-track term's held-out calibration removes.
+/// - A set-up of the same tires whose held-out gain is within one standard
+///   error of the best within-track term's takes its place (the one-SE
+///   rule: of the models the data cannot tell apart, the one with the
+///   fewest choices made on it). A set-up scans four forms, a condition
+///   a threshold grid on many scopes; where the two fit the held-out tracks
+///   alike, a condition that holds about every joule of one direction of
+///   sliding ("energy with accel_y_mps2 above 6 m/s², car1": 53 % of the
+///   energy, nearly all of it lateral) is the lateral-energy set-up of
+///   that car by another name (seed 340, docs/gap.md).
 pub(crate) fn next_term<'a>(
     ranked: &'a [Score],
     first_round: &[Score],
@@ -272,7 +281,18 @@ pub(crate) fn next_term<'a>(
     let within = ranked
         .iter()
         .filter(eligible)
-        .find(|s| !s.feature.track_level());
+        .find(|s| !s.feature.track_level())
+        .map(|best| {
+            ranked
+                .iter()
+                .filter(eligible)
+                .find(|s| {
+                    s.feature == Feature::Group
+                        && s.tires() == best.tires()
+                        && s.cv_gain >= best.cv_gain - best.cv_gain_se()
+                })
+                .unwrap_or(best)
+        });
     let road = ranked
         .iter()
         .filter(eligible)
@@ -314,6 +334,7 @@ mod tests {
             threshold: 85.0,
             coefficient: 1.0,
             cv_gain: cv,
+            cv_sse_by_fold: Vec::new(),
             cv_gain_across: cv,
             p: 0.001,
             p_between: f64::NAN,
@@ -338,6 +359,61 @@ mod tests {
             threshold: s.threshold,
             kpi_scale: KpiScale::NONE,
         }
+    }
+
+    #[test]
+    fn a_set_up_of_the_same_tires_within_one_standard_error_enters_instead() {
+        use crate::gap::candidates::Group;
+        let on = |car: &str, s: Score| Score {
+            group: Some(Group {
+                car: Some(car.into()),
+                wheel: None,
+            }),
+            // Two left-out tracks, 0.01 and 0.02 of the SSE left with the
+            // best term: its gain 0.97 has a standard error of 0.01.
+            cv_sse_by_fold: vec![(0.5, 0.01), (0.5, 0.02)],
+            ..s
+        };
+        let condition = on(
+            "car1",
+            score(
+                "energy with accel_y_mps2 above θ, car1",
+                Feature::Group,
+                None,
+                0.97,
+            ),
+        );
+        let condition = Score {
+            feature: Feature::ConditionEnergy {
+                condition: 0,
+                above: true,
+                component: crate::kpi::cpu::condition_map::Component::Total,
+            },
+            ..condition
+        };
+        let set_up = |car: &str, cv: f64| {
+            on(
+                car,
+                score(&format!("set-up: {car}"), Feature::Group, None, cv),
+            )
+        };
+        let pick =
+            |ranked: &[Score]| next_term(ranked, ranked, &[], &[], 0.05).map(|s| s.name.clone());
+        // Within one standard error (0.965 ≥ 0.97 − 0.01): the set-up.
+        let ranked = vec![condition.clone(), set_up("car1", 0.965)];
+        assert_eq!(pick(&ranked).as_deref(), Some("set-up: car1"));
+        // Beyond it, or another car's: the condition.
+        let ranked = vec![condition.clone(), set_up("car1", 0.955)];
+        assert_eq!(pick(&ranked).as_deref(), Some(condition.name.as_str()));
+        let ranked = vec![condition.clone(), set_up("car2", 0.969)];
+        assert_eq!(pick(&ranked).as_deref(), Some(condition.name.as_str()));
+        // A set-up that is not significant may not take its place.
+        let weak = Score {
+            p_adjusted: 0.2,
+            ..set_up("car1", 0.969)
+        };
+        let ranked = vec![condition.clone(), weak];
+        assert_eq!(pick(&ranked).as_deref(), Some(condition.name.as_str()));
     }
 
     #[test]

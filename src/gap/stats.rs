@@ -72,6 +72,44 @@ impl VarianceComponents {
             n,
         }
     }
+
+    /// The same for clusters nested in cells (`cell[i]`, constant within a
+    /// cluster): σ_e² is the clusters' scatter around their own cell's mean,
+    /// so a shift that every cluster of a cell shares (one car at one event:
+    /// a set-up of that car) is not counted as scatter between clusters.
+    /// Nested ANOVA by moments: MS_b = Σ_g m_g (ē_g − ē_cell(g))² / (G − C)
+    /// and n₀ = (N − Σ_cells Σ_g m_g² / N_cell) / (G − C); one cell gives
+    /// [`VarianceComponents::estimate`].
+    pub fn estimate_nested(r: &[f64], cluster: &[usize], cell: &[usize]) -> VarianceComponents {
+        let one = VarianceComponents::estimate(r, cluster);
+        let g = cluster.iter().copied().max().map_or(0, |m| m + 1);
+        let c = cell.iter().copied().max().map_or(0, |m| m + 1);
+        let (mut sum, mut count, mut cell_of) = (vec![0.0; g], vec![0usize; g], vec![0; g]);
+        let (mut cell_sum, mut cell_n) = (vec![0.0; c], vec![0usize; c]);
+        for ((v, &k), &e) in r.iter().zip(cluster).zip(cell) {
+            sum[k] += v;
+            count[k] += 1;
+            cell_of[k] = e;
+            cell_sum[e] += v;
+            cell_n[e] += 1;
+        }
+        let cells = cell_n.iter().filter(|&&m| m > 0).count();
+        let df = one.clusters.saturating_sub(cells);
+        let between = if df > 0 {
+            let (mut ssb, mut sq) = (0.0, 0.0);
+            for k in (0..g).filter(|&k| count[k] > 0) {
+                let e = cell_of[k];
+                let m = count[k] as f64;
+                ssb += m * (sum[k] / m - cell_sum[e] / cell_n[e] as f64).powi(2);
+                sq += m * m / cell_n[e] as f64;
+            }
+            let n0 = (r.len() as f64 - sq) / df as f64;
+            ((ssb / df as f64 - one.within) / n0).max(0.0)
+        } else {
+            0.0
+        };
+        VarianceComponents { between, ..one }
+    }
 }
 
 /// mean(r | inside) − mean(r | outside) for residuals with a random
@@ -192,6 +230,32 @@ impl KaplanMeier {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn nested_components_by_hand() {
+        // Two cells of two runs of two tires: runs (1, 3), (5, 7) in one,
+        // (11, 13), (15, 17) in the other. Within: 8 / (8 − 4) = 2. Between
+        // runs of a cell: 2·(2² + 2² + 2² + 2²) / (4 − 2) = 16, n₀ =
+        // (8 − 8/4 − 8/4) / 2 = 2, so (16 − 2) / 2 = 7. Unnested, the cells'
+        // shift counts too: run means 2, 6, 12, 16 around 9, MS_b = 232/3,
+        // n₀ = (8 − 16/8)/3 = 2, (232/3 − 2)/2 = 37.67.
+        let r = [1.0, 3.0, 5.0, 7.0, 11.0, 13.0, 15.0, 17.0];
+        let run = [0, 0, 1, 1, 2, 2, 3, 3];
+        let cell = [0, 0, 0, 0, 1, 1, 1, 1];
+        let nested = VarianceComponents::estimate_nested(&r, &run, &cell);
+        assert!((nested.within - 2.0).abs() < 1e-12, "{nested:?}");
+        assert!((nested.between - 7.0).abs() < 1e-12, "{nested:?}");
+        assert_eq!((nested.clusters, nested.n), (4, 8));
+        let plain = VarianceComponents::estimate(&r, &run);
+        assert!((plain.between - (232.0 / 3.0 - 2.0) / 2.0).abs() < 1e-12);
+        // One cell: the plain estimate (unbalanced runs of 3, 1 and 2).
+        let r = [0.3, -1.2, 0.8, 2.5, -0.4, 1.1];
+        let run = [0, 0, 0, 1, 2, 2];
+        let one = VarianceComponents::estimate_nested(&r, &run, &[0; 6]);
+        let plain = VarianceComponents::estimate(&r, &run);
+        assert!((one.between - plain.between).abs() < 1e-12);
+        assert_eq!(one.within, plain.within);
+    }
 
     #[test]
     fn kaplan_meier_tail_means_by_hand() {
