@@ -115,20 +115,32 @@ fn planted_graining_is_found_on_the_front_axle() {
 }
 
 /// Blistering planted at magnitude 1, threshold 125 °C inner liner: the
-/// truth puts almost all of it on the rears; the first term is the
-/// blistering mechanism and the testing-event gap shrinks.
+/// truth puts almost all of it on the rears; the blistering mechanism is
+/// among the terms, the terms' wear follows the planted wear, and the
+/// testing-event gap shrinks most of the way to the ideal.
+///
+/// Not necessarily first: on this season "lateral energy with
+/// distance_since_start_m above θ, rear axle" (held-out gain 0.831) and
+/// blistering (0.807) fit the left-out tracks alike, and since the runs'
+/// scatter is estimated around each car's mean at the event (docs/gap.md,
+/// "Set-up forms") the former enters first and blistering second: testing
+/// RMSE 9.40 → 4.63 → 2.47 %, where blistering alone, first, had left
+/// 2.62 %.
 #[test]
 fn planted_blistering_is_found() {
     let dir = tempfile::tempdir().unwrap();
     let e = planted(EffectKind::Blistering, 1.0, 125.0);
     let (case, d) = run_case(&Planted::Named(e.clone()), 3, &settings(dir.path())).unwrap();
     assert!(
-        case.hit && case.hit_axle,
-        "{case:?}\n{:?}",
-        d.candidates.first()
+        added(&d)
+            .iter()
+            .any(|a| a.starts_with("blistering (energy with a hot inner liner)")),
+        "{:?}",
+        added(&d)
     );
     assert!(case.truth_front_share < 0.2, "{case:?}");
-    assert!(case.rmse_diagnosed_pct < case.rmse_baseline_pct, "{case:?}");
+    assert!(case.terms_correlation >= 0.8, "{case:?}");
+    assert!(case.shrinkage_ratio > 0.8, "{case:?}");
 }
 
 /// A clean season: nothing is significant, so nothing is added.
