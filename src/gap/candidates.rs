@@ -1376,6 +1376,14 @@ mod tests {
         assert_eq!(share(&c, &row_maps), None);
     }
 
+    /// A front tire's law in the tests below: it abrades 0.4 %/MJ over an
+    /// energy term of 2.5 MJ, 1.3 % of wear.
+    const FRONT_LAW: LawRow = LawRow {
+        abrasion: 0.4,
+        energy_mj: 2.5,
+        wear_pct: 1.3,
+    };
+
     #[test]
     fn a_set_up_scans_the_law_s_wear_and_each_energy_component() {
         // car1's front tire: friction energy 3 MJ (1 MJ longitudinal, 2 MJ
@@ -1388,11 +1396,7 @@ mod tests {
             friction_energy_y_j: 2e6,
             ..Default::default()
         };
-        let law = LawRow {
-            abrasion: 0.4,
-            energy_mj: 2.5,
-            wear_pct: 1.3,
-        };
+        let law = FRONT_LAW;
         let set_up = |car: &str| Candidate {
             name: format!("set-up: {car}"),
             feature: Feature::Group,
@@ -1520,11 +1524,7 @@ mod tests {
             t_air_avg_c: 40.0,
             ..Default::default()
         };
-        let law = LawRow {
-            abrasion: 0.4,
-            energy_mj: 2.5,
-            wear_pct: 1.3,
-        };
+        let law = FRONT_LAW;
         let rows = vec![&r];
         let lib = library(&rows);
         let named = |name: &str| lib.iter().find(|c| c.name == name).expect(name);
