@@ -34,9 +34,9 @@ use super::candidates::{
 use super::linear::{BaseFit, dot, lstsq, orthonormal_basis, project_out, residual, weighted};
 use super::stats::{VarianceComponents, benjamini_hochberg, levels};
 use super::track_test::Severities;
+use crate::Axle;
 use crate::kpi::KpiRow;
 use crate::kpi::energy_maps::EnergyMaps;
-use crate::{Axle, Wheel};
 use faer::linalg::matmul::matmul;
 use faer::{Accum, Mat, Par};
 use rand::SeedableRng;
@@ -207,18 +207,6 @@ impl Score {
         let r = with / without;
         let ss: f64 = folds.iter().map(|(w0, w1)| (w1 - r * w0).powi(2)).sum();
         (f / (f - 1.0) * ss).sqrt() / without
-    }
-
-    /// The tires the term acts on: its group's car and wheel, and its axle
-    /// (a wheel's own, where the scope names a wheel).
-    pub(crate) fn tires(&self) -> (Option<&str>, Option<Wheel>, Option<Axle>) {
-        let g = self.group.as_ref();
-        let wheel = g.and_then(|g| g.wheel);
-        (
-            g.and_then(|g| g.car.as_deref()),
-            wheel,
-            self.axle.or(wheel.map(|w| w.axle())),
-        )
     }
 
     /// The library's candidate at the chosen scope (its threshold grid

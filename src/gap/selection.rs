@@ -283,13 +283,15 @@ pub(crate) fn next_term<'a>(
         .filter(eligible)
         .find(|s| !s.feature.track_level())
         .map(|best| {
+            // The same tires: the scope as the report names it.
+            let tires = best.as_candidate().scope_description();
             ranked
                 .iter()
                 .filter(eligible)
                 .find(|s| {
                     s.feature == Feature::Group
-                        && s.tires() == best.tires()
                         && s.cv_gain >= best.cv_gain - best.cv_gain_se()
+                        && s.as_candidate().scope_description() == tires
                 })
                 .unwrap_or(best)
         });
