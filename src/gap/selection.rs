@@ -256,7 +256,11 @@ fn not_abrading(law: &PhysicsBaseline) -> Option<(String, f64)> {
 ///   alike, a condition that holds about every joule of one direction of
 ///   sliding ("energy with accel_y_mps2 above 6 m/s², car1": 53 % of the
 ///   energy, nearly all of it lateral) is the lateral-energy set-up of
-///   that car by another name (seed 340, docs/gap.md).
+///   that car by another name (seed 340, docs/gap.md). A named mechanism
+///   of the same tires likewise ([`fewest_choices`]): "longitudinal energy
+///   with t_bulk_c above θ" where blistering (a hot inner liner) fits the
+///   held-out tracks as well is blistering seen through a neighbouring
+///   temperature.
 pub(crate) fn next_term<'a>(
     ranked: &'a [Score],
     first_round: &[Score],
@@ -283,13 +287,16 @@ pub(crate) fn next_term<'a>(
         .filter(eligible)
         .find(|s| !s.feature.track_level())
         .map(|best| {
+            if fewest_choices(best.feature) {
+                return best;
+            }
             // The same tires: the scope as the report names it.
             let tires = best.as_candidate().scope_description();
             ranked
                 .iter()
                 .filter(eligible)
                 .find(|s| {
-                    s.feature == Feature::Group
+                    fewest_choices(s.feature)
                         && s.cv_gain >= best.cv_gain - best.cv_gain_se()
                         && s.as_candidate().scope_description() == tires
                 })
@@ -304,6 +311,22 @@ pub(crate) fn next_term<'a>(
         (Some(w), _) => Some(w),
         (None, r) => r,
     }
+}
+
+/// A set-up or a named per-sample mechanism: the candidates the one-SE
+/// rule prefers to a generated condition of the same tires, as they make
+/// the fewest choices on the data (a set-up four forms, a named mechanism
+/// one condition and component fixed by its physics, where a generated
+/// condition picks its condition, direction and component too).
+fn fewest_choices(f: Feature) -> bool {
+    matches!(
+        f,
+        Feature::Group
+            | Feature::ColdTreadLateralEnergy
+            | Feature::HotInnerEnergy
+            | Feature::HotSurfaceEnergy
+            | Feature::FastSlidingEnergy
+    )
 }
 
 /// A generic KPI candidate (not a road index, which is road abrasion).
@@ -416,6 +439,49 @@ mod tests {
         };
         let ranked = vec![condition.clone(), weak];
         assert_eq!(pick(&ranked).as_deref(), Some(condition.name.as_str()));
+    }
+
+    #[test]
+    fn a_named_mechanism_of_the_same_tires_within_one_standard_error_enters_instead() {
+        use crate::kpi::cpu::condition_map::Component;
+        // Two left-out tracks, 0.01 and 0.02 of the SSE left with the best
+        // term: its gain 0.97 has a standard error of 0.01 (the test above).
+        let folds = |s: Score| Score {
+            cv_sse_by_fold: vec![(0.5, 0.01), (0.5, 0.02)],
+            ..s
+        };
+        let bulk = folds(score(
+            "longitudinal energy with t_bulk_c above θ, rear axle",
+            Feature::ConditionEnergy {
+                condition: 11,
+                above: true,
+                component: Component::Longitudinal,
+            },
+            Some(crate::Axle::Rear),
+            0.97,
+        ));
+        let blistering = |axle, cv| {
+            score(
+                "blistering (energy with a hot inner liner)",
+                Feature::HotInnerEnergy,
+                Some(axle),
+                cv,
+            )
+        };
+        let pick =
+            |ranked: &[Score]| next_term(ranked, ranked, &[], &[], 0.05).map(|s| s.name.clone());
+        let rear = crate::Axle::Rear;
+        // Within one standard error, on the same axle: the mechanism.
+        let ranked = vec![bulk.clone(), blistering(rear, 0.961)];
+        assert_eq!(pick(&ranked), Some(blistering(rear, 0.0).name));
+        // Beyond it, or on the other axle: the generated condition.
+        let ranked = vec![bulk.clone(), blistering(rear, 0.959)];
+        assert_eq!(pick(&ranked), Some(bulk.name.clone()));
+        let ranked = vec![bulk.clone(), blistering(crate::Axle::Front, 0.969)];
+        assert_eq!(pick(&ranked), Some(bulk.name.clone()));
+        // A named mechanism that is the best already stays.
+        let ranked = vec![folds(blistering(rear, 0.97)), bulk.clone()];
+        assert_eq!(pick(&ranked), Some(blistering(rear, 0.0).name));
     }
 
     #[test]
