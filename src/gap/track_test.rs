@@ -225,6 +225,17 @@ impl<'a> Severities<'a> {
             let kept = means.kept(&[axle]);
             let covariates = means.covariates(axle, &kept);
             let severity = s.track_means(&k[n_within..], axle, &kept);
+            // What the between-track test regresses, for tracing a season
+            // whose effect lies between tracks (docs/gap.md).
+            tracing::debug!(
+                axle = ?axle,
+                severities = ?kept
+                    .iter()
+                    .zip(&severity)
+                    .map(|(&t, v)| (s.tracks.rows[t].track.as_str(), *v))
+                    .collect::<Vec<_>>(),
+                "stage-1 track severities"
+            );
             s.designs[slot(axle)] = Design::new(kept, severity, &covariates);
         }
         for axle in Axle::ALL {
