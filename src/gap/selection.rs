@@ -5,7 +5,7 @@
 
 use super::acts::acts_in;
 use super::baseline::PhysicsBaseline;
-use super::candidates::{Candidate, Feature, LawRow};
+use super::candidates::{Candidate, Feature, LawRow, NAMED_CONDITIONS};
 use super::linear::weighted_fit;
 use super::recalibrate::{Rows, Term, refit_law};
 use super::scoring::{Problem, Score, relative_weights};
@@ -313,20 +313,14 @@ pub(crate) fn next_term<'a>(
     }
 }
 
-/// A set-up or a named per-sample mechanism: the candidates the one-SE
-/// rule prefers to a generated condition of the same tires, as they make
-/// the fewest choices on the data (a set-up four forms, a named mechanism
-/// one condition and component fixed by its physics, where a generated
-/// condition picks its condition, direction and component too).
+/// A set-up or a named per-sample mechanism (the registry
+/// [`NAMED_CONDITIONS`]): the candidates the one-SE rule prefers to a
+/// generated condition of the same tires, as they make the fewest choices
+/// on the data (a set-up four forms, a named mechanism one condition and
+/// component fixed by its physics, where a generated condition picks its
+/// condition, direction and component too).
 fn fewest_choices(f: Feature) -> bool {
-    matches!(
-        f,
-        Feature::Group
-            | Feature::ColdTreadLateralEnergy
-            | Feature::HotInnerEnergy
-            | Feature::HotSurfaceEnergy
-            | Feature::FastSlidingEnergy
-    )
+    f == Feature::Group || NAMED_CONDITIONS.iter().any(|(_, _, named)| *named == f)
 }
 
 /// A generic KPI candidate (not a road index, which is road abrasion).
