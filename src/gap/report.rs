@@ -16,7 +16,7 @@ use crate::ingest::compound::Wlf;
 use crate::kpi::energy_maps::EnergyMaps;
 use crate::kpi::{KpiRow, TireRun};
 use crate::model::ModelError;
-use crate::model::fit::split;
+use crate::model::fit::{Split, split};
 use crate::model::saved::SavedModel;
 use crate::{Axle, Wheel};
 use std::collections::BTreeMap;
@@ -349,79 +349,10 @@ pub fn diagnose(
     settings: &GapSettings,
 ) -> Result<Diagnosis, ModelError> {
     let fdr = settings.fdr;
-    // A tire with readings at the worn-through depth (5 % of new): its
-    // measured wear is a lower bound. Left out, or (`WornThrough::Impute`)
-    // in the training events entered with its wear imputed (Buckley–James,
-    // `PhysicsBaseline::fit_censored`); in the testing events always left
-    // out of the gap's measure.
-    let (rows, worn): (Vec<KpiRow>, Vec<KpiRow>) = rows
-        .iter()
-        .cloned()
-        .partition(|r| r.worn_through_readings <= 0.0);
-    let tire = |r: &KpiRow| format!("{}/{}", r.run, r.wheel);
-    let censored: Vec<String> = worn.iter().map(tire).collect();
-    let rows = rows.as_slice();
-    let mut s = split(rows, settings.test_events.as_deref())?;
-    let worn_train: Vec<&KpiRow> = match settings.worn_through {
-        WornThrough::Impute => worn
-            .iter()
-            .filter(|r| s.train_events.contains(&r.event))
-            .collect(),
-        WornThrough::LeaveOut => Vec::new(),
-    };
-    let map_of = |r: &KpiRow| maps.get(&r.tire_run());
-    // The training rows with the worn-through ones last, flagged.
-    let train_all: Vec<&KpiRow> = s.train.iter().chain(&worn_train).copied().collect();
-    let is_worn: Vec<bool> = (0..train_all.len()).map(|i| i >= s.train.len()).collect();
-    let (physics, imputed_wear) = match baseline {
-        Baseline::Physics => {
-            let train_maps: Vec<Option<&EnergyMaps>> =
-                train_all.iter().map(|r| map_of(r)).collect();
-            let (p, y) =
-                PhysicsBaseline::fit_censored(&train_all, &train_maps, &settings.wlf, &is_worn);
-            (Some(p), y[s.train.len()..].to_vec())
-        }
-        _ => (None, Vec::new()),
-    };
-    let name = match baseline {
-        Baseline::Physics => {
-            "physics (wear = k_compound,axle · Σ E_bin·φ_compound(T_bin) · exp(s·Sk))".to_string()
-        }
-        Baseline::Model(m) => format!("{} model", m.method()),
-        Baseline::Predictions(p) => format!("predictions from {}", p.source),
-    };
-    let predict = |r: &KpiRow| -> f64 {
-        match (baseline, &physics) {
-            (Baseline::Model(m), _) => m.predict_row(r).unwrap_or(f64::NAN),
-            (Baseline::Predictions(p), _) => {
-                p.wear_pct.get(&r.tire_run()).copied().unwrap_or(f64::NAN)
-            }
-            (_, Some(p)) => p.predict(r, map_of(r)),
-            _ => f64::NAN,
-        }
-    };
-    let usable = |set: &[&KpiRow]| -> Vec<usize> {
-        (0..set.len())
-            .filter(|&i| (set[i].wear_mean_pct - predict(set[i])).is_finite())
-            .collect()
-    };
-    // A fixed baseline's worn-through tires: imputed once from its own
-    // predictions (nothing to calibrate again).
-    let imputed_wear = if physics.is_some() || worn_train.is_empty() {
-        imputed_wear
-    } else {
-        let predicted: Vec<f64> = train_all.iter().map(|r| predict(r)).collect();
-        impute_censored(&train_all, &is_worn, &predicted)[s.train.len()..].to_vec()
-    };
-    let imputed: Vec<KpiRow> = worn_train
-        .iter()
-        .zip(&imputed_wear)
-        .filter(|(_, y)| y.is_finite())
-        .map(|(r, y)| KpiRow {
-            wear_mean_pct: *y,
-            ..(*r).clone()
-        })
-        .collect();
+    let (measured, worn) = censor(rows);
+    let censored: Vec<String> = worn.iter().map(tire_name).collect();
+    let mut s = split(&measured, settings.test_events.as_deref())?;
+    let (physics, imputed) = calibrate(baseline, &s, &worn, maps, settings);
     if !censored.is_empty() {
         tracing::warn!(
             tires = censored.len(),
@@ -430,162 +361,48 @@ pub fn diagnose(
             "tread worn through (readings at ≤ 5 % of the new depth), wear censored"
         );
     }
-    let imputed_tires: Vec<String> = imputed.iter().map(tire).collect();
+    let imputed_tires: Vec<String> = imputed.iter().map(tire_name).collect();
     s.train.extend(imputed.iter());
-    let (tr, te) = (usable(&s.train), usable(&s.test));
-    if tr.len() < 20 {
-        return Err(ModelError::TooFewObservations {
-            what: "gap diagnosis".into(),
-            needed: 20,
-            got: tr.len(),
-        });
-    }
-    // Training rows first, then testing rows.
-    let mut all_rows: Vec<&KpiRow> = tr.iter().map(|&i| s.train[i]).collect();
-    all_rows.extend(te.iter().map(|&i| s.test[i]));
-    let n_train = tr.len();
-    let row_maps: Vec<Option<&EnergyMaps>> = all_rows.iter().map(|r| map_of(r)).collect();
-    let y: Vec<f64> = all_rows.iter().map(|r| r.wear_mean_pct).collect();
-    let all_res: Vec<f64> = all_rows
-        .iter()
-        .map(|r| r.wear_mean_pct - predict(r))
-        .collect();
-    let (trv, tev) = all_res.split_at(n_train);
+    let predict = |r: &KpiRow| predicted(baseline, physics.as_ref(), r, maps);
+    let observed = Observed::new(&s, maps, &predict)?;
+    let n_train = observed.n_train;
+    let (trv, tev) = observed.residual.split_at(n_train);
 
     // Step 1 over all rows with a residual: the gap is judged where it lies, in and out of training.
-    let (tested, count) = slice_residuals(&all_rows, &all_res, fdr);
+    let (tested, count) = slice_residuals(&observed.rows, &observed.residual, fdr);
     let slices: Vec<Slice> = tested.into_iter().filter(|t| t.p_adjusted <= fdr).collect();
 
     // Steps 2 and 3: candidates scored on the training rows, added to the
     // baseline's design in turn; each step's fit applies to every row.
-    let base: Vec<Vec<f64>> = match &physics {
-        Some(p) => p.columns(&all_rows, &row_maps),
-        None => vec![
-            vec![1.0; all_rows.len()],
-            all_rows.iter().map(|r| predict(r)).collect(),
-        ],
-    };
-    // What the law says about each row: the mechanisms' terms are charged
-    // at its abrasion per joule (`candidate_feature`).
-    let law: Vec<LawRow> = all_rows
-        .iter()
-        .zip(&row_maps)
-        .map(|(r, m)| match &physics {
-            Some(p) => p.law_row(r, *m),
-            None => LawRow::raw(r),
-        })
-        .collect();
-    // The physics law's last column (its skewness derivative) is constant
-    // within tracks; so are road terms once selected.
-    let track_level: Vec<bool> = (0..base.len())
-        .map(|j| physics.is_some() && j + 1 == base.len())
-        .collect();
-    let step_of = |added: String, score: Option<&Score>, term: Option<&Term>, res: &[f64]| {
-        let energy_share = term.and_then(|t| {
-            t.candidate
-                .energy_share(&all_rows[..n_train], &row_maps[..n_train], t.threshold)
-        });
-        Step {
-            added,
-            feature: score.map(|s| s.feature),
-            threshold: score.map_or(f64::NAN, |s| s.threshold),
-            coefficient: score.map_or(f64::NAN, |s| s.coefficient),
-            cv_gain: score.map_or(f64::NAN, |s| s.cv_gain),
-            p_adjusted: score.map_or(f64::NAN, |s| s.p_adjusted),
-            energy_share,
-            scope: term.map(|t| t.candidate.scope_description()),
-            set_up: score.is_some_and(|s| s.feature == Feature::Group)
-                || (energy_share.is_some_and(|x| x >= SET_UP_SHARE)
-                    && term.is_some_and(|t| t.candidate.group.is_some())),
-            training: size(&res[..n_train]),
-            testing: (res.len() > n_train).then(|| size(&res[n_train..])),
-            slices: slices
-                .iter()
-                .map(|sl| {
-                    let v: Vec<f64> = res
-                        .iter()
-                        .zip(&sl.members)
-                        .filter(|(_, k)| **k)
-                        .map(|(r, _)| *r)
-                        .collect();
-                    size(&v)
-                })
-                .collect(),
-        }
-    };
-    let mut steps = vec![step_of("baseline".into(), None, None, &all_res)];
-    let mut candidates = Vec::new();
-    let data = Rows {
-        rows: &all_rows,
-        maps: &row_maps,
-        y: &y,
+    let record = StepRecord {
+        rows: &observed.rows,
+        maps: &observed.maps,
         n_train,
+        slices: &slices,
     };
+    let base = base_columns(physics.as_ref(), &observed, &predict);
+    let track_level = track_level(physics.is_some(), base.len());
     let mut sel = Selection::new(
-        data,
+        observed.data(),
         physics.as_ref(),
         &settings.wlf,
         base,
-        law,
+        law_rows(physics.as_ref(), &observed),
         track_level,
     );
-    if !maps.is_empty() {
-        let mut lib = library(&all_rows[..n_train]);
-        lib.extend(settings.user_effects.iter().cloned());
-        // Rounds: one per term added, plus one per term refused.
-        let mut round = 0;
-        while steps.len() <= settings.max_terms && round < 2 * settings.max_terms + 2 {
-            round += 1;
-            let ranked = rank(&sel.problem(), &lib, &settings.scoring, fdr);
-            for c in ranked.iter().take(8) {
-                tracing::trace!(
-                    round,
-                    candidate = %c.name,
-                    cv_gain = c.cv_gain,
-                    cv_gain_across = c.cv_gain_across,
-                    p = c.p,
-                    p_between = c.p_between,
-                    p_adjusted = c.p_adjusted,
-                    "ranked"
-                );
-            }
-            if round == 1 {
-                candidates = ranked.clone();
-                let named: Vec<(&str, Vec<bool>)> = slices
-                    .iter()
-                    .map(|s| (s.name.as_str(), s.members.clone()))
-                    .collect();
-                let leading = ACTS_FOR.min(candidates.len());
-                sel.acts_in(&mut candidates[..leading], &lib, &named, &all_res);
-            }
-            let Some(best) = next_term(&ranked, &candidates, &sel.terms, &sel.used, fdr) else {
-                break;
-            };
-            tracing::debug!(
-                round,
-                term = %best.name,
-                cv_gain = best.cv_gain,
-                cv_gain_across = best.cv_gain_across,
-                p_adjusted = best.p_adjusted,
-                "best significant candidate"
-            );
-            if let Some((refitted, res)) = sel.add(best, &lib) {
-                steps.push(step_of(
-                    best.name.clone(),
-                    Some(&refitted),
-                    sel.terms.last(),
-                    &res,
-                ));
-            }
-        }
-    }
+    let mut steps = vec![record.step("baseline".into(), None, None, &observed.residual)];
+    let candidates = if maps.is_empty() {
+        Vec::new()
+    } else {
+        forward_selection(&mut sel, &record, &observed.residual, settings, &mut steps)
+    };
     let terms_wear = terms_wear(&sel);
     let final_terms = final_terms(&sel, &steps, settings.scoring.seed);
     let refitted_law = sel.refitted_law;
     let mut d = Diagnosis {
         terms_wear,
         final_terms,
-        baseline: name,
+        baseline: baseline_name(baseline),
         physics,
         physics_with_terms: refitted_law,
         training_events: s.train_events.clone(),
@@ -603,6 +420,297 @@ pub fn diagnose(
     };
     d.findings = super::render::findings_lines(&d);
     Ok(d)
+}
+
+/// A tire-run as the diagnosis names it: run/wheel.
+fn tire_name(r: &KpiRow) -> String {
+    format!("{}/{}", r.run, r.wheel)
+}
+
+/// The rows with a measured wear, and the worn-through ones apart.
+///
+/// A tire with readings at the worn-through depth (5 % of new): its
+/// measured wear is a lower bound. Left out, or (`WornThrough::Impute`)
+/// in the training events entered with its wear imputed (Buckley–James,
+/// `PhysicsBaseline::fit_censored`); in the testing events always left
+/// out of the gap's measure.
+fn censor(rows: &[KpiRow]) -> (Vec<KpiRow>, Vec<KpiRow>) {
+    rows.iter()
+        .cloned()
+        .partition(|r| r.worn_through_readings <= 0.0)
+}
+
+/// The physics law calibrated on the training events (None for a fixed
+/// baseline), and the training events' worn-through tires with their wear
+/// imputed where `settings` asks for it (none otherwise).
+fn calibrate(
+    baseline: &Baseline,
+    s: &Split,
+    worn: &[KpiRow],
+    maps: &BTreeMap<TireRun, EnergyMaps>,
+    settings: &GapSettings,
+) -> (Option<PhysicsBaseline>, Vec<KpiRow>) {
+    let worn_train: Vec<&KpiRow> = match settings.worn_through {
+        WornThrough::Impute => worn
+            .iter()
+            .filter(|r| s.train_events.contains(&r.event))
+            .collect(),
+        WornThrough::LeaveOut => Vec::new(),
+    };
+    // The training rows with the worn-through ones last, flagged.
+    let train_all: Vec<&KpiRow> = s.train.iter().chain(&worn_train).copied().collect();
+    let is_worn: Vec<bool> = (0..train_all.len()).map(|i| i >= s.train.len()).collect();
+    let (physics, imputed_wear) = match baseline {
+        Baseline::Physics => {
+            let train_maps: Vec<Option<&EnergyMaps>> =
+                train_all.iter().map(|r| maps.get(&r.tire_run())).collect();
+            let (p, y) =
+                PhysicsBaseline::fit_censored(&train_all, &train_maps, &settings.wlf, &is_worn);
+            (Some(p), y[s.train.len()..].to_vec())
+        }
+        _ => (None, Vec::new()),
+    };
+    // A fixed baseline's worn-through tires: imputed once from its own
+    // predictions (nothing to calibrate again).
+    let imputed_wear = if physics.is_some() || worn_train.is_empty() {
+        imputed_wear
+    } else {
+        let predicted: Vec<f64> = train_all
+            .iter()
+            .map(|r| predicted(baseline, None, r, maps))
+            .collect();
+        impute_censored(&train_all, &is_worn, &predicted)[s.train.len()..].to_vec()
+    };
+    let imputed = worn_train
+        .iter()
+        .zip(&imputed_wear)
+        .filter(|(_, y)| y.is_finite())
+        .map(|(r, y)| KpiRow {
+            wear_mean_pct: *y,
+            ..(*r).clone()
+        })
+        .collect();
+    (physics, imputed)
+}
+
+/// The baseline's name in the report.
+fn baseline_name(baseline: &Baseline) -> String {
+    match baseline {
+        Baseline::Physics => {
+            "physics (wear = k_compound,axle · Σ E_bin·φ_compound(T_bin) · exp(s·Sk))".to_string()
+        }
+        Baseline::Model(m) => format!("{} model", m.method()),
+        Baseline::Predictions(p) => format!("predictions from {}", p.source),
+    }
+}
+
+/// The baseline's predicted wear (%) of `r` (NaN where it has none).
+fn predicted(
+    baseline: &Baseline,
+    physics: Option<&PhysicsBaseline>,
+    r: &KpiRow,
+    maps: &BTreeMap<TireRun, EnergyMaps>,
+) -> f64 {
+    match (baseline, physics) {
+        (Baseline::Model(m), _) => m.predict_row(r).unwrap_or(f64::NAN),
+        (Baseline::Predictions(p), _) => p.wear_pct.get(&r.tire_run()).copied().unwrap_or(f64::NAN),
+        (_, Some(p)) => p.predict(r, maps.get(&r.tire_run())),
+        _ => f64::NAN,
+    }
+}
+
+/// The rows the diagnosis measures the gap on: the training rows with a
+/// residual first, then the testing ones.
+struct Observed<'a> {
+    rows: Vec<&'a KpiRow>,
+    maps: Vec<Option<&'a EnergyMaps>>,
+    /// Measured mean wear (%).
+    y: Vec<f64>,
+    /// Measured − the baseline's prediction (%).
+    residual: Vec<f64>,
+    n_train: usize,
+}
+
+impl<'a> Observed<'a> {
+    fn new(
+        s: &Split<'a>,
+        maps: &'a BTreeMap<TireRun, EnergyMaps>,
+        predict: &impl Fn(&KpiRow) -> f64,
+    ) -> Result<Observed<'a>, ModelError> {
+        let usable = |set: &[&KpiRow]| -> Vec<usize> {
+            (0..set.len())
+                .filter(|&i| (set[i].wear_mean_pct - predict(set[i])).is_finite())
+                .collect()
+        };
+        let (tr, te) = (usable(&s.train), usable(&s.test));
+        if tr.len() < 20 {
+            return Err(ModelError::TooFewObservations {
+                what: "gap diagnosis".into(),
+                needed: 20,
+                got: tr.len(),
+            });
+        }
+        let mut rows: Vec<&KpiRow> = tr.iter().map(|&i| s.train[i]).collect();
+        rows.extend(te.iter().map(|&i| s.test[i]));
+        Ok(Observed {
+            maps: rows.iter().map(|r| maps.get(&r.tire_run())).collect(),
+            y: rows.iter().map(|r| r.wear_mean_pct).collect(),
+            residual: rows.iter().map(|r| r.wear_mean_pct - predict(r)).collect(),
+            n_train: tr.len(),
+            rows,
+        })
+    }
+
+    fn data(&self) -> Rows<'_> {
+        Rows {
+            rows: &self.rows,
+            maps: &self.maps,
+            y: &self.y,
+            n_train: self.n_train,
+        }
+    }
+}
+
+/// The baseline's design columns over every row: the physics law's
+/// (`PhysicsBaseline::columns`), or an intercept and the fixed prediction.
+fn base_columns(
+    physics: Option<&PhysicsBaseline>,
+    o: &Observed,
+    predict: &impl Fn(&KpiRow) -> f64,
+) -> Vec<Vec<f64>> {
+    match physics {
+        Some(p) => p.columns(&o.rows, &o.maps),
+        None => vec![
+            vec![1.0; o.rows.len()],
+            o.rows.iter().map(|r| predict(r)).collect(),
+        ],
+    }
+}
+
+/// What the law says about each row: the mechanisms' terms are charged at
+/// its abrasion per joule (`candidate_feature`).
+fn law_rows(physics: Option<&PhysicsBaseline>, o: &Observed) -> Vec<LawRow> {
+    o.rows
+        .iter()
+        .zip(&o.maps)
+        .map(|(r, m)| match physics {
+            Some(p) => p.law_row(r, *m),
+            None => LawRow::raw(r),
+        })
+        .collect()
+}
+
+/// Which of `n` base columns are constant within tracks: the physics law's
+/// last (its skewness derivative); road terms join them once selected.
+fn track_level(physics: bool, n: usize) -> Vec<bool> {
+    (0..n).map(|j| physics && j + 1 == n).collect()
+}
+
+/// What a step of the forward selection records about the rows.
+struct StepRecord<'a> {
+    rows: &'a [&'a KpiRow],
+    maps: &'a [Option<&'a EnergyMaps>],
+    n_train: usize,
+    slices: &'a [Slice],
+}
+
+impl StepRecord<'_> {
+    /// The step that added `added` (the baseline: no score or term) with the
+    /// residuals `res` (%) over every row.
+    fn step(&self, added: String, score: Option<&Score>, term: Option<&Term>, res: &[f64]) -> Step {
+        let n_train = self.n_train;
+        let energy_share = term.and_then(|t| {
+            t.candidate
+                .energy_share(&self.rows[..n_train], &self.maps[..n_train], t.threshold)
+        });
+        Step {
+            added,
+            feature: score.map(|s| s.feature),
+            threshold: score.map_or(f64::NAN, |s| s.threshold),
+            coefficient: score.map_or(f64::NAN, |s| s.coefficient),
+            cv_gain: score.map_or(f64::NAN, |s| s.cv_gain),
+            p_adjusted: score.map_or(f64::NAN, |s| s.p_adjusted),
+            energy_share,
+            scope: term.map(|t| t.candidate.scope_description()),
+            set_up: score.is_some_and(|s| s.feature == Feature::Group)
+                || (energy_share.is_some_and(|x| x >= SET_UP_SHARE)
+                    && term.is_some_and(|t| t.candidate.group.is_some())),
+            training: size(&res[..n_train]),
+            testing: (res.len() > n_train).then(|| size(&res[n_train..])),
+            slices: self
+                .slices
+                .iter()
+                .map(|sl| {
+                    let v: Vec<f64> = res
+                        .iter()
+                        .zip(&sl.members)
+                        .filter(|(_, k)| **k)
+                        .map(|(r, _)| *r)
+                        .collect();
+                    size(&v)
+                })
+                .collect(),
+        }
+    }
+}
+
+/// Steps 2 and 3: ranks the candidates, and adds the best significant one
+/// in rounds (one per term added, plus one per term refused), each added
+/// term's step pushed to `steps`. Returns the first round's ranking, with
+/// where the leading candidates act among the flagged slices.
+fn forward_selection(
+    sel: &mut Selection,
+    record: &StepRecord,
+    residual: &[f64],
+    settings: &GapSettings,
+    steps: &mut Vec<Step>,
+) -> Vec<Score> {
+    let fdr = settings.fdr;
+    let mut lib = library(&record.rows[..record.n_train]);
+    lib.extend(settings.user_effects.iter().cloned());
+    let mut candidates = Vec::new();
+    let mut round = 0;
+    while steps.len() <= settings.max_terms && round < 2 * settings.max_terms + 2 {
+        round += 1;
+        let ranked = rank(&sel.problem(), &lib, &settings.scoring, fdr);
+        for c in ranked.iter().take(8) {
+            tracing::trace!(
+                round,
+                candidate = %c.name,
+                cv_gain = c.cv_gain,
+                cv_gain_across = c.cv_gain_across,
+                p = c.p,
+                p_between = c.p_between,
+                p_adjusted = c.p_adjusted,
+                "ranked"
+            );
+        }
+        if round == 1 {
+            candidates = ranked.clone();
+            let named: Vec<(&str, Vec<bool>)> = record
+                .slices
+                .iter()
+                .map(|s| (s.name.as_str(), s.members.clone()))
+                .collect();
+            let leading = ACTS_FOR.min(candidates.len());
+            sel.acts_in(&mut candidates[..leading], &lib, &named, residual);
+        }
+        let Some(best) = next_term(&ranked, &candidates, &sel.terms, &sel.used, fdr) else {
+            break;
+        };
+        tracing::debug!(
+            round,
+            term = %best.name,
+            cv_gain = best.cv_gain,
+            cv_gain_across = best.cv_gain_across,
+            p_adjusted = best.p_adjusted,
+            "best significant candidate"
+        );
+        if let Some((refitted, res)) = sel.add(best, &lib) {
+            steps.push(record.step(best.name.clone(), Some(&refitted), sel.terms.last(), &res));
+        }
+    }
+    candidates
 }
 
 /// Each tire's wear from the final model's terms (none without terms).
