@@ -80,12 +80,17 @@ fn leads(candidates: &[Score]) -> Option<Leads> {
 /// step 1 flagged slices): what `gap validate` compares with the planted
 /// scope.
 pub(crate) fn leads_scope(d: &Diagnosis) -> Option<String> {
-    if d.steps.len() > 1 || d.slices.is_empty() {
+    if !shows_leads(d) {
         return None;
     }
     leads(&d.candidates)
         .and_then(|l| l.shared_scope)
         .map(|(scope, _)| scope)
+}
+
+/// Whether Findings prints the leads: no term, and slices flagged by step 1.
+fn shows_leads(d: &Diagnosis) -> bool {
+    d.steps.len() <= 1 && !d.slices.is_empty()
 }
 
 /// A candidate's name with its threshold in place of θ.
@@ -322,16 +327,18 @@ fn write_findings(s: &mut String, lines: &[String]) {
 fn findings(s: &mut String, d: &Diagnosis) {
     let terms = &d.steps[1.min(d.steps.len())..];
     if terms.is_empty() {
+        // Step 1 compares tires within events: a gap that differs only
+        // between tracks is not a slice (docs/gap.md, "Seed 345").
         let _ = writeln!(
             s,
             "No candidate effect is significant{}.",
             if d.slices.is_empty() {
-                " and no slice of the tires stands out: the model and the measurements agree within their noise"
+                " and no slice of the tires stands out from the noise. Slices are compared within events, so a gap that differs only between tracks would show in the testing events' RMSE against the training events', not as a slice"
             } else {
                 ": the flagged slices below stay unexplained"
             }
         );
-        if !d.slices.is_empty() {
+        if shows_leads(d) {
             write_leads(s, &d.candidates, d.fdr);
         }
     }
@@ -593,6 +600,87 @@ mod tests {
             kpi_scale: KpiScale::NONE,
             acts_in: Vec::new(),
         }
+    }
+
+    /// A diagnosis without a term: the baseline's step only, `slices`
+    /// flagged, six leads on the rear axle among its candidates.
+    fn no_term(slices: Vec<crate::gap::slices::Slice>) -> Diagnosis {
+        use crate::gap::report::{GapSize, Step};
+        let size = GapSize {
+            n: 10,
+            bias_pct: 0.0,
+            rmse_pct: 1.0,
+        };
+        Diagnosis {
+            baseline: "physics".into(),
+            physics: None,
+            physics_with_terms: None,
+            training_events: vec!["E1".into()],
+            testing_events: vec!["E2".into()],
+            censored: Vec::new(),
+            imputed: Vec::new(),
+            training: size,
+            testing: Some(size),
+            fdr: 0.05,
+            slices_tested: 4,
+            slices,
+            candidates: (0..6)
+                .map(|i| score(&format!("c{i}"), Some(Axle::Rear), 0.6 - 0.001 * i as f64))
+                .collect(),
+            steps: vec![Step {
+                added: "baseline".into(),
+                feature: None,
+                threshold: f64::NAN,
+                coefficient: f64::NAN,
+                cv_gain: f64::NAN,
+                p_adjusted: f64::NAN,
+                energy_share: None,
+                scope: None,
+                set_up: false,
+                training: size,
+                testing: Some(size),
+                slices: Vec::new(),
+            }],
+            terms_wear: Vec::new(),
+            final_terms: Vec::new(),
+            findings: Vec::new(),
+        }
+    }
+
+    /// Without a term or a flagged slice, Findings says that slices cannot
+    /// show a gap between tracks, claims no agreement, and lists no leads;
+    /// with a flagged slice it lists them and names the tires they share.
+    #[test]
+    fn without_a_term_findings_say_what_slices_cannot_show() {
+        let d = no_term(Vec::new());
+        let lines = findings_lines(&d);
+        assert_eq!(lines.len(), 1, "{lines:?}");
+        assert!(
+            lines[0].contains("differs only between tracks"),
+            "{}",
+            lines[0]
+        );
+        assert!(!lines[0].contains("agree"), "{}", lines[0]);
+        assert_eq!(leads_scope(&d), None);
+        let flagged = crate::gap::slices::Slice {
+            name: "axle = rear".into(),
+            n: 10,
+            mean_residual_pct: 1.0,
+            difference_pct: 2.0,
+            ci_pct: (1.0, 3.0),
+            effect_size: 1.0,
+            p: 1e-4,
+            p_adjusted: 1e-3,
+            share_of_squared_gap: 0.5,
+            explained_share: 0.4,
+            aliases: Vec::new(),
+            members: vec![true; 10],
+        };
+        let d = no_term(vec![flagged]);
+        let lines = findings_lines(&d);
+        assert!(lines[0].ends_with("the flagged slices below stay unexplained."));
+        assert!(lines[1].starts_with("Leads, not findings"), "{lines:?}");
+        assert_eq!(leads_scope(&d).as_deref(), Some("the rear axle"));
     }
 
     /// Paragraphs apart, numbered terms one list (as gap.md always had it).
