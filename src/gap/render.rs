@@ -321,23 +321,66 @@ fn write_findings(s: &mut String, lines: &[String]) {
     }
 }
 
+/// Findings' opening without a term: whether any candidate was
+/// significant (and why none entered), and what step 1 flagged.
+fn no_term(d: &Diagnosis) -> String {
+    let significant: Vec<&Score> = d
+        .candidates
+        .iter()
+        .filter(|c| c.significant(d.fdr))
+        .collect();
+    // Step 1 compares tires within events: a gap that differs only between
+    // tracks is not a slice (docs/gap.md, "Seed 345").
+    let quiet = "no slice of the tires stands out from the noise. Slices are compared within events, so a gap that differs only between tracks would show in the testing events' RMSE against the training events', not as a slice";
+    if significant.is_empty() {
+        return if d.slices.is_empty() {
+            format!("No candidate effect is significant and {quiet}.")
+        } else {
+            "No candidate effect is significant: the flagged slices below stay unexplained."
+                .to_string()
+        };
+    }
+    let listed: Vec<String> = significant
+        .iter()
+        .take(3)
+        .map(|c| {
+            format!(
+                "\"{}\" (p {:.3} adjusted, CV gain {:+.3} within tracks, {:+.3} across them)",
+                named_at_threshold(c),
+                c.p_adjusted,
+                c.cv_gain,
+                c.cv_gain_across
+            )
+        })
+        .collect();
+    let more = match significant.len() {
+        n if n > 3 => format!(" and {} more", n - 3),
+        _ => String::new(),
+    };
+    let (n, verb) = match significant.len() {
+        1 => ("One candidate".to_string(), "is"),
+        n => (format!("{n} candidates"), "are"),
+    };
+    let slices = if d.slices.is_empty() {
+        let mut c = quiet.chars();
+        c.next()
+            .map_or(String::new(), |f| f.to_uppercase().chain(c).collect())
+    } else {
+        "The flagged slices below stay unexplained".to_string()
+    };
+    format!(
+        "No term entered. {n} {verb} significant: {}{more}, but none both improves the prediction of held-out tracks (CV gain across tracks above 0) and passes step 3's checks. {slices}.",
+        listed.join("; ")
+    )
+}
+
 /// What the diagnosis found, in words: each term step 3 added with its
 /// threshold, its rate against the law's and its part of the wear where it
 /// acts; then the flagged slices the terms leave unexplained.
 fn findings(s: &mut String, d: &Diagnosis) {
     let terms = &d.steps[1.min(d.steps.len())..];
     if terms.is_empty() {
-        // Step 1 compares tires within events: a gap that differs only
-        // between tracks is not a slice (docs/gap.md, "Seed 345").
-        let _ = writeln!(
-            s,
-            "No candidate effect is significant{}.",
-            if d.slices.is_empty() {
-                " and no slice of the tires stands out from the noise. Slices are compared within events, so a gap that differs only between tracks would show in the testing events' RMSE against the training events', not as a slice"
-            } else {
-                ": the flagged slices below stay unexplained"
-            }
-        );
+        let _ = writeln!(s, "{}", no_term(d));
         if shows_leads(d) {
             write_leads(s, &d.candidates, d.fdr);
         }
@@ -604,7 +647,7 @@ mod tests {
 
     /// A diagnosis without a term: the baseline's step only, `slices`
     /// flagged, six leads on the rear axle among its candidates.
-    fn no_term(slices: Vec<crate::gap::slices::Slice>) -> Diagnosis {
+    fn without_terms(slices: Vec<crate::gap::slices::Slice>) -> Diagnosis {
         use crate::gap::report::{GapSize, Step};
         let size = GapSize {
             n: 10,
@@ -652,7 +695,7 @@ mod tests {
     /// with a flagged slice it lists them and names the tires they share.
     #[test]
     fn without_a_term_findings_say_what_slices_cannot_show() {
-        let d = no_term(Vec::new());
+        let d = without_terms(Vec::new());
         let lines = findings_lines(&d);
         assert_eq!(lines.len(), 1, "{lines:?}");
         assert!(
@@ -676,11 +719,32 @@ mod tests {
             aliases: Vec::new(),
             members: vec![true; 10],
         };
-        let d = no_term(vec![flagged]);
+        let d = without_terms(vec![flagged]);
         let lines = findings_lines(&d);
         assert!(lines[0].ends_with("the flagged slices below stay unexplained."));
         assert!(lines[1].starts_with("Leads, not findings"), "{lines:?}");
         assert_eq!(leads_scope(&d).as_deref(), Some("the rear axle"));
+    }
+
+    /// A significant candidate that did not enter (no gain across tracks):
+    /// Findings say so, with its figures, instead of "nothing significant".
+    #[test]
+    fn a_significant_candidate_that_did_not_enter_is_named() {
+        let mut d = without_terms(Vec::new());
+        d.candidates[2].p_adjusted = 0.026;
+        d.candidates[2].cv_gain = 0.2;
+        d.candidates[2].cv_gain_across = -0.05;
+        let lines = findings_lines(&d);
+        assert_eq!(
+            lines[0],
+            "No term entered. One candidate is significant: \"c2\" (p 0.026 adjusted, CV gain +0.200 within tracks, -0.050 across them), but none both improves the prediction of held-out tracks (CV gain across tracks above 0) and passes step 3's checks. No slice of the tires stands out from the noise. Slices are compared within events, so a gap that differs only between tracks would show in the testing events' RMSE against the training events', not as a slice."
+        );
+        for c in &mut d.candidates {
+            c.p_adjusted = 0.01;
+        }
+        let lines = findings_lines(&d);
+        assert!(lines[0].starts_with("No term entered. 6 candidates are significant"));
+        assert!(lines[0].contains("\"c2\" (p 0.010 adjusted, CV gain +0.200 within tracks, -0.050 across them) and 3 more, but"), "{}", lines[0]);
     }
 
     /// Paragraphs apart, numbered terms one list (as gap.md always had it).
