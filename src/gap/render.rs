@@ -321,6 +321,13 @@ fn write_findings(s: &mut String, lines: &[String]) {
     }
 }
 
+/// `text` with its first letter upper-case.
+fn capitalised(text: &str) -> String {
+    let mut c = text.chars();
+    c.next()
+        .map_or(String::new(), |f| f.to_uppercase().chain(c).collect())
+}
+
 /// Findings' opening without a term: whether any candidate was
 /// significant (and why none entered), and what step 1 flagged.
 fn no_term(d: &Diagnosis) -> String {
@@ -362,9 +369,7 @@ fn no_term(d: &Diagnosis) -> String {
         n => (format!("{n} candidates"), "are"),
     };
     let slices = if d.slices.is_empty() {
-        let mut c = quiet.chars();
-        c.next()
-            .map_or(String::new(), |f| f.to_uppercase().chain(c).collect())
+        capitalised(quiet)
     } else {
         "The flagged slices below stay unexplained".to_string()
     };
@@ -498,16 +503,13 @@ fn findings(s: &mut String, d: &Diagnosis) {
                 100.0 * x
             ),
             (None, component, x) => {
-                let mut c = name.chars();
                 let held = match (component, x) {
                     (Some(component), Some(x)) => {
                         format!(" ({:.0} % of the {component} of {scope})", 100.0 * x)
                     }
                     _ => String::new(),
                 };
-                c.next()
-                    .map_or(String::new(), |f| f.to_uppercase().chain(c).collect())
-                    + &held
+                capitalised(&name) + &held
             }
         };
         let advice = if st.set_up {
