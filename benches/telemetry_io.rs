@@ -18,6 +18,7 @@ fn bench(c: &mut Criterion) {
         let opts = SimOptions {
             preset: Preset::Tiny,
             scale: 1.0,
+            tracks: None,
             seed: 1,
             effects: vec![],
             generated: None,
@@ -66,6 +67,7 @@ fn bench_extract(c: &mut Criterion) {
     let s = simulate(&SimOptions {
         preset: if small { Preset::Tiny } else { Preset::Demo },
         scale: 1.0,
+        tracks: None,
         seed: 7,
         effects: vec![],
         generated: None,

@@ -485,6 +485,7 @@ impl BenchSeason {
         crate::sim::SimOptions {
             preset: self.preset,
             scale: self.scale,
+            tracks: None,
             seed: 1,
             effects: self
                 .effect

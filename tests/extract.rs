@@ -13,6 +13,7 @@ fn sim(out: &Path, preset: Preset, rate: f64) {
     simulate(&SimOptions {
         preset,
         scale: 1.0,
+        tracks: None,
         seed: 7,
         effects: vec![],
         generated: None,
@@ -490,6 +491,7 @@ fn bench_decode_lines_measure_a_given_season() {
     let summary = simulate(&SimOptions {
         preset: Preset::Tiny,
         scale: 1.0,
+        tracks: None,
         seed: 3,
         effects: vec![],
         generated: None,

@@ -63,6 +63,7 @@ fn settings(work: &std::path::Path) -> ValidateSettings {
         random: vec![],
         preset: tirewear::sim::Preset::Demo,
         scale: 1.0,
+        tracks: None,
         rate_hz: 5.0,
         scatter: tirewear::sim::WearScatter::NONE,
         work: work.to_path_buf(),

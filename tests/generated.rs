@@ -33,6 +33,7 @@ fn simulate_with(out: &Path, g: GeneratedEffect) -> (Vec<TruthRow>, GeneratedEff
     simulate(&SimOptions {
         preset: Preset::Tiny,
         scale: 1.0,
+        tracks: None,
         seed: 5,
         effects: vec![],
         generated: Some(g),

@@ -80,6 +80,7 @@ fn findings(seed: u64) -> Findings {
     simulate(&SimOptions {
         preset: Preset::Demo,
         scale: 1.0,
+        tracks: None,
         seed,
         effects: vec![],
         generated: None,

@@ -433,6 +433,7 @@ fn mutated_manifests_compounds_roads_and_wear_never_panic() {
     tirewear::sim::simulate(&tirewear::sim::SimOptions {
         preset: tirewear::sim::Preset::Tiny,
         scale: 1.0,
+        tracks: None,
         seed: 5,
         effects: vec![],
         generated: None,

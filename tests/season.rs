@@ -14,6 +14,7 @@ fn sim(out: &Path, seed: u64, encoding: Encoding, noise: bool, effects: Vec<Effe
     let opts = SimOptions {
         preset: Preset::Tiny,
         scale: 1.0,
+        tracks: None,
         seed,
         effects,
         generated: None,

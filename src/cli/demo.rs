@@ -31,6 +31,7 @@ pub(crate) fn run(a: DemoArgs, progress: bool) -> Result<()> {
     let opts = SimOptions {
         preset: Preset::Demo,
         scale: 1.0,
+        tracks: None,
         seed,
         effects: parse_effects(&effects)?,
         generated: None,

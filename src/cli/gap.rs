@@ -158,6 +158,11 @@ pub(crate) enum GapAction {
         /// event per track).
         #[arg(long, default_value_t = 0.5)]
         scale: f64,
+        /// Number of tracks of the simulated seasons, in place of the
+        /// preset's (as `tirewear simulate --tracks`): `--tracks 24 --scale 1`
+        /// gives 24 events on 24 tracks, 16 of them training tracks.
+        #[arg(long)]
+        tracks: Option<usize>,
         /// Telemetry rate of the simulated seasons (Hz).
         #[arg(long, default_value_t = 5.0)]
         rate: f64,
@@ -199,10 +204,13 @@ pub(crate) fn run_validate(
         serde_json::to_string_pretty(&cases)?.as_bytes(),
     )?;
     let md = format!(
-        "# Gap diagnosis on withheld effects\n\n{} seasons ({:?} preset, scale {}, {} Hz; wear scatter σ per event {}, run {}, tire {}, gauge bias {} mm) in {:.0} s.\n\n{table}",
+        "# Gap diagnosis on withheld effects\n\n{} seasons ({:?} preset, scale {}, {} tracks, {} Hz; wear scatter σ per event {}, run {}, tire {}, gauge bias {} mm) in {:.0} s.\n\n{table}",
         cases.len(),
         settings.preset,
         settings.scale,
+        settings
+            .tracks
+            .map_or_else(|| "the preset's".to_string(), |n| n.to_string()),
         settings.rate_hz,
         settings.scatter.event_sd,
         settings.scatter.run_sd,
@@ -280,6 +288,7 @@ pub(crate) fn run(a: GapArgs, progress: bool) -> Result<()> {
         random_from,
         preset,
         scale,
+        tracks,
         rate,
         wear_scatter,
         work,
@@ -311,6 +320,7 @@ pub(crate) fn run(a: GapArgs, progress: bool) -> Result<()> {
             random: (random_from..random_from + random).collect(),
             preset: preset.into(),
             scale,
+            tracks,
             rate_hz: rate,
             scatter: wear_scatter.into(),
             work: work.unwrap_or_else(|| out.join("seasons")),

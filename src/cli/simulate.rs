@@ -14,6 +14,14 @@ pub(crate) struct SimulateArgs {
     /// Multiplies the number of events of the `season` preset (toward full-season archives).
     #[arg(long, default_value_t = 1.0)]
     scale: f64,
+    /// Number of tracks, in place of the preset's (at most 64). The first
+    /// twelve are the catalogue's (docs/simulator.md); the others are
+    /// generated from their number alone, each parameter within the
+    /// catalogue's range, so track 13 is the same in every season. Events
+    /// visit each track once before any twice: `--preset season --scale 1
+    /// --tracks 24` is one event on each of 24 tracks.
+    #[arg(long)]
+    tracks: Option<usize>,
     /// Random seed: the same seed gives the same season.
     #[arg(long, default_value_t = 7)]
     seed: u64,
@@ -137,6 +145,7 @@ pub(crate) fn run(a: SimulateArgs, progress: bool) -> Result<()> {
     let opts = SimOptions {
         preset: a.preset.into(),
         scale: a.scale,
+        tracks: a.tracks,
         seed: a.seed,
         effects: parse_effects(&a.effects)?,
         generated: a.random_effect.map(tirewear::sim::GeneratedEffect::draw),

@@ -41,6 +41,9 @@ use wear::RoadTruth;
 pub struct SimOptions {
     pub preset: Preset,
     pub scale: f64,
+    /// Number of tracks, in place of the preset's (`None`: the preset's);
+    /// past the catalogue's twelve they are generated (`preset::tracks`).
+    pub tracks: Option<usize>,
     pub seed: u64,
     pub effects: Vec<Effect>,
     /// A randomly generated effect (`GeneratedEffect::draw`), resolved on
@@ -93,13 +96,27 @@ pub fn simulate(opts: &SimOptions) -> Result<SimSummary, SimError> {
             "the sample rate must be within 1..1000 Hz, got {r}"
         )));
     }
+    if let Some(n) = opts.tracks
+        && !(1..=preset::MAX_TRACKS).contains(&n)
+    {
+        return Err(SimError::Config(format!(
+            "the number of tracks must be within 1..{}, got {n}",
+            preset::MAX_TRACKS
+        )));
+    }
     let mut kinds: Vec<_> = opts.effects.iter().map(|e| e.kind).collect();
     kinds.sort();
     kinds.dedup();
     if kinds.len() != opts.effects.len() {
         return Err(SimError::Config("each effect may be given once".into()));
     }
-    let plan = Plan::new(opts.preset, opts.scale, opts.seed, opts.rate_hz);
+    let plan = Plan::new(
+        opts.preset,
+        opts.scale,
+        opts.tracks,
+        opts.seed,
+        opts.rate_hz,
+    );
     let out = &opts.out;
     let io = |p: &Path, e| SimError::Ingest(IngestError::io(p, e));
     std::fs::create_dir_all(out).map_err(|e| io(out, e))?;
@@ -719,4 +736,41 @@ fn generated_unit_pct(
 
 fn write_csv<T: serde::Serialize>(path: &Path, rows: &[T]) -> Result<(), SimError> {
     crate::atomic::write_csv(path, rows).map_err(|e| SimError::Ingest(IngestError::io(path, e)))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A number of tracks outside 1..=64 is refused by name before any file
+    /// is written.
+    #[test]
+    fn tracks_out_of_range_are_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        // 64 is the documented limit (docs/simulator.md).
+        for n in [0, 65] {
+            let out = dir.path().join(format!("s{n}"));
+            let opts = SimOptions {
+                preset: Preset::Tiny,
+                scale: 1.0,
+                tracks: Some(n),
+                seed: 1,
+                effects: Vec::new(),
+                generated: None,
+                scatter: WearScatter::NONE,
+                encoding: Encoding::Block,
+                rate_hz: None,
+                out: out.clone(),
+                sensor_noise: true,
+                logger_export: None,
+                progress: false,
+            };
+            let e = simulate(&opts).unwrap_err().to_string();
+            assert!(
+                e.contains("number of tracks") && e.contains(&n.to_string()),
+                "{e}"
+            );
+            assert!(!out.exists());
+        }
+    }
 }

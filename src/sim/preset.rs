@@ -240,6 +240,50 @@ pub fn track_catalogue() -> Vec<TrackDef> {
         .collect()
 }
 
+/// The most tracks a season may have (`SimOptions::tracks`).
+pub const MAX_TRACKS: usize = 64;
+
+/// The first `n` tracks of a season: the catalogue's twelve, then tracks
+/// generated from their index alone (`generated_track`), so that track 13
+/// is the same in every season that has it.
+pub fn tracks(n: usize) -> Vec<TrackDef> {
+    let mut tracks = track_catalogue();
+    tracks.truncate(n);
+    let first = tracks.len();
+    tracks.extend((first..n).map(generated_track));
+    tracks
+}
+
+/// Track `index` (0-based) beyond the catalogue: each parameter drawn
+/// uniformly from the catalogue's own range, from a generator seeded by the
+/// index (the road's seed follows the catalogue's numbering, 1000 + index).
+fn generated_track(index: usize) -> TrackDef {
+    let mut rng = ChaCha8Rng::seed_from_u64(0x7472_6163_6b00 + index as u64);
+    let mut within = |lo: f64, hi: f64| rng.random_range(lo..=hi);
+    let length_target_m = (within(3900.0, 6300.0) / 100.0).round() * 100.0;
+    let corners = within(9.0, 16.0).round() as usize;
+    let grip = within(0.96, 1.03);
+    let hidden_abrasiveness = within(0.97, 1.04);
+    let road = RoadParams {
+        hurst: within(0.66, 0.88),
+        rms_mm: within(0.28, 0.72),
+        rolloff_mm: within(17.0, 38.0),
+        cutoff_mm: 0.04,
+        skew_coef: within(-0.23, -0.01),
+        kurt_coef: within(0.0, 0.12),
+    };
+    TrackDef {
+        id: format!("track-{}", index + 1),
+        name: format!("Track {}", index + 1),
+        seed: 1000 + index as u64,
+        length_target_m,
+        corners,
+        grip,
+        hidden_abrasiveness,
+        road,
+    }
+}
+
 /// Days since 1970-01-01 of a civil date (proleptic Gregorian).
 fn days_from_civil(y: i64, m: i64, d: i64) -> i64 {
     let y = if m <= 2 { y - 1 } else { y };
@@ -265,11 +309,17 @@ fn civil_from_days(z: i64) -> (i64, i64, i64) {
 
 impl Plan {
     /// Builds the plan of a preset. `scale` multiplies the number of events
-    /// (season preset); `rate_hz` overrides the preset's sample rate.
-    pub fn new(preset: Preset, scale: f64, seed: u64, rate_hz: Option<f64>) -> Plan {
+    /// (season preset); `n_tracks` overrides the preset's number of tracks
+    /// (`tracks`) and `rate_hz` its sample rate.
+    pub fn new(
+        preset: Preset,
+        scale: f64,
+        n_tracks: Option<usize>,
+        seed: u64,
+        rate_hz: Option<f64>,
+    ) -> Plan {
         let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x7469_7265_7765_6172);
-        let all_tracks = track_catalogue();
-        let (name, n_tracks, n_events, n_cars, runs_per_car, rate, dist) = match preset {
+        let (name, preset_tracks, n_events, n_cars, runs_per_car, rate, dist) = match preset {
             Preset::Tiny => ("tiny", 2, 2, 1, 2, 20.0, (6e3, 12e3)),
             Preset::Demo => ("demo", 8, 10, 2, 4, 20.0, (30e3, 110e3)),
             Preset::Season => {
@@ -277,7 +327,8 @@ impl Plan {
                 ("season", 12, events, 3, 6, 200.0, (30e3, 110e3))
             }
         };
-        let tracks: Vec<TrackDef> = all_tracks.into_iter().take(n_tracks).collect();
+        let n_tracks = n_tracks.unwrap_or(preset_tracks);
+        let tracks = self::tracks(n_tracks);
         let cars: Vec<CarParams> = (0..n_cars)
             .map(|i| {
                 CarParams::single_seater(
@@ -394,9 +445,70 @@ mod tests {
 
     #[test]
     fn demo_has_enough_observations_from_separate_events() {
-        let p = Plan::new(Preset::Demo, 1.0, 7, None);
+        let p = Plan::new(Preset::Demo, 1.0, None, 7, None);
         assert!(p.runs.len() * 4 >= 280);
         assert_eq!(p.tracks.len(), 8);
         assert!(p.events.len() >= 10);
+    }
+
+    /// Generated tracks: the catalogue's first, then new ones the same in
+    /// every season, each parameter inside the catalogue's range, and each
+    /// event of a season with as many events as tracks on its own track.
+    #[test]
+    fn more_tracks_than_the_catalogue() {
+        let catalogue = track_catalogue();
+        let t = tracks(24);
+        assert_eq!(t.len(), 24);
+        assert_eq!(
+            t[..12].iter().map(|t| &t.id).collect::<Vec<_>>(),
+            catalogue.iter().map(|t| &t.id).collect::<Vec<_>>()
+        );
+        let ids: std::collections::BTreeSet<&str> = t.iter().map(|t| t.id.as_str()).collect();
+        assert_eq!(ids.len(), 24, "track ids are unique");
+        let range = |f: fn(&TrackDef) -> f64| {
+            catalogue
+                .iter()
+                .map(f)
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| {
+                    (lo.min(v), hi.max(v))
+                })
+        };
+        let params: [fn(&TrackDef) -> f64; 9] = [
+            |t| t.length_target_m,
+            |t| t.corners as f64,
+            |t| t.grip,
+            |t| t.hidden_abrasiveness,
+            |t| t.road.hurst,
+            |t| t.road.rms_mm,
+            |t| t.road.rolloff_mm,
+            |t| t.road.skew_coef,
+            |t| t.road.kurt_coef,
+        ];
+        for f in params {
+            let (lo, hi) = range(f);
+            for g in &t[12..] {
+                assert!(
+                    (lo..=hi).contains(&f(g)),
+                    "{}: {} outside {lo}..{hi}",
+                    g.id,
+                    f(g)
+                );
+            }
+            // Not one value for every generated track.
+            assert!(t[12..].iter().any(|g| f(g) != f(&t[12])));
+        }
+        assert_eq!(t[12].id, "track-13");
+        assert_eq!(t[12].seed, 1012);
+        assert_eq!(format!("{:?}", tracks(13)[12]), format!("{:?}", t[12]));
+
+        let p = Plan::new(Preset::Season, 1.0, Some(24), 3, None);
+        assert_eq!(p.tracks.len(), 24);
+        let mut visited: Vec<usize> = p.events.iter().map(|e| e.track).collect();
+        visited.sort();
+        assert_eq!(visited, (0..24).collect::<Vec<_>>());
+        assert_eq!(
+            Plan::new(Preset::Season, 0.5, None, 3, None).tracks.len(),
+            12
+        );
     }
 }

@@ -51,6 +51,8 @@ pub struct ValidateSettings {
     /// Season preset and scale of the simulated seasons.
     pub preset: crate::sim::Preset,
     pub scale: f64,
+    /// Number of tracks, in place of the preset's (`SimOptions::tracks`).
+    pub tracks: Option<usize>,
     /// Telemetry rate of the simulated seasons (Hz).
     pub rate_hz: f64,
     /// Wear variation no KPI measures in the simulated seasons.
@@ -231,6 +233,7 @@ pub fn run_case(
     let opts = crate::sim::SimOptions {
         preset: s.preset,
         scale: s.scale,
+        tracks: s.tracks,
         seed,
         effects: match planted_kind {
             Planted::Named(e) => vec![e.clone()],
@@ -345,6 +348,7 @@ mod tests {
         crate::sim::SimOptions {
             preset: crate::sim::Preset::Tiny,
             scale: 1.0,
+            tracks: None,
             seed,
             effects: Vec::new(),
             generated: None,

@@ -16,6 +16,7 @@ pub fn simulate_preset(
     tirewear::sim::simulate(&tirewear::sim::SimOptions {
         preset,
         scale: 1.0,
+        tracks: None,
         seed,
         effects: vec![],
         generated: None,
