@@ -233,8 +233,9 @@ fn render_generated(s: &mut String, cases: &[Case]) {
             .count();
         let _ = writeln!(
             s,
-            "\nWithout a term at ≥ 10 % of the variance: {} seasons; their leads name the tires they share in {}, the planted ones in {right}.",
+            "\nWithout a term at ≥ 10 % of the variance: {} season{}; their leads name the tires they share in {}, the planted ones in {right}.",
             no_term.len(),
+            if no_term.len() == 1 { "" } else { "s" },
             named.len()
         );
     }
@@ -363,6 +364,11 @@ mod tests {
                 "Clean seasons whose leads name the tires they share: 1 of 2; seed 5: every tire"
             ),
             "{md}"
+        );
+        let one = render(&cases[2..]);
+        assert!(
+            one.contains("Without a term at ≥ 10 % of the variance: 1 season; their leads name the tires they share in 0, the planted ones in 0."),
+            "{one}"
         );
     }
 }
