@@ -107,6 +107,10 @@ fn planted_graining_is_found_on_the_front_axle() {
     // shrinks the testing gap about as far as the ideal, which knows it.
     assert!((case.oracle_size - 1.0).abs() <= 0.15, "{case:?}");
     assert!(case.oracle_shrinkage > 0.9, "{case:?}");
+    // Without wear scatter every tire's factor is 1, so the planted shape
+    // the telemetry predicts is the planted shape itself.
+    assert_eq!(case.expected_size, case.oracle_size, "{case:?}");
+    assert_eq!(case.expected_shrinkage, case.oracle_shrinkage, "{case:?}");
     // Step 3 measures each flagged slice on the very tires step 1 flagged
     // (quantile edges are not re-read from the slice's printed name).
     assert!(!d.slices.is_empty());

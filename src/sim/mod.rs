@@ -501,6 +501,9 @@ struct TruthRow {
     wear_road_abrasion_pct: f64,
     wear_generated_pct: f64,
     wear_total_pct: f64,
+    /// The tire's wear scatter factor (`WearScatter::draw`), already in
+    /// every wear column above: 1 without `--wear-scatter`.
+    wear_scatter_factor: f64,
 }
 
 impl TruthRow {
@@ -537,6 +540,7 @@ impl TruthRow {
             wear_road_abrasion_pct: tw.effect_pct[3],
             wear_generated_pct: tw.generated_pct,
             wear_total_pct: tw.total_pct(),
+            wear_scatter_factor: tw.scatter_factor,
         }
     }
 }

@@ -104,6 +104,7 @@ impl TireWear {
             *e *= factor;
         }
         self.generated_pct *= factor;
+        self.scatter_factor *= factor;
     }
 }
 
@@ -116,6 +117,10 @@ pub(crate) struct TireWear {
     pub effect_pct: [f64; 4],
     /// A generated effect's wear (`sim::generated`).
     pub generated_pct: f64,
+    /// The factor `scale` multiplied every part by (`WearScatter::draw`;
+    /// 1 without scatter): the planted wear over it is what the telemetry
+    /// predicts, the rest is scatter no term can know.
+    pub scatter_factor: f64,
     /// Camber tilt and pressure crowning of the base-wear distribution.
     pub camber_tilt: f64,
     pub pressure_crown: f64,
@@ -188,6 +193,7 @@ pub(crate) fn tire_wear(
         irregular_pct,
         effect_pct,
         generated_pct: 0.0,
+        scatter_factor: 1.0,
         camber_tilt: -0.1 * truth.mean_camber_deg,
         pressure_crown: 2.0 * (truth.mean_pressure_pa / 130_000.0 - 1.0),
         new_depth_mm,
@@ -258,6 +264,7 @@ mod tests {
             irregular_pct: 6.0,
             effect_pct: [2.0, 0.0, 1.0, 0.0],
             generated_pct: 0.5,
+            scatter_factor: 1.0,
             camber_tilt: 0.3,
             pressure_crown: 0.1,
             new_depth_mm: 4.0,

@@ -111,6 +111,15 @@ pub struct Case {
     pub oracle_size: f64,
     pub rmse_oracle_pct: f64,
     pub oracle_shrinkage: f64,
+    /// The same for the planted shape the telemetry predicts: each tire's
+    /// planted wear over its wear scatter factor (`--wear-scatter`; NaN for
+    /// a season whose truth has no factors). The ideal and the planted
+    /// shape above carry the tire's own scatter of the planted part, which
+    /// no term can know; this is what a term of exactly the right form and
+    /// size can reach (equal to the above without scatter).
+    pub expected_size: f64,
+    pub rmse_expected_pct: f64,
+    pub expected_shrinkage: f64,
     /// Pearson correlation, over the tires diagnosed, of the wear the
     /// diagnosis's terms add with the planted wear (0 without terms).
     pub terms_correlation: f64,
@@ -269,8 +278,17 @@ pub fn run_case(
         ),
         Planted::Clean => (Planted::Clean, None),
     };
-    let planted = read_planted(&truth.join("wear_truth.csv"), column)?;
-    let case = score_case(&resolved, seed, &rows, &maps, &planted, &d, &gap)?;
+    let (planted, factors) = read_planted(&truth.join("wear_truth.csv"), column)?;
+    let case = score_case(
+        &resolved,
+        seed,
+        &rows,
+        &maps,
+        &planted,
+        factors.as_ref(),
+        &d,
+        &gap,
+    )?;
     if !s.keep {
         std::fs::remove_dir_all(&dir).map_err(|e| ValidateError::Io {
             path: dir.display().to_string(),
@@ -320,6 +338,9 @@ pub fn validate(s: &ValidateSettings) -> Vec<Case> {
                     oracle_size: f64::NAN,
                     rmse_oracle_pct: f64::NAN,
                     oracle_shrinkage: f64::NAN,
+                    expected_size: f64::NAN,
+                    rmse_expected_pct: f64::NAN,
+                    expected_shrinkage: f64::NAN,
                     error: Some(e.to_string()),
                 }
             }

@@ -178,16 +178,17 @@ fn render_generated(s: &mut String, cases: &[Case]) {
         let hits = g.iter().filter(|c| c.hit).count();
         let _ = writeln!(
             s,
-            "| {label} | {n} | {hits}/{n} ({:.0} %) | {:.2} | {:.2} | {:.2} | {} |",
+            "| {label} | {n} | {hits}/{n} ({:.0} %) | {:.2} | {:.2} | {:.2} | {:.2} | {} |",
             100.0 * hits as f64 / n as f64,
             median(g.iter().map(|c| c.terms_correlation).collect()),
             median(g.iter().map(|c| c.shrinkage_ratio).collect()),
             median(g.iter().map(|c| c.oracle_shrinkage).collect()),
+            median(g.iter().map(|c| c.expected_shrinkage).collect()),
             g.iter().filter(|c| c.significant_terms == 0).count(),
         );
     };
     s.push_str(
-        "\nGenerated effects (targets over those at ≥ 10 % of the wear variance: hit ≥ 80 %, median shrinkage ≥ 0.8 of the ideal; hit: the terms' wear correlates ≥ 0.8 with the planted wear; exact shape, sized: the planted wear itself as the term, its size fitted with the law on the training events, what the best term could reach):\n\n| seasons | n | hit | correlation (median) | shrinkage / ideal (median) | exact shape, sized: shrinkage (median) | no term |\n|---|---|---|---|---|---|---|\n",
+        "\nGenerated effects (targets over those at ≥ 10 % of the wear variance: hit ≥ 80 %, median shrinkage ≥ 0.8 of the ideal; hit: the terms' wear correlates ≥ 0.8 with the planted wear; exact shape, sized: the planted wear itself as the term, its size fitted with the law on the training events; expected shape: the same without each tire's wear scatter factor, which the ideal and the exact shape carry and no term can know, so what a term of the right form can reach):\n\n| seasons | n | hit | correlation (median) | shrinkage / ideal (median) | exact shape, sized: shrinkage (median) | expected shape, sized: shrinkage (median) | no term |\n|---|---|---|---|---|---|---|---|\n",
     );
     line(s, "all generated", &generated);
     line(s, "≥ 10 % of the variance", &big);
@@ -240,13 +241,13 @@ fn render_generated(s: &mut String, cases: &[Case]) {
         );
     }
     s.push_str(
-        "\n| effect | variance share | terms | correlation | RMSE baseline / diagnosed / ideal | shrinkage / ideal | exact shape: size, shrinkage |\n|---|---|---|---|---|---|---|\n",
+        "\n| effect | variance share | terms | correlation | RMSE baseline / diagnosed / ideal | shrinkage / ideal | exact shape: size, shrinkage | expected shape: size, shrinkage |\n|---|---|---|---|---|---|---|---|\n",
     );
     for c in &generated {
         let g = c.generated.as_ref().expect("generated");
         let _ = writeln!(
             s,
-            "| {g} | {:.1} % | {} | {:.2} | {:.3} / {:.3} / {:.3} | {:.2} | {:.3}, {:.2} |",
+            "| {g} | {:.1} % | {} | {:.2} | {:.3} / {:.3} / {:.3} | {:.2} | {:.3}, {:.2} | {:.3}, {:.2} |",
             100.0 * c.variance_share,
             c.first_term.as_deref().map_or(
                 c.leads_scope
@@ -266,6 +267,8 @@ fn render_generated(s: &mut String, cases: &[Case]) {
             c.shrinkage_ratio,
             c.oracle_size,
             c.oracle_shrinkage,
+            c.expected_size,
+            c.expected_shrinkage,
         );
     }
 }
@@ -297,6 +300,9 @@ mod tests {
             oracle_size: f64::NAN,
             rmse_oracle_pct: f64::NAN,
             oracle_shrinkage: f64::NAN,
+            expected_size: f64::NAN,
+            rmse_expected_pct: f64::NAN,
+            expected_shrinkage: f64::NAN,
             terms_correlation: f64::NAN,
             generated: None,
             error: None,

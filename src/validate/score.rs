@@ -10,11 +10,13 @@ use std::collections::BTreeMap;
 use std::path::Path;
 
 /// Planted wear (%) per (run, wheel) from `truth/wear_truth.csv`: the
-/// column `wear_<column>_pct` (None: zero).
+/// column `wear_<column>_pct` (None: zero); and each tire's wear scatter
+/// factor (`wear_scatter_factor`; None for a season simulated before the
+/// column was written).
 pub(super) fn read_planted(
     truth: &Path,
     column: Option<&str>,
-) -> Result<BTreeMap<TireRun, f64>, ValidateError> {
+) -> Result<(BTreeMap<TireRun, f64>, Option<BTreeMap<TireRun, f64>>), ValidateError> {
     let file = truth.display().to_string();
     let mut rd = csv::Reader::from_path(truth).map_err(|e| ValidateError::Truth {
         file: file.clone(),
@@ -44,7 +46,9 @@ pub(super) fn read_planted(
         Some(k) => Some(col(&format!("wear_{}_pct", k.replace('-', "_")))?),
         None => None,
     };
+    let factor_col = headers.iter().position(|h| h == "wear_scatter_factor");
     let mut out = BTreeMap::new();
+    let mut factors = BTreeMap::new();
     for (i, rec) in rd.records().enumerate() {
         let rec = rec.map_err(|e| ValidateError::Truth {
             file: file.clone(),
@@ -64,9 +68,17 @@ pub(super) fn read_planted(
             line: i + 2,
             message: format!("wheel '{}' is not FL, FR, RL or RR", &rec[wheel]),
         })?;
+        if let Some(c) = factor_col {
+            let f = rec[c].parse::<f64>().map_err(|_| ValidateError::Truth {
+                file: file.clone(),
+                line: i + 2,
+                message: format!("wear_scatter_factor '{}' is not a number", &rec[c]),
+            })?;
+            factors.insert((rec[run].to_string(), w), f);
+        }
         out.insert((rec[run].to_string(), w), v);
     }
-    Ok(out)
+    Ok((out, factor_col.map(|_| factors)))
 }
 
 fn variance(v: &[f64]) -> f64 {
@@ -81,11 +93,20 @@ pub(crate) fn score_case(
     rows: &[KpiRow],
     maps: &BTreeMap<TireRun, crate::kpi::energy_maps::EnergyMaps>,
     planted: &BTreeMap<TireRun, f64>,
+    scatter_factors: Option<&BTreeMap<TireRun, f64>>,
     d: &Diagnosis,
     gap: &GapSettings,
 ) -> Result<Case, ValidateError> {
     let planted_of = |r: &KpiRow| planted.get(&r.tire_run()).copied().unwrap_or(0.0);
     let p: Vec<f64> = rows.iter().map(planted_of).collect();
+    // The planted wear the telemetry predicts: without the tire's scatter
+    // factor, which multiplies every part of its wear and no term can know.
+    let expected: Option<Vec<f64>> = scatter_factors.and_then(|f| {
+        rows.iter()
+            .zip(&p)
+            .map(|(r, v)| f.get(&r.tire_run()).map(|f| v / f))
+            .collect()
+    });
     // The variance share over the tires the diagnosis keeps: a worn-through
     // tire's measured wear is capped while its planted wear is not.
     let (p_kept, w_kept): (Vec<f64>, Vec<f64>) = rows
@@ -139,6 +160,12 @@ pub(crate) fn score_case(
     } else {
         exact_shape_sized(rows, &p, law_alone)?
     };
+    let (expected_size, rmse_expected) = match &expected {
+        Some(e) if !matches!(planted_kind, Planted::Clean) => {
+            exact_shape_sized(rows, e, law_alone)?
+        }
+        _ => (f64::NAN, f64::NAN),
+    };
     let rmse_base = d.testing.map_or(f64::NAN, |t| t.rmse_pct);
     let last = d.steps.last().expect("the baseline step");
     let rmse_diag = last.testing.map_or(f64::NAN, |t| t.rmse_pct);
@@ -191,6 +218,9 @@ pub(crate) fn score_case(
         oracle_size,
         rmse_oracle_pct: rmse_oracle,
         oracle_shrinkage: (rmse_base - rmse_oracle) / (rmse_base - rmse_ideal),
+        expected_size,
+        rmse_expected_pct: rmse_expected,
+        expected_shrinkage: (rmse_base - rmse_expected) / (rmse_base - rmse_ideal),
         error: None,
     })
 }
@@ -312,5 +342,44 @@ mod tests {
         let (c, _) =
             exact_shape_sized(&flat, &planted, |y| Ok((sd(&y[..4]), sd(&y[4..])))).unwrap();
         assert_eq!(c, 0.0);
+    }
+
+    /// The planted column and the scatter factors, by run and wheel; a
+    /// truth without the factor column (an older season) gives none.
+    #[test]
+    fn planted_wear_and_scatter_factors_are_read_by_tire() {
+        let dir = tempfile::tempdir().unwrap();
+        let with = dir.path().join("with.csv");
+        std::fs::write(
+            &with,
+            "run,wheel,wear_generated_pct,wear_total_pct,wear_scatter_factor\n\
+             R1,FL,2.5,40,1.25\nR1,RR,0,30,0.8\n",
+        )
+        .unwrap();
+        let (planted, factors) = read_planted(&with, Some("generated")).unwrap();
+        let key = |w: crate::Wheel| ("R1".to_string(), w);
+        assert_eq!(planted[&key(crate::Wheel::FL)], 2.5);
+        assert_eq!(planted[&key(crate::Wheel::RR)], 0.0);
+        let factors = factors.unwrap();
+        assert_eq!(factors[&key(crate::Wheel::FL)], 1.25);
+        assert_eq!(factors[&key(crate::Wheel::RR)], 0.8);
+
+        let without = dir.path().join("without.csv");
+        std::fs::write(&without, "run,wheel,wear_generated_pct\nR1,FL,2.5\n").unwrap();
+        let (planted, factors) = read_planted(&without, Some("generated")).unwrap();
+        assert_eq!(planted.len(), 1);
+        assert!(factors.is_none());
+
+        let bad = dir.path().join("bad.csv");
+        std::fs::write(
+            &bad,
+            "run,wheel,wear_generated_pct,wear_scatter_factor\nR1,FL,2.5,x\n",
+        )
+        .unwrap();
+        let e = read_planted(&bad, Some("generated"))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("bad.csv, line 2:"), "{e}");
+        assert!(e.contains("wear_scatter_factor"), "{e}");
     }
 }
