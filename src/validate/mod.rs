@@ -278,17 +278,8 @@ pub fn run_case(
         ),
         Planted::Clean => (Planted::Clean, None),
     };
-    let (planted, factors) = read_planted(&truth.join("wear_truth.csv"), column)?;
-    let case = score_case(
-        &resolved,
-        seed,
-        &rows,
-        &maps,
-        &planted,
-        factors.as_ref(),
-        &d,
-        &gap,
-    )?;
+    let planted = read_planted(&truth.join("wear_truth.csv"), column)?;
+    let case = score_case(&resolved, seed, &rows, &maps, &planted, &d, &gap)?;
     if !s.keep {
         std::fs::remove_dir_all(&dir).map_err(|e| ValidateError::Io {
             path: dir.display().to_string(),

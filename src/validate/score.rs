@@ -9,14 +9,23 @@ use crate::sim::GeneratedEffect;
 use std::collections::BTreeMap;
 use std::path::Path;
 
+/// What a season's truth says of each tire (`read_planted`).
+#[derive(Debug)]
+pub(crate) struct PlantedWear {
+    /// Planted wear (%) per (run, wheel).
+    pub wear: BTreeMap<TireRun, f64>,
+    /// Each tire's wear scatter factor, already in `wear` (None for a
+    /// season simulated before `truth/wear_truth.csv` had the column).
+    pub scatter_factors: Option<BTreeMap<TireRun, f64>>,
+}
+
 /// Planted wear (%) per (run, wheel) from `truth/wear_truth.csv`: the
 /// column `wear_<column>_pct` (None: zero); and each tire's wear scatter
-/// factor (`wear_scatter_factor`; None for a season simulated before the
-/// column was written).
+/// factor (`wear_scatter_factor`) where the file has it.
 pub(super) fn read_planted(
     truth: &Path,
     column: Option<&str>,
-) -> Result<(BTreeMap<TireRun, f64>, Option<BTreeMap<TireRun, f64>>), ValidateError> {
+) -> Result<PlantedWear, ValidateError> {
     let file = truth.display().to_string();
     let mut rd = csv::Reader::from_path(truth).map_err(|e| ValidateError::Truth {
         file: file.clone(),
@@ -78,7 +87,10 @@ pub(super) fn read_planted(
         }
         out.insert((rec[run].to_string(), w), v);
     }
-    Ok((out, factor_col.map(|_| factors)))
+    Ok(PlantedWear {
+        wear: out,
+        scatter_factors: factor_col.map(|_| factors),
+    })
 }
 
 fn variance(v: &[f64]) -> f64 {
@@ -92,16 +104,16 @@ pub(crate) fn score_case(
     seed: u64,
     rows: &[KpiRow],
     maps: &BTreeMap<TireRun, crate::kpi::energy_maps::EnergyMaps>,
-    planted: &BTreeMap<TireRun, f64>,
-    scatter_factors: Option<&BTreeMap<TireRun, f64>>,
+    truth: &PlantedWear,
     d: &Diagnosis,
     gap: &GapSettings,
 ) -> Result<Case, ValidateError> {
+    let planted = &truth.wear;
     let planted_of = |r: &KpiRow| planted.get(&r.tire_run()).copied().unwrap_or(0.0);
     let p: Vec<f64> = rows.iter().map(planted_of).collect();
     // The planted wear the telemetry predicts: without the tire's scatter
     // factor, which multiplies every part of its wear and no term can know.
-    let expected: Option<Vec<f64>> = scatter_factors.and_then(|f| {
+    let expected: Option<Vec<f64>> = truth.scatter_factors.as_ref().and_then(|f| {
         rows.iter()
             .zip(&p)
             .map(|(r, v)| f.get(&r.tire_run()).map(|f| v / f))
@@ -356,19 +368,19 @@ mod tests {
              R1,FL,2.5,40,1.25\nR1,RR,0,30,0.8\n",
         )
         .unwrap();
-        let (planted, factors) = read_planted(&with, Some("generated")).unwrap();
+        let truth = read_planted(&with, Some("generated")).unwrap();
         let key = |w: crate::Wheel| ("R1".to_string(), w);
-        assert_eq!(planted[&key(crate::Wheel::FL)], 2.5);
-        assert_eq!(planted[&key(crate::Wheel::RR)], 0.0);
-        let factors = factors.unwrap();
+        assert_eq!(truth.wear[&key(crate::Wheel::FL)], 2.5);
+        assert_eq!(truth.wear[&key(crate::Wheel::RR)], 0.0);
+        let factors = truth.scatter_factors.unwrap();
         assert_eq!(factors[&key(crate::Wheel::FL)], 1.25);
         assert_eq!(factors[&key(crate::Wheel::RR)], 0.8);
 
         let without = dir.path().join("without.csv");
         std::fs::write(&without, "run,wheel,wear_generated_pct\nR1,FL,2.5\n").unwrap();
-        let (planted, factors) = read_planted(&without, Some("generated")).unwrap();
-        assert_eq!(planted.len(), 1);
-        assert!(factors.is_none());
+        let truth = read_planted(&without, Some("generated")).unwrap();
+        assert_eq!(truth.wear.len(), 1);
+        assert!(truth.scatter_factors.is_none());
 
         let bad = dir.path().join("bad.csv");
         std::fs::write(
