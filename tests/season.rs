@@ -290,3 +290,72 @@ fn manifest_errors_name_the_record() {
         "{err}"
     );
 }
+
+/// `wear_scatter_factor` in the truth is the factor that multiplied the
+/// tire's wear: the same season without scatter has every factor 1 and
+/// each tire's wear equal to the scattered one over its factor.
+#[test]
+fn the_truth_s_scatter_factor_is_what_multiplied_the_wear() {
+    #[derive(serde::Deserialize)]
+    struct Row {
+        run: String,
+        wheel: Wheel,
+        wear_base_pct: f64,
+        wear_total_pct: f64,
+        wear_scatter_factor: f64,
+    }
+    let season = |scatter| {
+        let dir = tempfile::tempdir().unwrap();
+        simulate(&SimOptions {
+            preset: Preset::Tiny,
+            scale: 1.0,
+            tracks: None,
+            seed: 11,
+            effects: vec![],
+            generated: None,
+            scatter,
+            encoding: Encoding::Block,
+            rate_hz: None,
+            out: dir.path().to_path_buf(),
+            sensor_noise: true,
+            logger_export: None,
+            progress: false,
+        })
+        .unwrap();
+        let rows: Vec<Row> = csv::Reader::from_path(dir.path().join("truth/wear_truth.csv"))
+            .unwrap()
+            .deserialize()
+            .map(Result::unwrap)
+            .collect();
+        rows
+    };
+    let plain = season(tirewear::sim::WearScatter::NONE);
+    let scattered = season(tirewear::sim::WearScatter::REALISTIC);
+    assert_eq!(plain.len(), 16);
+    assert_eq!(plain.len(), scattered.len());
+    for (p, s) in plain.iter().zip(&scattered) {
+        assert_eq!((&p.run, p.wheel), (&s.run, s.wheel));
+        assert_eq!(p.wear_scatter_factor, 1.0);
+        for (a, b) in [
+            (p.wear_base_pct, s.wear_base_pct),
+            (p.wear_total_pct, s.wear_total_pct),
+        ] {
+            let back = b / s.wear_scatter_factor;
+            assert!(
+                (back - a).abs() <= 1e-9 * a.abs(),
+                "{} {:?}: {a} vs {back}",
+                p.run,
+                p.wheel
+            );
+        }
+    }
+    // The realistic factors vary from tire to tire (σ ≈ 0.25 in the log).
+    let logs: Vec<f64> = scattered
+        .iter()
+        .map(|s| s.wear_scatter_factor.ln())
+        .collect();
+    let mean = logs.iter().sum::<f64>() / logs.len() as f64;
+    let sd =
+        (logs.iter().map(|l| (l - mean).powi(2)).sum::<f64>() / (logs.len() - 1) as f64).sqrt();
+    assert!((0.1..0.5).contains(&sd), "{sd}");
+}
