@@ -42,7 +42,7 @@ struct TruthRow {
     wear_total_pct: f64,
 }
 
-fn truth(dir: &Path) -> Vec<TruthRow> {
+fn truth<T: serde::de::DeserializeOwned>(dir: &Path) -> Vec<T> {
     csv::Reader::from_path(dir.join("truth/wear_truth.csv"))
         .unwrap()
         .deserialize()
@@ -158,7 +158,7 @@ fn friction_energy_recomputed_from_telemetry_equals_the_truth() {
     let dir = tempfile::tempdir().unwrap();
     sim(dir.path(), 9, Encoding::Block, false, vec![]);
     let season = Season::open(dir.path()).unwrap();
-    let truth = truth(dir.path());
+    let truth = truth::<TruthRow>(dir.path());
     for r in &season.manifest.runs {
         let tel = read_telemetry(&season.path(&r.telemetry)).unwrap();
         for w in Wheel::ALL {
@@ -199,7 +199,10 @@ fn planted_effect_adds_wear_only_where_it_acts() {
         true,
         vec![graining, blistering],
     );
-    let (c, p) = (truth(clean.path()), truth(planted.path()));
+    let (c, p) = (
+        truth::<TruthRow>(clean.path()),
+        truth::<TruthRow>(planted.path()),
+    );
     let mut front = 0.0;
     let mut rear = 0.0;
     for (a, b) in c.iter().zip(&p) {
@@ -322,12 +325,7 @@ fn the_truth_s_scatter_factor_is_what_multiplied_the_wear() {
             progress: false,
         })
         .unwrap();
-        let rows: Vec<Row> = csv::Reader::from_path(dir.path().join("truth/wear_truth.csv"))
-            .unwrap()
-            .deserialize()
-            .map(Result::unwrap)
-            .collect();
-        rows
+        truth::<Row>(dir.path())
     };
     let plain = season(tirewear::sim::WearScatter::NONE);
     let scattered = season(tirewear::sim::WearScatter::REALISTIC);

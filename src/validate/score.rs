@@ -64,12 +64,15 @@ pub(super) fn read_planted(
             line: i + 2,
             message: e.to_string(),
         })?;
-        let v = match effect {
-            Some(c) => rec[c].parse::<f64>().map_err(|_| ValidateError::Truth {
+        let number = |c: usize| {
+            rec[c].parse::<f64>().map_err(|_| ValidateError::Truth {
                 file: file.clone(),
                 line: i + 2,
-                message: format!("'{}' is not a number", &rec[c]),
-            })?,
+                message: format!("{} '{}' is not a number", &headers[c], &rec[c]),
+            })
+        };
+        let v = match effect {
+            Some(c) => number(c)?,
             None => 0.0,
         };
         let w = rec[wheel].parse().map_err(|_| ValidateError::Truth {
@@ -78,12 +81,7 @@ pub(super) fn read_planted(
             message: format!("wheel '{}' is not FL, FR, RL or RR", &rec[wheel]),
         })?;
         if let Some(c) = factor_col {
-            let f = rec[c].parse::<f64>().map_err(|_| ValidateError::Truth {
-                file: file.clone(),
-                line: i + 2,
-                message: format!("wear_scatter_factor '{}' is not a number", &rec[c]),
-            })?;
-            factors.insert((rec[run].to_string(), w), f);
+            factors.insert((rec[run].to_string(), w), number(c)?);
         }
         out.insert((rec[run].to_string(), w), v);
     }
