@@ -81,7 +81,16 @@ pub(super) fn read_planted(
             message: format!("wheel '{}' is not FL, FR, RL or RR", &rec[wheel]),
         })?;
         if let Some(c) = factor_col {
-            factors.insert((rec[run].to_string(), w), number(c)?);
+            // Every planted wear is divided by it.
+            let f = number(c)?;
+            if !(f.is_finite() && f > 0.0) {
+                return Err(ValidateError::Truth {
+                    file: file.clone(),
+                    line: i + 2,
+                    message: format!("wear_scatter_factor {f} is not a positive number"),
+                });
+            }
+            factors.insert((rec[run].to_string(), w), f);
         }
         out.insert((rec[run].to_string(), w), v);
     }
@@ -391,5 +400,21 @@ mod tests {
             .to_string();
         assert!(e.contains("bad.csv, line 2:"), "{e}");
         assert!(e.contains("wear_scatter_factor"), "{e}");
+        for f in ["0", "-1.2", "NaN", "inf"] {
+            std::fs::write(
+                &bad,
+                format!(
+                    "run,wheel,wear_generated_pct,wear_scatter_factor\nR1,FL,2.5,1\nR1,FR,1,{f}\n"
+                ),
+            )
+            .unwrap();
+            let e = read_planted(&bad, Some("generated"))
+                .unwrap_err()
+                .to_string();
+            assert!(
+                e.contains("bad.csv, line 3:") && e.contains("not a positive number"),
+                "{e}"
+            );
+        }
     }
 }
