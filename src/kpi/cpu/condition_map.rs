@@ -812,19 +812,23 @@ pub(crate) fn side_table(
     let (mut bin, mut lo, mut hi, mut lo_2, mut hi_2) = (vec![], vec![], vec![], vec![], vec![]);
     let mut e: [Vec<f64>; COMPONENTS] = Default::default();
     let layouts = map_layouts();
+    // Every tire has the same cells: their edges are worked out once.
+    let edges: Vec<Vec<[f64; 4]>> = layouts
+        .iter()
+        .map(|l| (0..l.cells).map(|b| l.edges(b)).collect())
+        .collect();
     for (r, w, m) in maps {
-        for l in &layouts {
-            for b in 0..l.cells {
+        for (l, edges) in layouts.iter().zip(&edges) {
+            for (b, &[a, b_, c, d]) in edges.iter().enumerate() {
                 let energies = l.energies(m, b);
                 if energies.iter().all(|e| *e == 0.0 || e.is_nan()) {
                     continue;
                 }
-                run.push(r.clone());
+                run.push(r.as_str());
                 wheel.push(w.name());
-                cond.push(l.name.clone());
-                unit.push(l.unit.clone());
+                cond.push(l.name.as_str());
+                unit.push(l.unit.as_str());
                 bin.push(b as u32);
-                let [a, b_, c, d] = l.edges(b);
                 lo.push(a);
                 hi.push(b_);
                 lo_2.push(c);
