@@ -255,7 +255,7 @@ pub(crate) fn write_batch_to(
 
 /// The file `ArrowWriter` writes (its schema, metadata and column
 /// writers), but each row group's columns are encoded on rayon threads at
-/// once: a big side table (the condition maps', 880 000 rows at season
+/// once: a big side table (the condition maps', 933 000 rows at season
 /// scale) is otherwise encoded on one thread after every run is done.
 fn write_row_groups(
     file: impl std::io::Write + Send,
