@@ -784,16 +784,15 @@ fn write_outputs(
     };
     let mut set = crate::atomic::OutputSet::new(&journal).map_err(io(&journal))?;
     let tables = encode_tables(opts, extraction_id, rows, curves, maps);
-    for (i, (dest, bytes)) in tables.into_iter().enumerate() {
+    for (dest, bytes) in tables {
         set.add(&dest, |f| std::io::Write::write_all(f, &bytes?))
             .map_err(io(&dest))?;
-        // The CSV copy of the KPI rows goes right after their Parquet file.
-        if let (0, Some(csv)) = (i, &opts.csv) {
-            set.add(csv, |f| {
-                crate::atomic::csv_to(std::io::BufWriter::new(f), rows)
-            })
-            .map_err(io(csv))?;
-        }
+    }
+    if let Some(csv) = &opts.csv {
+        set.add(csv, |f| {
+            crate::atomic::csv_to(std::io::BufWriter::new(f), rows)
+        })
+        .map_err(io(csv))?;
     }
     let report = side_table_path(&opts.out, "report.json");
     let text = serde_json::to_string_pretty(summary)

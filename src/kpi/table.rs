@@ -270,11 +270,11 @@ fn write_row_groups(
         .build();
     let w = parquet::arrow::ArrowWriter::try_new(file, batch.schema(), Some(props))?;
     let (mut file_writer, columns) = w.into_serialized_writer()?;
-    let rows = batch.num_rows();
+    let (rows, schema) = (batch.num_rows(), batch.schema());
     for (group, start) in (0..rows).step_by(rows_per_group.max(1)).enumerate() {
         let part = batch.slice(start, rows_per_group.min(rows - start));
         let mut leaves = Vec::new();
-        for (field, column) in part.schema().fields().iter().zip(part.columns()) {
+        for (field, column) in schema.fields().iter().zip(part.columns()) {
             leaves.extend(compute_leaves(field, column)?);
         }
         let writers = columns.create_column_writers(group)?;
