@@ -1,11 +1,13 @@
 //! The gap diagnosis: its statistics against statsmodels and scipy (goldens
-//! from tests/oracles/gap_oracle.py), and a small matrix of the validation on
+//! from tests/oracles/gap_oracle.py and tests/oracles/tobit_oracle.py), and a small matrix of the validation on
 //! withheld effects: a planted effect is found where the truth put it, and a
 //! clean season reports nothing.
 
 use tirewear::gap::report::{Diagnosis, GapSettings};
 use tirewear::gap::scoring::ScoringSettings;
-use tirewear::gap::stats::{VarianceComponents, benjamini_hochberg, clustered_difference};
+use tirewear::gap::stats::{
+    CensoredNormal, VarianceComponents, benjamini_hochberg, clustered_difference,
+};
 use tirewear::sim::{Effect, EffectKind};
 use tirewear::validate::{Case, Planted, ValidateSettings, run_case};
 
@@ -43,6 +45,59 @@ fn statistics_equal_statsmodels_and_scipy() {
             w.ci
         );
         assert!((p - w.p).abs() < 1e-9 * w.p.max(1e-3), "{p} vs {}", w.p);
+    }
+}
+
+#[derive(serde::Deserialize)]
+struct TobitCase {
+    values: Vec<f64>,
+    censored: Vec<bool>,
+    mean: f64,
+    sd: f64,
+    at: Vec<f64>,
+    mean_beyond: Vec<f64>,
+    mean_exp_beyond: Vec<f64>,
+}
+
+#[derive(serde::Deserialize)]
+struct TobitGolden {
+    cases: Vec<TobitCase>,
+}
+
+/// The censored-normal fit that imputes worn-through tires on the log scale
+/// (`--worn-through tobit`) against scipy's censored maximum likelihood, and
+/// its tail means against scipy's truncated normal and a quadrature. The fit
+/// is EM stopped at 1e-12 and scipy's a Nelder–Mead optimum (xatol 1e-12):
+/// they agree to 1e-7; the tail means are closed forms of the fit, so they
+/// are compared at the golden's parameters to 1e-9 relative.
+#[test]
+fn censored_normal_equals_scipy() {
+    let g: TobitGolden =
+        serde_json::from_str(include_str!("golden/tobit.json")).expect("golden parses");
+    for (i, case) in g.cases.iter().enumerate() {
+        let fit = CensoredNormal::fit(&case.values, &case.censored).expect("identified");
+        assert!(
+            (fit.mean - case.mean).abs() < 1e-7 && (fit.sd - case.sd).abs() < 1e-7,
+            "case {i}: {fit:?} vs ({}, {})",
+            case.mean,
+            case.sd
+        );
+        let golden = CensoredNormal {
+            mean: case.mean,
+            sd: case.sd,
+        };
+        for (j, &c) in case.at.iter().enumerate() {
+            let (b, e) = (golden.mean_beyond(c), golden.mean_exp_beyond(c));
+            let (want_b, want_e) = (case.mean_beyond[j], case.mean_exp_beyond[j]);
+            assert!(
+                (b - want_b).abs() < 1e-9 * want_b.abs().max(1.0),
+                "case {i} at {c}: {b} vs {want_b}"
+            );
+            assert!(
+                (e - want_e).abs() < 1e-9 * want_e,
+                "case {i} at {c}: {e} vs {want_e}"
+            );
+        }
     }
 }
 

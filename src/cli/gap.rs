@@ -67,7 +67,10 @@ pub(crate) struct GapStatsArgs {
     /// Tires whose tread wore through (their wear only a lower bound):
     /// `leave-out`, or `impute` the training events' ones by Buckley-James
     /// regression on the law (its prediction times the Kaplan-Meier mean of
-    /// the relative residuals beyond their own).
+    /// the relative residuals beyond their own), or `tobit`: the same with
+    /// the residuals' tail log-normal, its mean and sd fitted by censored
+    /// likelihood (reaches beyond the largest measured residual, where the
+    /// heavily worn tires lie when most of them wore through).
     /// Measured side by side in docs/gap.md ("Worn-through tires imputed").
     #[arg(long, value_enum, default_value = "leave-out")]
     worn_through: WornThroughArg,
@@ -77,6 +80,7 @@ pub(crate) struct GapStatsArgs {
 pub(crate) enum WornThroughArg {
     LeaveOut,
     Impute,
+    Tobit,
 }
 
 impl GapStatsArgs {
@@ -98,6 +102,7 @@ impl GapStatsArgs {
             worn_through: match self.worn_through {
                 WornThroughArg::LeaveOut => tirewear::gap::report::WornThrough::LeaveOut,
                 WornThroughArg::Impute => tirewear::gap::report::WornThrough::Impute,
+                WornThroughArg::Tobit => tirewear::gap::report::WornThrough::Tobit,
             },
         }
     }

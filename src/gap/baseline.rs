@@ -17,7 +17,7 @@
 //! Without an energy map the factor uses the run's mean surface temperature.
 
 use super::candidates::LawRow;
-use super::stats::KaplanMeier;
+use super::stats::{CensoredNormal, KaplanMeier};
 use crate::ingest::compound::Wlf;
 use crate::kpi::KpiRow;
 use crate::kpi::energy_maps::EnergyMaps;
@@ -100,34 +100,78 @@ fn usable(r: &KpiRow) -> bool {
 /// Rounds of imputation and calibration in [`PhysicsBaseline::fit_censored`].
 const BUCKLEY_JAMES_ROUNDS: usize = 5;
 
-/// Each row's wear with the censored rows' imputed from `predicted` (%):
-/// predicted · (1 + E[e | e > e_i]), the Kaplan–Meier mean of the relative
-/// residuals e = wear/predicted − 1 of every row (the censored ones as
-/// lower bounds) beyond the row's own e_i. One distribution for all rows,
-/// as Buckley–James assume: the heavily worn tires, most of which wear
-/// through, show nothing beyond their own lower bounds, so their tail can
-/// only be learnt from the rest (a window of the rows nearest in predicted
-/// wear was tried: docs/gap.md, "Worn-through tires imputed"). NaN where a
-/// censored row has no positive prediction.
-pub fn impute_censored(rows: &[&KpiRow], censored: &[bool], predicted: &[f64]) -> Vec<f64> {
-    let e: Vec<f64> = rows
-        .iter()
-        .zip(predicted)
-        .map(|(r, p)| {
-            if *p > 0.0 {
-                r.wear_mean_pct / p - 1.0
-            } else {
-                f64::NAN
+/// How a worn-through tire's wear beyond its lower bound is imputed from
+/// the law's residuals (docs/gap.md, "Worn-through tires imputed").
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum CensoredTail {
+    /// predicted · (1 + E[e | e > e_i]), the Kaplan–Meier mean of the
+    /// relative residuals e = wear/predicted − 1 beyond the row's own: no
+    /// assumption on their distribution, but no mass beyond the largest
+    /// observed residual.
+    KaplanMeier,
+    /// predicted · E[exp r | r > r_i], r = ln(wear/predicted) normal with
+    /// its mean and sd fitted by censored likelihood (a Tobit model of the
+    /// log residuals): the scatter of wear as multiplicative, which reaches
+    /// beyond the largest observed residual.
+    LogNormal,
+}
+
+/// Each row's wear with the censored rows' imputed from `predicted` (%) as
+/// `tail` says, from the residuals of every row (the censored ones as lower
+/// bounds). One distribution for all rows, as Buckley–James assume: the
+/// heavily worn tires, most of which wear through, show little beyond their
+/// own lower bounds, so their tail is learnt from the rest (a window of the
+/// rows nearest in predicted wear was tried: docs/gap.md, "Worn-through
+/// tires imputed"). NaN where a censored row has no positive prediction.
+pub fn impute_censored(
+    rows: &[&KpiRow],
+    censored: &[bool],
+    predicted: &[f64],
+    tail: CensoredTail,
+) -> Vec<f64> {
+    let residual = |f: &dyn Fn(f64, f64) -> f64| -> Vec<f64> {
+        rows.iter()
+            .zip(predicted)
+            .map(|(r, &p)| {
+                if p > 0.0 {
+                    f(r.wear_mean_pct, p)
+                } else {
+                    f64::NAN
+                }
+            })
+            .collect()
+    };
+    // Each censored row's wear over its prediction, NaN where undefined.
+    let tail_of = |x: &[f64], f: &dyn Fn(f64) -> f64| -> Vec<f64> {
+        x.iter()
+            .zip(censored)
+            .map(|(&x, &c)| if c && x.is_finite() { f(x) } else { f64::NAN })
+            .collect()
+    };
+    let factor = match tail {
+        CensoredTail::LogNormal => {
+            // ln of a non-positive wear is not finite: left out of the fit.
+            let r = residual(&|y, p| (y / p).ln());
+            match CensoredNormal::fit(&r, censored) {
+                Some(d) => tail_of(&r, &|r| d.mean_exp_beyond(r)),
+                None => {
+                    return impute_censored(rows, censored, predicted, CensoredTail::KaplanMeier);
+                }
             }
-        })
-        .collect();
-    let km = KaplanMeier::new(&e, censored);
+        }
+        CensoredTail::KaplanMeier => {
+            let e = residual(&|y, p| y / p - 1.0);
+            let km = KaplanMeier::new(&e, censored);
+            tail_of(&e, &|e| 1.0 + km.mean_beyond(e))
+        }
+    };
     rows.iter()
         .enumerate()
         .map(|(i, r)| match censored[i] {
             false => r.wear_mean_pct,
-            true if e[i].is_finite() => predicted[i] * (1.0 + km.mean_beyond(e[i])),
-            true => f64::NAN,
+            true => Some(predicted[i] * factor[i])
+                .filter(|v| v.is_finite())
+                .unwrap_or(f64::NAN),
         })
         .collect()
 }
@@ -221,12 +265,11 @@ impl PhysicsBaseline {
 
     /// Calibrates on rows some of whose wear is censored (`censored[i]`: the
     /// tire wore through, so its wear is at least `wear_mean_pct`), by
-    /// Buckley–James regression on the law's relative scale: calibrated on
-    /// the measured rows, each censored row's wear is imputed as the law's
-    /// prediction times 1 + E[e | e > e_i], the Kaplan–Meier mean of the
-    /// relative residuals e = wear/prediction − 1 beyond its own lower
-    /// bound e_i ([`impute_censored`]), and the law is calibrated again on
-    /// every row, [`BUCKLEY_JAMES_ROUNDS`] times. Leaving worn-through tires
+    /// Buckley–James regression on the law's scale: calibrated on the
+    /// measured rows, each censored row's wear is imputed as the law's
+    /// prediction times the mean of the residuals' distribution beyond its
+    /// own lower bound ([`impute_censored`] with `tail`), and the law is
+    /// calibrated again on every row, [`BUCKLEY_JAMES_ROUNDS`] times. Leaving worn-through tires
     /// out selects on the residual: the tires that wore most for their
     /// energy go, which biases wear per joule down where wear is high and
     /// hides an effect's strongest tires. Returns the law and each row's wear
@@ -236,6 +279,7 @@ impl PhysicsBaseline {
         maps: &[Option<&EnergyMaps>],
         wlf: &BTreeMap<String, Wlf>,
         censored: &[bool],
+        tail: CensoredTail,
     ) -> (PhysicsBaseline, Vec<f64>) {
         // The rows `fit` would calibrate on, and the censored ones beside.
         let ok: Vec<usize> = (0..rows.len())
@@ -258,7 +302,7 @@ impl PhysicsBaseline {
                     .zip(&ok_maps)
                     .map(|(r, m)| law.predict(r, *m))
                     .collect();
-                y = impute_censored(&ok_rows, &ok_censored, &predicted);
+                y = impute_censored(&ok_rows, &ok_censored, &predicted, tail);
                 law = PhysicsBaseline::fit_grid(&grid, &ok_rows, &y);
             }
         }
@@ -432,7 +476,37 @@ mod tests {
         // wear = E·(1 + ε) (k = 1 %/MJ), ε the 200 normal quantiles of sd
         // 0.2 in a scrambled order; a tire above 20 % reads 20 % and is
         // censored, 44 of 200. Left out, they take the tires that wore most
-        // for their energy and k falls to 0.95; imputed, k is 1 within 1 %.
+        // for their energy and k falls to 0.95; imputed, k is 1 within 1 %
+        // with the Kaplan–Meier tail and within 1.5 % with the log-normal
+        // one, whose upper tail is heavier than 1 + ε's (1.012).
+        let (rows, censored) = censored_rows(|eps| 1.0 + eps, 20.0);
+        assert_eq!(censored.iter().filter(|c| **c).count(), 44);
+        let k_left_out = k_with(&rows, &censored, None);
+        assert!(k_left_out < 0.96, "{k_left_out}");
+        for (tail, tolerance) in [
+            (CensoredTail::KaplanMeier, 0.01),
+            (CensoredTail::LogNormal, 0.015),
+        ] {
+            let k = k_with(&rows, &censored, Some(tail));
+            assert!((k - 1.0).abs() < tolerance, "{tail:?}: {k}");
+        }
+        // Log-normal scatter, exp(ε − σ²/2) (mean 1), read at 15 %: 90 of
+        // 200 censored. Left out, k falls to 0.90; imputed, within 0.5 %
+        // with either tail.
+        let (rows, censored) = censored_rows(|eps| (eps - 0.02).exp(), 15.0);
+        assert_eq!(censored.iter().filter(|c| **c).count(), 90);
+        let k_left_out = k_with(&rows, &censored, None);
+        assert!(k_left_out < 0.91, "{k_left_out}");
+        for tail in [CensoredTail::KaplanMeier, CensoredTail::LogNormal] {
+            let k = k_with(&rows, &censored, Some(tail));
+            assert!((k - 1.0).abs() < 0.005, "{tail:?}: {k}");
+        }
+    }
+
+    /// 200 rows of energy 5–24 MJ with wear = E·scatter(ε), ε the normal
+    /// quantiles of sd 0.2 in a scrambled order, read at most `limit` %
+    /// (and censored there).
+    fn censored_rows(scatter: impl Fn(f64) -> f64, limit: f64) -> (Vec<KpiRow>, Vec<bool>) {
         let normal = statrs::distribution::Normal::new(0.0, 0.2).unwrap();
         let n = 200;
         let rows: Vec<KpiRow> = (0..n)
@@ -446,35 +520,44 @@ mod tests {
                     friction_energy_j: e * 1e6,
                     t_surface_avg_c: 60.0,
                     skewness: 0.0,
-                    wear_mean_pct: (e * (1.0 + eps)).min(20.0),
+                    wear_mean_pct: (e * scatter(eps)).min(limit),
                     ..Default::default()
                 }
             })
             .collect();
-        let censored: Vec<bool> = rows.iter().map(|r| r.wear_mean_pct >= 20.0).collect();
-        assert_eq!(censored.iter().filter(|c| **c).count(), 44);
+        let censored = rows.iter().map(|r| r.wear_mean_pct >= limit).collect();
+        (rows, censored)
+    }
+
+    /// The law's k (%/MJ) with the censored rows left out (`None`) or
+    /// imputed with `tail`; each imputed wear must lie beyond its reading.
+    fn k_with(rows: &[KpiRow], censored: &[bool], tail: Option<CensoredTail>) -> f64 {
         let refs: Vec<&KpiRow> = rows.iter().collect();
-        let maps = vec![None; n];
-        let measured: Vec<&KpiRow> = refs
-            .iter()
-            .zip(&censored)
-            .filter(|(_, c)| !**c)
-            .map(|(r, _)| *r)
-            .collect();
-        let left_out = PhysicsBaseline::fit(&measured, &maps[..measured.len()], &BTreeMap::new());
-        let k_left_out = left_out.k_pct_per_mj["soft/front"];
-        let (law, wear) = PhysicsBaseline::fit_censored(&refs, &maps, &BTreeMap::new(), &censored);
-        let k = law.k_pct_per_mj["soft/front"];
-        assert!(k_left_out < 0.96, "{k_left_out}");
-        assert!((k - 1.0).abs() < 0.01, "{k}");
-        // Each imputed wear lies beyond its reading; the measured ones stay.
-        for ((r, w), c) in rows.iter().zip(&wear).zip(&censored) {
+        let maps = vec![None; rows.len()];
+        let Some(tail) = tail else {
+            let measured: Vec<&KpiRow> = refs
+                .iter()
+                .zip(censored)
+                .filter(|(_, c)| !**c)
+                .map(|(r, _)| *r)
+                .collect();
+            let law = PhysicsBaseline::fit(&measured, &maps[..measured.len()], &BTreeMap::new());
+            return law.k_pct_per_mj["soft/front"];
+        };
+        let (law, wear) =
+            PhysicsBaseline::fit_censored(&refs, &maps, &BTreeMap::new(), censored, tail);
+        for ((r, w), c) in rows.iter().zip(&wear).zip(censored) {
             if *c {
-                assert!(*w > r.wear_mean_pct, "{w}");
+                // Kaplan–Meier: the reading itself beyond the largest
+                // measured residual.
+                let beyond = *w > r.wear_mean_pct
+                    || (tail == CensoredTail::KaplanMeier && *w == r.wear_mean_pct);
+                assert!(beyond, "{tail:?}: {w}");
             } else {
                 assert_eq!(*w, r.wear_mean_pct);
             }
         }
+        law.k_pct_per_mj["soft/front"]
     }
 
     #[test]

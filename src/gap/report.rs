@@ -3,7 +3,7 @@
 //! 2) and how far it shrinks as terms are added (step 3); written as JSON
 //! and Markdown.
 
-use super::baseline::{PhysicsBaseline, impute_censored};
+use super::baseline::{CensoredTail, PhysicsBaseline, impute_censored};
 use super::candidates::{Candidate, Feature, LawRow, SET_UP_SHARE, library};
 use super::error::GapError;
 use super::linear::weighted_fit;
@@ -278,8 +278,23 @@ pub enum WornThrough {
     LeaveOut,
     /// The training events' ones enter the calibration, the slices and the
     /// tests with their wear imputed by Buckley–James regression on the
-    /// law (`PhysicsBaseline::fit_censored`).
+    /// law (`PhysicsBaseline::fit_censored`), the residuals' tail from
+    /// their Kaplan–Meier estimate.
     Impute,
+    /// As `Impute`, the tail from a log-normal scatter of wear about the
+    /// law fitted by censored likelihood (Tobit).
+    Tobit,
+}
+
+impl WornThrough {
+    /// How the imputed ones' tail is estimated; None when they are left out.
+    fn tail(self) -> Option<CensoredTail> {
+        match self {
+            WornThrough::LeaveOut => None,
+            WornThrough::Impute => Some(CensoredTail::KaplanMeier),
+            WornThrough::Tobit => Some(CensoredTail::LogNormal),
+        }
+    }
 }
 
 impl Default for GapSettings {
@@ -450,13 +465,16 @@ fn calibrate(
     maps: &BTreeMap<TireRun, EnergyMaps>,
     settings: &GapSettings,
 ) -> (Option<PhysicsBaseline>, Vec<KpiRow>) {
-    let worn_train: Vec<&KpiRow> = match settings.worn_through {
-        WornThrough::Impute => worn
+    let tail = settings.worn_through.tail();
+    let worn_train: Vec<&KpiRow> = match tail {
+        Some(_) => worn
             .iter()
             .filter(|r| s.train_events.contains(&r.event))
             .collect(),
-        WornThrough::LeaveOut => Vec::new(),
+        None => Vec::new(),
     };
+    // Nothing imputed when nothing wore through, so the tail is moot.
+    let tail = tail.unwrap_or(CensoredTail::KaplanMeier);
     // The training rows with the worn-through ones last, flagged.
     let train_all: Vec<&KpiRow> = s.train.iter().chain(&worn_train).copied().collect();
     let is_worn: Vec<bool> = (0..train_all.len()).map(|i| i >= s.train.len()).collect();
@@ -464,8 +482,13 @@ fn calibrate(
         Baseline::Physics => {
             let train_maps: Vec<Option<&EnergyMaps>> =
                 train_all.iter().map(|r| maps.get(&r.tire_run())).collect();
-            let (p, y) =
-                PhysicsBaseline::fit_censored(&train_all, &train_maps, &settings.wlf, &is_worn);
+            let (p, y) = PhysicsBaseline::fit_censored(
+                &train_all,
+                &train_maps,
+                &settings.wlf,
+                &is_worn,
+                tail,
+            );
             (Some(p), y[s.train.len()..].to_vec())
         }
         _ => (None, Vec::new()),
@@ -479,7 +502,7 @@ fn calibrate(
             .iter()
             .map(|r| predicted(baseline, None, r, maps))
             .collect();
-        impute_censored(&train_all, &is_worn, &predicted)[s.train.len()..].to_vec()
+        impute_censored(&train_all, &is_worn, &predicted, tail)[s.train.len()..].to_vec()
     };
     let imputed = worn_train
         .iter()
