@@ -791,6 +791,69 @@ mod tests {
     use super::*;
 
     #[test]
+    fn worn_through_tires_are_imputed_in_the_training_events_only() {
+        // 4 events × 6 runs × 4 wheels, wear = 1 %/MJ · E · scatter, read
+        // at most 30 % (worn through there). Left out, nothing is imputed;
+        // imputed by either tail, exactly the training events' worn-through
+        // tires are, and the testing event's stay out.
+        let mut rows = Vec::new();
+        for e in 0..4 {
+            for run in 0..6 {
+                for (w, wheel) in Wheel::ALL.into_iter().enumerate() {
+                    let energy_mj = 10.0 + 4.0 * run as f64 + w as f64;
+                    let scatter =
+                        1.0 + 0.25 * (((e * 24 + run * 4 + w) * 37 % 23) as f64 / 11.0 - 1.0);
+                    let wear = energy_mj * scatter;
+                    rows.push(KpiRow {
+                        event: format!("e{e}"),
+                        track: format!("t{e}"),
+                        car: "car1".into(),
+                        run: format!("e{e}-r{run}"),
+                        wheel,
+                        axle: wheel.axle(),
+                        compound: "soft".into(),
+                        friction_energy_j: energy_mj * 1e6,
+                        t_surface_avg_c: 80.0,
+                        wear_mean_pct: wear.min(30.0),
+                        worn_through_readings: if wear > 30.0 { 2.0 } else { 0.0 },
+                        ..Default::default()
+                    });
+                }
+            }
+        }
+        let worn = |event: &str| -> Vec<String> {
+            rows.iter()
+                .filter(|r| r.worn_through_readings > 0.0 && r.event == event)
+                .map(tire_name)
+                .collect()
+        };
+        let training_worn: Vec<String> = ["e0", "e1", "e2"].iter().flat_map(|e| worn(e)).collect();
+        assert!(!training_worn.is_empty() && !worn("e3").is_empty());
+        for how in [
+            WornThrough::LeaveOut,
+            WornThrough::Impute,
+            WornThrough::Tobit,
+        ] {
+            let settings = GapSettings {
+                test_events: Some(vec!["e3".into()]),
+                worn_through: how,
+                ..GapSettings::default()
+            };
+            let d = diagnose(&rows, &BTreeMap::new(), &Baseline::Physics, &settings).unwrap();
+            assert_eq!(d.censored.len(), training_worn.len() + worn("e3").len());
+            let mut imputed = d.imputed.clone();
+            imputed.sort();
+            let mut want = if how == WornThrough::LeaveOut {
+                Vec::new()
+            } else {
+                training_worn.clone()
+            };
+            want.sort();
+            assert_eq!(imputed, want, "{how:?}");
+        }
+    }
+
+    #[test]
     fn event_bootstrap_intervals_by_hand() {
         // Two events of 10 tires, y = 1·x in the first and 3·x in the
         // second, x the same in both. Drawing two events with replacement
