@@ -209,7 +209,7 @@ pub(crate) fn run_validate(
         serde_json::to_string_pretty(&cases)?.as_bytes(),
     )?;
     let md = format!(
-        "# Gap diagnosis on withheld effects\n\n{} seasons ({:?} preset, scale {}, {} tracks, {} Hz; wear scatter σ per event {}, run {}, tire {}, gauge bias {} mm) in {:.0} s.\n\n{table}",
+        "# Gap diagnosis on withheld effects\n\n{} seasons ({:?} preset, scale {}, {} tracks, {} Hz; wear scatter σ per event {}, run {}, tire {}, gauge bias {} mm; worn-through tires: {}) in {:.0} s.\n\n{table}",
         cases.len(),
         settings.preset,
         settings.scale,
@@ -221,6 +221,7 @@ pub(crate) fn run_validate(
         settings.scatter.run_sd,
         settings.scatter.tire_sd,
         settings.scatter.gauge_bias_sd_mm,
+        settings.gap.worn_through.name(),
         started.elapsed().as_secs_f64()
     );
     tirewear::atomic::write_bytes(&out.join("validate.md"), md.as_bytes())?;

@@ -3,7 +3,7 @@
 
 use super::baseline::PhysicsBaseline;
 use super::candidates::{Feature, SET_UP_SHARE, SetUpForm, significant};
-use super::report::Diagnosis;
+use super::report::{Diagnosis, WornThrough};
 use super::scoring::Score;
 use std::fmt::Write;
 
@@ -128,9 +128,17 @@ pub fn render_markdown(d: &Diagnosis, max_slices: usize) -> String {
                 d.censored.len(),
             )
         } else {
+            let tail = match d.worn_through {
+                WornThrough::Tobit => {
+                    "E[e^r | r > r_i] of the log residuals r = ln(wear/prediction), normal with their mean and sd fitted by censored likelihood (Tobit)"
+                }
+                _ => {
+                    "1 plus the Kaplan–Meier mean of the relative residuals wear/prediction − 1 beyond their own"
+                }
+            };
             writeln!(
                 s,
-                "\n{} tires worn through (depth readings at ≤ 5 % of the new depth), so their wear is only a lower bound: {listed}. {} of them, of the training events, enter with their wear imputed (Buckley–James: the model's prediction times the Kaplan–Meier mean of the relative residuals beyond their own); the other {} are left out.",
+                "\n{} tires worn through (depth readings at ≤ 5 % of the new depth), so their wear is only a lower bound: {listed}. {} of them, of the training events, enter with their wear imputed (Buckley–James: the model's prediction times {tail}); the other {} are left out.",
                 d.censored.len(),
                 d.imputed.len(),
                 d.censored.len() - d.imputed.len(),
@@ -664,6 +672,7 @@ mod tests {
             testing_events: vec!["E2".into()],
             censored: Vec::new(),
             imputed: Vec::new(),
+            worn_through: Default::default(),
             training: size,
             testing: Some(size),
             fdr: 0.05,
@@ -730,6 +739,26 @@ mod tests {
 
     /// A significant candidate that did not enter (no gain across tracks):
     /// Findings say so, with its figures, instead of "nothing significant".
+    #[test]
+    fn the_report_says_how_worn_through_tires_were_imputed() {
+        let mut d = without_terms(Vec::new());
+        let text = |d: &Diagnosis| render_markdown(d, 5);
+        d.censored = vec!["R1/FL".into(), "R2/FR".into(), "R9/RL".into()];
+        assert!(text(&d).contains("3 tires left out"), "{}", text(&d));
+        d.imputed = vec!["R1/FL".into(), "R2/FR".into()];
+        for (how, says) in [
+            (WornThrough::Impute, "Kaplan–Meier"),
+            (WornThrough::Tobit, "Tobit"),
+        ] {
+            d.worn_through = how;
+            let t = text(&d);
+            assert!(
+                t.contains(says) && t.contains("the other 1 are left out"),
+                "{t}"
+            );
+        }
+    }
+
     #[test]
     fn a_significant_candidate_that_did_not_enter_is_named() {
         let mut d = without_terms(Vec::new());

@@ -148,6 +148,8 @@ pub struct Diagnosis {
     /// `PhysicsBaseline::fit_censored`); the rest (the testing events') are
     /// left out of the gap's measure.
     pub imputed: Vec<String>,
+    /// What was done with the worn-through tires (`--worn-through`).
+    pub worn_through: WornThrough,
     pub training: GapSize,
     pub testing: Option<GapSize>,
     /// False-discovery rate of the slice tests.
@@ -287,6 +289,15 @@ pub enum WornThrough {
 }
 
 impl WornThrough {
+    /// The setting as `--worn-through` names it.
+    pub fn name(self) -> &'static str {
+        match self {
+            WornThrough::LeaveOut => "leave-out",
+            WornThrough::Impute => "impute",
+            WornThrough::Tobit => "tobit",
+        }
+    }
+
     /// How the imputed ones' tail is estimated; None when they are left out.
     fn tail(self) -> Option<CensoredTail> {
         match self {
@@ -424,6 +435,7 @@ pub fn diagnose(
         testing_events: s.test_events.clone(),
         censored,
         imputed: imputed_tires,
+        worn_through: settings.worn_through,
         training: size(trv),
         testing: (!tev.is_empty()).then(|| size(tev)),
         fdr,
