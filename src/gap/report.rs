@@ -477,16 +477,16 @@ fn calibrate(
     maps: &BTreeMap<TireRun, EnergyMaps>,
     settings: &GapSettings,
 ) -> (Option<PhysicsBaseline>, Vec<KpiRow>) {
-    let tail = settings.worn_through.tail();
-    let worn_train: Vec<&KpiRow> = match tail {
-        Some(_) => worn
-            .iter()
-            .filter(|r| s.train_events.contains(&r.event))
-            .collect(),
-        None => Vec::new(),
+    // Left out: nothing to impute, so the tail is moot.
+    let (worn_train, tail): (Vec<&KpiRow>, _) = match settings.worn_through.tail() {
+        Some(tail) => (
+            worn.iter()
+                .filter(|r| s.train_events.contains(&r.event))
+                .collect(),
+            tail,
+        ),
+        None => (Vec::new(), CensoredTail::KaplanMeier),
     };
-    // Nothing imputed when nothing wore through, so the tail is moot.
-    let tail = tail.unwrap_or(CensoredTail::KaplanMeier);
     // The training rows with the worn-through ones last, flagged.
     let train_all: Vec<&KpiRow> = s.train.iter().chain(&worn_train).copied().collect();
     let is_worn: Vec<bool> = (0..train_all.len()).map(|i| i >= s.train.len()).collect();

@@ -4,8 +4,7 @@
 //! the Kaplan–Meier and censored-normal (Tobit) tail means that impute
 //! worn-through tires' wear.
 
-use statrs::distribution::{ContinuousCDF, StudentsT};
-use statrs::function::erf::erfc;
+use statrs::distribution::{Continuous, ContinuousCDF, Normal, StudentsT};
 
 /// The distinct levels of `keys` (sorted) and each key's level index.
 pub(crate) fn levels<'a>(
@@ -321,7 +320,7 @@ impl CensoredNormal {
 
 /// Φ(z), the standard normal distribution function.
 fn normal_cdf(z: f64) -> f64 {
-    0.5 * erfc(-z / std::f64::consts::SQRT_2)
+    Normal::standard().cdf(z)
 }
 
 /// The inverse Mills ratio φ(a) / (1 − Φ(a)); its asymptotic series where
@@ -330,8 +329,8 @@ fn inverse_mills(a: f64) -> f64 {
     if a > 30.0 {
         return a + 1.0 / a - 2.0 / a.powi(3);
     }
-    let density = (-0.5 * a * a).exp() / (2.0 * std::f64::consts::PI).sqrt();
-    density / normal_cdf(-a)
+    let n = Normal::standard();
+    n.pdf(a) / n.sf(a)
 }
 
 #[cfg(test)]
