@@ -239,37 +239,8 @@ mod tests {
         // rear); E_hot is the energy with the surface above 80 °C. The law
         // calibrated without the term is off; backfitting returns to the
         // planted law and c exactly (β and s on their grids).
-        let (beta, s, c) = (0.03, 0.2, 0.5);
-        let mut rows = Vec::new();
-        let mut maps = Vec::new();
-        for i in 0..48 {
-            let (compound, axle, k) = if i % 2 == 0 {
-                ("soft", crate::Axle::Front, 1.5)
-            } else {
-                ("hard", crate::Axle::Rear, 0.8)
-            };
-            let cool_mj = 4.0 + (i % 5) as f64;
-            let warm_mj = 1.0 + (i % 4) as f64;
-            let hot_mj = 0.5 * (i % 7) as f64;
-            let sk = -1.0 + 0.1 * (i % 9) as f64;
-            let mut m = EnergyMaps::new();
-            m.add(61.0, 90.0, 1.0, cool_mj * 1e6); // surface bin 60–65 °C
-            m.add(76.0, 100.0, 1.0, warm_mj * 1e6); // surface bin 75–80 °C
-            m.add(91.0, 110.0, 1.0, hot_mj * 1e6); // surface bin 90–95 °C
-            let phi = |t: f64| (beta * (t - 60.0)).exp();
-            let law = cool_mj * phi(62.5) + warm_mj * phi(77.5) + hot_mj * phi(92.5);
-            rows.push(KpiRow {
-                compound: compound.into(),
-                axle,
-                track: format!("t{}", i % 6),
-                friction_energy_j: (cool_mj + warm_mj + hot_mj) * 1e6,
-                t_surface_avg_c: 70.0,
-                skewness: sk,
-                wear_mean_pct: k * (s * sk).exp() * (law + c * hot_mj),
-                ..Default::default()
-            });
-            maps.push(m);
-        }
+        let (beta, s, c) = (BETA, SKEWNESS, 0.5);
+        let (rows, maps, _) = planted_season(48, c, 0.0, f64::INFINITY);
         let refs: Vec<&KpiRow> = rows.iter().collect();
         let map_refs: Vec<Option<&EnergyMaps>> = maps.iter().map(Some).collect();
         let y: Vec<f64> = rows.iter().map(|r| r.wear_mean_pct).collect();
@@ -279,15 +250,7 @@ mod tests {
             start.temperature_factor,
             TemperatureFactor::Exponential { beta_per_k: beta }
         );
-        let thermal = library(&refs)
-            .into_iter()
-            .find(|c| c.name == "thermal degradation (energy with a hot surface)")
-            .expect("thermal candidate");
-        let terms = [Term {
-            candidate: thermal,
-            threshold: 80.0,
-            kpi_scale: KpiScale::NONE,
-        }];
+        let terms = [thermal_term(&refs)];
         let mut d = Rows {
             rows: &refs,
             maps: &map_refs,
@@ -310,17 +273,25 @@ mod tests {
         assert!(worst < 1e-6, "{worst}");
     }
 
-    /// Rows whose wear is the planted law and thermal term (as in the test
-    /// above: β = 0.03 /K, s = 0.2, k = 1.5 and 0.8) times a log-normal
-    /// scatter (σ = 0.15, seeded), each row's hot energy 0–3 MJ; wear above
-    /// `limit` reads as the limit (worn through).
-    fn censored_season(c: f64, limit: f64) -> (Vec<KpiRow>, Vec<EnergyMaps>, Vec<bool>) {
+    /// The planted law's β (/K) and s.
+    const BETA: f64 = 0.03;
+    const SKEWNESS: f64 = 0.2;
+
+    /// `n` rows whose wear is the planted law (β, s; k = 1.5 soft front,
+    /// 0.8 hard rear) and thermal term c·E_hot, times a log-normal scatter
+    /// (sd `scatter`, seeded), each row's hot energy 0–3 MJ; wear above
+    /// `limit` reads as the limit (worn through, flagged).
+    fn planted_season(
+        n: usize,
+        c: f64,
+        scatter: f64,
+        limit: f64,
+    ) -> (Vec<KpiRow>, Vec<EnergyMaps>, Vec<bool>) {
         use rand::SeedableRng;
         use rand_distr::{Distribution, StandardNormal};
-        let (beta, s) = (0.03, 0.2);
         let mut rng = rand::rngs::StdRng::seed_from_u64(7);
         let (mut rows, mut maps, mut worn) = (Vec::new(), Vec::new(), Vec::new());
-        for i in 0..400 {
+        for i in 0..n {
             let (compound, axle, k) = if i % 2 == 0 {
                 ("soft", crate::Axle::Front, 1.5)
             } else {
@@ -331,13 +302,13 @@ mod tests {
             let hot_mj = 0.5 * (i % 7) as f64;
             let sk = -1.0 + 0.1 * (i % 9) as f64;
             let mut m = EnergyMaps::new();
-            m.add(61.0, 90.0, 1.0, cool_mj * 1e6);
-            m.add(76.0, 100.0, 1.0, warm_mj * 1e6);
-            m.add(91.0, 110.0, 1.0, hot_mj * 1e6);
-            let phi = |t: f64| (beta * (t - 60.0)).exp();
+            m.add(61.0, 90.0, 1.0, cool_mj * 1e6); // surface bin 60–65 °C
+            m.add(76.0, 100.0, 1.0, warm_mj * 1e6); // surface bin 75–80 °C
+            m.add(91.0, 110.0, 1.0, hot_mj * 1e6); // surface bin 90–95 °C
+            let phi = |t: f64| (BETA * (t - 60.0)).exp();
             let law = cool_mj * phi(62.5) + warm_mj * phi(77.5) + hot_mj * phi(92.5);
             let z: f64 = StandardNormal.sample(&mut rng);
-            let wear = k * (s * sk).exp() * (law + c * hot_mj) * (0.15 * z).exp();
+            let wear = k * (SKEWNESS * sk).exp() * (law + c * hot_mj) * (scatter * z).exp();
             worn.push(wear > limit);
             rows.push(KpiRow {
                 compound: compound.into(),
@@ -354,6 +325,19 @@ mod tests {
         (rows, maps, worn)
     }
 
+    /// Thermal degradation at 80 °C, the planted term.
+    fn thermal_term(rows: &[&KpiRow]) -> Term {
+        let thermal = library(rows)
+            .into_iter()
+            .find(|c| c.name == "thermal degradation (energy with a hot surface)")
+            .expect("thermal candidate");
+        Term {
+            candidate: thermal,
+            threshold: 80.0,
+            kpi_scale: KpiScale::NONE,
+        }
+    }
+
     #[test]
     fn worn_through_tires_are_imputed_again_with_the_terms() {
         // The hot tires wear most and wear through most (a third of the
@@ -364,7 +348,7 @@ mod tests {
         // low, left out 13 % low; imputed again from the law and the term
         // each round (Buckley–James with the term) within 1 %.
         let (c, limit) = (2.0, 20.0);
-        let (rows, maps, worn) = censored_season(c, limit);
+        let (rows, maps, worn) = planted_season(400, c, 0.15, limit);
         let share = worn.iter().filter(|&&w| w).count() as f64 / worn.len() as f64;
         assert!((0.15..0.5).contains(&share), "{share}");
         let refs: Vec<&KpiRow> = rows.iter().collect();
@@ -372,15 +356,7 @@ mod tests {
         let no_wlf = BTreeMap::new();
         let tail = CensoredTail::LogNormal;
         let (law, y) = PhysicsBaseline::fit_censored(&refs, &map_refs, &no_wlf, &worn, tail);
-        let thermal = library(&refs)
-            .into_iter()
-            .find(|c| c.name == "thermal degradation (energy with a hot surface)")
-            .expect("thermal candidate");
-        let terms = [Term {
-            candidate: thermal,
-            threshold: 80.0,
-            kpi_scale: KpiScale::NONE,
-        }];
+        let terms = [thermal_term(&refs)];
         let term_c = |censoring: Option<Censoring>| {
             let mut d = Rows {
                 rows: &refs,
@@ -399,7 +375,7 @@ mod tests {
             tail,
         }));
         let full = {
-            let (rows, maps, _) = censored_season(c, f64::INFINITY);
+            let (rows, maps, _) = planted_season(400, c, 0.15, f64::INFINITY);
             let refs: Vec<&KpiRow> = rows.iter().collect();
             let map_refs: Vec<Option<&EnergyMaps>> = maps.iter().map(Some).collect();
             let law = PhysicsBaseline::fit(&refs, &map_refs, &no_wlf);
