@@ -374,41 +374,27 @@ mod tests {
             bound: rows.iter().map(|r| r.wear_mean_pct).collect(),
             tail,
         }));
-        let full = {
-            let (rows, maps, _) = planted_season(400, c, 0.15, f64::INFINITY);
-            let refs: Vec<&KpiRow> = rows.iter().collect();
-            let map_refs: Vec<Option<&EnergyMaps>> = maps.iter().map(Some).collect();
+        // The term fitted with the law on measured wear, on a selection.
+        let uncensored = |rows: &[KpiRow], maps: &[EnergyMaps], keep: &dyn Fn(usize) -> bool| {
+            let kept: Vec<usize> = (0..rows.len()).filter(|&i| keep(i)).collect();
+            let refs: Vec<&KpiRow> = kept.iter().map(|&i| &rows[i]).collect();
+            let map_refs: Vec<Option<&EnergyMaps>> = kept.iter().map(|&i| Some(&maps[i])).collect();
             let law = PhysicsBaseline::fit(&refs, &map_refs, &no_wlf);
             let mut d = Rows {
                 rows: &refs,
                 maps: &map_refs,
-                y: rows.iter().map(|r| r.wear_mean_pct).collect(),
+                y: refs.iter().map(|r| r.wear_mean_pct).collect(),
                 n_train: refs.len(),
                 censoring: None,
             };
             let r = refit_law(&law, &terms, &mut d, &no_wlf);
             r.coefficients[r.coefficients.len() - 1]
         };
-        let left_out = {
-            let keep: Vec<&KpiRow> = (0..rows.len())
-                .filter(|&i| !worn[i])
-                .map(|i| &rows[i])
-                .collect();
-            let km: Vec<Option<&EnergyMaps>> = (0..rows.len())
-                .filter(|&i| !worn[i])
-                .map(|i| Some(&maps[i]))
-                .collect();
-            let law = PhysicsBaseline::fit(&keep, &km, &no_wlf);
-            let mut d = Rows {
-                rows: &keep,
-                maps: &km,
-                y: keep.iter().map(|r| r.wear_mean_pct).collect(),
-                n_train: keep.len(),
-                censoring: None,
-            };
-            let r = refit_law(&law, &terms, &mut d, &no_wlf);
-            r.coefficients[r.coefficients.len() - 1]
+        let full = {
+            let (rows, maps, _) = planted_season(400, c, 0.15, f64::INFINITY);
+            uncensored(&rows, &maps, &|_| true)
         };
+        let left_out = uncensored(&rows, &maps, &|i| !worn[i]);
         let off = |x: f64| (x / full - 1.0).abs();
         assert!(
             off(again) < 0.02,
