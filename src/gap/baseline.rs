@@ -129,16 +129,22 @@ pub fn impute_censored(
     predicted: &[f64],
     tail: CensoredTail,
 ) -> Vec<f64> {
+    let wear: Vec<f64> = rows.iter().map(|r| r.wear_mean_pct).collect();
+    impute_wear(&wear, censored, predicted, tail)
+}
+
+/// [`impute_censored`] on the rows' wear (%; a censored row's its lower
+/// bound).
+pub(crate) fn impute_wear(
+    wear: &[f64],
+    censored: &[bool],
+    predicted: &[f64],
+    tail: CensoredTail,
+) -> Vec<f64> {
     let residual = |f: &dyn Fn(f64, f64) -> f64| -> Vec<f64> {
-        rows.iter()
+        wear.iter()
             .zip(predicted)
-            .map(|(r, &p)| {
-                if p > 0.0 {
-                    f(r.wear_mean_pct, p)
-                } else {
-                    f64::NAN
-                }
-            })
+            .map(|(&y, &p)| if p > 0.0 { f(y, p) } else { f64::NAN })
             .collect()
     };
     // Each censored row's wear over its prediction, NaN where undefined.
@@ -155,7 +161,7 @@ pub fn impute_censored(
             match CensoredNormal::fit(&r, censored) {
                 Some(d) => tail_of(&r, &|r| d.mean_exp_beyond(r)),
                 None => {
-                    return impute_censored(rows, censored, predicted, CensoredTail::KaplanMeier);
+                    return impute_wear(wear, censored, predicted, CensoredTail::KaplanMeier);
                 }
             }
         }
@@ -165,10 +171,10 @@ pub fn impute_censored(
             tail_of(&e, &|e| 1.0 + km.mean_beyond(e))
         }
     };
-    rows.iter()
+    wear.iter()
         .enumerate()
-        .map(|(i, r)| match censored[i] {
-            false => r.wear_mean_pct,
+        .map(|(i, &y)| match censored[i] {
+            false => y,
             true => Some(predicted[i] * factor[i])
                 .filter(|v| v.is_finite())
                 .unwrap_or(f64::NAN),

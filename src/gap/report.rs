@@ -7,7 +7,7 @@ use super::baseline::{CensoredTail, PhysicsBaseline, impute_censored};
 use super::candidates::{Candidate, Feature, LawRow, SET_UP_SHARE, library};
 use super::error::GapError;
 use super::linear::weighted_fit;
-use super::recalibrate::{Rows, Term};
+use super::recalibrate::{Censoring, Rows, Term};
 pub use super::render::render_markdown;
 use super::scoring::{Score, ScoringSettings, rank};
 use super::selection::{Selection, next_term};
@@ -388,6 +388,11 @@ pub fn diagnose(
         );
     }
     let imputed_tires: Vec<String> = imputed.iter().map(tire_name).collect();
+    let bounds: BTreeMap<TireRun, f64> = worn
+        .iter()
+        .filter(|r| imputed.iter().any(|i| i.tire_run() == r.tire_run()))
+        .map(|r| (r.tire_run(), r.wear_mean_pct))
+        .collect();
     s.train.extend(imputed.iter());
     let predict = |r: &KpiRow| predicted(baseline, physics.as_ref(), r, maps);
     let observed = Observed::new(&s, maps, &predict)?;
@@ -409,7 +414,7 @@ pub fn diagnose(
     let base = base_columns(physics.as_ref(), &observed, &predict);
     let track_level = track_level(physics.is_some(), base.len());
     let mut sel = Selection::new(
-        observed.data(),
+        observed.data(&bounds, settings.worn_through.tail()),
         physics.as_ref(),
         &settings.wlf,
         base,
@@ -596,12 +601,26 @@ impl<'a> Observed<'a> {
         })
     }
 
-    fn data(&self) -> Rows<'_> {
+    /// The rows for step 3; `bounds`: the imputed training tires' measured
+    /// wear (their lower bounds), imputed again as terms enter.
+    fn data(&self, bounds: &BTreeMap<TireRun, f64>, tail: Option<CensoredTail>) -> Rows<'_> {
+        let censoring = tail.filter(|_| !bounds.is_empty()).map(|tail| {
+            let train = &self.rows[..self.n_train];
+            let bound_of = |i: usize| bounds.get(&train[i].tire_run()).copied();
+            Censoring {
+                worn: (0..self.n_train).map(|i| bound_of(i).is_some()).collect(),
+                bound: (0..self.n_train)
+                    .map(|i| bound_of(i).unwrap_or(self.y[i]))
+                    .collect(),
+                tail,
+            }
+        });
         Rows {
             rows: &self.rows,
             maps: &self.maps,
-            y: &self.y,
+            y: self.y.clone(),
             n_train: self.n_train,
+            censoring,
         }
     }
 }
@@ -785,7 +804,7 @@ fn final_terms(sel: &Selection, steps: &[Step], seed: u64) -> Vec<FinalTerm> {
         .iter()
         .map(|r| r.event.as_str())
         .collect();
-    let ci = bootstrap_terms(base, &sel.final_w, sel.data.y, &events, n_terms, seed);
+    let ci = bootstrap_terms(base, &sel.final_w, &sel.data.y, &events, n_terms, seed);
     steps[1..]
         .iter()
         .zip(ci)

@@ -105,7 +105,7 @@ impl<'a> Selection<'a> {
         named: &[(&str, Vec<bool>)],
         residual: &[f64],
     ) {
-        let (y, train_idx) = (self.data.y, self.train_idx());
+        let (y, train_idx) = (&self.data.y, self.train_idx());
         let before = weighted_fit(&self.base, &self.w, y, &train_idx).1;
         for c in candidates {
             if c.coefficient == 0.0 {
@@ -153,24 +153,26 @@ impl<'a> Selection<'a> {
             kpi_scale: best.kpi_scale,
         };
         self.used.push(best.name.clone());
-        let y = self.data.y;
+        // The wear before the term: a refused term leaves it as it was.
+        let y_before = self.data.y.clone();
         // Under a statistical baseline the design with the term's column.
         let (k, fitted, law_refit, with) = match self.physics {
             Some(p) => {
                 let with_term = [self.terms.as_slice(), std::slice::from_ref(&term)].concat();
                 let start = self.refitted_law.as_ref().unwrap_or(p);
-                let r = refit_law(start, &with_term, &self.data, self.wlf);
+                let r = refit_law(start, &with_term, &mut self.data, self.wlf);
                 (r.coefficients.clone(), r.fitted.clone(), Some(r), None)
             }
             None => {
                 let mut with = self.base.clone();
                 with.push(term.column(self.data.rows, self.data.maps, &self.law));
-                let (k, fitted) = weighted_fit(&with, &self.w, y, &self.train_idx());
+                let (k, fitted) = weighted_fit(&with, &self.w, &self.data.y, &self.train_idx());
                 (k, fitted, None, Some(with))
             }
         };
         let coefficient = k[k.len() - 1];
         if cand.adds_wear_only() && coefficient <= 0.0 {
+            self.data.y = y_before;
             tracing::info!(
                 term = %best.name,
                 coefficient,
@@ -184,6 +186,7 @@ impl<'a> Selection<'a> {
         // it, and extrapolates as the term alone (docs/gap.md, "A term may
         // not take the law's place").
         if let Some((group, k)) = law_refit.as_ref().and_then(|r| not_abrading(&r.law)) {
+            self.data.y = y_before;
             tracing::info!(
                 term = %best.name,
                 group = %group,
@@ -192,7 +195,10 @@ impl<'a> Selection<'a> {
             );
             return None;
         }
-        let residual: Vec<f64> = y.iter().zip(&fitted).map(|(a, b)| a - b).collect();
+        let residual: Vec<f64> = (self.data.y.iter())
+            .zip(&fitted)
+            .map(|(a, b)| a - b)
+            .collect();
         self.track_level.push(cand.feature.track_level());
         if let Some(with) = with {
             self.base = with;
