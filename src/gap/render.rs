@@ -465,6 +465,10 @@ fn findings(s: &mut String, d: &Diagnosis) {
             x => format!(": {:.0} % less predicted wear on the tires it acts on", -x),
         };
         let testing = match (d.steps[t].testing, st.testing) {
+            (Some(a), Some(b)) if b.rmse_pct > a.rmse_pct => format!(
+                " Testing-event RMSE {:.3} → {:.3} %: worse on the events the selection never saw, so it may not carry to a new event (a term can fit the training events' scatter; docs/gap.md, \"When a term makes the testing events worse\").",
+                a.rmse_pct, b.rmse_pct
+            ),
             (Some(a), Some(b)) => format!(
                 " Testing-event RMSE {:.3} → {:.3} %.",
                 a.rmse_pct, b.rmse_pct
@@ -529,6 +533,9 @@ fn findings(s: &mut String, d: &Diagnosis) {
         };
         let _ = writeln!(s, "{}. {name} {rate}{share}.{advice}{testing}{acts}", t + 1);
     }
+    if let Some(line) = worse_on_testing(d) {
+        let _ = writeln!(s, "\n{line}");
+    }
     // Flagged slices whose mean residual the terms leave at more than half.
     if let (Some(first), Some(last)) = (d.steps.first(), d.steps.last())
         && d.steps.len() > 1
@@ -554,6 +561,20 @@ fn findings(s: &mut String, d: &Diagnosis) {
             );
         }
     }
+}
+
+/// Whether the terms together left the testing events' RMSE above the
+/// baseline's: then they fit the training events without carrying to the
+/// events the selection never saw, and the user is told so, in figures.
+fn worse_on_testing(d: &Diagnosis) -> Option<String> {
+    let (first, last) = (d.steps.first()?, d.steps.last()?);
+    let (a, b) = (first.testing?, last.testing?);
+    (d.steps.len() > 1 && b.rmse_pct > a.rmse_pct).then(|| {
+        format!(
+            "With the terms the testing events' RMSE is {:.3} % against the baseline's {:.3} %: the terms above improve the training events but not the events the selection never saw. Read them as leads to check, not as mechanisms found.",
+            b.rmse_pct, a.rmse_pct
+        )
+    })
 }
 
 /// The leads when nothing is significant, marked as such: the candidates
@@ -776,6 +797,53 @@ mod tests {
         let lines = findings_lines(&d);
         assert!(lines[0].starts_with("No term entered. 6 candidates are significant"));
         assert!(lines[0].contains("\"c2\" (p 0.010 adjusted, CV gain +0.200 within tracks, -0.050 across them) and 3 more, but"), "{}", lines[0]);
+    }
+
+    /// A term that raised the testing events' RMSE is marked in its line,
+    /// and the terms together, when they leave it above the baseline's, get
+    /// a paragraph of their own; a term that lowered it gets neither.
+    #[test]
+    fn a_term_that_made_the_testing_events_worse_is_marked() {
+        let mut d = without_terms(Vec::new());
+        let baseline = d.steps[0].clone();
+        let term = |testing_rmse: f64| crate::gap::report::Step {
+            added: "KPI t_track_avg_c".into(),
+            feature: Some(Feature::Kpi("t_track_avg_c")),
+            testing: Some(crate::gap::report::GapSize {
+                n: 10,
+                bias_pct: 0.0,
+                rmse_pct: testing_rmse,
+            }),
+            ..baseline.clone()
+        };
+        // Seed 8 with the imputed tires (docs/gap.md): 4.26 → 5.57 %.
+        d.steps[0].testing.as_mut().unwrap().rmse_pct = 4.26;
+        d.steps.push(term(5.57));
+        let lines = findings_lines(&d);
+        let line = lines.iter().find(|l| l.starts_with("1. ")).unwrap();
+        assert!(
+            line.contains(
+                "Testing-event RMSE 4.260 → 5.570 %: worse on the events the selection never saw"
+            ),
+            "{line}"
+        );
+        assert!(
+            lines.iter().any(|l| l.starts_with(
+                "With the terms the testing events' RMSE is 5.570 % against the baseline's 4.260 %"
+            )),
+            "{lines:?}"
+        );
+        // A second term that brings it back below the baseline: only the
+        // first is marked, and no paragraph.
+        d.steps.push(term(4.0));
+        let lines = findings_lines(&d);
+        assert_eq!(lines.iter().filter(|l| l.contains(": worse on")).count(), 1);
+        assert!(
+            lines
+                .iter()
+                .any(|l| l.contains("Testing-event RMSE 5.570 → 4.000 %."))
+        );
+        assert!(!lines.iter().any(|l| l.starts_with("With the terms")));
     }
 
     /// Paragraphs apart, numbered terms one list (as gap.md always had it).
