@@ -66,7 +66,40 @@ pub struct BenchReport {
     pub gpu: Option<String>,
     pub threads: usize,
     pub lines: Vec<BenchLine>,
+    /// Where each season's one-thread extraction spent its time.
+    pub extract_splits: Vec<ExtractSplit>,
+    /// Problems met (a GPU kernel that failed, an engine skipped).
     pub notes: Vec<String>,
+}
+
+/// Where a one-thread extraction's time went (seconds), from its summary
+/// (the best repeat's): which stage bounds the ratio to zstd. `rest` is
+/// the wall time outside the runs: reading the season, the road KPIs and
+/// writing the tables.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct ExtractSplit {
+    pub kernel: String,
+    pub wall_s: f64,
+    pub zstd_s: f64,
+    pub decode_s: f64,
+    pub cleaning_s: f64,
+    pub reductions_s: f64,
+    pub rest_s: f64,
+}
+
+impl ExtractSplit {
+    fn new(kernel: &str, wall: Duration, zstd: Duration, s: &crate::kpi::ExtractSummary) -> Self {
+        let wall_s = wall.as_secs_f64();
+        ExtractSplit {
+            kernel: kernel.into(),
+            wall_s,
+            zstd_s: zstd.as_secs_f64(),
+            decode_s: s.decode_seconds,
+            cleaning_s: s.prepare_seconds,
+            reductions_s: s.reduce_seconds - s.prepare_seconds,
+            rest_s: wall_s - s.decode_seconds - s.reduce_seconds,
+        }
+    }
 }
 
 /// One kernel's input, shared by its measured lines.
@@ -100,14 +133,18 @@ impl Workload {
     }
 }
 
+/// The best time of `repeats` calls, with that call's result.
 fn best<T>(repeats: usize, mut f: impl FnMut() -> T) -> (Duration, T) {
     let mut out = None;
     let mut best = Duration::MAX;
     for _ in 0..repeats.max(1) {
         let t = Instant::now();
         let r = f();
-        best = best.min(t.elapsed());
-        out = Some(r);
+        let d = t.elapsed();
+        if out.is_none() || d < best {
+            best = d;
+            out = Some(r);
+        }
     }
     (best, out.expect("one repeat"))
 }
@@ -206,6 +243,7 @@ pub fn run_bench(o: &BenchOptions) -> BenchReport {
         gpu: None,
         threads,
         lines: Vec::new(),
+        extract_splits: Vec::new(),
         notes: Vec::new(),
     };
     let gpu = if o.gpu {
@@ -559,11 +597,13 @@ fn season_decode_lines(
             season,
             scratch.join("bench-kpis.parquet"),
         ))
-        .map(|s| s.rows)
     };
-    let (e1, rows) = best(o.repeats, || one_thread(extract));
-    rows.map_err(|e| format!("extract: {e}"))?;
+    let (e1, summary) = best(o.repeats, || one_thread(extract));
+    let summary = summary.map_err(|e| format!("extract: {e}"))?;
     report.lines.push(w.line("extract, 1 thread", e1, None));
+    report
+        .extract_splits
+        .push(ExtractSplit::new(label, e1, z1, &summary));
     if o.gpu {
         gpu_extract_lines(o, season, scratch, &w, report);
     }
@@ -769,6 +809,22 @@ pub fn render(r: &BenchReport) -> String {
          the same bytes; decode: zstd alone decompressing the same chunks; gap: \
          its 10 s target)"
     );
+    for x in &r.extract_splits {
+        let ms = |v: f64| v * 1e3;
+        let _ = writeln!(
+            s,
+            "{}: extract, 1 thread, {:.0} ms = decoding {:.0} ms (zstd alone {:.0} ms) + \
+             cleaning {:.0} ms + reductions and rows {:.0} ms + the rest {:.0} ms \
+             (season, road KPIs, writing)",
+            x.kernel,
+            ms(x.wall_s),
+            ms(x.decode_s),
+            ms(x.zstd_s),
+            ms(x.cleaning_s),
+            ms(x.reductions_s),
+            ms(x.rest_s)
+        );
+    }
     for n in &r.notes {
         let _ = writeln!(s, "note: {n}");
     }

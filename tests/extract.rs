@@ -536,4 +536,22 @@ fn bench_decode_lines_measure_a_given_season() {
         );
         assert!(l.vs_memory_pass > 0.0 && l.vs_memory_pass.is_finite());
     }
+    // The one-thread extraction's split: its stages were timed inside the
+    // runs, one after another on one thread, so together they fit in the
+    // wall time the line measured, and each took some time.
+    let [x] = &r.extract_splits[..] else {
+        panic!("one split expected: {:?}", r.extract_splits)
+    };
+    let line = |e: &str| r.lines.iter().find(|l| l.engine == e).unwrap().seconds;
+    assert_eq!(x.kernel, "decode, season");
+    assert_eq!(x.wall_s, line("extract, 1 thread"));
+    assert_eq!(x.zstd_s, line("zstd only, 1 thread"));
+    assert!(
+        x.decode_s > 0.0 && x.cleaning_s > 0.0 && x.reductions_s > 0.0,
+        "{x:?}"
+    );
+    assert!(
+        x.decode_s + x.cleaning_s + x.reductions_s <= x.wall_s && x.rest_s >= 0.0,
+        "{x:?}"
+    );
 }

@@ -113,6 +113,9 @@ pub struct ExtractSummary {
     /// Seconds summed over runs (all threads): decoding MCAP vs reducing samples.
     pub decode_seconds: f64,
     pub reduce_seconds: f64,
+    /// The part of `reduce_seconds` spent cleaning the decoded samples and
+    /// laying them out for the engine (derived conditions included).
+    pub prepare_seconds: f64,
     pub cleaning: BTreeMap<String, CleaningReport>,
 }
 
@@ -220,7 +223,9 @@ pub(crate) struct RunOutput {
     pub samples: u64,
     pub bytes: u64,
     pub decode_s: f64,
+    /// Cleaning, reductions and rows; `prepare_s` of it the cleaning.
     pub reduce_s: f64,
+    pub prepare_s: f64,
 }
 
 impl RunOutput {
@@ -383,6 +388,7 @@ fn finish_run(
         bytes,
         decode_s,
         reduce_s: 0.0,
+        prepare_s,
     };
     let sums = merge(&batch, &all.partials);
     let maps = all.energy_maps.into_iter().zip(all.condition_maps);
@@ -681,7 +687,8 @@ pub fn extract(opts: &ExtractOptions) -> Result<ExtractSummary, IngestError> {
     let mut conditions = Vec::new();
     let mut skipped = Vec::new();
     let mut cleaning = BTreeMap::new();
-    let (mut samples, mut bytes, mut decode_s, mut reduce_s) = (0, 0, 0.0, 0.0);
+    let (mut samples, mut bytes) = (0, 0);
+    let (mut decode_s, mut reduce_s, mut prepare_s) = (0.0, 0.0, 0.0);
     for (run, r) in results {
         match r {
             Ok(o) => {
@@ -696,6 +703,7 @@ pub fn extract(opts: &ExtractOptions) -> Result<ExtractSummary, IngestError> {
                 bytes += o.bytes;
                 decode_s += o.decode_s;
                 reduce_s += o.reduce_s;
+                prepare_s += o.prepare_s;
             }
             Err(reason) => {
                 tracing::warn!("run {} skipped: {reason}", run.id);
@@ -723,6 +731,7 @@ pub fn extract(opts: &ExtractOptions) -> Result<ExtractSummary, IngestError> {
         runs_seconds,
         decode_seconds: decode_s,
         reduce_seconds: reduce_s,
+        prepare_seconds: prepare_s,
         cleaning,
     };
     let maps = SideMaps {
