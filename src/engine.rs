@@ -126,10 +126,18 @@ pub struct GpuEngine {
 
 impl GpuEngine {
     pub fn new() -> Result<GpuEngine, GpuError> {
-        Ok(GpuEngine {
-            ctx: GpuContext::new()?,
+        Ok(Self::with(GpuContext::new()?))
+    }
+    /// A hardware GPU's engine, or the software adapter's description
+    /// (nothing built on it): see [`GpuContext::new_hardware`].
+    pub fn new_hardware() -> Result<Result<GpuEngine, wgpu::AdapterInfo>, GpuError> {
+        Ok(GpuContext::new_hardware()?.map(Self::with))
+    }
+    fn with(ctx: GpuContext) -> GpuEngine {
+        GpuEngine {
+            ctx,
             timings: Mutex::new(GpuTimings::default()),
-        })
+        }
     }
     /// Upload, compute and readback time summed over every call so far.
     pub fn timings(&self) -> GpuTimings {

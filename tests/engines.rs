@@ -643,3 +643,32 @@ fn road_indices_on_every_engine_match_the_cpu_route() {
         assert!(worst <= limit, "{} engine: {worst:e}", e.name());
     }
 }
+
+/// `--engine auto` decides on the adapter before building its device and
+/// kernels: `new_hardware` opens the adapter `GpuEngine::new` opens when it
+/// is a hardware one and only describes it when it is a software one
+/// (lavapipe in CI: `Err` with the same adapter).
+#[test]
+fn new_hardware_refuses_exactly_the_software_adapter_new_opens() {
+    use tirewear::engine::GpuEngine;
+    let Some(full) = gpu_for_tests("new_hardware_refuses_exactly_the_software_adapter_new_opens")
+    else {
+        return;
+    };
+    let software = full.ctx.adapter.device_type == wgpu::DeviceType::Cpu;
+    match GpuEngine::new_hardware().unwrap() {
+        Ok(hardware) => {
+            assert!(!software, "{}", full.device());
+            assert_eq!(hardware.device(), full.device());
+        }
+        Err(info) => {
+            assert!(
+                software,
+                "{info:?} refused but {} is hardware",
+                full.device()
+            );
+            assert_eq!(info.name, full.ctx.adapter.name);
+            assert_eq!(info.backend, full.ctx.adapter.backend);
+        }
+    }
+}
