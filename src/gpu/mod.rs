@@ -99,8 +99,8 @@ impl GpuContext {
 
     /// As [`GpuContext::new`], but only a hardware adapter: where the one it
     /// would open is a software rasteriser (lavapipe, WARP), its description,
-    /// without building the device and compiling the kernels (0.1–0.3 s on
-    /// lavapipe, a sixth of a one-core extraction of the demo).
+    /// without building the device and compiling the kernels (0.1–0.35 s on
+    /// lavapipe, up to a fifth of a one-core extraction of the demo).
     pub fn new_hardware() -> Result<Result<GpuContext, wgpu::AdapterInfo>, GpuError> {
         pollster::block_on(async {
             let adapter = Self::adapter().await?;

@@ -619,7 +619,7 @@ pub(crate) fn open_engine(
         Engine::Cpu => Ok((Engine::Cpu, None)),
         Engine::Gpu => Ok((Engine::Gpu, Some(GpuEngine::new()?))),
         // A software adapter is refused before its device and kernels are
-        // built: that cost 0.1–0.3 s of every extraction on a machine with
+        // built: that cost 0.1–0.35 s of every extraction on a machine with
         // lavapipe and no GPU.
         Engine::Auto => match GpuEngine::new_hardware() {
             Ok(Ok(g)) => Ok((Engine::Gpu, Some(g))),
