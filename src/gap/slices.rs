@@ -19,7 +19,8 @@ pub(crate) const MIN_SLICE: usize = 10;
 /// One slice of the residuals.
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct Slice {
-    /// e.g. "axle = front", "t_surface_avg_c in Q4 [82.1, 96.0]", "axle = front & track = x".
+    /// e.g. "axle = front", "t_surface_avg_c in Q4 [82.1, 96.0]" (edges:
+    /// `band_edges`), "axle = front & track = x".
     pub name: String,
     pub n: usize,
     /// Mean residual in the slice (% of tread).
@@ -112,6 +113,7 @@ fn singles(rows: &[&KpiRow], residual: &[f64]) -> Vec<Single> {
             q(0.75),
             sorted[sorted.len() - 1],
         ];
+        let shown = band_edges(&edges);
         for b in 0..4 {
             let (lo, hi) = (edges[b], edges[b + 1]);
             let members: Vec<bool> = v
@@ -120,12 +122,34 @@ fn singles(rows: &[&KpiRow], residual: &[f64]) -> Vec<Single> {
                 .collect();
             out.push(Single {
                 variable: col.into(),
-                name: format!("{col} in Q{} [{lo:.4}, {hi:.4}]", b + 1),
+                name: format!("{col} in Q{} [{}, {}]", b + 1, shown[b], shown[b + 1]),
                 members,
             });
         }
     }
     out
+}
+
+/// A KPI's band edges as the slice names show them, in the column's unit:
+/// three significant digits of the column's range (a pressure spanning
+/// 26 kPa in whole pascals, a temperature in tenths of a degree, a slip
+/// in ten-thousandths), more where two different edges would read alike.
+/// The names are labels only: a slice's rows are its member mask.
+fn band_edges(edges: &[f64; 5]) -> [String; 5] {
+    let span = edges[4] - edges[0];
+    let from_range = 3 - span.log10().ceil() as i32;
+    let mut decimals = from_range.clamp(0, 9) as usize;
+    loop {
+        let shown = edges.map(|x| format!("{x:.decimals$}"));
+        let alike = edges
+            .windows(2)
+            .zip(shown.windows(2))
+            .any(|(v, t)| v[0] != v[1] && t[0] == t[1]);
+        if !alike || decimals >= 9 {
+            return shown;
+        }
+        decimals += 1;
+    }
 }
 
 /// The residuals, their events and the events' variance components.
@@ -231,6 +255,32 @@ mod tests {
     use super::*;
     use rand::SeedableRng;
     use rand_distr::{Distribution, Normal};
+
+    /// Edges to three significant digits of the range, more only where
+    /// two different edges would print alike (values worked by hand).
+    #[test]
+    fn band_edges_read_in_the_columns_unit() {
+        // A pressure over 26 224 Pa: ⌈log10⌉ = 5, so whole pascals.
+        let p = band_edges(&[104505.968, 118315.1958, 123812.9825, 130729.8106, 131002.4]);
+        assert_eq!(p, ["104506", "118315", "123813", "130730", "131002"]);
+        // 130729.8 and 130730.3 differ but read alike in whole pascals: one
+        // decimal more for all five.
+        let p = band_edges(&[104505.968, 118315.1958, 123812.9825, 130729.8, 130730.3]);
+        assert_eq!(
+            p,
+            ["104506.0", "118315.2", "123813.0", "130729.8", "130730.3"]
+        );
+        // A temperature over 14 K: tenths (⌈log10 14⌉ = 2).
+        assert_eq!(
+            band_edges(&[82.14, 85.0, 88.25, 91.0, 96.0]),
+            ["82.1", "85.0", "88.2", "91.0", "96.0"]
+        );
+        // A slip ratio over 0.04: ten-thousandths (⌈log10 0.04⌉ = −1).
+        assert_eq!(
+            band_edges(&[0.01234, 0.02, 0.031, 0.04, 0.05]),
+            ["0.0123", "0.0200", "0.0310", "0.0400", "0.0500"]
+        );
+    }
 
     /// A right model with noise: measured = predicted + e. Banding by the
     /// measured wear puts the large e in its top band (cov(e, y) = var(e));
