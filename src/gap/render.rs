@@ -181,7 +181,7 @@ pub fn render_markdown(d: &Diagnosis, max_slices: usize) -> String {
         for t in d.slices.iter().take(max_slices) {
             let _ = writeln!(
                 s,
-                "| {}{} | {} | {:+.2} | {:+.2} [{:+.2}, {:+.2}] | {:+.2} | {:.1e} | {:.1} % | {:.1} % |",
+                "| {}{} | {} | {:+.2} | {:+.2} [{:+.2}, {:+.2}] | {:+.2} | {} | {:.1} % | {:.1} % |",
                 t.name,
                 if t.aliases.is_empty() {
                     String::new()
@@ -194,7 +194,7 @@ pub fn render_markdown(d: &Diagnosis, max_slices: usize) -> String {
                 t.ci_pct.0,
                 t.ci_pct.1,
                 t.effect_size,
-                t.p_adjusted,
+                p_text(t.p_adjusted),
                 100.0 * t.explained_share,
                 100.0 * t.share_of_squared_gap
             );
@@ -221,7 +221,7 @@ pub fn render_markdown(d: &Diagnosis, max_slices: usize) -> String {
             };
             let _ = writeln!(
                 s,
-                "| {}{} | {th} | {:+.4} | {:+.3} | {:.1e} | {} | {} |",
+                "| {}{} | {th} | {:+.4} | {:+.3} | {} | {} | {} |",
                 c.name,
                 if c.significant(d.fdr) {
                     " **(significant)**"
@@ -230,7 +230,7 @@ pub fn render_markdown(d: &Diagnosis, max_slices: usize) -> String {
                 },
                 c.coefficient,
                 c.cv_gain,
-                c.p_adjusted,
+                p_text(c.p_adjusted),
                 // A generic KPI term changes sign across rows: no share.
                 if (0.0..=1.0).contains(&c.front_share) {
                     format!("{:.0} %", 100.0 * c.front_share)
@@ -330,6 +330,21 @@ fn write_findings(s: &mut String, lines: &[String]) {
 }
 
 /// `text` with its first letter upper-case.
+/// A p-value as the tables and Findings print it: two significant digits
+/// (0.44, 0.033, 0.0012), in exponent form below 0.001 (3.3e-4); an
+/// adjusted p above 1 (Bonferroni over the families) reads 1.0.
+fn p_text(p: f64) -> String {
+    if p.is_nan() {
+        return "–".into();
+    }
+    let p = p.min(1.0);
+    if p < 1e-3 {
+        return format!("{p:.1e}");
+    }
+    let decimals = (1 - p.log10().floor() as i32).max(1) as usize;
+    format!("{p:.decimals$}")
+}
+
 fn capitalised(text: &str) -> String {
     let mut c = text.chars();
     c.next()
@@ -360,9 +375,9 @@ fn no_term(d: &Diagnosis) -> String {
         .take(3)
         .map(|c| {
             format!(
-                "\"{}\" (p {:.3} adjusted, CV gain {:+.3} within tracks, {:+.3} across them)",
+                "\"{}\" (p {} adjusted, CV gain {:+.3} within tracks, {:+.3} across them)",
                 named_at_threshold(c),
-                c.p_adjusted,
+                p_text(c.p_adjusted),
                 c.cv_gain,
                 c.cv_gain_across
             )
@@ -590,11 +605,11 @@ fn write_leads(s: &mut String, candidates: &[Score], fdr: f64) {
         .map(|&i| {
             let c = &candidates[i];
             format!(
-                "\"{}\" (CV gain {:+.3}, p {:.2} before the adjustment, {:.2} after)",
+                "\"{}\" (CV gain {:+.3}, p {} before the adjustment, {} after)",
                 named_at_threshold(c),
                 c.cv_gain,
-                c.p,
-                c.p_adjusted.min(1.0)
+                p_text(c.p),
+                p_text(c.p_adjusted)
             )
         })
         .collect();
@@ -654,6 +669,20 @@ mod tests {
     use super::*;
     use crate::Axle;
     use crate::gap::candidates::KpiScale;
+
+    #[test]
+    fn p_values_print_with_two_significant_digits() {
+        let printed: Vec<String> = [1.0, 2.5, 0.44, 0.033, 0.0012, 0.00099, 5e-4, f64::NAN]
+            .into_iter()
+            .map(p_text)
+            .collect();
+        assert_eq!(
+            printed,
+            [
+                "1.0", "1.0", "0.44", "0.033", "0.0012", "9.9e-4", "5.0e-4", "–"
+            ]
+        );
+    }
 
     fn score(name: &str, axle: Option<Axle>, cv_gain: f64) -> Score {
         Score {
