@@ -238,6 +238,24 @@ impl Feature {
     }
 
     /// Unit of the threshold.
+    /// Where a named mechanism acts, with θ for its threshold, for a name
+    /// that does not hold θ itself ("graining (lateral energy with a cold
+    /// tread)"): the Findings then say which threshold was fitted. `None`
+    /// for the other features (their names hold θ, or they have none) and
+    /// for a road term without a hinge (θ = 0).
+    pub(crate) fn threshold_phrase(&self, theta: f64) -> Option<&'static str> {
+        match self {
+            Feature::ColdTreadLateralEnergy => Some("tread bulk below θ"),
+            Feature::HotInnerEnergy => Some("inner liner above θ"),
+            Feature::HotSurfaceEnergy => Some("surface above θ"),
+            Feature::FastSlidingEnergy => Some("sliding faster than θ"),
+            Feature::RoughRoadEnergy | Feature::RoughRoadEnergySquared if theta > 0.0 => {
+                Some("micro-texture above θ")
+            }
+            _ => None,
+        }
+    }
+
     pub(crate) fn threshold_unit(&self) -> &'static str {
         match self {
             Feature::ColdTreadLateralEnergy

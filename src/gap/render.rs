@@ -95,11 +95,32 @@ fn shows_leads(d: &Diagnosis) -> bool {
 
 /// A candidate's name with its threshold in place of θ.
 fn named_at_threshold(c: &Score) -> String {
-    if c.threshold.is_finite() {
-        c.name
-            .replace('θ', &c.feature.format_threshold(c.threshold))
-    } else {
-        c.name.clone()
+    with_threshold(&c.name, Some(c.feature), c.threshold)
+}
+
+/// A term's name with its threshold, in its unit: in place of θ, or for a
+/// named mechanism whose name holds none, inside its parenthesis
+/// ("graining (lateral energy with a cold tread: tread bulk below
+/// 85.00 °C), front axle").
+fn with_threshold(name: &str, feature: Option<Feature>, threshold: f64) -> String {
+    if !threshold.is_finite() {
+        return name.to_string();
+    }
+    let th = feature.map_or_else(|| significant(threshold), |f| f.format_threshold(threshold));
+    if name.contains('θ') {
+        return name.replace('θ', &th);
+    }
+    match (
+        feature.and_then(|f| f.threshold_phrase(threshold)),
+        name.find(')'),
+    ) {
+        (Some(phrase), Some(close)) => format!(
+            "{}: {}{}",
+            &name[..close],
+            phrase.replace('θ', &th),
+            &name[close..]
+        ),
+        _ => name.to_string(),
     }
 }
 
@@ -414,15 +435,7 @@ fn findings(s: &mut String, d: &Diagnosis) {
         }
     }
     for (t, st) in terms.iter().enumerate() {
-        let name = if st.threshold.is_finite() {
-            let th = st.feature.map_or_else(
-                || significant(st.threshold),
-                |f| f.format_threshold(st.threshold),
-            );
-            st.added.replace('θ', &th)
-        } else {
-            st.added.clone()
-        };
+        let name = with_threshold(&st.added, st.feature, st.threshold);
         // The final model's coefficient and its event-bootstrap interval.
         let (c, (lo, hi)) = d
             .final_terms
@@ -669,6 +682,31 @@ mod tests {
     use super::*;
     use crate::Axle;
     use crate::gap::candidates::KpiScale;
+
+    #[test]
+    fn named_mechanisms_say_their_threshold() {
+        let graining = "graining (lateral energy with a cold tread), front axle";
+        assert_eq!(
+            with_threshold(graining, Some(Feature::ColdTreadLateralEnergy), 85.0),
+            "graining (lateral energy with a cold tread: tread bulk below 85.00 °C), front axle"
+        );
+        // A road term without a hinge has no threshold to say.
+        let road = "road abrasion (energy on micro-rough roads)";
+        assert_eq!(
+            with_threshold(road, Some(Feature::RoughRoadEnergy), 0.0),
+            road
+        );
+        // A name with θ takes the threshold in its place.
+        assert_eq!(
+            with_threshold(
+                "camber (energy × camber beyond θ)",
+                Some(Feature::CamberEnergy),
+                2.5
+            ),
+            "camber (energy × camber beyond 2.500 °)"
+        );
+        assert_eq!(with_threshold(graining, None, f64::NAN), graining);
+    }
 
     #[test]
     fn p_values_print_with_two_significant_digits() {
