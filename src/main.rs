@@ -135,6 +135,7 @@ fn run() -> Result<std::process::ExitCode> {
         .init();
     // Before any thread starts (rayon's pool, the engines).
     cli::allocator::tune();
+    cli::device_select::quiet();
     let progress = !cli.quiet && std::io::IsTerminal::is_terminal(&std::io::stderr());
     match cli.command {
         Command::Simulate(a) => cli::simulate::run(a, progress)?,

@@ -5,6 +5,7 @@
 pub(crate) mod allocator;
 pub(crate) mod bench;
 pub(crate) mod demo;
+pub(crate) mod device_select;
 pub(crate) mod extract;
 pub(crate) mod fit;
 pub(crate) mod gap;
