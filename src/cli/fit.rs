@@ -54,15 +54,26 @@ pub(crate) fn run_fit(
         split.test_events.join(", ")
     );
     let mut models = Vec::new();
+    // The rows each method leaves out; listed again only where they differ.
+    let mut listed: Option<Vec<String>> = None;
     for &m in methods {
         let t = Instant::now();
         let (model, notes) = fit::fit_method(m, &split, settings)
             .with_context(|| format!("fitting the {m:?} model on {}", kpis.display()))?;
-        for n in notes.iter().take(5) {
-            println!("left out: {n}");
-        }
-        if notes.len() > 5 {
-            println!("... and {} more rows left out", notes.len() - 5);
+        if listed.as_ref() == Some(&notes) {
+            if !notes.is_empty() {
+                println!("left out: the same {} rows as above", notes.len());
+            }
+        } else {
+            for n in notes.iter().take(5) {
+                println!("left out: {n}");
+            }
+            match notes.len().saturating_sub(5) {
+                0 => {}
+                1 => println!("... and 1 more row left out"),
+                more => println!("... and {more} more rows left out"),
+            }
+            listed = Some(notes);
         }
         println!(
             "\n{}  ({:.1} s)",

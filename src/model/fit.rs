@@ -61,8 +61,15 @@ fn usable<'a>(rows: &[&'a KpiRow], inputs: &[String]) -> (Vec<&'a KpiRow>, Vec<S
             // A reading at the worn-through depth: the tread is gone there, and the
             // tire's wear is only a lower bound.
             dropped.push(format!(
-                "run {} wheel {}: tread worn through at {} readings, the wear is censored",
-                r.run, r.wheel, r.worn_through_readings
+                "run {} wheel {}: tread worn through at {} reading{}, the wear is censored",
+                r.run,
+                r.wheel,
+                r.worn_through_readings,
+                if r.worn_through_readings == 1.0 {
+                    ""
+                } else {
+                    "s"
+                }
             ))
         } else if bad.is_empty() {
             ok.push(*r)
