@@ -39,15 +39,21 @@ struct Cli {
 #[derive(Subcommand)]
 #[allow(clippy::large_enum_variant)] // parsed once; boxing would only obscure the CLI
 enum Command {
+    /// Simulate a season with known physics and planted effects.
+    ///
     /// Simulate a whole season (telemetry, road profiles, compounds, wear
     /// readings) with known physics and optionally planted effects; the
     /// ground truth goes to `OUT/truth/`.
     Simulate(cli::simulate::SimulateArgs),
+    /// Extract the KPI database (one row per tire and run) from a season.
+    ///
     /// Extract the KPI database from a season archive: one row per tire and
     /// run with the paper's road (table 3), telemetry (table 4) and
     /// viscoelastic (table 5) indices and the mean wear; side tables of road
     /// spectra and friction-energy maps; a report of skipped runs.
     Extract(cli::extract::ExtractArgs),
+    /// Nightly: bring a KPI dataset up to date, incremental and resumable.
+    ///
     /// Bring a KPI dataset up to date with season archives, every night:
     /// only runs whose inputs changed are processed (content-hash keys), a
     /// killed run resumes where it stopped, outputs are committed together,
@@ -55,6 +61,8 @@ enum Command {
     /// (Slurm, Kubernetes; docs/nightly.md). Exit 3: some runs failed, the
     /// rest committed; exit 4: another process holds the dataset.
     Process(cli::process::ProcessArgs),
+    /// Import logger data (MoTeC, CSV, Parquet) into a season archive.
+    ///
     /// Import real logger data into a season archive: MoTeC `.ld`, MoTeC
     /// CSV exports, generic CSV or Parquet with a time column. Channels are
     /// named through a channel map (a shipped default knows MoTeC, ACC and
@@ -64,40 +72,60 @@ enum Command {
     /// estimated (docs/import.md). Exit 3: some logs failed, the rest were
     /// imported.
     Import(cli::import::ImportArgs),
+    /// Fit the three wear models on a KPI database.
+    ///
     /// Fit wear models on a KPI database: the feed-forward network (LM),
     /// PCA + regression and the physical correlations + regression per axle,
     /// trained on some events and tested on others. Prints the paper's
     /// performance tables and writes each model as JSON (OUT/METHOD.json).
     Fit(cli::fit::FitArgs),
+    /// Predict wear with a saved model.
+    ///
     /// Apply a saved model to a KPI database; refuses a table whose columns
     /// or units differ from the model's, naming them.
     Predict(cli::predict::PredictArgs),
+    /// Diagnose the sim-to-real gap: where, which effect, how far it shrinks.
+    ///
     /// Diagnose the sim-to-real gap. Calibrates the physics baseline (the
     /// frictional-energy wear law per compound and axle, with the rubber's
     /// temperature factor over the energy map and the road's skewness) on the
-    /// training events, or takes a saved model; then (1) where the gap lies:
-    /// bias and RMSE on training and testing events and slices of the
-    /// residual with false-discovery control; (2) which unmodelled effect
-    /// explains it: candidate mechanisms (graining, blistering, thermal
-    /// degradation, fast sliding, road abrasion, every unused KPI) scored by
-    /// track-grouped cross-validation and a permutation test; (3) how far it
-    /// shrinks as significant terms are added in turn, the physics law
-    /// calibrated again around them. Writes OUT/gap.json
-    /// and OUT/gap.md. `tirewear gap validate` proves it on seasons with
-    /// planted effects.
+    /// training events, or takes a saved model or a CSV of predicted wear
+    /// from your own simulation; then (1) where the gap lies: bias and RMSE
+    /// on training and testing events and slices of the residual with
+    /// false-discovery control; (2) which unmodelled effect explains it:
+    /// energy above, below or between thresholds of every per-sample
+    /// condition and pair of the condition maps (slip, sliding speed, load,
+    /// temperatures and their rates, pressure, camber, speed,
+    /// accelerations…) on each axle and wheel, the named mechanisms
+    /// (graining, blistering, thermal degradation, fast sliding, road
+    /// abrasion), set-up effects of a car, axle or wheel that no telemetry
+    /// shows, every unused KPI and your own `--effects`, scored by
+    /// track-grouped cross-validation and a permutation test with false
+    /// discoveries controlled over the whole family; (3) how far it shrinks
+    /// as significant terms are added in turn, the physics law calibrated
+    /// again around them. Writes OUT/gap.json and OUT/gap.md, which open
+    /// with the findings in words and units. `tirewear gap validate` proves
+    /// it on seasons with planted effects, including randomly generated
+    /// ones.
     #[command(args_conflicts_with_subcommands = true, subcommand_negates_reqs = true)]
     Gap(cli::gap::GapArgs),
+    /// Measure the engines, decoding against zstd, and the diagnosis's time.
+    ///
     /// Measure the engines: each kernel on the CPU (1 thread, all threads) and
     /// the GPU (upload, compute, readback), against a plain memory pass over
     /// the same buffer. Prints a table and saves it as JSON; run it on two
     /// machines to compare them.
     Bench(cli::bench::BenchArgs),
+    /// Write the season's HTML report (one offline page).
+    ///
     /// Write DIR/report.html: one self-contained page (inline SVG figures,
     /// nothing fetched) with the season, the physical correlations (wear
     /// against friction energy per track), the models' predictions against
     /// the measurements and the sim-to-real gap, from what `extract`, `fit`
     /// and `gap` wrote in the season folder (docs/report.md).
     Report(cli::report::ReportArgs),
+    /// Try tirewear: simulate, extract, fit, diagnose and report the demo season.
+    ///
     /// Try tirewear: simulate the demo season, extract its KPI database, fit
     /// the three wear models and diagnose the gap between the physics law and
     /// the measured wear. The default season has no planted effect; plant one
