@@ -643,7 +643,7 @@ fn an_unlisted_slip_effect_is_found_among_the_generated_candidates() {
         let md = tirewear::gap::report::render_markdown(&d, 12);
         let line = md
             .lines()
-            .find(|l| l.starts_with("1. Energy with (combined_slip, "))
+            .find(|l| l.starts_with("1. Energy with (combined slip, "))
             .unwrap_or_else(|| panic!("{md}"));
         let (_, after) = line.split_once(" above/").expect("above the slip edge");
         let open = after.find('(').expect("the edges");
@@ -664,7 +664,7 @@ fn an_unlisted_slip_effect_is_found_among_the_generated_candidates() {
         // The findings say it in words, with the threshold in place of θ.
         let md = tirewear::gap::report::render_markdown(&d, 12);
         let said = format!(
-            "1. Energy with combined_slip above {} abrades ",
+            "1. Energy with combined slip above {} abrades ",
             tirewear::gap::candidates::significant(theta)
         );
         assert!(md.contains(&said), "{md}");

@@ -5,6 +5,7 @@ use super::baseline::PhysicsBaseline;
 use super::candidates::{Feature, SET_UP_SHARE, SetUpForm, significant};
 use super::report::{Diagnosis, WornThrough};
 use super::scoring::Score;
+use crate::kpi::cpu::condition_map::{CONDITIONS, pair_conditions};
 use std::fmt::Write;
 
 /// How close to the best held-out gain a candidate must come to count as
@@ -98,11 +99,13 @@ fn named_at_threshold(c: &Score) -> String {
     with_threshold(&c.name, Some(c.feature), c.threshold)
 }
 
-/// A term's name with its threshold, in its unit: in place of θ, or for a
+/// A term's name as the Findings and leads say it: its conditions in words
+/// ([`in_words`]) and its threshold in its unit, in place of θ, or for a
 /// named mechanism whose name holds none, inside its parenthesis
 /// ("graining (lateral energy with a cold tread: tread bulk below
-/// 85.00 °C), front axle").
+/// 85.00 °C), front axle"). The tables keep the names `gap.json` has.
 fn with_threshold(name: &str, feature: Option<Feature>, threshold: f64) -> String {
+    let name = &in_words(name, feature);
     if !threshold.is_finite() {
         return name.to_string();
     }
@@ -122,6 +125,48 @@ fn with_threshold(name: &str, feature: Option<Feature>, threshold: f64) -> Strin
         ),
         _ => name.to_string(),
     }
+}
+
+/// A generated candidate's name with its conditions' side-table names in
+/// words ("energy with combined slip above θ" for "energy with
+/// combined_slip above θ"): only the conditions the feature bins, and only
+/// where the name stands as a whole word.
+fn in_words(name: &str, feature: Option<Feature>) -> String {
+    let conditions = match feature {
+        Some(
+            Feature::ConditionEnergy { condition, .. } | Feature::BandEnergy { condition, .. },
+        ) => {
+            vec![condition]
+        }
+        Some(Feature::PairEnergy { pair, .. }) => {
+            let (a, b) = pair_conditions(pair);
+            vec![a, b]
+        }
+        _ => Vec::new(),
+    };
+    let mut out = name.to_string();
+    for c in conditions {
+        out = replace_whole_word(&out, CONDITIONS[c].name, CONDITIONS[c].words);
+    }
+    out
+}
+
+/// `text` with every occurrence of `word` that no letter, digit or '_'
+/// touches replaced by `by` (so "speed_mps" leaves "sliding_speed_mps").
+fn replace_whole_word(text: &str, word: &str, by: &str) -> String {
+    let part_of_word = |c: Option<char>| c.is_some_and(|c| c.is_alphanumeric() || c == '_');
+    let mut out = String::with_capacity(text.len());
+    let mut rest = text;
+    while let Some(at) = rest.find(word) {
+        let after = &rest[at + word.len()..];
+        // `out` ends with what precedes this occurrence.
+        out.push_str(&rest[..at]);
+        let whole = !part_of_word(out.chars().next_back()) && !part_of_word(after.chars().next());
+        out.push_str(if whole { by } else { word });
+        rest = after;
+    }
+    out.push_str(rest);
+    out
 }
 
 /// The diagnosis as Markdown (also what `tirewear gap` prints).
@@ -682,6 +727,48 @@ mod tests {
     use super::*;
     use crate::Axle;
     use crate::gap::candidates::KpiScale;
+
+    #[test]
+    fn generated_candidates_name_their_conditions_in_words() {
+        let band = Feature::BandEnergy {
+            condition: 12,
+            component: crate::kpi::cpu::condition_map::Component::Lateral,
+        };
+        assert_eq!(CONDITIONS[12].name, "t_surface_rate_kps");
+        assert_eq!(
+            in_words(
+                "lateral energy with t_surface_rate_kps between θ, FL wheel",
+                Some(band)
+            ),
+            "lateral energy with surface temperature's rate of change between θ, FL wheel"
+        );
+        // A pair: both conditions; "speed_mps" alone would not touch
+        // "sliding_speed_mps".
+        let p = (0..crate::kpi::cpu::condition_map::N_PAIRS)
+            .find(|&p| pair_conditions(p) == (2, 10))
+            .expect("the pair of combined slip and speed");
+        let pair = Feature::PairEnergy {
+            pair: p,
+            first_above: true,
+            second_above: false,
+        };
+        assert_eq!(
+            in_words(
+                "energy with (combined_slip, speed_mps) above/below θ",
+                Some(pair)
+            ),
+            "energy with (combined slip, speed) above/below θ"
+        );
+        assert_eq!(
+            replace_whole_word("sliding_speed_mps and speed_mps", "speed_mps", "speed"),
+            "sliding_speed_mps and speed"
+        );
+        // Other features keep their names.
+        assert_eq!(
+            in_words("fz_avg_n", Some(Feature::Kpi("fz_avg_n"))),
+            "fz_avg_n"
+        );
+    }
 
     #[test]
     fn named_mechanisms_say_their_threshold() {

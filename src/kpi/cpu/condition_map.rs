@@ -28,6 +28,9 @@ use bytemuck::{Pod, Zeroable};
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Condition {
     pub name: &'static str,
+    /// What the condition is, in words, for the diagnosis's findings
+    /// ("surface temperature" for `t_surface_c`).
+    pub words: &'static str,
     pub unit: &'static str,
     pub bins: Bins,
     /// Eight bins for the pair maps ([`PAIRS`]): their inner edges span the
@@ -56,6 +59,7 @@ const fn bins(lo: f64, width: f64, n: usize) -> Bins {
 pub const CONDITIONS: [Condition; N_CONDITIONS] = [
     Condition {
         name: "slip_ratio",
+        words: "slip ratio",
         unit: "1",
         bins: bins(-0.3, 0.02, 30),
         coarse: bins(-0.06, 0.015, 8),
@@ -63,6 +67,7 @@ pub const CONDITIONS: [Condition; N_CONDITIONS] = [
     },
     Condition {
         name: "lateral_slip",
+        words: "lateral slip",
         unit: "1",
         bins: bins(-0.3, 0.02, 30),
         coarse: bins(-0.06, 0.015, 8),
@@ -70,6 +75,7 @@ pub const CONDITIONS: [Condition; N_CONDITIONS] = [
     },
     Condition {
         name: "combined_slip",
+        words: "combined slip",
         unit: "1",
         bins: bins(0.0, 0.02, 30),
         coarse: bins(0.02, 0.01, 8),
@@ -77,6 +83,7 @@ pub const CONDITIONS: [Condition; N_CONDITIONS] = [
     },
     Condition {
         name: "sliding_speed_mps",
+        words: "sliding speed",
         unit: "m/s",
         bins: bins(0.0, 0.5, 20),
         coarse: bins(1.0, 0.5, 8),
@@ -84,6 +91,7 @@ pub const CONDITIONS: [Condition; N_CONDITIONS] = [
     },
     Condition {
         name: "load_n",
+        words: "load",
         unit: "N",
         bins: bins(0.0, 500.0, 24),
         coarse: bins(1500.0, 1000.0, 8),
@@ -91,6 +99,7 @@ pub const CONDITIONS: [Condition; N_CONDITIONS] = [
     },
     Condition {
         name: "friction_utilisation",
+        words: "friction utilisation",
         unit: "1",
         bins: bins(0.0, 0.1, 25),
         coarse: bins(1.0, 0.1, 8),
@@ -98,6 +107,7 @@ pub const CONDITIONS: [Condition; N_CONDITIONS] = [
     },
     Condition {
         name: "t_surface_c",
+        words: "surface temperature",
         unit: "°C",
         bins: bins(20.0, 5.0, 24),
         coarse: bins(45.0, 5.0, 8),
@@ -105,6 +115,7 @@ pub const CONDITIONS: [Condition; N_CONDITIONS] = [
     },
     Condition {
         name: "t_inner_c",
+        words: "inner-liner temperature",
         unit: "°C",
         bins: bins(40.0, 5.0, 24),
         coarse: bins(70.0, 10.0, 8),
@@ -112,6 +123,7 @@ pub const CONDITIONS: [Condition; N_CONDITIONS] = [
     },
     Condition {
         name: "pressure_pa",
+        words: "pressure",
         unit: "Pa",
         bins: bins(100e3, 5e3, 30),
         coarse: bins(105e3, 5e3, 8),
@@ -119,6 +131,7 @@ pub const CONDITIONS: [Condition; N_CONDITIONS] = [
     },
     Condition {
         name: "camber_deg",
+        words: "camber",
         unit: "deg",
         bins: bins(-6.0, 0.25, 32),
         coarse: bins(-4.0, 0.5, 8),
@@ -126,6 +139,7 @@ pub const CONDITIONS: [Condition; N_CONDITIONS] = [
     },
     Condition {
         name: "speed_mps",
+        words: "speed",
         unit: "m/s",
         bins: bins(0.0, 4.0, 25),
         coarse: bins(24.0, 8.0, 8),
@@ -134,6 +148,7 @@ pub const CONDITIONS: [Condition; N_CONDITIONS] = [
     // From format version 2 on.
     Condition {
         name: "t_bulk_c",
+        words: "bulk temperature",
         unit: "°C",
         bins: bins(30.0, 5.0, 24),
         coarse: bins(65.0, 5.0, 8),
@@ -141,6 +156,7 @@ pub const CONDITIONS: [Condition; N_CONDITIONS] = [
     },
     Condition {
         name: "t_surface_rate_kps",
+        words: "surface temperature's rate of change",
         unit: "K/s",
         bins: bins(-15.0, 1.0, 30),
         coarse: bins(-2.0, 1.0, 8),
@@ -148,6 +164,7 @@ pub const CONDITIONS: [Condition; N_CONDITIONS] = [
     },
     Condition {
         name: "t_inner_rate_kps",
+        words: "inner-liner temperature's rate of change",
         unit: "K/s",
         bins: bins(-1.5, 0.1, 30),
         coarse: bins(-0.8, 0.2, 8),
@@ -155,6 +172,7 @@ pub const CONDITIONS: [Condition; N_CONDITIONS] = [
     },
     Condition {
         name: "relative_load",
+        words: "relative load",
         unit: "1",
         bins: bins(0.0, 0.1, 30),
         coarse: bins(0.5, 0.2, 8),
@@ -162,6 +180,7 @@ pub const CONDITIONS: [Condition; N_CONDITIONS] = [
     },
     Condition {
         name: "time_since_start_s",
+        words: "time since the start",
         unit: "s",
         bins: bins(0.0, 120.0, 30),
         coarse: bins(0.0, 240.0, 8),
@@ -169,6 +188,7 @@ pub const CONDITIONS: [Condition; N_CONDITIONS] = [
     },
     Condition {
         name: "distance_since_start_m",
+        words: "distance since the start",
         unit: "m",
         bins: bins(0.0, 5000.0, 30),
         coarse: bins(0.0, 10000.0, 8),
@@ -177,6 +197,7 @@ pub const CONDITIONS: [Condition; N_CONDITIONS] = [
     // From format version 4 on.
     Condition {
         name: "accel_x_mps2",
+        words: "longitudinal acceleration",
         unit: "m/s²",
         bins: bins(-45.0, 3.0, 20),
         coarse: bins(-30.0, 6.0, 8),
@@ -184,6 +205,7 @@ pub const CONDITIONS: [Condition; N_CONDITIONS] = [
     },
     Condition {
         name: "accel_y_mps2",
+        words: "lateral acceleration",
         unit: "m/s²",
         bins: bins(0.0, 3.0, 20),
         coarse: bins(6.0, 6.0, 8),
