@@ -555,7 +555,12 @@ fn findings(s: &mut String, d: &Diagnosis) {
             .filter(|c| !c.acts_in.is_empty())
             .map(|c| {
                 format!(
-                    " Acts in: {}.",
+                    // The change of the prediction, not the term alone: the
+                    // law calibrated again around the term gives back what
+                    // the term takes over, so other tires' slices can close
+                    // too (an FL term lowers the front axle's k, which an
+                    // FL excess had raised, and FR's overestimate goes).
+                    " The gap closes most (the term, and the law calibrated again around it) in: {}.",
                     c.acts_in
                         .iter()
                         .map(|a| format!(
