@@ -253,6 +253,28 @@ pub(crate) fn write_batch_to(
     .map_err(std::io::Error::other)
 }
 
+/// How tirewear's Parquet files are written: zstd, row groups of
+/// `rows_per_group`, and no dictionary for f64 columns. Energies and
+/// indices are nearly all distinct, so a dictionary is built, outgrows its
+/// page and is dropped for plain encoding anyway; skipping it saved 6 of
+/// the condition maps' 38 ms of encoding on the demo and made the file
+/// 10 % smaller (2.96 → 2.67 MB; its bin edges compress as well without).
+fn writer_properties(
+    schema: &arrow_schema::Schema,
+    rows_per_group: usize,
+) -> parquet::file::properties::WriterProperties {
+    let mut props = parquet::file::properties::WriterProperties::builder()
+        .set_compression(parquet::basic::Compression::ZSTD(Default::default()))
+        .set_max_row_group_row_count(Some(rows_per_group));
+    for f in schema.fields() {
+        if f.data_type() == &DataType::Float64 {
+            let column = parquet::schema::types::ColumnPath::from(f.name().as_str());
+            props = props.set_column_dictionary_enabled(column, false);
+        }
+    }
+    props.build()
+}
+
 /// The file `ArrowWriter` writes (its schema, metadata and column
 /// writers), but each row group's columns are encoded on rayon threads at
 /// once: a big side table (the condition maps', 933 000 rows at season
@@ -264,10 +286,7 @@ fn write_row_groups(
 ) -> parquet::errors::Result<()> {
     use parquet::arrow::arrow_writer::{ArrowColumnChunk, compute_leaves};
     use rayon::prelude::*;
-    let props = parquet::file::properties::WriterProperties::builder()
-        .set_compression(parquet::basic::Compression::ZSTD(Default::default()))
-        .set_max_row_group_row_count(Some(rows_per_group))
-        .build();
+    let props = writer_properties(&batch.schema(), rows_per_group);
     let w = parquet::arrow::ArrowWriter::try_new(file, batch.schema(), Some(props))?;
     let (mut file_writer, columns) = w.into_serialized_writer()?;
     let (rows, schema) = (batch.num_rows(), batch.schema());
@@ -534,10 +553,7 @@ mod tests {
 
     /// `ArrowWriter` itself, the route `write_row_groups` replaces.
     fn arrow_writer_bytes(batch: &RecordBatch, rows_per_group: usize) -> Vec<u8> {
-        let props = parquet::file::properties::WriterProperties::builder()
-            .set_compression(parquet::basic::Compression::ZSTD(Default::default()))
-            .set_max_row_group_row_count(Some(rows_per_group))
-            .build();
+        let props = writer_properties(&batch.schema(), rows_per_group);
         let mut out = Vec::new();
         let mut w =
             parquet::arrow::ArrowWriter::try_new(&mut out, batch.schema(), Some(props)).unwrap();
