@@ -154,6 +154,9 @@ fn in_words(name: &str, feature: Option<Feature>) -> String {
 /// `text` with every occurrence of `word` that no letter, digit or '_'
 /// touches replaced by `by` (so "speed_mps" leaves "sliding_speed_mps").
 fn replace_whole_word(text: &str, word: &str, by: &str) -> String {
+    if word.is_empty() {
+        return text.to_string();
+    }
     let part_of_word = |c: Option<char>| c.is_some_and(|c| c.is_alphanumeric() || c == '_');
     let mut out = String::with_capacity(text.len());
     let mut rest = text;

@@ -137,7 +137,7 @@ fn singles(rows: &[&KpiRow], residual: &[f64]) -> Vec<Single> {
 /// The names are labels only: a slice's rows are its member mask.
 fn band_edges(edges: &[f64; 5]) -> [String; 5] {
     let span = edges[4] - edges[0];
-    let from_range = 3 - span.log10().ceil() as i32;
+    let from_range = 3i32.saturating_sub(span.log10().ceil() as i32);
     let mut decimals = from_range.clamp(0, 9) as usize;
     loop {
         let shown = edges.map(|x| format!("{x:.decimals$}"));
