@@ -237,7 +237,6 @@ impl Feature {
         )
     }
 
-    /// Unit of the threshold.
     /// Where a named mechanism acts, with θ for its threshold, for a name
     /// that does not hold θ itself ("graining (lateral energy with a cold
     /// tread)"): the Findings then say which threshold was fitted. `None`
@@ -256,6 +255,7 @@ impl Feature {
         }
     }
 
+    /// Unit of the threshold.
     pub(crate) fn threshold_unit(&self) -> &'static str {
         match self {
             Feature::ColdTreadLateralEnergy

@@ -94,7 +94,7 @@ fn shows_leads(d: &Diagnosis) -> bool {
     d.steps.len() <= 1 && !d.slices.is_empty()
 }
 
-/// A candidate's name with its threshold in place of θ.
+/// A candidate's name as the Findings and leads say it ([`with_threshold`]).
 fn named_at_threshold(c: &Score) -> String {
     with_threshold(&c.name, Some(c.feature), c.threshold)
 }
@@ -398,7 +398,6 @@ fn write_findings(s: &mut String, lines: &[String]) {
     }
 }
 
-/// `text` with its first letter upper-case.
 /// A p-value as the tables and Findings print it: two significant digits
 /// (0.44, 0.033, 0.0012), in exponent form below 0.001 (3.3e-4); an
 /// adjusted p above 1 (Bonferroni over the families) reads 1.0.
@@ -414,6 +413,7 @@ fn p_text(p: f64) -> String {
     format!("{p:.decimals$}")
 }
 
+/// `text` with its first letter upper-case.
 fn capitalised(text: &str) -> String {
     let mut c = text.chars();
     c.next()
