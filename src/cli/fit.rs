@@ -60,21 +60,10 @@ pub(crate) fn run_fit(
         let t = Instant::now();
         let (model, notes) = fit::fit_method(m, &split, settings)
             .with_context(|| format!("fitting the {m:?} model on {}", kpis.display()))?;
-        if listed.as_ref() == Some(&notes) {
-            if !notes.is_empty() {
-                println!("left out: the same {} rows as above", notes.len());
-            }
-        } else {
-            for n in notes.iter().take(5) {
-                println!("left out: {n}");
-            }
-            match notes.len().saturating_sub(5) {
-                0 => {}
-                1 => println!("... and 1 more row left out"),
-                more => println!("... and {more} more rows left out"),
-            }
-            listed = Some(notes);
+        for line in left_out_lines(listed.as_deref(), &notes) {
+            println!("{line}");
         }
+        listed = Some(notes);
         println!(
             "\n{}  ({:.1} s)",
             fit::render_table(&model),
@@ -92,6 +81,28 @@ pub(crate) fn run_fit(
     }
     println!("fitted in {:.1} s", t0.elapsed().as_secs_f64());
     Ok(models)
+}
+
+/// What `fit` prints of the rows a method leaves out: the first five and
+/// how many more, or one line when the method before left out the same.
+fn left_out_lines(previous: Option<&[String]>, notes: &[String]) -> Vec<String> {
+    if previous == Some(notes) {
+        return match notes.len() {
+            0 => Vec::new(),
+            n => vec![format!("left out: the same {n} rows as above")],
+        };
+    }
+    let mut lines: Vec<String> = notes
+        .iter()
+        .take(5)
+        .map(|n| format!("left out: {n}"))
+        .collect();
+    match notes.len().saturating_sub(5) {
+        0 => {}
+        1 => lines.push("... and 1 more row left out".into()),
+        more => lines.push(format!("... and {more} more rows left out")),
+    }
+    lines
 }
 
 /// Runs `tirewear fit`.
@@ -112,4 +123,30 @@ pub(crate) fn run(a: FitArgs) -> Result<()> {
     };
     run_fit(&a.kpis, &methods, &settings, &a.out)?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::left_out_lines;
+
+    #[test]
+    fn left_out_rows_are_listed_once_across_methods() {
+        let six: Vec<String> = (1..=6).map(|i| format!("row {i}")).collect();
+        let first = left_out_lines(None, &six);
+        assert_eq!(first.len(), 6);
+        assert_eq!(first[0], "left out: row 1");
+        assert_eq!(first[5], "... and 1 more row left out");
+        assert_eq!(
+            left_out_lines(Some(&six), &six),
+            ["left out: the same 6 rows as above"]
+        );
+        // Different rows are listed in full; seven leave "2 more rows".
+        let seven: Vec<String> = (1..=7).map(|i| format!("row {i}")).collect();
+        assert_eq!(
+            left_out_lines(Some(&six), &seven)[5],
+            "... and 2 more rows left out"
+        );
+        assert!(left_out_lines(Some(&[]), &[]).is_empty());
+        assert!(left_out_lines(None, &[]).is_empty());
+    }
 }

@@ -606,6 +606,56 @@ mod tests {
         }
     }
 
+    /// The written file's own footer, read back by the Parquet reader: the
+    /// f64 column has no dictionary page, the string and integer ones keep
+    /// theirs, and the values read back unchanged.
+    #[test]
+    fn f64_columns_are_written_without_a_dictionary() {
+        use arrow_array::UInt32Array;
+        use parquet::file::reader::{FileReader, SerializedFileReader};
+        let n = 3_000;
+        let schema = Schema::new(vec![
+            Field::new("run", DataType::Utf8, false),
+            Field::new("bin", DataType::UInt32, false),
+            Field::new("energy_j", DataType::Float64, false),
+        ]);
+        let energy = Float64Array::from_iter_values((0..n).map(|i| (i % 5) as f64 * 0.5));
+        let batch = RecordBatch::try_new(
+            Arc::new(schema),
+            vec![
+                Arc::new(StringArray::from_iter_values(
+                    (0..n).map(|i| format!("run{}", i / 100)),
+                )),
+                Arc::new(UInt32Array::from_iter_values((0..n).map(|i| i as u32 % 40))),
+                Arc::new(energy.clone()),
+            ],
+        )
+        .unwrap();
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("t.parquet");
+        write_batch_to(std::fs::File::create(&path).unwrap(), &batch).unwrap();
+        let file = SerializedFileReader::new(std::fs::File::open(&path).unwrap()).unwrap();
+        let group = file.metadata().row_group(0);
+        let dictionary: Vec<bool> = (0..3)
+            .map(|c| group.column(c).dictionary_page_offset().is_some())
+            .collect();
+        assert_eq!(dictionary, [true, true, false]);
+        let back = parquet::arrow::arrow_reader::ParquetRecordBatchReader::try_new(
+            std::fs::File::open(&path).unwrap(),
+            4096,
+        )
+        .unwrap()
+        .next()
+        .unwrap()
+        .unwrap();
+        let read = back
+            .column(2)
+            .as_any()
+            .downcast_ref::<Float64Array>()
+            .unwrap();
+        assert_eq!(read, &energy);
+    }
+
     #[test]
     fn files_without_later_columns_read_them_as_zero() {
         let rows = vec![
