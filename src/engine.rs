@@ -73,12 +73,38 @@ pub trait ReduceEngine: Send + Sync {
 /// The CPU engine: the shaders' Rust twins in f64, parallel over chunks.
 pub struct CpuEngine;
 
+/// The processor's name as the system gives it (Linux: `/proc/cpuinfo`'s
+/// first `model name`), so that a bench file says which machine measured
+/// it; "CPU" where the system does not say.
+pub fn cpu_model() -> &'static str {
+    static MODEL: std::sync::OnceLock<String> = std::sync::OnceLock::new();
+    MODEL.get_or_init(|| {
+        std::fs::read_to_string("/proc/cpuinfo")
+            .ok()
+            .and_then(|info| model_name(&info))
+            .unwrap_or_else(|| "CPU".into())
+    })
+}
+
+/// The first `model name` of a `/proc/cpuinfo` text, spaces collapsed.
+fn model_name(cpuinfo: &str) -> Option<String> {
+    cpuinfo
+        .lines()
+        .filter_map(|l| l.split_once(':'))
+        .find(|(key, _)| key.trim() == "model name")
+        .map(|(_, v)| v.split_whitespace().collect::<Vec<_>>().join(" "))
+        .filter(|v| !v.is_empty())
+}
+
 impl ReduceEngine for CpuEngine {
     fn name(&self) -> &'static str {
         "cpu"
     }
     fn device(&self) -> String {
-        format!("CPU, {} threads", rayon::current_num_threads())
+        match rayon::current_num_threads() {
+            1 => format!("{}, 1 thread", cpu_model()),
+            n => format!("{}, {n} threads", cpu_model()),
+        }
     }
     fn telemetry_reduce(&self, batch: &ReduceBatch) -> Result<Vec<[f64; SUMS]>, EngineError> {
         Ok(telemetry_reduce(batch))
@@ -421,4 +447,22 @@ pub fn compare_roughness(
         }
     }
     Ok((m, h, p))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn model_name_is_the_first_one_spaces_collapsed() {
+        let info = "processor\t: 0\nvendor_id\t: AuthenticAMD\nmodel name\t: AMD EPYC  7B13 64-Core Processor\n\n\
+                    processor\t: 1\nmodel name\t: other\n";
+        assert_eq!(
+            model_name(info).as_deref(),
+            Some("AMD EPYC 7B13 64-Core Processor")
+        );
+        // ARM's cpuinfo has no model name; an empty one does not count.
+        assert_eq!(model_name("processor\t: 0\nBogoMIPS\t: 50.00\n"), None);
+        assert_eq!(model_name("model name\t:   \n"), None);
+    }
 }

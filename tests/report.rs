@@ -57,7 +57,7 @@ fn the_demo_report_has_every_section_its_figures_and_no_external_url() {
     write_diagnosis(&d, &dir.path().join("gap")).unwrap();
 
     let out = dir.path().join("report.html");
-    let summary = tirewear::report::write_report(dir.path(), &out, None).unwrap();
+    let summary = tirewear::report::write_report(dir.path(), &out, &[]).unwrap();
     let html = std::fs::read_to_string(&out).unwrap();
 
     // Every section, in order.
@@ -191,7 +191,8 @@ fn the_demo_report_has_every_section_its_figures_and_no_external_url() {
              "seconds": 0.3, "vs_memory_pass": 0.73, "reference": "zstd only"}]}"#,
     )
     .unwrap();
-    let with = tirewear::report::write_report(dir.path(), &out, Some(&bench)).unwrap();
+    let with =
+        tirewear::report::write_report(dir.path(), &out, std::slice::from_ref(&bench)).unwrap();
     assert_eq!(with.sections.last().unwrap(), "Performance");
     assert_eq!(with.figures, summary.figures + 1);
     let html = std::fs::read_to_string(&out).unwrap();
@@ -203,15 +204,80 @@ fn the_demo_report_has_every_section_its_figures_and_no_external_url() {
         assert!(html.contains(cell), "{cell}");
     }
     let missing = dir.path().join("nothing.json");
-    let e = tirewear::report::write_report(dir.path(), &out, Some(&missing)).unwrap_err();
+    let e = tirewear::report::write_report(dir.path(), &out, &[missing]).unwrap_err();
     assert!(e.to_string().contains("nothing.json"), "{e}");
+
+    // Two machines' bench files (by hand): the lines both hold side by
+    // side, each machine's all-thread line matched whatever its thread
+    // count, speeds worked out by hand as the first file's time over the
+    // second's; a line only one machine has listed apart.
+    let container = dir.path().join("container.json");
+    std::fs::write(
+        &container,
+        r#"{"cpu": "EPYC, 2 threads", "gpu": null, "threads": 2, "lines": [
+            {"kernel": "energy_map", "size": "1 M samples", "engine": "cpu, 1 thread",
+             "seconds": 0.004, "vs_memory_pass": 0.5, "reference": "memory pass"},
+            {"kernel": "energy_map", "size": "1 M samples", "engine": "cpu, 2 threads",
+             "seconds": 0.0025, "vs_memory_pass": 0.8, "reference": "memory pass"},
+            {"kernel": "decode, block", "size": "80 runs", "engine": "zstd only, 2 thr",
+             "seconds": 0.3, "vs_memory_pass": 1.0, "reference": "zstd only"}]}"#,
+    )
+    .unwrap();
+    let h200 = dir.path().join("h200.json");
+    std::fs::write(
+        &h200,
+        r#"{"cpu": "Xeon, 16 threads", "gpu": "NVIDIA H200", "threads": 16, "lines": [
+            {"kernel": "energy_map", "size": "1 M samples", "engine": "cpu, 1 thread",
+             "seconds": 0.005, "vs_memory_pass": 0.4, "reference": "memory pass"},
+            {"kernel": "energy_map", "size": "1 M samples", "engine": "cpu, 16 threads",
+             "seconds": 0.0005, "vs_memory_pass": 2.0, "reference": "memory pass"},
+            {"kernel": "energy_map", "size": "1 M samples", "engine": "gpu",
+             "seconds": 0.0001, "vs_memory_pass": 9.0, "reference": "memory pass"},
+            {"kernel": "decode, block", "size": "80 runs", "engine": "zstd only, 16 thr",
+             "seconds": 0.25, "vs_memory_pass": 1.0, "reference": "zstd only"}]}"#,
+    )
+    .unwrap();
+    let both = tirewear::report::write_report(dir.path(), &out, &[container, h200]).unwrap();
+    // The comparison, then each machine's own figure.
+    assert_eq!(both.figures, summary.figures + 3);
+    let html = std::fs::read_to_string(&out).unwrap();
+    let performance = &html[html.rfind("Performance</h2>").unwrap()..];
+    for cell in [
+        "<th>container (ms)</th><th>h200 (ms)</th><th>h200 vs container</th>",
+        // 1 thread: 4 ms against 5 ms, 0.004 / 0.005.
+        "<td class=\"t\">cpu, 1 thread</td><td class=\"n\">4.00</td><td class=\"n\">5.00</td><td class=\"n\">0.800</td>",
+        // All threads: 2.5 ms on 2, 0.5 ms on 16, 0.0025 / 0.0005.
+        "<td class=\"t\">cpu, all threads</td><td class=\"n\">2.50</td><td class=\"n\">0.50</td><td class=\"n\">5.000</td>",
+        "<td class=\"t\">zstd only, all threads</td><td class=\"n\">300.00</td><td class=\"n\">250.00</td><td class=\"n\">1.200</td>",
+        "Only in h200 (not compared): energy_map (1 M samples, gpu).",
+        "<h3>container</h3>",
+        "<h3>h200</h3>",
+        "GPU: NVIDIA H200.",
+    ] {
+        assert!(performance.contains(cell), "{cell}");
+    }
+    // The legend names both files (plotters writes text on its own line).
+    for label in ["container", "h200"] {
+        assert!(
+            performance.contains(&format!(">\n{label}\n</text>")),
+            "{label}"
+        );
+    }
+    // A JSON that is not a bench file is refused by name.
+    let other = dir.path().join("models.json");
+    std::fs::write(&other, r#"{"method": "pca"}"#).unwrap();
+    let e = tirewear::report::write_report(dir.path(), &out, &[other]).unwrap_err();
+    assert!(
+        e.to_string().contains("models.json") && e.to_string().contains("lines"),
+        "{e}"
+    );
 }
 
 #[test]
 fn a_folder_without_kpis_is_an_error_naming_the_file() {
     let dir = tempfile::tempdir().unwrap();
     let e =
-        tirewear::report::write_report(dir.path(), &dir.path().join("r.html"), None).unwrap_err();
+        tirewear::report::write_report(dir.path(), &dir.path().join("r.html"), &[]).unwrap_err();
     let msg = e.to_string();
     assert!(
         msg.contains("kpis.parquet") && msg.contains("tirewear extract"),

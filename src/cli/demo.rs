@@ -82,6 +82,6 @@ pub(crate) fn run(a: DemoArgs, progress: bool) -> Result<()> {
         &out.join("gap"),
     )?;
     println!();
-    run_report(&out, &out.join("report.html"), None)?;
+    run_report(&out, &out.join("report.html"), &[])?;
     Ok(())
 }

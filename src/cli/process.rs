@@ -268,7 +268,7 @@ fn then_steps(opts: &ProcessOptions, steps: &[Then]) -> Result<()> {
     if steps.contains(&Then::Report) {
         println!();
         let dir = opts.dataset.join("report").join(&stamp);
-        super::report::run_report(&opts.dataset, &dir.join("report.html"), None)?;
+        super::report::run_report(&opts.dataset, &dir.join("report.html"), &[])?;
     }
     Ok(())
 }

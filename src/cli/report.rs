@@ -14,12 +14,15 @@ pub(crate) struct ReportArgs {
     out: Option<PathBuf>,
     /// A `tirewear bench` JSON for the performance section (default
     /// DIR/bench.json when it exists; without one the section is left out).
-    #[arg(long)]
-    bench: Option<PathBuf>,
+    /// Give it once per machine (`--bench h200.json --bench laptop.json`)
+    /// to compare them: each line's time on every machine and its speed
+    /// against the first file's.
+    #[arg(long, value_name = "FILE")]
+    bench: Vec<PathBuf>,
 }
 
 /// Writes the report of `dir` to `out` and says where it is.
-pub(crate) fn run_report(dir: &Path, out: &Path, bench: Option<&Path>) -> Result<()> {
+pub(crate) fn run_report(dir: &Path, out: &Path, bench: &[PathBuf]) -> Result<()> {
     let s = tirewear::report::write_report(dir, out, bench)?;
     println!(
         "wrote {} ({} figures; sections: {})",
@@ -33,5 +36,5 @@ pub(crate) fn run_report(dir: &Path, out: &Path, bench: Option<&Path>) -> Result
 /// Runs `tirewear report`.
 pub(crate) fn run(a: ReportArgs) -> Result<()> {
     let out = a.out.unwrap_or_else(|| a.dir.join("report.html"));
-    run_report(&a.dir, &out, a.bench.as_deref())
+    run_report(&a.dir, &out, &a.bench)
 }

@@ -218,6 +218,57 @@ pub(crate) fn bars(axes: &Axes, bars: &[Bar]) -> Result<String, ReportError> {
     })
 }
 
+/// Groups of bars at x = 1, 2, … (labels in the table beside the figure):
+/// in each group one bar per series, side by side in the series' order and
+/// colour, a missing value leaving its place empty; a legend names the
+/// series, and a dashed line marks `reference` (1 for ratios).
+pub(crate) fn grouped_bars(
+    axes: &Axes,
+    series: &[(String, usize)],
+    groups: &[Vec<Option<f64>>],
+    reference: f64,
+) -> Result<String, ReportError> {
+    let values = groups.iter().flatten().flatten().copied();
+    let (y0, y1) = padded(values.chain([reference]), true);
+    let x1 = groups.len() as f64 + 0.5;
+    let width = 0.8 / series.len().max(1) as f64;
+    svg(|root| {
+        let mut chart = frame(root, axes)
+            .build_cartesian_2d(0.5..x1, y0..y1)
+            .map_err(draw_error)?;
+        mesh!(chart, axes)
+            .x_labels(groups.len().clamp(1, 20))
+            .x_label_formatter(&|v| format!("{v:.0}"))
+            .draw()
+            .map_err(draw_error)?;
+        for (s, (label, c)) in series.iter().enumerate() {
+            let fill = color(Some(*c)).mix(0.8).filled();
+            let left = |g: usize| g as f64 + 1.0 - 0.4 + s as f64 * width;
+            chart
+                .draw_series(groups.iter().enumerate().filter_map(|(g, values)| {
+                    let v = values.get(s).copied().flatten()?;
+                    Some(Rectangle::new([(left(g), 0.0), (left(g) + width, v)], fill))
+                }))
+                .map_err(draw_error)?
+                .label(label.as_str())
+                .legend(move |(x, y)| Rectangle::new([(x, y - 5), (x + 12, y + 5)], fill));
+        }
+        chart
+            .draw_series(LineSeries::new([(0.5, 0.0), (x1, 0.0)], BLACK))
+            .map_err(draw_error)?;
+        chart
+            .draw_series(DashedLineSeries::new(
+                [(0.5, reference), (x1, reference)],
+                6,
+                4,
+                BLACK.stroke_width(1),
+            ))
+            .map_err(draw_error)?;
+        legend!(chart, SeriesLabelPosition::UpperLeft);
+        Ok(())
+    })
+}
+
 /// Lines through points at x = 0, 1, … (steps), one per series, with marks.
 pub(crate) fn steps(
     axes: &Axes,

@@ -36,8 +36,61 @@ pub(crate) struct Inputs {
     pub maps: std::collections::BTreeMap<crate::kpi::TireRun, crate::kpi::energy_maps::EnergyMaps>,
     /// `compounds/*.toml`: the master curves.
     pub compounds: Vec<crate::ingest::compound::Compound>,
-    /// A `tirewear bench` JSON, when given or in the folder as `bench.json`.
-    pub bench: Option<serde_json::Value>,
+    /// The `tirewear bench` JSONs given, or the folder's `bench.json`: one
+    /// machine's lines each; two or more are compared line by line.
+    pub bench: Vec<BenchFile>,
+}
+
+/// One `tirewear bench` JSON and the name the report gives it.
+pub(crate) struct BenchFile {
+    /// The file's name without `.json` (its folder too where two files
+    /// share a name): what the comparison's legend and columns say.
+    pub label: String,
+    pub json: serde_json::Value,
+}
+
+/// Reads the bench files, each checked to hold a `lines` array, and names
+/// them by their stems (with the folder where two stems are alike).
+fn read_bench_files(paths: &[PathBuf]) -> Result<Vec<BenchFile>, ReportError> {
+    let mut files = Vec::with_capacity(paths.len());
+    for path in paths {
+        let Some(json) = read_json(path)? else {
+            return Err(ReportError::Input {
+                path: path.clone(),
+                message: "not found (a `tirewear bench` JSON was asked for)".into(),
+            });
+        };
+        if !json["lines"].is_array() {
+            return Err(ReportError::Input {
+                path: path.clone(),
+                message: "not a `tirewear bench` JSON: it has no `lines` array".into(),
+            });
+        }
+        files.push(BenchFile {
+            label: String::new(),
+            json,
+        });
+    }
+    let stem = |p: &Path| p.file_stem().map(|s| s.to_string_lossy().into_owned());
+    let stems: Vec<String> = paths
+        .iter()
+        .map(|p| stem(p).unwrap_or_else(|| "bench".into()))
+        .collect();
+    for (i, f) in files.iter_mut().enumerate() {
+        let alike = stems.iter().filter(|s| **s == stems[i]).count() > 1;
+        let folder = paths[i].parent().and_then(stem).filter(|_| alike);
+        f.label = match folder {
+            Some(folder) => format!("{folder}/{}", stems[i]),
+            None => stems[i].clone(),
+        };
+    }
+    // Still alike (the same folder names): numbered in the given order.
+    for i in 0..files.len() {
+        if files[..i].iter().any(|f| f.label == files[i].label) {
+            files[i].label = format!("{} ({})", files[i].label, i + 1);
+        }
+    }
+    Ok(files)
 }
 
 fn read_json(path: &Path) -> Result<Option<serde_json::Value>, ReportError> {
@@ -94,7 +147,7 @@ fn compound_dirs(dir: &Path) -> Result<Vec<PathBuf>, ReportError> {
 }
 
 impl Inputs {
-    pub fn read(dir: &Path, bench: Option<&Path>) -> Result<Inputs, ReportError> {
+    pub fn read(dir: &Path, bench: &[PathBuf]) -> Result<Inputs, ReportError> {
         let kpis = dir.join("kpis.parquet");
         if !kpis.exists() {
             return Err(ReportError::Input {
@@ -148,15 +201,11 @@ impl Inputs {
                 }
             }
         }
+        let default_bench = dir.join("bench.json");
         let bench = match bench {
-            Some(path) if !path.exists() => {
-                return Err(ReportError::Input {
-                    path: path.into(),
-                    message: "not found (a `tirewear bench` JSON was asked for)".into(),
-                });
-            }
-            Some(path) => read_json(path)?,
-            None => read_json(&dir.join("bench.json"))?,
+            [] if default_bench.exists() => read_bench_files(&[default_bench])?,
+            [] => Vec::new(),
+            paths => read_bench_files(paths)?,
         };
         Ok(Inputs {
             bench,
@@ -242,12 +291,13 @@ outputs. Figures mirror the paper's; definitions in docs/report.md and docs/kpis
 }
 
 /// Writes `out` (atomically) from the season folder `dir`, with the
-/// performance section from `bench` (a `tirewear bench` JSON; default
+/// performance section from `bench` (`tirewear bench` JSONs, one per
+/// machine, compared line by line when there are two or more; none given:
 /// `dir/bench.json` when it exists).
 pub fn write_report(
     dir: &Path,
     out: &Path,
-    bench: Option<&Path>,
+    bench: &[PathBuf],
 ) -> Result<ReportSummary, ReportError> {
     let inputs = Inputs::read(dir, bench)?;
     let (page, sections) = render(&inputs)?;
@@ -292,6 +342,32 @@ mod tests {
         assert_eq!(newest(d, "gap", "gap.json"), d.join("gap/gap.json"));
     }
 
+    #[test]
+    fn bench_files_are_named_by_stem_with_their_folder_where_alike() {
+        let dir = tempfile::tempdir().unwrap();
+        let write = |rel: &str| {
+            let p = dir.path().join(rel);
+            std::fs::create_dir_all(p.parent().unwrap()).unwrap();
+            std::fs::write(&p, r#"{"lines": []}"#).unwrap();
+            p
+        };
+        let paths = [
+            write("h200/bench.json"),
+            write("laptop/bench.json"),
+            write("ci.json"),
+            write("x/h200/bench.json"),
+        ];
+        let labels: Vec<String> = read_bench_files(&paths)
+            .unwrap()
+            .into_iter()
+            .map(|f| f.label)
+            .collect();
+        assert_eq!(
+            labels,
+            ["h200/bench", "laptop/bench", "ci", "h200/bench (4)"]
+        );
+    }
+
     /// A folder with nothing but this gap.json.
     fn with_gap(gap: serde_json::Value) -> Inputs {
         Inputs {
@@ -303,7 +379,7 @@ mod tests {
             road: Vec::new(),
             maps: Default::default(),
             compounds: Vec::new(),
-            bench: None,
+            bench: Vec::new(),
         }
     }
 
@@ -355,7 +431,7 @@ mod tests {
             road: Vec::new(),
             maps: Default::default(),
             compounds: Vec::new(),
-            bench: None,
+            bench: Vec::new(),
         };
         let s = sections::season(&inputs);
         assert!(s.html.contains("Skipped runs (1)"), "{}", s.html);

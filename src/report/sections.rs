@@ -1526,13 +1526,33 @@ beyond chance.</p>\n";
     })
 }
 
-/// The performance section, when a `tirewear bench` JSON is given: every
-/// line's speed against its reference (the memory pass for the kernels,
-/// zstd alone for decoding, the 10 s target for the gap).
+/// The performance section, when `tirewear bench` JSONs are given: with
+/// two or more, first each line's time on every machine and its speed
+/// against the first file's; then, for each file, every line's speed
+/// against its reference (the memory pass for the kernels, zstd alone for
+/// decoding, the 10 s target for the gap).
 pub(super) fn performance(inputs: &Inputs) -> Result<Option<Section>, ReportError> {
-    let Some(b) = &inputs.bench else {
-        return Ok(None);
-    };
+    let (mut html, mut figures) = (String::new(), 0);
+    if inputs.bench.len() > 1 {
+        html += &comparison(&inputs.bench)?;
+        figures += 1;
+    }
+    for b in &inputs.bench {
+        if inputs.bench.len() > 1 {
+            html += &format!("<h3>{}</h3>\n", escape(&b.label));
+        }
+        html += &one_machine(&b.json)?;
+        figures += 1;
+    }
+    Ok((figures > 0).then(|| Section {
+        title: "Performance".into(),
+        html,
+        figures,
+    }))
+}
+
+/// One bench file's lines, each against its own reference.
+fn one_machine(b: &Value) -> Result<String, ReportError> {
     let lines: Vec<&Value> = b["lines"].as_array().into_iter().flatten().collect();
     let kernels: Vec<&str> = lines
         .iter()
@@ -1575,10 +1595,9 @@ pub(super) fn performance(inputs: &Inputs) -> Result<Option<Section>, ReportErro
         },
         &bars,
     )?;
-    let html = format!(
-        "<p>CPU: {}; GPU: {}.</p>\n{}",
-        escape(b["cpu"].as_str().unwrap_or("?")),
-        escape(b["gpu"].as_str().unwrap_or("none")),
+    Ok(format!(
+        "<p>{}</p>\n{}",
+        machine(b),
         fig(
             &svg,
             "Each benchmark line's speed as the reference's time over its time: above 1 \
@@ -1598,12 +1617,160 @@ per kernel, the lines numbered as in the table.",
                 &rows,
             ),
         )
+    ))
+}
+
+/// "CPU: …; GPU: …." of a bench file.
+fn machine(b: &Value) -> String {
+    format!(
+        "CPU: {}; GPU: {}.",
+        escape(b["cpu"].as_str().unwrap_or("?")),
+        escape(b["gpu"].as_str().unwrap_or("none"))
+    )
+}
+
+/// What a line measures, the same on every machine: its kernel, size and
+/// engine, the engine's "N threads" (or "N thr") written "all threads"
+/// where N is the file's own thread count, so that a 2-core and a 16-core
+/// machine compare their all-thread lines.
+pub(crate) fn line_key(line: &Value, threads: u64) -> [String; 3] {
+    let text = |k: &str| line[k].as_str().unwrap_or("").to_string();
+    let mut engine = text("engine");
+    if threads > 1 {
+        for unit in ["threads", "thr"] {
+            let own = format!(", {threads} {unit}");
+            if engine.ends_with(&own) {
+                engine.truncate(engine.len() - own.len());
+                engine += ", all threads";
+                break;
+            }
+        }
+    }
+    [text("kernel"), text("size"), engine]
+}
+
+/// The lines of several bench files side by side: each line (by
+/// [`line_key`], in the order the files first list them) with its time on
+/// every machine, and its speed on each machine against the first file's
+/// (the first file's time over this file's, the same work both times).
+fn comparison(files: &[super::BenchFile]) -> Result<String, ReportError> {
+    let mut keys: Vec<[String; 3]> = Vec::new();
+    let mut seconds: Vec<Vec<Option<f64>>> = Vec::new();
+    for (i, b) in files.iter().enumerate() {
+        let threads = b.json["threads"].as_u64().unwrap_or(0);
+        for l in b.json["lines"].as_array().into_iter().flatten() {
+            let key = line_key(l, threads);
+            let row = match keys.iter().position(|k| *k == key) {
+                Some(row) => row,
+                None => {
+                    keys.push(key);
+                    seconds.push(vec![None; files.len()]);
+                    keys.len() - 1
+                }
+            };
+            let t = f(&l["seconds"]);
+            // A line listed twice in one file: its first time counts.
+            if seconds[row][i].is_none() && t.is_finite() && t > 0.0 {
+                seconds[row][i] = Some(t);
+            }
+        }
+    }
+    let base = &files[0].label;
+    let speed = |times: &[Option<f64>]| -> Vec<Option<f64>> {
+        times.iter().map(|t| Some(times[0]? / (*t)?)).collect()
+    };
+    // The figure: the lines the first file and at least one other have.
+    let compared: Vec<usize> = (0..keys.len())
+        .filter(|&r| speed(&seconds[r]).iter().skip(1).any(Option::is_some))
+        .collect();
+    let series: Vec<(String, usize)> = files
+        .iter()
+        .enumerate()
+        .map(|(i, b)| (b.label.clone(), i))
+        .collect();
+    let groups: Vec<Vec<Option<f64>>> = compared.iter().map(|&r| speed(&seconds[r])).collect();
+    let title = format!("Speed against {base}");
+    let y = format!("{base}'s time / time (1)");
+    let svg = figure::grouped_bars(
+        &Axes {
+            title: &title,
+            x: "benchmark line (table)",
+            y: &y,
+        },
+        &series,
+        &groups,
+        1.0,
+    )?;
+    let mut header: Vec<String> = ["#", "kernel", "size", "engine"].map(String::from).to_vec();
+    for b in files {
+        header.push(format!("{} (ms)", b.label));
+    }
+    for b in &files[1..] {
+        header.push(format!("{} vs {base}", b.label));
+    }
+    let dash = || "–".to_string();
+    let mut rows: Vec<Vec<String>> = Vec::new();
+    // Lines the comparison leaves out, by the files that hold them.
+    let mut only: Vec<(String, Vec<String>)> = Vec::new();
+    for (r, key) in keys.iter().enumerate() {
+        let Some(n) = compared.iter().position(|&c| c == r) else {
+            let holders: Vec<&str> = (0..files.len())
+                .filter(|&i| seconds[r][i].is_some())
+                .map(|i| files[i].label.as_str())
+                .collect();
+            let holders = holders.join(", ");
+            let line = format!("{} ({}, {})", key[0], key[1], key[2]);
+            match only.iter_mut().find(|(h, _)| *h == holders) {
+                Some((_, lines)) => lines.push(line),
+                None => only.push((holders, vec![line])),
+            }
+            continue;
+        };
+        let mut row = vec![
+            (n + 1).to_string(),
+            key[0].clone(),
+            key[1].clone(),
+            key[2].clone(),
+        ];
+        row.extend(
+            seconds[r]
+                .iter()
+                .map(|t| t.map_or_else(dash, |t| num(t * 1e3, 2))),
+        );
+        row.extend(
+            speed(&seconds[r])[1..]
+                .iter()
+                .map(|s| s.map_or_else(dash, |s| num(s, 3))),
+        );
+        rows.push(row);
+    }
+    let machines: String = files
+        .iter()
+        .map(|b| format!("<li>{}: {}</li>", escape(&b.label), machine(&b.json)))
+        .collect();
+    let header: Vec<&str> = header.iter().map(String::as_str).collect();
+    let mut html = format!(
+        "<p>{} bench files, one machine each:</p>\n<ul>{machines}</ul>\n{}",
+        files.len(),
+        fig(
+            &svg,
+            &format!(
+                "Each line measured on several machines (the same kernel, input size and \
+engine; a machine's all-thread lines compared with another's, whatever their thread counts): \
+its speed on each machine as {base}'s time over that machine's time, above 1 faster; one \
+colour per file, the dashed line at 1, the lines numbered as in the table."
+            ),
+            &table(&header, &rows),
+        )
     );
-    Ok(Some(Section {
-        title: "Performance".into(),
-        html,
-        figures: 1,
-    }))
+    for (holders, lines) in &only {
+        html += &format!(
+            "<p>Only in {} (not compared): {}.</p>\n",
+            escape(holders),
+            escape(&lines.join("; "))
+        );
+    }
+    Ok(html)
 }
 
 #[cfg(test)]
@@ -1622,6 +1789,25 @@ mod tests {
         // measured (1, 2, 3), predicted (1, 2, 5): SSE 4, SST 2: R² −1, RMSE √(4/3).
         let (r2, rmse) = fit_quality(&[(1.0, 1.0), (2.0, 2.0), (3.0, 5.0)]);
         assert!((r2 + 1.0).abs() < 1e-12 && (rmse - (4.0f64 / 3.0).sqrt()).abs() < 1e-12);
+    }
+
+    #[test]
+    fn a_machines_own_thread_count_reads_all_threads() {
+        let line = |engine: &str| serde_json::json!({"kernel": "k", "size": "s", "engine": engine});
+        let engine = |e: &str, threads: u64| line_key(&line(e), threads)[2].clone();
+        assert_eq!(engine("cpu, 16 threads", 16), "cpu, all threads");
+        assert_eq!(engine("cpu realfft, 2 thr", 2), "cpu realfft, all threads");
+        // Another count, or a count inside a word, is left as written.
+        assert_eq!(engine("cpu, 8 threads", 16), "cpu, 8 threads");
+        assert_eq!(engine("cpu, 1 thread", 1), "cpu, 1 thread");
+        assert_eq!(
+            engine("gpu, 16 threads upload", 16),
+            "gpu, 16 threads upload"
+        );
+        assert_eq!(
+            line_key(&line("gpu"), 4),
+            ["k", "s", "gpu"].map(String::from)
+        );
     }
 
     #[test]
