@@ -775,7 +775,8 @@ fn season_gap_lines(
 /// The report as a table.
 pub fn render(r: &BenchReport) -> String {
     let mut s = String::new();
-    let _ = writeln!(s, "CPU: {} threads", r.threads);
+    // `cpu` names the model and the thread count (the CPU engine's device).
+    let _ = writeln!(s, "CPU: {}", r.cpu);
     let _ = writeln!(s, "GPU: {}", r.gpu.as_deref().unwrap_or("none"));
     let _ = writeln!(
         s,
