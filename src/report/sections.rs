@@ -1633,7 +1633,7 @@ fn machine(b: &Value) -> String {
 /// engine, the engine's "N threads" (or "N thr") written "all threads"
 /// where N is the file's own thread count, so that a 2-core and a 16-core
 /// machine compare their all-thread lines.
-pub(crate) fn line_key(line: &Value, threads: u64) -> [String; 3] {
+fn line_key(line: &Value, threads: u64) -> [String; 3] {
     let text = |k: &str| line[k].as_str().unwrap_or("").to_string();
     let mut engine = text("engine");
     if threads > 1 {
