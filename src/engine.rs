@@ -76,7 +76,7 @@ pub struct CpuEngine;
 /// The processor's name as the system gives it (Linux: `/proc/cpuinfo`'s
 /// first `model name`), so that a bench file says which machine measured
 /// it; "CPU" where the system does not say.
-pub fn cpu_model() -> &'static str {
+fn cpu_model() -> &'static str {
     static MODEL: std::sync::OnceLock<String> = std::sync::OnceLock::new();
     MODEL.get_or_init(|| {
         std::fs::read_to_string("/proc/cpuinfo")

@@ -1676,19 +1676,21 @@ fn comparison(files: &[super::BenchFile]) -> Result<String, ReportError> {
         }
     }
     let base = &files[0].label;
-    let speed = |times: &[Option<f64>]| -> Vec<Option<f64>> {
-        times.iter().map(|t| Some(times[0]? / (*t)?)).collect()
-    };
+    // Each line's speed on each machine: the first file's time over its own.
+    let speeds: Vec<Vec<Option<f64>>> = seconds
+        .iter()
+        .map(|times| times.iter().map(|t| Some(times[0]? / (*t)?)).collect())
+        .collect();
     // The figure: the lines the first file and at least one other have.
     let compared: Vec<usize> = (0..keys.len())
-        .filter(|&r| speed(&seconds[r]).iter().skip(1).any(Option::is_some))
+        .filter(|&r| speeds[r].iter().skip(1).any(Option::is_some))
         .collect();
     let series: Vec<(String, usize)> = files
         .iter()
         .enumerate()
         .map(|(i, b)| (b.label.clone(), i))
         .collect();
-    let groups: Vec<Vec<Option<f64>>> = compared.iter().map(|&r| speed(&seconds[r])).collect();
+    let groups: Vec<Vec<Option<f64>>> = compared.iter().map(|&r| speeds[r].clone()).collect();
     let title = format!("Speed against {base}");
     let y = format!("{base}'s time / time (1)");
     let svg = figure::grouped_bars(
@@ -1738,7 +1740,7 @@ fn comparison(files: &[super::BenchFile]) -> Result<String, ReportError> {
                 .map(|t| t.map_or_else(dash, |t| num(t * 1e3, 2))),
         );
         row.extend(
-            speed(&seconds[r])[1..]
+            speeds[r][1..]
                 .iter()
                 .map(|s| s.map_or_else(dash, |s| num(s, 3))),
         );
