@@ -437,6 +437,23 @@ const fn condition_table_at_build() -> [ConditionBins; TABLE_LEN] {
     out
 }
 
+// Every entry's bins lie inside its map (TABLE_FITS): a condition's
+// within the 1-D maps' `CONDITION_BINS`, a pair's `n_a·n_b` cells within
+// `PAIR_BINS`; what lets `WheelHistogram::add` index without a bounds check.
+const _: () = {
+    let mut k = 0;
+    while k < N_CONDITIONS {
+        let t = &CONDITION_TABLE[k];
+        assert!(t.n >= 1 && (t.offset + t.n) as usize <= CONDITION_BINS);
+        k += 1;
+    }
+    while k < TABLE_LEN {
+        let (a, b) = (&CONDITION_TABLE[k], &CONDITION_TABLE[k + 1]);
+        assert!(a.n >= 1 && b.n >= 1 && (a.offset + a.n * b.n) as usize <= PAIR_BINS);
+        k += 2;
+    }
+};
+
 /// [`CONDITION_TABLE`] as the GPU engine uploads it and the twin reads it.
 pub(crate) fn condition_table() -> Vec<ConditionBins> {
     CONDITION_TABLE.to_vec()
@@ -605,6 +622,28 @@ fn maps_by_wheel<const ENERGY: bool>(batch: &ReduceBatch) -> (Vec<u64>, Vec<u64>
     (energy, conditions)
 }
 
+/// A two-component cell plus `q`, lane by lane with wrapping: on x86-64 one
+/// 16-byte add and one store (SSE2, always there), where two scalar adds
+/// take two stores.
+#[inline(always)]
+fn add_pair(cell: &mut [u64; SUMMED], q: [u64; SUMMED]) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        use std::arch::x86_64::{__m128i, _mm_add_epi64, _mm_loadu_si128, _mm_storeu_si128};
+        let p = cell.as_mut_ptr().cast::<__m128i>();
+        // SAFETY: `cell` is 16 valid, writable bytes (two u64s); the
+        // unaligned load and store need no alignment.
+        unsafe {
+            let sum = _mm_add_epi64(_mm_loadu_si128(p), _mm_loadu_si128(q.as_ptr().cast()));
+            _mm_storeu_si128(p, sum);
+        }
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    for (slot, qm) in cell.iter_mut().zip(q) {
+        *slot = slot.wrapping_add(qm);
+    }
+}
+
 /// One wheel's private histogram of quanta: [bin][longitudinal, lateral]
 /// for the 1-D maps, then the pair cells (total only); and with `ENERGY`
 /// the energy maps' bins (`energy_map`'s layout).
@@ -664,10 +703,14 @@ impl<const ENERGY: bool> WheelHistogram<ENERGY> {
         for p in samples {
             if ENERGY {
                 let e = sample_energy(p);
-                let [a, b, c] = e.cells;
-                self.energy[a] = self.energy[a].wrapping_add(e.total);
-                self.energy[b] = self.energy[b].wrapping_add(e.total);
-                self.energy[c] = self.energy[c].wrapping_add(e.lateral);
+                for (cell, q) in e.cells.into_iter().zip([e.total, e.total, e.lateral]) {
+                    debug_assert!(cell < ENERGY_BINS);
+                    // SAFETY: `sample_energy`'s cells are clamped bins of
+                    // maps that tile `energy_map`'s BINS (its const
+                    // assertions); `energy` has BINS entries with ENERGY.
+                    let slot = unsafe { self.energy.get_unchecked_mut(cell) };
+                    *slot = slot.wrapping_add(q);
+                }
             }
             let q = sample_quanta(p);
             let q_total = q[0].wrapping_add(q[1]);
@@ -682,15 +725,22 @@ impl<const ENERGY: bool> WheelHistogram<ENERGY> {
                 bin[k] = bin_of(x[k], t.lo[k], t.inv_width[k], t.last[k]);
             }
             for k in 0..N_CONDITIONS {
-                let cell = &mut self.one_d[(t.offset[k] + bin[k]) as usize];
-                for (slot, &qm) in cell.iter_mut().zip(&q) {
-                    *slot = slot.wrapping_add(qm);
-                }
+                let cell = (t.offset[k] + bin[k]) as usize;
+                debug_assert!(cell < CONDITION_BINS);
+                // SAFETY: bin_of clamps bin[k] to 0..n_k, every condition's
+                // bins lie inside the map (TABLE_FITS), and `one_d` has
+                // CONDITION_BINS cells.
+                add_pair(unsafe { self.one_d.get_unchecked_mut(cell) }, q);
             }
             for k in 0..N_PAIRS {
                 let (a, b) = (N_CONDITIONS + 2 * k, N_CONDITIONS + 2 * k + 1);
                 let n_b = CONDITION_TABLE[b].n;
-                let slot = &mut self.pairs[(t.offset[a] + bin[a] * n_b + bin[b]) as usize];
+                let cell = (t.offset[a] + bin[a] * n_b + bin[b]) as usize;
+                debug_assert!(cell < PAIR_BINS);
+                // SAFETY: bin[a] < n_a and bin[b] < n_b (clamped), so the
+                // cell is below offset + n_a·n_b ≤ PAIR_BINS (TABLE_FITS),
+                // the length of `pairs`.
+                let slot = unsafe { self.pairs.get_unchecked_mut(cell) };
                 *slot = slot.wrapping_add(q_total);
             }
         }
