@@ -292,6 +292,13 @@ pub(crate) fn prepare_wheel_into(
     }
     let channels = s.channels();
     for ((name, _, _), c) in WHEEL_RANGES.iter().zip(channels) {
+        if c.len() != s.len() {
+            return Err(format!(
+                "channel {name} has {} samples where the wheel has {} timestamps",
+                c.len(),
+                s.len()
+            ));
+        }
         if c.iter().all(|&v| v == 0.0) {
             return Err(format!("channel {name} is missing (every sample is 0)"));
         }
@@ -310,43 +317,84 @@ pub(crate) fn prepare_wheel_into(
         ));
     }
     samples.reserve(kept.len());
-    let lateral_known = lateral_accel.len() == s.len();
-    let lateral = |i: usize| match lateral_known {
-        true => lateral_accel[i],
-        false => f32::NAN,
-    };
-    let push = |i: usize, dt: f64, d: DerivedConditions| {
-        let (dt_hi, dt_lo) = ReduceSample::split_dt(dt);
-        samples.push(ReduceSample {
-            vx: s.vx_mps[i],
-            vy: s.vy_mps[i],
-            omega: s.omega_radps[i],
-            radius: s.rolling_radius_m[i],
-            fx: s.fx_n[i],
-            fy: s.fy_n[i],
-            fz: s.fz_n[i],
-            t_surface: s.t_surface_c[i],
-            t_inner: s.t_inner_c[i],
-            pressure: s.pressure_pa[i],
-            camber: s.camber_deg[i],
-            t_surface_rate: d.t_surface_rate as f32,
-            t_inner_rate: d.t_inner_rate as f32,
-            load_rel: d.load_rel as f32,
-            time_s: d.time_s as f32,
-            distance_m: d.distance_m as f32,
-            accel_x: d.accel_x_mps2 as f32,
-            accel_y: lateral(i),
-            dt: dt_hi,
-            dt_lo,
-        });
-    };
-    // Every sample kept is the usual case: read without the index.
-    if kept.len() == s.len() {
-        for_each_kept(s, AllSamples(s.len()), &mut report, push);
+    // Every channel cut to the wheel's length (checked above), so that the
+    // push, inlined into the loop, indexes them without a check each.
+    let n = s.len();
+    let c = channels.map(|c| &c[..n]);
+    let lateral = (lateral_accel.len() == n).then(|| &lateral_accel[..n]);
+    // Every sample kept is the usual case: read without the index. The
+    // closures are inlined into the loop (not inlined, the push was a call
+    // per sample with eleven bounds checks).
+    if kept.len() == n {
+        let all = AllSamples(n);
+        for_each_kept(
+            s,
+            all,
+            &mut report,
+            #[inline(always)]
+            |i, dt, d| push_sample(samples, &c, lateral, i, dt, d),
+        );
     } else {
-        for_each_kept(s, kept.as_slice(), &mut report, push);
+        let kept = kept.as_slice();
+        for_each_kept(
+            s,
+            kept,
+            &mut report,
+            #[inline(always)]
+            |i, dt, d| push_sample(samples, &c, lateral, i, dt, d),
+        );
     }
     Ok(report)
+}
+
+/// Appends sample `i` of a wheel's channels (in [`WheelSeries::channels`]
+/// order, each as long as the wheel) as a [`ReduceSample`]; the lateral
+/// acceleration NaN where unknown. Always inlined: called once per sample.
+#[inline(always)]
+fn push_sample(
+    samples: &mut Vec<ReduceSample>,
+    c: &[&[f32]; 11],
+    lateral: Option<&[f32]>,
+    i: usize,
+    dt: f64,
+    d: DerivedConditions,
+) {
+    let (dt_hi, dt_lo) = ReduceSample::split_dt(dt);
+    let [
+        vx,
+        vy,
+        omega,
+        radius,
+        fx,
+        fy,
+        fz,
+        t_surface,
+        t_inner,
+        pressure,
+        camber,
+    ] = c;
+    samples.push(ReduceSample {
+        vx: vx[i],
+        vy: vy[i],
+        omega: omega[i],
+        radius: radius[i],
+        fx: fx[i],
+        fy: fy[i],
+        fz: fz[i],
+        t_surface: t_surface[i],
+        t_inner: t_inner[i],
+        pressure: pressure[i],
+        camber: camber[i],
+        t_surface_rate: d.t_surface_rate as f32,
+        t_inner_rate: d.t_inner_rate as f32,
+        load_rel: d.load_rel as f32,
+        time_s: d.time_s as f32,
+        distance_m: d.distance_m as f32,
+        accel_x: d.accel_x_mps2 as f32,
+        accel_y: lateral.map_or(f32::NAN, |a| a[i]),
+        dt: dt_hi,
+        dt_lo,
+    });
 }
 
 /// The car's lateral acceleration |Σ F_y| / m (m/s²) at each sample of
