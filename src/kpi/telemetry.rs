@@ -458,7 +458,9 @@ impl LateralAcceleration {
                         while j + 1 < src.time_ns.len() && src.time_ns[j + 1] <= t {
                             j += 1;
                         }
-                        *s += f[j] as f64;
+                        // A force channel shorter than its clock (a series
+                        // built by hand) adds nothing; its wheel is refused.
+                        *s += f.get(j).map_or(0.0, |&f| f as f64);
                     }
                 }
             }
@@ -749,6 +751,20 @@ mod tests {
         let lateral: f64 = maps.lateral_surface_inner.iter().sum();
         assert!((lateral - k.friction_energy_y_j).abs() < 1e-6);
         assert_eq!((rep.dropouts, rep.sample_periods), (0, 1));
+    }
+
+    /// A series built by hand (an importer, a test) whose channel is
+    /// shorter or longer than its timestamps is refused by name; before,
+    /// the shorter one panicked on an index.
+    #[test]
+    fn channel_of_another_length_is_an_error_naming_it() {
+        for (len, what) in [(99, "99 samples"), (101, "101 samples")] {
+            let mut s = constant_series(100, 10_000_000);
+            s.fy_n.resize(len, 3000.0);
+            let e = prepare_wheel(&s).err().expect("refused");
+            assert!(e.contains("channel fy_n") && e.contains(what), "{e}");
+            assert!(e.contains("100 timestamps"), "{e}");
+        }
     }
 
     #[test]
