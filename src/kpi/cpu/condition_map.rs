@@ -437,9 +437,9 @@ const fn condition_table_at_build() -> [ConditionBins; TABLE_LEN] {
     out
 }
 
-// Every entry's bins lie inside its map (TABLE_FITS): a condition's
-// within the 1-D maps' `CONDITION_BINS`, a pair's `n_a·n_b` cells within
-// `PAIR_BINS`; what lets `WheelHistogram::add` index without a bounds check.
+// The table fits its maps: every condition's bins lie within the 1-D
+// maps' `CONDITION_BINS`, every pair's `n_a·n_b` cells within `PAIR_BINS`;
+// what lets `WheelHistogram::add` index without a bounds check.
 const _: () = {
     let mut k = 0;
     while k < N_CONDITIONS {
@@ -728,7 +728,8 @@ impl<const ENERGY: bool> WheelHistogram<ENERGY> {
                 let cell = (t.offset[k] + bin[k]) as usize;
                 debug_assert!(cell < CONDITION_BINS);
                 // SAFETY: bin_of clamps bin[k] to 0..n_k, every condition's
-                // bins lie inside the map (TABLE_FITS), and `one_d` has
+                // bins lie inside the map (the table-fits assertion after
+                // `condition_table_at_build`), and `one_d` has
                 // CONDITION_BINS cells.
                 add_pair(unsafe { self.one_d.get_unchecked_mut(cell) }, q);
             }
@@ -738,8 +739,8 @@ impl<const ENERGY: bool> WheelHistogram<ENERGY> {
                 let cell = (t.offset[a] + bin[a] * n_b + bin[b]) as usize;
                 debug_assert!(cell < PAIR_BINS);
                 // SAFETY: bin[a] < n_a and bin[b] < n_b (clamped), so the
-                // cell is below offset + n_a·n_b ≤ PAIR_BINS (TABLE_FITS),
-                // the length of `pairs`.
+                // cell is below offset + n_a·n_b ≤ PAIR_BINS (the table-fits
+                // assertion), the length of `pairs`.
                 let slot = unsafe { self.pairs.get_unchecked_mut(cell) };
                 *slot = slot.wrapping_add(q_total);
             }
