@@ -24,15 +24,27 @@ pub(crate) enum Field<'a> {
 
 /// A base-128 varint at the front of `buf`, which is advanced past it.
 /// `None` when it runs off the end or is longer than a u64 allows.
-#[inline]
+/// One and two bytes (tags, and a packed array's length up to 16 KiB:
+/// all but a block's start time and period) are read inline where it is
+/// called; longer ones take a call ([`varint_long`]).
+#[inline(always)]
 pub(crate) fn varint(buf: &mut &[u8]) -> Option<u64> {
-    // Tags and short lengths take one byte.
-    if let Some((&byte, rest)) = buf.split_first()
-        && byte < 0x80
-    {
-        *buf = rest;
-        return Some(u64::from(byte));
+    match **buf {
+        [b0, ..] if b0 < 0x80 => {
+            *buf = &buf[1..];
+            Some(u64::from(b0))
+        }
+        [b0, b1, ..] if b1 < 0x80 => {
+            *buf = &buf[2..];
+            Some(u64::from(b0 & 0x7f) | u64::from(b1) << 7)
+        }
+        _ => varint_long(buf),
     }
+}
+
+/// [`varint`] of three bytes or more (or none), byte by byte.
+#[inline(never)]
+fn varint_long(buf: &mut &[u8]) -> Option<u64> {
     let mut value = 0u64;
     for i in 0..10 {
         let byte = *buf.get(i)?;
@@ -51,7 +63,9 @@ pub(crate) fn varint(buf: &mut &[u8]) -> Option<u64> {
 
 /// The field at the front of `buf` (its number and value); `buf` is advanced
 /// past it. `None` for a malformed field or a group (wire types 3 and 4).
-#[inline]
+/// Always inlined: called once per field of every block, in the loop that
+/// matches the field's number.
+#[inline(always)]
 pub(crate) fn next_field<'a>(buf: &mut &'a [u8]) -> Option<(u32, Field<'a>)> {
     let key = varint(buf)?;
     let number = u32::try_from(key >> 3).ok().filter(|&n| n > 0)?;
@@ -178,6 +192,31 @@ mod tests {
         assert_eq!(varint(&mut over), None);
         let mut cut: &[u8] = &[0x80];
         assert_eq!(varint(&mut cut), None);
+    }
+
+    #[test]
+    fn varints_of_every_length_read_as_prost_writes_them() {
+        // Both sides of each length's boundary (1, 2 and 3 bytes are
+        // read by different code), then every tenth-power and u64::MAX.
+        let mut values: Vec<u64> = (0..10)
+            .flat_map(|k| {
+                let edge = 1u64 << (7 * k);
+                [edge.saturating_sub(1), edge, edge + 1]
+            })
+            .collect();
+        values.extend((0..20).map(|k| 10u64.pow(k)));
+        values.push(u64::MAX);
+        for v in values {
+            let mut bytes = Vec::new();
+            prost::encoding::encode_varint(v, &mut bytes);
+            bytes.push(0x2a);
+            let mut b = bytes.as_slice();
+            assert_eq!(varint(&mut b), Some(v), "{v}");
+            assert_eq!(b, &[0x2a], "{v}: what is left");
+            // Cut one byte short, it is no varint.
+            let mut cut = &bytes[..bytes.len() - 2];
+            assert_eq!(varint(&mut cut), None, "{v} cut short");
+        }
     }
 
     #[test]
