@@ -149,15 +149,55 @@ fn in_range(channels: &[&[f32]; 11], bounds: &[(f32, f32); 11]) -> Vec<bool> {
     ok
 }
 
-/// Indices of the samples the cleaning rule keeps, in order (their times
-/// strictly increase); the drops are counted in `report`.
-fn kept_samples(
-    s: &WheelSeries,
-    channels: &[&[f32]; 11],
-    report: &mut CleaningReport,
-) -> Vec<usize> {
+/// The samples the cleaning rule keeps.
+#[derive(Debug)]
+enum Kept {
+    /// Every sample of the wheel (the usual case): no index list built.
+    All(usize),
+    /// The kept samples' indices, in order (their times strictly increase).
+    Indices(Vec<usize>),
+}
+
+impl Kept {
+    fn len(&self) -> usize {
+        match self {
+            Kept::All(n) => *n,
+            Kept::Indices(kept) => kept.len(),
+        }
+    }
+
+    /// The kept samples' indices, whichever the case.
+    #[cfg(test)]
+    fn indices(&self) -> Vec<usize> {
+        match self {
+            Kept::All(n) => (0..*n).collect(),
+            Kept::Indices(kept) => kept.clone(),
+        }
+    }
+}
+
+/// The samples the cleaning rule keeps (their times strictly increase);
+/// the drops are counted in `report`.
+fn kept_samples(s: &WheelSeries, channels: &[&[f32]; 11], report: &mut CleaningReport) -> Kept {
     report.samples = s.len() as u64;
     let bounds = WHEEL_RANGES.map(|(_, lo, hi)| f32_bounds(lo, hi));
+    // Every sample valid and the times strictly increasing, the usual
+    // case: checked in passes without a branch per sample (which the
+    // compiler vectorises), and neither a mask nor an index list built
+    // (the loop below pushing every index cost ~40 instructions a sample;
+    // callgrind, docs/performance.md).
+    let all_valid = bounds
+        .iter()
+        .zip(channels)
+        .all(|(&b, col)| col.iter().fold(true, |all, &v| all & within(v, b)));
+    let in_order = s
+        .time_ns
+        .windows(2)
+        .fold(true, |all, t| all & (t[0] < t[1]));
+    if all_valid && in_order {
+        report.kept = report.samples;
+        return Kept::All(s.len());
+    }
     let valid = in_range(channels, &bounds);
     let mut kept: Vec<usize> = Vec::with_capacity(s.len());
     let mut last_t: Option<u64> = None;
@@ -183,7 +223,7 @@ fn kept_samples(
         kept.push(i);
     }
     report.kept = kept.len() as u64;
-    kept
+    Kept::Indices(kept)
 }
 
 /// Which samples a wheel keeps, as the preparation reads them: all of them
@@ -325,24 +365,21 @@ pub(crate) fn prepare_wheel_into(
     // Every sample kept is the usual case: read without the index. The
     // closures are inlined into the loop (not inlined, the push was a call
     // per sample with eleven bounds checks).
-    if kept.len() == n {
-        let all = AllSamples(n);
-        for_each_kept(
+    match kept {
+        Kept::All(n) => for_each_kept(
             s,
-            all,
+            AllSamples(n),
             &mut report,
             #[inline(always)]
             |i, dt, d| push_sample(samples, &c, lateral, i, dt, d),
-        );
-    } else {
-        let kept = kept.as_slice();
-        for_each_kept(
+        ),
+        Kept::Indices(kept) => for_each_kept(
             s,
-            kept,
+            kept.as_slice(),
             &mut report,
             #[inline(always)]
             |i, dt, d| push_sample(samples, &c, lateral, i, dt, d),
-        );
+        ),
     }
     Ok(report)
 }
@@ -767,6 +804,55 @@ mod tests {
         }
     }
 
+    /// The cleaning rule's keep list, fast path (every sample kept) or
+    /// not, against the rule as docs/kpis.md states it, sample by sample
+    /// in f64: kept when every channel is finite and within its range and
+    /// its time is after the last kept sample's. Series with nothing wrong,
+    /// one value out of range, NaN, ±∞, a repeated or a backward time.
+    #[test]
+    fn kept_samples_follow_the_rule_stated_sample_by_sample() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand::rngs::StdRng::seed_from_u64(17);
+        let rule = |s: &WheelSeries| {
+            let mut last: Option<u64> = None;
+            let mut kept = Vec::new();
+            for i in 0..s.len() {
+                let valid = WHEEL_RANGES
+                    .iter()
+                    .zip(s.channels())
+                    .all(|(&(_, lo, hi), c)| in_bounds(c[i], lo, hi));
+                if valid && last.is_none_or(|t| s.time_ns[i] > t) {
+                    last = Some(s.time_ns[i]);
+                    kept.push(i);
+                }
+            }
+            kept
+        };
+        for case in 0..300 {
+            let n = rng.random_range(1..200);
+            let mut s = constant_series(n, 10_000_000);
+            let i = rng.random_range(0..n);
+            match case % 6 {
+                0 => {}
+                1 => s.time_ns[i] = s.time_ns[i.saturating_sub(1)],
+                2 => s.time_ns[i] = s.time_ns[i].saturating_sub(25_000_000),
+                3 => s.fz_n[i] = f32::NAN,
+                4 => s.t_inner_c[i] = if i % 2 == 0 { f32::INFINITY } else { 250.1 },
+                _ => s.camber_deg[i] = -15.000_01,
+            }
+            let mut report = CleaningReport::default();
+            let kept = kept_samples(&s, &s.channels(), &mut report);
+            let expected = rule(&s);
+            assert_eq!(kept.indices(), expected, "case {case}");
+            assert_eq!(report.kept as usize, expected.len());
+            assert_eq!(
+                matches!(kept, Kept::All(_)),
+                expected.len() == n,
+                "case {case}"
+            );
+        }
+    }
+
     #[test]
     fn derived_conditions_by_hand() {
         // 10 Hz; the surface heats 2 K per sample (20 K/s), the inner liner
@@ -780,7 +866,7 @@ mod tests {
         // Sample 20 is lost (a NaN): its neighbours stand for 0.2 s.
         s.vx_mps[20] = f32::NAN;
         let mut report = CleaningReport::default();
-        let kept = kept_samples(&s, &s.channels(), &mut report);
+        let kept = kept_samples(&s, &s.channels(), &mut report).indices();
         assert_eq!(kept.len(), 39);
         let d = derived_conditions(&s, &kept);
         // Sample 10 (k = 10): window t ± 0.5 s = samples 5..=15, 1 s apart.
@@ -821,7 +907,7 @@ mod tests {
             s.vx_mps[i] = 60.0 - 0.5 * i.min(20) as f32;
         }
         let mut report = CleaningReport::default();
-        let kept = kept_samples(&s, &s.channels(), &mut report);
+        let kept = kept_samples(&s, &s.channels(), &mut report).indices();
         let d = derived_conditions(&s, &kept);
         let a = |k: usize| d[k].1.accel_x_mps2;
         // Sample 10: window 5..=15, (52.5 − 57.5) / 1 s.
