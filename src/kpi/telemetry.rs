@@ -409,10 +409,8 @@ pub(crate) fn prepare_wheel_into(
         ));
     }
     samples.reserve(kept.len());
-    // Every channel cut to the wheel's length (checked above), so that the
-    // push, inlined into the loop, indexes them without a check each.
     let n = s.len();
-    let c = channels.map(|c| &c[..n]);
+    let c = Columns::new(channels, n).ok_or("a channel is shorter than the wheel's timestamps")?;
     let lateral = (lateral_accel.len() == n).then(|| &lateral_accel[..n]);
     // Every sample kept is the usual case: read without the index. The
     // closures are inlined into the loop (not inlined, the push was a call
@@ -436,13 +434,41 @@ pub(crate) fn prepare_wheel_into(
     Ok(report)
 }
 
-/// Appends sample `i` of a wheel's channels (in [`WheelSeries::channels`]
-/// order, each as long as the wheel) as a [`ReduceSample`]; the lateral
-/// acceleration NaN where unknown. Always inlined: called once per sample.
+/// A wheel's eleven channels (in [`WheelSeries::channels`] order), each
+/// cut to the same length: a sample's values read behind one bounds check
+/// instead of eleven (the compiler kept all eleven in the push's loop,
+/// even with the slices cut to the wheel's length: docs/performance.md).
+struct Columns<'a> {
+    channels: [&'a [f32]; 11],
+    len: usize,
+}
+
+impl<'a> Columns<'a> {
+    /// The channels cut to `len` values; `None` if one is shorter.
+    fn new(channels: [&'a [f32]; 11], len: usize) -> Option<Self> {
+        channels.iter().all(|c| c.len() >= len).then(|| Columns {
+            channels: channels.map(|c| &c[..len]),
+            len,
+        })
+    }
+
+    /// Sample `i`'s values.
+    #[inline(always)]
+    fn row(&self, i: usize) -> [f32; 11] {
+        assert!(i < self.len, "sample {i} of {}", self.len);
+        // SAFETY: every channel holds exactly `len` values (cut in `new`,
+        // the only constructor) and i < len, checked just above.
+        self.channels.map(|c| unsafe { *c.get_unchecked(i) })
+    }
+}
+
+/// Appends sample `i` of a wheel's channels as a [`ReduceSample`]; the
+/// lateral acceleration NaN where unknown. Always inlined: called once per
+/// sample.
 #[inline(always)]
 fn push_sample(
     samples: &mut Vec<ReduceSample>,
-    c: &[&[f32]; 11],
+    c: &Columns,
     lateral: Option<&[f32]>,
     i: usize,
     dt: f64,
@@ -461,19 +487,19 @@ fn push_sample(
         t_inner,
         pressure,
         camber,
-    ] = c;
+    ] = c.row(i);
     samples.push(ReduceSample {
-        vx: vx[i],
-        vy: vy[i],
-        omega: omega[i],
-        radius: radius[i],
-        fx: fx[i],
-        fy: fy[i],
-        fz: fz[i],
-        t_surface: t_surface[i],
-        t_inner: t_inner[i],
-        pressure: pressure[i],
-        camber: camber[i],
+        vx,
+        vy,
+        omega,
+        radius,
+        fx,
+        fy,
+        fz,
+        t_surface,
+        t_inner,
+        pressure,
+        camber,
         t_surface_rate: d.t_surface_rate as f32,
         t_inner_rate: d.t_inner_rate as f32,
         load_rel: d.load_rel as f32,
