@@ -329,13 +329,7 @@ fn counted_period(steps: Vec<u64>, report: &mut CleaningReport) -> u64 {
         .map_or(0, |&(d, _)| d);
     // Equal steps fall together in its dedup as well: the distinct
     // periods are the same from the distinct steps.
-    let mut periods: Vec<u64> = distinct
-        .iter()
-        .map(|e| e.0)
-        .filter(|&d| bridged_step(d))
-        .collect();
-    periods.dedup_by(|a, b| (*a as f64 - *b as f64).abs() <= 0.01 * *b as f64);
-    report.sample_periods = periods.len() as u32;
+    report.sample_periods = distinct_periods(distinct.iter().map(|e| e.0));
     period_ns
 }
 
@@ -348,10 +342,16 @@ fn bridged_step(step_ns: u64) -> bool {
 fn sorted_period(mut steps: Vec<u64>, report: &mut CleaningReport) -> u64 {
     steps.sort_unstable();
     let period_ns = steps.get(steps.len() / 2).copied().unwrap_or(0);
-    let mut periods: Vec<u64> = steps.into_iter().filter(|&d| bridged_step(d)).collect();
-    periods.dedup_by(|a, b| (*a as f64 - *b as f64).abs() <= 0.01 * *b as f64);
-    report.sample_periods = periods.len() as u32;
+    report.sample_periods = distinct_periods(steps.into_iter());
     period_ns
+}
+
+/// How many distinct sample periods sorted steps hold: the bridged ones,
+/// each within 1 % of the last one counted falling together with it.
+fn distinct_periods(sorted_steps: impl Iterator<Item = u64>) -> u32 {
+    let mut periods: Vec<u64> = sorted_steps.filter(|&d| bridged_step(d)).collect();
+    periods.dedup_by(|a, b| (*a as f64 - *b as f64).abs() <= 0.01 * *b as f64);
+    periods.len() as u32
 }
 
 /// A wheel cleaned and ready for the engines: its kept samples as the
