@@ -779,24 +779,26 @@ pub fn wheel_condition_maps(
 pub(crate) fn vehicle_indices(v: &VehicleSeries) -> Result<VehicleIndices, String> {
     let ok = |x: f32, lo: f32, hi: f32| x.is_finite() && x >= lo && x <= hi;
     let (mut track, mut air) = (Moments::default(), Moments::default());
-    let mut dist: Vec<f64> = Vec::new();
-    for i in 0..v.len() {
-        if ok(v.t_track_c[i], -30.0, 120.0) && ok(v.t_air_c[i], -40.0, 70.0) {
-            track.push(v.t_track_c[i] as f64);
-            air.push(v.t_air_c[i] as f64);
-        }
-        if v.distance_m[i].is_finite() && v.distance_m[i] >= 0.0 {
-            dist.push(v.distance_m[i]);
+    for (&t, &a) in v.t_track_c.iter().zip(&v.t_air_c).take(v.len()) {
+        if ok(t, -30.0, 120.0) && ok(a, -40.0, 70.0) {
+            track.push(t as f64);
+            air.push(a as f64);
         }
     }
-    if track.n == 0.0 || dist.len() < 2 {
-        return Err("no valid /vehicle samples (track/air temperature, distance)".into());
+    // The distance covered: the last valid reading less the first (two
+    // searches, not a list of every valid reading).
+    let dist = &v.distance_m[..v.len().min(v.distance_m.len())];
+    let valid = |d: f64| d.is_finite() && d >= 0.0;
+    let first = dist.iter().position(|&d| valid(d));
+    let last = dist.iter().rposition(|&d| valid(d));
+    match (first, last) {
+        (Some(a), Some(b)) if track.n > 0.0 && a < b => Ok(VehicleIndices {
+            t_track_avg_c: track.mean,
+            t_air_avg_c: air.mean,
+            distance_m: dist[b] - dist[a],
+        }),
+        _ => Err("no valid /vehicle samples (track/air temperature, distance)".into()),
     }
-    Ok(VehicleIndices {
-        t_track_avg_c: track.mean,
-        t_air_avg_c: air.mean,
-        distance_m: dist[dist.len() - 1] - dist[0],
-    })
 }
 
 #[cfg(test)]
@@ -809,6 +811,41 @@ mod tests {
     fn in_bounds(v: f32, lo: f64, hi: f64) -> bool {
         let v = v as f64;
         v.is_finite() && v >= lo && v <= hi
+    }
+
+    #[test]
+    fn vehicle_indices_are_the_mean_and_the_first_to_last_distance() {
+        // Hand-made: temperatures kept only where both are in range; the
+        // distance from the first to the last finite non-negative reading.
+        let v = VehicleSeries {
+            time_ns: (0..6).collect(),
+            speed_mps: vec![10.0; 6],
+            t_track_c: vec![30.0, 31.0, f32::NAN, 33.0, 200.0, 35.0],
+            t_air_c: vec![20.0, 21.0, 22.0, 100.0, 24.0, 25.0],
+            distance_m: vec![f64::NAN, -1.0, 100.0, f64::INFINITY, 350.5, -0.5],
+        };
+        let i = vehicle_indices(&v).unwrap();
+        assert!((i.t_track_avg_c - (30.0 + 31.0 + 35.0) / 3.0).abs() < 1e-12);
+        assert!((i.t_air_avg_c - (20.0 + 21.0 + 25.0) / 3.0).abs() < 1e-12);
+        assert_eq!(i.distance_m, 250.5);
+        // One valid distance, or no valid temperature pair: an error.
+        let one = VehicleSeries {
+            distance_m: vec![f64::NAN, -1.0, 100.0, f64::NAN, -2.0, f64::NAN],
+            ..v.clone()
+        };
+        assert!(vehicle_indices(&one).is_err());
+        let hot = VehicleSeries {
+            t_track_c: vec![200.0; 6],
+            ..v.clone()
+        };
+        assert!(vehicle_indices(&hot).is_err());
+        // Channels shorter than the timestamps: an error or a value, not a panic.
+        let short = VehicleSeries {
+            distance_m: vec![1.0],
+            t_air_c: vec![20.0],
+            ..v
+        };
+        assert!(vehicle_indices(&short).is_err());
     }
 
     #[test]
