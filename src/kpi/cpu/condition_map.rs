@@ -343,9 +343,22 @@ const fn condition_at(name: &str) -> usize {
     }
 }
 
+/// The conditions of every pair, found by name once, at build time: the
+/// diagnosis asks for them per tire and candidate, where a name search
+/// each time cost 7 % of a one-thread diagnosis of the demo.
+const PAIR_CONDITIONS: [(usize, usize); N_PAIRS] = {
+    let mut o = [(0, 0); N_PAIRS];
+    let mut p = 0;
+    while p < N_PAIRS {
+        o[p] = (condition_at(PAIRS[p].first), condition_at(PAIRS[p].second));
+        p += 1;
+    }
+    o
+};
+
 /// The conditions of pair `p` (indices into [`CONDITIONS`]).
 pub(crate) const fn pair_conditions(p: usize) -> (usize, usize) {
-    (condition_at(PAIRS[p].first), condition_at(PAIRS[p].second))
+    PAIR_CONDITIONS[p]
 }
 
 /// Cells of pair `p`'s map.
@@ -354,8 +367,9 @@ const fn pair_cells(p: usize) -> usize {
     CONDITIONS[a].coarse.n * CONDITIONS[b].coarse.n
 }
 
-/// First cell of each pair within the pair cells.
-const fn pair_offsets() -> [usize; N_PAIRS] {
+/// First cell of each pair within the pair cells (a constant, as
+/// [`PAIR_CONDITIONS`]).
+const PAIR_OFFSETS: [usize; N_PAIRS] = {
     let mut o = [0; N_PAIRS];
     let mut p = 1;
     while p < N_PAIRS {
@@ -363,7 +377,7 @@ const fn pair_offsets() -> [usize; N_PAIRS] {
         p += 1;
     }
     o
-}
+};
 
 /// A pair's side-table name: its conditions' names joined by ':'.
 pub fn pair_name(p: usize) -> String {
@@ -420,13 +434,13 @@ const fn condition_table_at_build() -> [ConditionBins; TABLE_LEN] {
         value: 0,
     };
     let mut out = [zero; TABLE_LEN];
-    let o = offsets();
+    let o = OFFSETS;
     let mut c = 0;
     while c < N_CONDITIONS {
         out[c] = table_entry(&CONDITIONS[c].bins, o[c], c);
         c += 1;
     }
-    let po = pair_offsets();
+    let po = PAIR_OFFSETS;
     let mut p = 0;
     while p < N_PAIRS {
         let (a, b) = pair_conditions(p);
@@ -480,8 +494,9 @@ fn bin_of(x: f32, lo: f32, inv_width: f32, last: f32) -> u32 {
     unsafe { i.to_int_unchecked::<i32>() as u32 }
 }
 
-/// First bin of each condition within a component.
-const fn offsets() -> [usize; N_CONDITIONS] {
+/// First bin of each condition within a component (a constant, as
+/// [`PAIR_CONDITIONS`]).
+const OFFSETS: [usize; N_CONDITIONS] = {
     let mut o = [0; N_CONDITIONS];
     let mut c = 1;
     while c < N_CONDITIONS {
@@ -489,7 +504,7 @@ const fn offsets() -> [usize; N_CONDITIONS] {
         c += 1;
     }
     o
-}
+};
 
 /// The conditions of one sample, in [`CONDITIONS`] order (the shader's
 /// `condition_values`, in f64).
@@ -816,7 +831,7 @@ impl Component {
 impl ConditionMaps {
     /// One condition's map of one component (J per bin of `CONDITIONS[c].bins`).
     pub fn map(&self, component: Component, condition: usize) -> &[f64] {
-        let o = offsets()[condition];
+        let o = OFFSETS[condition];
         &self.energy_j[component as usize][o..o + CONDITIONS[condition].bins.n]
     }
     /// Whether the maps hold a condition (an older side table lacks the
@@ -831,7 +846,7 @@ impl ConditionMaps {
     /// Pair `p`'s map of the total energy (J per cell, [first's coarse
     /// bin][second's coarse bin], row-major).
     pub fn pair_map(&self, p: usize) -> &[f64] {
-        let o = pair_offsets()[p];
+        let o = PAIR_OFFSETS[p];
         &self.pairs_j[o..o + pair_cells(p)]
     }
 }
@@ -1003,7 +1018,7 @@ impl MapLayout {
 
 /// Every map in side-table order: the conditions, then the pairs.
 fn map_layouts() -> Vec<MapLayout> {
-    let mut out: Vec<MapLayout> = offsets()
+    let mut out: Vec<MapLayout> = OFFSETS
         .iter()
         .enumerate()
         .map(|(c, &offset)| MapLayout {
@@ -1015,7 +1030,7 @@ fn map_layouts() -> Vec<MapLayout> {
             second: None,
         })
         .collect();
-    for (p, o) in pair_offsets().iter().enumerate() {
+    for (p, o) in PAIR_OFFSETS.iter().enumerate() {
         let (a, b) = pair_conditions(p);
         out.push(MapLayout {
             name: pair_name(p),
@@ -1419,7 +1434,7 @@ mod tests {
         m.energy_j[1][3] = 10.0;
         m.energy_j[2][3] = 2.5;
         // The last bin of the last condition a version-3 table holds.
-        let distance_last = offsets()[V3_CONDITIONS - 1] + CONDITIONS[V3_CONDITIONS - 1].bins.n - 1;
+        let distance_last = OFFSETS[V3_CONDITIONS - 1] + CONDITIONS[V3_CONDITIONS - 1].bins.n - 1;
         m.energy_j[0][distance_last] = -1.0;
         m.pairs_j[PAIR_BINS - 1] = 4.0; // the last pair's last cell
         let batch = side_table(&[("r1".into(), crate::Wheel::FL, m.clone())]);
