@@ -1136,10 +1136,11 @@ pub(crate) fn feature(
                 // bisection, then the same sum in the same order as over
                 // the bins that pass, without testing each (this ran for
                 // every row, threshold and scope of every candidate).
+                let below = |b: usize| bins.lower_edge(b + 1) <= theta + tol;
                 let kept = if above {
                     &map[first_bin(map.len(), |b| bins.lower_edge(b) >= theta - tol)..]
                 } else {
-                    &map[..first_bin(map.len(), |b| !(bins.lower_edge(b + 1) <= theta + tol))]
+                    &map[..first_bin(map.len(), |b| !below(b))]
                 };
                 kept.iter().sum::<f64>() * mj
             }),
