@@ -84,37 +84,32 @@ pub fn gaussian_lowpass(z: &[f64], dx_mm: f64, cutoff_mm: f64) -> Vec<f64> {
         .collect()
 }
 
-/// Σ a·b in four interleaved partial sums (vectorisable; a different
-/// rounding order from a serial sum, ~1e-16 relative).
+/// Σ term(a_i, b_i) in four interleaved partial sums (vectorisable; a
+/// different rounding order from a serial sum, ~1e-16 relative): one
+/// running sum waits on each addition's latency.
 #[inline]
-fn dot(a: &[f64], b: &[f64]) -> f64 {
+fn four_sums(a: &[f64], b: &[f64], term: impl Fn(f64, f64) -> f64) -> f64 {
     let mut acc = [0.0f64; 4];
     let (ca, cb) = (a.chunks_exact(4), b.chunks_exact(4));
     let (ra, rb) = (ca.remainder(), cb.remainder());
     for (x, y) in ca.zip(cb) {
         for l in 0..4 {
-            acc[l] += x[l] * y[l];
+            acc[l] += term(x[l], y[l]);
         }
     }
-    let tail: f64 = ra.iter().zip(rb).map(|(x, y)| x * y).sum();
+    let tail: f64 = ra.iter().zip(rb).map(|(&x, &y)| term(x, y)).sum();
     (acc[0] + acc[1]) + (acc[2] + acc[3]) + tail
 }
 
-/// Σ (a − b)² in four interleaved partial sums, as [`dot`]: the HDC's
-/// sums vectorise, where one running sum waits on each addition's
-/// latency (a different rounding order, ~1e-16 relative).
+/// Σ a·b (the Gaussian filter's window).
+#[inline]
+fn dot(a: &[f64], b: &[f64]) -> f64 {
+    four_sums(a, b, |x, y| x * y)
+}
+
+/// Σ (a − b)² (the HDC's sums).
 fn squared_differences(a: &[f64], b: &[f64]) -> f64 {
-    let mut acc = [0.0f64; 4];
-    let (ca, cb) = (a.chunks_exact(4), b.chunks_exact(4));
-    let (ra, rb) = (ca.remainder(), cb.remainder());
-    for (x, y) in ca.zip(cb) {
-        for l in 0..4 {
-            let d = x[l] - y[l];
-            acc[l] += d * d;
-        }
-    }
-    let tail: f64 = ra.iter().zip(rb).map(|(x, y)| (x - y) * (x - y)).sum();
-    (acc[0] + acc[1]) + (acc[2] + acc[3]) + tail
+    four_sums(a, b, |x, y| (x - y) * (x - y))
 }
 
 /// One-sided PSD in the SurfaceTopography convention `C(q)` (mm³), with
