@@ -140,6 +140,10 @@ pub(crate) struct BaseFit {
     sse0: f64,
     /// The largest squared column norm (the scale of `Cholesky`'s tests).
     scale: f64,
+    /// The rows of the fit, in order, with `y` on each.
+    rows: Vec<(usize, f64)>,
+    /// The base columns on those rows.
+    columns: BaseColumns,
 }
 
 impl BaseFit {
@@ -155,6 +159,8 @@ impl BaseFit {
             k0,
             sse0,
             scale,
+            rows: idx.iter().map(|&i| (i, y[i])).collect(),
+            columns: BaseColumns::new(cols, idx),
         }
     }
 
@@ -164,29 +170,19 @@ impl BaseFit {
     }
 
     /// Coefficients of `y` on the base columns and `x` (the term last) over
-    /// the same rows, and the sum of squared residuals, as [`lstsq`] on all
+    /// the fit's rows, and the sum of squared residuals, as [`lstsq`] on all
     /// the columns gives them; None when `lstsq` would pin `x`'s coefficient
     /// to 0 (its squared norm at most 1e-14 of the largest column's). By the
     /// partitioned normal equations: β = G⁻¹Xᵀx, x⊥ = x − Xβ,
     /// c = x⊥·r₀ / |x⊥|² (|x⊥|² floored at 1e-12·|x|², `lstsq`'s jitter),
     /// SSE = SSE₀ − 2c·x⊥·r₀ + c²|x⊥|², base coefficients k₀ − c·β.
-    pub(crate) fn with_column(
-        &self,
-        cols: &[&[f64]],
-        x: &[f64],
-        y: &[f64],
-        idx: &[usize],
-    ) -> Option<(Vec<f64>, f64)> {
-        let rows = nonzero_rows(x, idx);
-        let (mut xx, mut xy) = (0.0, 0.0);
-        for &(i, xi) in &rows {
-            xx += xi * xi;
-            xy += xi * y[i];
-        }
+    pub(crate) fn with_column(&self, x: &[f64]) -> Option<(Vec<f64>, f64)> {
+        let mut nonzero = Vec::new();
+        let (xx, xy) = nonzero_rows(&self.rows, x, &mut nonzero);
         if xx <= 1e-14 * self.scale.max(xx) {
             return None;
         }
-        let xb = cross_products(cols, &rows);
+        let xb = self.columns.cross_products(x, &nonzero);
         let beta = self.gram.solve(&xb);
         let perp = (xx - dot(&xb, &beta)).max(0.0);
         // x⊥·r₀ = x·r₀ (r₀ ⟂ the base) = x·y − (Xᵀx)·k₀.
@@ -198,48 +194,147 @@ impl BaseFit {
     }
 }
 
-/// The rows of `idx` where x is not 0, with x's value, in `idx`'s order:
-/// a scope's column is 0 on the other tires' rows, and the passes of
-/// [`cross_products`] then run without a branch per row.
-fn nonzero_rows(x: &[f64], idx: &[usize]) -> Vec<(usize, f64)> {
-    idx.iter()
-        .map(|&i| (i, x[i]))
-        .filter(|&(_, xi)| xi != 0.0)
-        .collect()
+/// The rows (of `rows`, each with its y) where x is not 0, with x's value,
+/// in their order, into `out`; and x·x, x·y. Written without a branch per
+/// row (each row is stored, the count moves on where x is not 0): a
+/// scope's column is 0 on the other tires, a pattern no branch predictor
+/// follows. The sums take every row: where x is 0 the product is ±0, and
+/// adding ±0 to a sum that starts at +0 leaves its bits as they were (it
+/// is never −0), so they are the sums over the rows where x is not 0. (Not
+/// where y is a NaN or an infinity; but then the base fit is NaN too.)
+/// Not inlined: inlined, both sums lived in memory (they are live across
+/// the allocations after the loop), a store and a load per row on each
+/// chain.
+#[inline(never)]
+fn nonzero_rows(rows: &[(usize, f64)], x: &[f64], out: &mut Vec<(usize, f64)>) -> (f64, f64) {
+    out.clear();
+    out.resize(rows.len(), (0, 0.0));
+    let (mut xx, mut xy, mut kept) = (0.0, 0.0, 0);
+    for &(i, yi) in rows {
+        let xi = x[i];
+        xx += xi * xi;
+        xy += xi * yi;
+        // kept ≤ the rows before this one < out.len().
+        out[kept] = (i, xi);
+        kept += usize::from(xi != 0.0);
+    }
+    out.truncate(kept);
+    (xx, xy)
 }
 
-/// Xᵀx over `rows` (from [`nonzero_rows`]), each column's sum taken in
-/// row order. Four columns at a time, their sums in registers: one sum per
-/// column in memory waited on a store and a load per row, and these sums
-/// are the largest part of a one-thread diagnosis. Each sum adds the same
-/// products in the same order as a plain loop over the rows, skipping
-/// those where x is 0, so the results are the same bits.
-fn cross_products(cols: &[&[f64]], rows: &[(usize, f64)]) -> Vec<f64> {
-    let mut xb = vec![0.0; cols.len()];
-    for (group, out) in cols.chunks(4).zip(xb.chunks_mut(4)) {
-        let mut s = [0.0f64; 4];
-        if let [c0, c1, c2, c3] = group {
-            for &(i, xi) in rows {
-                s[0] += c0[i] * xi;
-                s[1] += c1[i] * xi;
-                s[2] += c2[i] * xi;
-                s[3] += c3[i] * xi;
-            }
-        } else {
-            for &(i, xi) in rows {
-                for (sa, c) in s.iter_mut().zip(group) {
-                    *sa += c[i] * xi;
-                }
+/// A fit's base columns on its rows, for [`BaseFit::with_column`]'s Xᵀx.
+/// A column that is not 0 on at least half the rows is read densely over
+/// the rows where x is not 0. The others are lists of their entries that
+/// are not 0: the baseline's per-group energy terms are 0 off their
+/// compound and axle, the tracks' scale columns off their track, and
+/// their products with x were most of a one-thread diagnosis. Either way
+/// each sum adds the products in row order, and those it leaves out or
+/// adds where x is 0 are ±0: the same bits as the plain loop over the rows
+/// where x is not 0 (tested), the columns being finite on the fit's rows
+/// (a NaN or an infinity there makes the base fit NaN).
+struct BaseColumns {
+    p: usize,
+    /// Column index and values, by row.
+    dense: Vec<(usize, Vec<f64>)>,
+    /// Column index and its (row, value) entries that are not 0, in row
+    /// order; the shortest lists first, so that groups of four have about
+    /// the same length.
+    sparse: Vec<(usize, Vec<(usize, f64)>)>,
+}
+
+impl BaseColumns {
+    fn new(cols: &[&[f64]], idx: &[usize]) -> BaseColumns {
+        let (mut dense, mut sparse) = (Vec::new(), Vec::new());
+        for (a, c) in cols.iter().enumerate() {
+            let entries: Vec<(usize, f64)> = idx
+                .iter()
+                .map(|&i| (i, c[i]))
+                .filter(|&(_, v)| v != 0.0)
+                .collect();
+            if 2 * entries.len() >= idx.len() {
+                dense.push((a, c.to_vec()));
+            } else {
+                sparse.push((a, entries));
             }
         }
-        out.copy_from_slice(&s[..out.len()]);
+        sparse.sort_by_key(|(_, e)| e.len());
+        BaseColumns {
+            p: cols.len(),
+            dense,
+            sparse,
+        }
     }
-    xb
+
+    /// Xᵀx, given x's rows that are not 0 (from [`nonzero_rows`]). Four
+    /// columns at a time, their sums in registers, so that four chains of
+    /// additions run at once.
+    #[inline(never)]
+    fn cross_products(&self, x: &[f64], nonzero: &[(usize, f64)]) -> Vec<f64> {
+        let mut xb = vec![0.0; self.p];
+        for group in self.dense.chunks(4) {
+            let mut s = [0.0f64; 4];
+            if let [(_, c0), (_, c1), (_, c2), (_, c3)] = group {
+                for &(i, xi) in nonzero {
+                    s[0] += c0[i] * xi;
+                    s[1] += c1[i] * xi;
+                    s[2] += c2[i] * xi;
+                    s[3] += c3[i] * xi;
+                }
+            } else {
+                for &(i, xi) in nonzero {
+                    for (sa, (_, c)) in s.iter_mut().zip(group) {
+                        *sa += c[i] * xi;
+                    }
+                }
+            }
+            for ((a, _), sa) in group.iter().zip(s) {
+                xb[*a] = sa;
+            }
+        }
+        for group in self.sparse.chunks(4) {
+            let mut s = [0.0f64; 4];
+            if let [(_, e0), (_, e1), (_, e2), (_, e3)] = group {
+                // Shortest first: `zip` stops at the end of e0, the
+                // group's common length.
+                let common = e0.len();
+                let rows = e0.iter().zip(e1).zip(e2).zip(e3);
+                for (((&(i0, v0), &(i1, v1)), &(i2, v2)), &(i3, v3)) in rows {
+                    s[0] += x[i0] * v0;
+                    s[1] += x[i1] * v1;
+                    s[2] += x[i2] * v2;
+                    s[3] += x[i3] * v3;
+                }
+                for (sa, e) in s.iter_mut().zip([e0, e1, e2, e3]) {
+                    for &(i, v) in &e[common..] {
+                        *sa += x[i] * v;
+                    }
+                }
+            } else {
+                for (sa, (_, e)) in s.iter_mut().zip(group) {
+                    for &(i, v) in e {
+                        *sa += x[i] * v;
+                    }
+                }
+            }
+            for ((a, _), sa) in group.iter().zip(s) {
+                xb[*a] = sa;
+            }
+        }
+        xb
+    }
 }
 
 /// `y − Σ coef·col` at row i.
 pub fn residual(cols: &[&[f64]], coef: &[f64], y: &[f64], i: usize) -> f64 {
     y[i] - cols.iter().zip(coef).map(|(c, k)| k * c[i]).sum::<f64>()
+}
+
+/// [`residual`] with one more column `x` after `cols` (its coefficient
+/// `coef`'s last), without a new list of the columns: the same sum in the
+/// same order.
+pub(crate) fn residual_with(cols: &[&[f64]], x: &[f64], coef: &[f64], y: &[f64], i: usize) -> f64 {
+    let terms = cols.iter().chain([&x]).zip(coef);
+    y[i] - terms.map(|(c, k)| k * c[i]).sum::<f64>()
 }
 
 /// An orthonormal basis (over the rows `idx`, as dense vectors of length
@@ -329,25 +424,39 @@ mod tests {
 
     #[test]
     fn cross_products_are_the_plain_loops_bits() {
-        // Against one running sum per column in row order, bit for bit, for
-        // 1 to 9 columns (whole groups of four and remainders), rows where x
-        // is 0 skipped (a NaN there would show), rows in a scrambled order.
+        // Against one running sum per column in row order over the rows
+        // where x is not 0, bit for bit, for 1 to 11 columns (whole groups
+        // of four and remainders) of different sparsity (dense, half, a
+        // tenth and no entries: read densely or as lists, groups of four
+        // with common parts and tails), x 0 and −0 on some rows, rows in a
+        // scrambled order; and x's rows that are not 0, x·x and x·y as
+        // `with_column` takes them.
         use rand::{Rng, SeedableRng};
         let mut rng = rand::rngs::StdRng::seed_from_u64(5);
         let n = 200;
-        for p in 1..=9 {
+        for p in 1..=11 {
             let cols: Vec<Vec<f64>> = (0..p)
-                .map(|_| (0..n).map(|_| rng.random_range(-3.0..3.0)).collect())
+                .map(|a| {
+                    let every = [1, 2, 10, 0][a % 4];
+                    (0..n)
+                        .map(|i| {
+                            let on = every != 0 && i % every == a % 3;
+                            if on { rng.random_range(-3.0..3.0) } else { 0.0 }
+                        })
+                        .collect()
+                })
                 .collect();
             let mut x: Vec<f64> = (0..n).map(|_| rng.random_range(-1.0..1.0)).collect();
-            let mut cols = cols;
+            let y: Vec<f64> = (0..n).map(|_| rng.random_range(-2.0..2.0)).collect();
             for i in (0..n).step_by(3) {
-                x[i] = 0.0;
-                cols[p - 1][i] = f64::NAN;
+                x[i] = if i % 2 == 0 { 0.0 } else { -0.0 };
             }
             let idx: Vec<usize> = (0..n).map(|k| (k * 37) % n).step_by(2).collect();
             let refs: Vec<&[f64]> = cols.iter().map(|c| c.as_slice()).collect();
-            let got = cross_products(&refs, &nonzero_rows(&x, &idx));
+            let rows: Vec<(usize, f64)> = idx.iter().map(|&i| (i, y[i])).collect();
+            let mut nonzero = Vec::new();
+            let (got_xx, got_xy) = nonzero_rows(&rows, &x, &mut nonzero);
+            let got = BaseColumns::new(&refs, &idx).cross_products(&x, &nonzero);
             for (a, c) in cols.iter().enumerate() {
                 let mut want = 0.0;
                 for &i in &idx {
@@ -355,8 +464,40 @@ mod tests {
                         want += c[i] * x[i];
                     }
                 }
+                assert!(want.is_finite(), "p {p}, column {a}");
                 assert_eq!(got[a].to_bits(), want.to_bits(), "p {p}, column {a}");
             }
+            let (mut xx, mut xy) = (0.0f64, 0.0f64);
+            for &i in &idx {
+                if x[i] != 0.0 {
+                    xx += x[i] * x[i];
+                    xy += x[i] * y[i];
+                }
+            }
+            let want_rows: Vec<(usize, f64)> = idx
+                .iter()
+                .map(|&i| (i, x[i]))
+                .filter(|&(_, xi)| xi != 0.0)
+                .collect();
+            assert_eq!(nonzero, want_rows);
+            assert!(xy.is_finite());
+            assert_eq!(
+                (got_xx.to_bits(), got_xy.to_bits()),
+                (xx.to_bits(), xy.to_bits())
+            );
+        }
+    }
+
+    #[test]
+    fn residual_with_one_more_column_is_residuals_bits() {
+        let (a, b, x) = ([0.1, 0.7, -2.3], [1.0 / 3.0, 5.5, 1e-17], [3.0, 1e16, -0.2]);
+        let (k, y) = ([0.3, -1.7, 2.9], [1.1, -4.0, 0.6]);
+        for i in 0..3 {
+            let want = residual(&[&a, &b, &x], &k, &y, i);
+            assert_eq!(
+                residual_with(&[&a, &b], &x, &k, &y, i).to_bits(),
+                want.to_bits()
+            );
         }
     }
 
@@ -373,7 +514,7 @@ mod tests {
         let (a, b, x, y) = (f(1), f(2), f(3), f(4));
         let idx: Vec<usize> = (0..25).collect();
         let fit = BaseFit::new(&[&a, &b], &y, &idx);
-        let (k, sse) = fit.with_column(&[&a, &b], &x, &y, &idx).unwrap();
+        let (k, sse) = fit.with_column(&x).unwrap();
         let want = lstsq(&[&a, &b, &x], &y, &idx);
         let want_sse: f64 = idx
             .iter()
@@ -387,9 +528,9 @@ mod tests {
             "{sse} vs {want_sse}"
         );
         let tiny: Vec<f64> = x.iter().map(|v| v * 1e-9).collect();
-        assert!(fit.with_column(&[&a, &b], &tiny, &y, &idx).is_none());
+        assert!(fit.with_column(&tiny).is_none());
         assert_eq!(lstsq(&[&a, &b, &tiny], &y, &idx)[2], 0.0);
         let outside: Vec<f64> = (0..30).map(|i| if i >= 25 { 1.0 } else { 0.0 }).collect();
-        assert!(fit.with_column(&[&a, &b], &outside, &y, &idx).is_none());
+        assert!(fit.with_column(&outside).is_none());
     }
 }

@@ -31,7 +31,9 @@ use super::acts::ActsIn;
 use super::candidates::{
     Candidate, Feature, Group, KpiScale, LawRow, band_admissible, candidate_feature, kpi_scale,
 };
-use super::linear::{BaseFit, dot, lstsq, orthonormal_basis, project_out, residual, weighted};
+use super::linear::{
+    BaseFit, dot, lstsq, orthonormal_basis, project_out, residual, residual_with, weighted,
+};
 use super::stats::{VarianceComponents, benjamini_hochberg, levels};
 use super::track_test::Severities;
 use crate::Axle;
@@ -246,17 +248,10 @@ fn folds(rows: &[&KpiRow]) -> Vec<Vec<usize>> {
 
 /// Best threshold on `train`: index, coefficients (term last) and SSE; None
 /// when no threshold gives an admissible coefficient.
-fn best_threshold(
-    fit: &BaseFit,
-    base: &[&[f64]],
-    x: &[Vec<f64>],
-    y: &[f64],
-    train: &[usize],
-    positive_only: bool,
-) -> Option<(usize, Vec<f64>)> {
+fn best_threshold(fit: &BaseFit, x: &[Vec<f64>], positive_only: bool) -> Option<(usize, Vec<f64>)> {
     let mut best: Option<(usize, Vec<f64>, f64)> = None;
     for (t, xt) in x.iter().enumerate() {
-        let Some((k, sse)) = fit.with_column(base, xt, y, train) else {
+        let Some((k, sse)) = fit.with_column(xt) else {
             continue;
         };
         if positive_only && k[k.len() - 1] <= 0.0 {
@@ -582,19 +577,17 @@ pub(super) fn track_cells<'r>(
     (kept, out)
 }
 
-/// One cross-validation fold of a null model: training rows, columns, and
-/// their fit on those rows.
+/// One cross-validation fold of a null model: its columns and their fit
+/// on the training rows (which the fit keeps).
 struct Fold {
-    train: Vec<usize>,
     cols: Vec<Vec<f64>>,
     fit: BaseFit,
 }
 
-/// A null model: its columns and fit per fold and on all rows, on its own
-/// scale (`y` and every column through `whitening` when it has one).
+/// A null model: its columns and fit per fold and its fit on all rows, on
+/// its own scale (`y` and every column through `whitening` when it has one).
 struct Null {
     folds: Vec<Fold>,
-    cols: Vec<Vec<f64>>,
     fit: BaseFit,
     q: Vec<Vec<f64>>,
     e0: Vec<f64>,
@@ -633,7 +626,7 @@ impl Null {
                 let cols = with_tracks(&train);
                 let refs: Vec<&[f64]> = cols.iter().map(|c| c.as_slice()).collect();
                 let fit = BaseFit::new(&refs, y, &train);
-                Fold { train, cols, fit }
+                Fold { cols, fit }
             })
             .collect();
         let cols = with_tracks(&all);
@@ -646,7 +639,6 @@ impl Null {
             .collect();
         Null {
             folds,
-            cols,
             fit,
             q,
             e0,
@@ -683,18 +675,14 @@ fn cv_gain(
     let mut by_fold = Vec::with_capacity(groups.len());
     for (test, fold) in groups.iter().zip(&null.folds) {
         let base: Vec<&[f64]> = fold.cols.iter().map(|c| c.as_slice()).collect();
-        let fit = best_threshold(&fold.fit, &base, x, y, &fold.train, positive);
+        let fit = best_threshold(&fold.fit, x, positive);
         let k0 = fold.fit.k0();
         let (r0, r1): (Vec<f64>, Vec<f64>) = test
             .iter()
             .map(|&i| {
                 let r0 = residual(&base, k0, y, i);
                 let r1 = match &fit {
-                    Some((t, k)) => {
-                        let mut c = base.clone();
-                        c.push(&x[*t]);
-                        residual(&c, k, y, i)
-                    }
+                    Some((t, k)) => residual_with(&base, &x[*t], k, y, i),
                     None => r0,
                 };
                 (r0, r1)
@@ -846,9 +834,8 @@ pub(crate) fn rank(
                 cv_gain(rows, &across, &groups, &x, positive, false).0
             };
             // Fit on all rows, and the permutation test, on the null's scale.
-            let cols: Vec<&[f64]> = null.cols.iter().map(|c| c.as_slice()).collect();
             let xs = null.columns(&x);
-            let fit = best_threshold(&null.fit, &cols, &xs, &null.y, &all, positive);
+            let fit = best_threshold(&null.fit, &xs, positive);
             let (threshold, coefficient, front_share) = match &fit {
                 Some((t, k)) => {
                     // The term's wear (%) is x/w: the share in wear, not on
