@@ -32,7 +32,8 @@ use super::candidates::{
     Candidate, Feature, Group, KpiScale, LawRow, band_admissible, candidate_feature, kpi_scale,
 };
 use super::linear::{
-    BaseFit, dot, lstsq, orthonormal_basis, project_out, residual, residual_with, weighted,
+    BaseFit, dot, dots, lstsq, orthonormal_basis, project_out_each, residual, residual_with,
+    weighted,
 };
 use super::stats::{VarianceComponents, benjamini_hochberg, levels};
 use super::track_test::Severities;
@@ -727,16 +728,24 @@ fn cv_gain(
 
 /// Projects each threshold's term off the null's span: (terms, squared norms).
 pub(super) fn projected(q: &[Vec<f64>], x: &[Vec<f64>]) -> (Vec<Vec<f64>>, Vec<f64>) {
-    x.iter()
-        .map(|xt| {
-            let mut v = xt.clone();
-            project_out(q, &mut v);
-            let nn = dot(&v, &v);
-            // A term inside the null's span carries nothing new.
-            let nn = if nn > 1e-12 * dot(xt, xt) { nn } else { 0.0 };
-            (v, nn)
-        })
-        .unzip()
+    let mut ft = x.to_vec();
+    project_out_each(q, &mut ft);
+    let nf = ft
+        .chunks(4)
+        .zip(x.chunks(4))
+        .flat_map(|(v, xt)| squared_norms(v).into_iter().zip(squared_norms(xt)))
+        // A term inside the null's span carries nothing new.
+        .map(|(nn, xx)| if nn > 1e-12 * xx { nn } else { 0.0 })
+        .collect();
+    (ft, nf)
+}
+
+/// `dot(v, v)` of each of up to four vectors, four at once ([`dots`]).
+fn squared_norms(vs: &[Vec<f64>]) -> Vec<f64> {
+    match vs {
+        [a, b, c, d] => dots([a, b, c, d], [a, b, c, d]).to_vec(),
+        _ => vs.iter().map(|v| dot(v, v)).collect(),
+    }
 }
 
 /// Scores every candidate of `library` on `problem`; sorted by held-out gain.
@@ -1182,6 +1191,7 @@ fn adjust(scored: Vec<(Score, Option<NullDraws>)>, permutations: usize) -> Vec<S
 mod tests {
     use super::*;
     use crate::gap::candidates::library;
+    use crate::gap::linear::project_out;
 
     /// 8 tracks × 16 tires; each map spreads energy over surface temperatures
     /// 42.5 … 97.5 °C; wear = 1 %/MJ of all energy + 0.5 %/MJ of the energy
