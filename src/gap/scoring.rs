@@ -247,8 +247,9 @@ fn folds(rows: &[&KpiRow]) -> Vec<Vec<usize>> {
         .collect()
 }
 
-/// Best threshold on `train`: index, coefficients (term last) and SSE; None
-/// when no threshold gives an admissible coefficient.
+/// Best threshold on the rows of `fit` (a fold's training rows, or all):
+/// index and coefficients (term last); None when no threshold gives an
+/// admissible coefficient.
 fn best_threshold(fit: &BaseFit, x: &[Vec<f64>], positive_only: bool) -> Option<(usize, Vec<f64>)> {
     let mut best: Option<(usize, Vec<f64>, f64)> = None;
     for (t, xt) in x.iter().enumerate() {
