@@ -469,18 +469,38 @@ impl PermutedNull {
     fn max_f(&self, ft: &[Vec<f64>], nf: &[f64], positive_only: bool) -> Vec<f64> {
         let (perms, n) = (self.e.nrows(), self.e.ncols());
         let f = Mat::from_fn(n, ft.len(), |i, t| ft[t][i]);
-        let mut d = Mat::<f64>::zeros(perms, ft.len());
-        // Sequential: the candidates are already spread over the threads.
-        matmul(
-            d.as_mut(),
-            Accum::Replace,
-            self.e.as_ref(),
-            f.as_ref(),
-            1.0,
-            Par::Seq,
-        );
-        max_f_from_products(d.as_ref(), &self.sse0, nf, positive_only)
+        PRODUCTS.with_borrow_mut(|d| {
+            // The same shape and layout as a new `Mat::zeros(perms, T)`; a
+            // matrix of another number of permutations (the floor's
+            // refinement) is made anew rather than reshaped, so that its
+            // column stride is a new one's too.
+            if d.nrows() != perms {
+                *d = Mat::zeros(perms, ft.len());
+            }
+            d.resize_with(perms, ft.len(), |_, _| 0.0);
+            // Sequential: the candidates are already spread over the
+            // threads. `Replace` writes every product, so what the
+            // matrix held before does not matter.
+            matmul(
+                d.as_mut(),
+                Accum::Replace,
+                self.e.as_ref(),
+                f.as_ref(),
+                1.0,
+                Par::Seq,
+            );
+            max_f_from_products(d.as_ref(), &self.sse0, nf, positive_only)
+        })
     }
+}
+
+thread_local! {
+    /// Each thread's products matrix for [`PermutedNull::max_f`]
+    /// (permutations × terms), kept from one candidate to the next: a new
+    /// one per candidate (2 000 × 400, 6 MB on a demo season) cost its pages'
+    /// faults, a memset and its unmapping each time, about 5 % of a
+    /// one-thread diagnosis (docs/gap.md). The products are the same bits.
+    static PRODUCTS: std::cell::RefCell<Mat<f64>> = const { std::cell::RefCell::new(Mat::new()) };
 }
 
 /// Each permutation's max-F from its products with the terms (`d`,
