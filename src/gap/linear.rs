@@ -100,30 +100,39 @@ impl Cholesky {
 
     /// G⁻¹ b (0 for the dead columns).
     fn solve(&self, b: &[f64]) -> Vec<f64> {
+        let mut x = Vec::new();
+        self.solve_into(b, &mut x);
+        x
+    }
+
+    /// [`Cholesky::solve`] into `x` (its length set to p): the forward
+    /// substitution's z, then the backward one over z in place — x_a reads
+    /// z_a and the x_k after it, which are final by then, so the bits are
+    /// those of a separate x.
+    fn solve_into(&self, b: &[f64], x: &mut Vec<f64>) {
         let (p, l, dead) = (self.p, &self.l, &self.dead);
-        let mut z = vec![0.0; p];
+        x.clear();
+        x.resize(p, 0.0);
         for a in 0..p {
             if dead[a] {
                 continue;
             }
             let mut s = b[a];
             for k in 0..a {
-                s -= l[a * p + k] * z[k];
+                s -= l[a * p + k] * x[k];
             }
-            z[a] = s / l[a * p + a];
+            x[a] = s / l[a * p + a];
         }
-        let mut x = vec![0.0; p];
         for a in (0..p).rev() {
             if dead[a] {
                 continue;
             }
-            let mut s = z[a];
+            let mut s = x[a];
             for k in a + 1..p {
                 s -= l[k * p + a] * x[k];
             }
             x[a] = s / l[a * p + a];
         }
-        x
     }
 }
 
@@ -169,29 +178,59 @@ impl BaseFit {
         &self.k0
     }
 
-    /// Coefficients of `y` on the base columns and `x` (the term last) over
-    /// the fit's rows, and the sum of squared residuals, as [`lstsq`] on all
-    /// the columns gives them; None when `lstsq` would pin `x`'s coefficient
-    /// to 0 (its squared norm at most 1e-14 of the largest column's). By the
-    /// partitioned normal equations: β = G⁻¹Xᵀx, x⊥ = x − Xβ,
-    /// c = x⊥·r₀ / |x⊥|² (|x⊥|² floored at 1e-12·|x|², `lstsq`'s jitter),
-    /// SSE = SSE₀ − 2c·x⊥·r₀ + c²|x⊥|², base coefficients k₀ − c·β.
+    /// [`BaseFit::with_column_in`] with the coefficients: the tests'
+    /// reference, against [`lstsq`] on all the columns.
+    #[cfg(test)]
     pub(crate) fn with_column(&self, x: &[f64]) -> Option<(Vec<f64>, f64)> {
-        let mut nonzero = Vec::new();
-        let (xx, xy) = nonzero_rows(&self.rows, x, &mut nonzero);
+        let mut scratch = Scratch::default();
+        let (c, sse) = self.with_column_in(x, &mut scratch)?;
+        Some((self.coefficients(&scratch.beta, c), sse))
+    }
+
+    /// The fit of `y` on the base columns and `x` (the term last) over the
+    /// fit's rows, as [`lstsq`] on all the columns gives it: the term's
+    /// coefficient c and the sum of squared residuals, with β = G⁻¹Xᵀx left
+    /// in `scratch.beta` for [`BaseFit::coefficients`]; None when `lstsq`
+    /// would pin `x`'s coefficient to 0 (its squared norm at most 1e-14 of
+    /// the largest column's). By the partitioned normal equations:
+    /// x⊥ = x − Xβ, c = x⊥·r₀ / |x⊥|² (|x⊥|² floored at 1e-12·|x|²,
+    /// `lstsq`'s jitter), SSE = SSE₀ − 2c·x⊥·r₀ + c²|x⊥|², base
+    /// coefficients k₀ − c·β. The scans call it for every threshold, so it
+    /// allocates nothing: five buffers per call were a third of the
+    /// allocations of a one-thread diagnosis.
+    pub(crate) fn with_column_in(&self, x: &[f64], scratch: &mut Scratch) -> Option<(f64, f64)> {
+        let Scratch { nonzero, xb, beta } = scratch;
+        let (xx, xy) = nonzero_rows(&self.rows, x, nonzero);
         if xx <= 1e-14 * self.scale.max(xx) {
             return None;
         }
-        let xb = self.columns.cross_products(x, &nonzero);
-        let beta = self.gram.solve(&xb);
-        let perp = (xx - dot(&xb, &beta)).max(0.0);
+        self.columns.cross_products_into(x, nonzero, xb);
+        self.gram.solve_into(xb, beta);
+        let perp = (xx - dot(xb, beta)).max(0.0);
         // x⊥·r₀ = x·r₀ (r₀ ⟂ the base) = x·y − (Xᵀx)·k₀.
-        let xr = xy - dot(&xb, &self.k0);
+        let xr = xy - dot(xb, &self.k0);
         let c = xr / perp.max(1e-12 * xx);
-        let mut k: Vec<f64> = self.k0.iter().zip(&beta).map(|(k, b)| k - c * b).collect();
-        k.push(c);
-        Some((k, self.sse0 - 2.0 * c * xr + c * c * perp))
+        Some((c, self.sse0 - 2.0 * c * xr + c * c * perp))
     }
+
+    /// The coefficients with the term (last, `c`), from the β that
+    /// [`BaseFit::with_column_in`] left: k₀ − c·β, then c.
+    pub(crate) fn coefficients(&self, beta: &[f64], c: f64) -> Vec<f64> {
+        let mut k: Vec<f64> = self.k0.iter().zip(beta).map(|(k, b)| k - c * b).collect();
+        k.push(c);
+        k
+    }
+}
+
+/// Buffers [`BaseFit::with_column_in`] reuses from one call to the next.
+#[derive(Default)]
+pub(crate) struct Scratch {
+    /// The rows where the term is not 0 ([`nonzero_rows`]).
+    nonzero: Vec<(usize, f64)>,
+    /// Xᵀx.
+    xb: Vec<f64>,
+    /// G⁻¹Xᵀx.
+    pub(crate) beta: Vec<f64>,
 }
 
 /// The rows (of `rows`, each with its y) where x is not 0, with x's value,
@@ -269,8 +308,17 @@ impl BaseColumns {
     /// columns at a time, their sums in registers, so that four chains of
     /// additions run at once.
     #[inline(never)]
+    #[cfg(test)]
     fn cross_products(&self, x: &[f64], nonzero: &[(usize, f64)]) -> Vec<f64> {
-        let mut xb = vec![0.0; self.p];
+        let mut xb = Vec::new();
+        self.cross_products_into(x, nonzero, &mut xb);
+        xb
+    }
+
+    /// [`BaseColumns::cross_products`] into `xb` (its length set to p).
+    fn cross_products_into(&self, x: &[f64], nonzero: &[(usize, f64)], xb: &mut Vec<f64>) {
+        xb.clear();
+        xb.resize(self.p, 0.0);
         for group in self.dense.chunks(4) {
             let mut s = [0.0f64; 4];
             if let [(_, c0), (_, c1), (_, c2), (_, c3)] = group {
@@ -320,7 +368,6 @@ impl BaseColumns {
                 xb[*a] = sa;
             }
         }
-        xb
     }
 }
 
@@ -572,6 +619,80 @@ mod tests {
         );
         for ((x, y), g) in uneven.iter().zip(got) {
             assert_eq!(g.to_bits(), dot(x, y).to_bits());
+        }
+    }
+
+    /// The substitutions in one buffer are the two-buffer ones bit for
+    /// bit (z kept apart from x, as `solve` was written before), dead
+    /// columns included; and `with_column_in` with a reused scratch gives
+    /// every threshold's fit as a fresh `with_column` does.
+    #[test]
+    fn solve_in_place_and_reused_scratch_are_the_same_bits() {
+        fn two_buffers(c: &Cholesky, b: &[f64]) -> Vec<f64> {
+            let (p, l, dead) = (c.p, &c.l, &c.dead);
+            let mut z = vec![0.0; p];
+            for a in (0..p).filter(|&a| !dead[a]) {
+                let mut s = b[a];
+                for k in 0..a {
+                    s -= l[a * p + k] * z[k];
+                }
+                z[a] = s / l[a * p + a];
+            }
+            let mut x = vec![0.0; p];
+            for a in (0..p).rev().filter(|&a| !dead[a]) {
+                let mut s = z[a];
+                for k in a + 1..p {
+                    s -= l[k * p + a] * x[k];
+                }
+                x[a] = s / l[a * p + a];
+            }
+            x
+        }
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand::rngs::StdRng::seed_from_u64(9);
+        let n = 60;
+        for p in 1..=9 {
+            // Column 1 all 0 (dead) where there is one.
+            let cols: Vec<Vec<f64>> = (0..p)
+                .map(|a| {
+                    (0..n)
+                        .map(|_| {
+                            if a == 1 {
+                                0.0
+                            } else {
+                                rng.random_range(-3.0..3.0)
+                            }
+                        })
+                        .collect()
+                })
+                .collect();
+            let refs: Vec<&[f64]> = cols.iter().map(|c| c.as_slice()).collect();
+            let y: Vec<f64> = (0..n).map(|_| rng.random_range(-1.0..5.0)).collect();
+            let idx: Vec<usize> = (0..n).filter(|i| i % 7 != 3).collect();
+            let (g, b) = normal_equations(&refs, &y, &idx);
+            let chol = Cholesky::new(&g, p);
+            assert_eq!(chol.dead.iter().any(|&d| d), p > 1);
+            let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            let mut x = vec![7.0; 2 * p];
+            chol.solve_into(&b, &mut x);
+            assert_eq!(bits(&x), bits(&two_buffers(&chol, &b)), "p = {p}");
+            let fit = BaseFit::new(&refs, &y, &idx);
+            let mut scratch = Scratch::default();
+            for t in 0..6 {
+                let term: Vec<f64> = (0..n)
+                    .map(|i| {
+                        if (i + t) % 3 == 0 {
+                            0.0
+                        } else {
+                            rng.random_range(0.0..2.0)
+                        }
+                    })
+                    .collect();
+                let (k, sse) = fit.with_column(&term).unwrap();
+                let (c, sse_in) = fit.with_column_in(&term, &mut scratch).unwrap();
+                assert_eq!(sse.to_bits(), sse_in.to_bits());
+                assert_eq!(bits(&k), bits(&fit.coefficients(&scratch.beta, c)));
+            }
         }
     }
 

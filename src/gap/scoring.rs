@@ -32,8 +32,8 @@ use super::candidates::{
     Candidate, Feature, Group, KpiScale, LawRow, band_admissible, candidate_feature, kpi_scale,
 };
 use super::linear::{
-    BaseFit, dot, dots, lstsq, orthonormal_basis, project_out_each, residual, residual_with,
-    weighted,
+    BaseFit, Scratch, dot, dots, lstsq, orthonormal_basis, project_out_each, residual,
+    residual_with, weighted,
 };
 use super::stats::{VarianceComponents, benjamini_hochberg, levels};
 use super::track_test::Severities;
@@ -251,19 +251,22 @@ fn folds(rows: &[&KpiRow]) -> Vec<Vec<usize>> {
 /// index and coefficients (term last); None when no threshold gives an
 /// admissible coefficient.
 fn best_threshold(fit: &BaseFit, x: &[Vec<f64>], positive_only: bool) -> Option<(usize, Vec<f64>)> {
-    let mut best: Option<(usize, Vec<f64>, f64)> = None;
+    // (threshold, term's coefficient, SSE); the best one's β in `best_beta`.
+    let mut best: Option<(usize, f64, f64)> = None;
+    let (mut scratch, mut best_beta) = (Scratch::default(), Vec::new());
     for (t, xt) in x.iter().enumerate() {
-        let Some((k, sse)) = fit.with_column(xt) else {
+        let Some((c, sse)) = fit.with_column_in(xt, &mut scratch) else {
             continue;
         };
-        if positive_only && k[k.len() - 1] <= 0.0 {
+        if positive_only && c <= 0.0 {
             continue;
         }
-        if best.as_ref().is_none_or(|b| sse < b.2) {
-            best = Some((t, k, sse));
+        if best.is_none_or(|b| sse < b.2) {
+            best = Some((t, c, sse));
+            std::mem::swap(&mut best_beta, &mut scratch.beta);
         }
     }
-    best.map(|(t, k, _)| (t, k))
+    best.map(|(t, c, _)| (t, fit.coefficients(&best_beta, c)))
 }
 
 /// Where a row sits for the permutation test: rows of one `unit` move
