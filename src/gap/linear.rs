@@ -199,8 +199,13 @@ impl BaseFit {
     /// allocates nothing: five buffers per call were a third of the
     /// allocations of a one-thread diagnosis.
     pub(crate) fn with_column_in(&self, x: &[f64], scratch: &mut Scratch) -> Option<(f64, f64)> {
-        let Scratch { nonzero, xb, beta } = scratch;
-        let (xx, xy) = nonzero_rows(&self.rows, x, nonzero);
+        let Scratch {
+            nonzero,
+            ys,
+            xb,
+            beta,
+        } = scratch;
+        let (xx, xy) = nonzero_rows(&self.rows, x, nonzero, ys);
         if xx <= 1e-14 * self.scale.max(xx) {
             return None;
         }
@@ -225,8 +230,9 @@ impl BaseFit {
 /// Buffers [`BaseFit::with_column_in`] reuses from one call to the next.
 #[derive(Default)]
 pub(crate) struct Scratch {
-    /// The rows where the term is not 0 ([`nonzero_rows`]).
+    /// The rows where the term is not 0 ([`nonzero_rows`]), and their y.
     nonzero: Vec<(usize, f64)>,
+    ys: Vec<f64>,
     /// Xᵀx.
     xb: Vec<f64>,
     /// G⁻¹Xᵀx.
@@ -234,30 +240,38 @@ pub(crate) struct Scratch {
 }
 
 /// The rows (of `rows`, each with its y) where x is not 0, with x's value,
-/// in their order, into `out`; and x·x, x·y. Written without a branch per
-/// row (each row is stored, the count moves on where x is not 0): a
-/// scope's column is 0 on the other tires, a pattern no branch predictor
-/// follows. The sums take every row: where x is 0 the product is ±0, and
-/// adding ±0 to a sum that starts at +0 leaves its bits as they were (it
-/// is never −0), so they are the sums over the rows where x is not 0. (Not
-/// where y is a NaN or an infinity; but then the base fit is NaN too.)
-/// Not inlined: inlined, both sums lived in memory (they are live across
-/// the allocations after the loop), a store and a load per row on each
-/// chain.
-#[inline(never)]
-fn nonzero_rows(rows: &[(usize, f64)], x: &[f64], out: &mut Vec<(usize, f64)>) -> (f64, f64) {
+/// in their order, into `out` (their y into `ys`); and x·x, x·y over them.
+/// The rows are gathered without a branch per row (each row is stored,
+/// the count moves on where x is not 0): a scope's column is 0 on the
+/// other tires, a pattern no branch predictor follows. The sums then run
+/// over the rows gathered only: each is one chain of additions, one row
+/// per addition's latency, and a term 0 on most rows (another car's
+/// tires, a threshold few bins pass) need not wait on them.
+fn nonzero_rows(
+    rows: &[(usize, f64)],
+    x: &[f64],
+    out: &mut Vec<(usize, f64)>,
+    ys: &mut Vec<f64>,
+) -> (f64, f64) {
     out.clear();
     out.resize(rows.len(), (0, 0.0));
-    let (mut xx, mut xy, mut kept) = (0.0, 0.0, 0);
+    ys.clear();
+    ys.resize(rows.len(), 0.0);
+    let mut kept = 0;
     for &(i, yi) in rows {
         let xi = x[i];
-        xx += xi * xi;
-        xy += xi * yi;
-        // kept ≤ the rows before this one < out.len().
+        // kept ≤ the rows before this one < out.len() = ys.len().
         out[kept] = (i, xi);
+        ys[kept] = yi;
         kept += usize::from(xi != 0.0);
     }
     out.truncate(kept);
+    ys.truncate(kept);
+    let (mut xx, mut xy) = (0.0, 0.0);
+    for (&(_, xi), &yi) in out.iter().zip(ys.iter()) {
+        xx += xi * xi;
+        xy += xi * yi;
+    }
     (xx, xy)
 }
 
@@ -544,8 +558,8 @@ mod tests {
             let idx: Vec<usize> = (0..n).map(|k| (k * 37) % n).step_by(2).collect();
             let refs: Vec<&[f64]> = cols.iter().map(|c| c.as_slice()).collect();
             let rows: Vec<(usize, f64)> = idx.iter().map(|&i| (i, y[i])).collect();
-            let mut nonzero = Vec::new();
-            let (got_xx, got_xy) = nonzero_rows(&rows, &x, &mut nonzero);
+            let (mut nonzero, mut ys) = (Vec::new(), Vec::new());
+            let (got_xx, got_xy) = nonzero_rows(&rows, &x, &mut nonzero, &mut ys);
             let got = BaseColumns::new(&refs, &idx).cross_products(&x, &nonzero);
             for (a, c) in cols.iter().enumerate() {
                 let mut want = 0.0;
