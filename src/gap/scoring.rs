@@ -1525,47 +1525,38 @@ mod tests {
                 if t % 5 == 0 { -v } else { v }
             });
             let sse0: Vec<f64> = q.iter().map(|q| 3.0 * q).collect();
-            let got = max_f_from_products(d.as_ref(), &sse0, &nf, positive_only);
-            for p in 0..perms {
-                let mut best = 0.0f64;
-                for (t, nn) in nf.iter().enumerate() {
-                    let dt = d[(p, t)];
-                    if positive_only && dt <= 0.0 {
-                        continue;
-                    }
-                    let red = dt * dt / nn;
-                    best = best.max(red / (sse0[p] - red).max(1e-300));
-                }
-                assert_eq!(
-                    got[p].to_bits(),
-                    best.to_bits(),
-                    "near ties, permutation {p}"
-                );
-            }
+            same_as_plain(d.as_ref(), &sse0, &nf, positive_only);
         }
         for positive_only in [false, true] {
             let (perms, terms) = (37, 23);
             let d = Mat::from_fn(perms, terms, |_, _| pick(&mut rng, 3.0));
             let sse0: Vec<f64> = (0..perms).map(|_| pick(&mut rng, 8.0).abs()).collect();
             let nf: Vec<f64> = (0..terms).map(|_| pick(&mut rng, 2.0)).collect();
-            let got = max_f_from_products(d.as_ref(), &sse0, &nf, positive_only);
-            for p in 0..perms {
-                let mut best = 0.0f64;
-                for (t, nn) in nf.iter().enumerate() {
-                    let dt = d[(p, t)];
-                    if *nn <= 0.0 || (positive_only && dt <= 0.0) {
-                        continue;
-                    }
-                    let red = dt * dt / nn;
-                    best = best.max(red / (sse0[p] - red).max(1e-300));
+            same_as_plain(d.as_ref(), &sse0, &nf, positive_only);
+        }
+    }
+
+    /// `max_f_from_products` against the definition, bit for bit: each
+    /// permutation's max over the thresholds of red/(SSE − red), red =
+    /// d²/nf, two divisions per threshold, skipping nf ≤ 0 (and d ≤ 0 with
+    /// `positive_only`).
+    fn same_as_plain(d: MatRef<f64>, sse0: &[f64], nf: &[f64], positive_only: bool) {
+        let got = max_f_from_products(d, sse0, nf, positive_only);
+        for (p, got) in got.iter().enumerate() {
+            let mut best = 0.0f64;
+            for (t, nn) in nf.iter().enumerate() {
+                let dt = d[(p, t)];
+                if *nn <= 0.0 || (positive_only && dt <= 0.0) {
+                    continue;
                 }
-                assert_eq!(
-                    got[p].to_bits(),
-                    best.to_bits(),
-                    "permutation {p}: {} vs {best}",
-                    got[p]
-                );
+                let red = dt * dt / nn;
+                best = best.max(red / (sse0[p] - red).max(1e-300));
             }
+            assert_eq!(
+                got.to_bits(),
+                best.to_bits(),
+                "permutation {p}: {got} vs {best}"
+            );
         }
     }
 
