@@ -275,7 +275,7 @@ fn nonzero_rows(
     (xx, xy)
 }
 
-/// A fit's base columns on its rows, for [`BaseFit::with_column`]'s Xᵀx.
+/// A fit's base columns on its rows, for [`BaseFit::with_column_in`]'s Xᵀx.
 /// A column that is not 0 on at least half the rows is read densely over
 /// the rows where x is not 0. The others are lists of their entries that
 /// are not 0: the baseline's per-group energy terms are 0 off their
