@@ -567,22 +567,17 @@ fn max_f_from_products(d: MatRef<f64>, sse0: &[f64], nf: &[f64], positive_only: 
         })
         .collect();
     let mut red_max = vec![f64::NEG_INFINITY; perms];
-    // Permutation r's quotient of a term (`nn`) folded into its maximum.
-    let exact = |r: &mut f64, dt: f64, nn: f64| {
-        if !(positive_only && dt <= 0.0) {
-            *r = r.max(dt * dt / nn);
-        }
-    };
     for (column, &nn) in columns.iter().zip(nf) {
         if nn <= 0.0 {
             continue;
         }
-        let Some(inv) = inverse(nn) else {
-            for (r, &dt) in red_max.iter_mut().zip(column.iter()) {
-                exact(r, dt, nn);
-            }
-            continue;
-        };
+        // Permutation r's quotient folded into its maximum (−∞, where the
+        // term does not count, leaves it as it is).
+        let exact = |r: &mut f64, dt: f64| *r = r.max(squared(dt) / nn);
+        // Whether the quotient can be the permutation's largest (every
+        // quotient, where the term has no estimate).
+        let inv = inverse(nn);
+        let candidate = |dt: f64, floor: f64| inv.is_none_or(|inv| squared(dt) * inv >= floor);
         const LANES: usize = 8;
         let mut rows = red_max
             .chunks_exact_mut(LANES)
@@ -596,20 +591,19 @@ fn max_f_from_products(d: MatRef<f64>, sse0: &[f64], nf: &[f64], positive_only: 
                 (dt.try_into().expect("8"), fl.try_into().expect("8"));
             let mut any = false;
             for k in 0..LANES {
-                any |= squared(dt[k]) * inv >= fl[k];
+                any |= candidate(dt[k], fl[k]);
             }
             if any {
                 for k in 0..LANES {
-                    if squared(dt[k]) * inv >= fl[k] {
-                        exact(&mut r[k], dt[k], nn);
+                    if candidate(dt[k], fl[k]) {
+                        exact(&mut r[k], dt[k]);
                     }
                 }
             }
         }
-        let done = perms - perms % LANES;
-        for r in done..perms {
-            if squared(column[r]) * inv >= floor[r] {
-                exact(&mut red_max[r], column[r], nn);
+        for r in perms - perms % LANES..perms {
+            if candidate(column[r], floor[r]) {
+                exact(&mut red_max[r], column[r]);
             }
         }
     }
