@@ -152,6 +152,24 @@ fn band_edges(edges: &[f64; 5]) -> [String; 5] {
     }
 }
 
+/// A row mask packed 64 rows to a word, row `i` at bit `i % 64` of word
+/// `i / 64`.
+fn packed(members: &[bool]) -> Vec<u64> {
+    members
+        .chunks(64)
+        .map(|c| {
+            c.iter()
+                .enumerate()
+                .fold(0, |w, (i, &m)| w | (u64::from(m) << i))
+        })
+        .collect()
+}
+
+/// The first `n` rows of a [`packed`] mask.
+fn unpacked(bits: &[u64], n: usize) -> Vec<bool> {
+    (0..n).map(|i| bits[i / 64] >> (i % 64) & 1 == 1).collect()
+}
+
 /// The residuals, their events and the events' variance components.
 struct Residuals<'a> {
     r: &'a [f64],
@@ -206,31 +224,39 @@ pub(crate) fn slice_residuals(rows: &[&KpiRow], residual: &[f64], fdr: f64) -> (
         sd,
         total_sq,
     };
-    // Slices with the same rows are one test under several names.
-    let mut seen: std::collections::HashMap<Vec<bool>, usize> = std::collections::HashMap::new();
+    // Slices with the same rows are one test under several names; the rows
+    // are keyed packed 64 to a word (hashing a bool per row cost ~2 % of a
+    // diagnosis), and a slice too small or too large for `test` is passed
+    // over by its count before its mask is built.
+    let n_rows = residual.len();
+    let mut seen: std::collections::HashMap<Vec<u64>, usize> = std::collections::HashMap::new();
     let mut tested: Vec<Slice> = Vec::new();
-    let mut add = |name: String, members: Vec<bool>, tested: &mut Vec<Slice>| {
-        if let Some(&i) = seen.get(&members) {
+    let mut add = |name: String, bits: Vec<u64>, tested: &mut Vec<Slice>| {
+        let count = bits.iter().map(|w| w.count_ones() as usize).sum::<usize>();
+        if count < MIN_SLICE || n_rows - count < MIN_SLICE {
+            return;
+        }
+        if let Some(&i) = seen.get(&bits) {
             tested[i].aliases.push(name);
-        } else if let Some(t) = test(name, &members, &res) {
-            seen.insert(members, tested.len());
+        } else if let Some(t) = test(name, &unpacked(&bits, n_rows), &res) {
+            seen.insert(bits, tested.len());
             tested.push(t);
         }
     };
     let s = singles(rows, residual);
-    for a in &s {
-        add(a.name.clone(), a.members.clone(), &mut tested);
+    let packed_s: Vec<Vec<u64>> = s.iter().map(|a| packed(&a.members)).collect();
+    for (a, bits) in s.iter().zip(&packed_s) {
+        add(a.name.clone(), bits.clone(), &mut tested);
     }
     for (i, a) in s.iter().enumerate() {
-        for b in &s[i + 1..] {
+        for (j, b) in s.iter().enumerate().skip(i + 1) {
             if a.variable != b.variable {
-                let both: Vec<bool> = a
-                    .members
-                    .iter()
-                    .zip(&b.members)
-                    .map(|(x, y)| *x && *y)
-                    .collect();
-                add(format!("{} & {}", a.name, b.name), both, &mut tested);
+                let both = packed_s[i].iter().zip(&packed_s[j]).map(|(x, y)| x & y);
+                add(
+                    format!("{} & {}", a.name, b.name),
+                    both.collect(),
+                    &mut tested,
+                );
             }
         }
     }
@@ -255,6 +281,24 @@ mod tests {
     use super::*;
     use rand::SeedableRng;
     use rand_distr::{Distribution, Normal};
+
+    /// Packing keeps every row and its place, across word boundaries and
+    /// a last word only partly used; the words read by hand.
+    #[test]
+    fn packed_masks_keep_each_row() {
+        let mut rng = rand::rngs::StdRng::seed_from_u64(3);
+        for n in [1usize, 63, 64, 65, 130, 316] {
+            let m: Vec<bool> = (0..n)
+                .map(|_| rand::Rng::random_bool(&mut rng, 0.4))
+                .collect();
+            let bits = packed(&m);
+            assert_eq!(bits.len(), n.div_ceil(64));
+            assert_eq!(unpacked(&bits, n), m);
+        }
+        let mut m = vec![false; 70];
+        (m[0], m[63], m[64], m[69]) = (true, true, true, true);
+        assert_eq!(packed(&m), vec![1 | 1 << 63, 1 | 1 << 5]);
+    }
 
     /// Edges to three significant digits of the range, more only where
     /// two different edges would print alike (values worked by hand).
