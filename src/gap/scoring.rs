@@ -671,6 +671,17 @@ pub(super) fn track_cells<'r>(
     (kept, out)
 }
 
+/// The base columns that are not constant within tracks (`track_level[j]`
+/// false): a model with [`track_cells`] beside them, whose cells span the
+/// others, takes only these.
+pub(super) fn varying_within_tracks(base: &[Vec<f64>], track_level: &[bool]) -> Vec<Vec<f64>> {
+    base.iter()
+        .zip(track_level)
+        .filter(|(_, t)| !**t)
+        .map(|(c, _)| c.clone())
+        .collect()
+}
+
 /// One cross-validation fold of a null model: its columns and their fit
 /// on the training rows (which the fit keeps).
 struct Fold {
@@ -888,12 +899,7 @@ pub(crate) fn rank(
     // they cancel on the fold's own rows and not on the held-out track's,
     // whose predictions then decided the CV gain (docs/gap.md, "The
     // held-out tracks' predictions").
-    let within_base: Vec<Vec<f64>> = base
-        .iter()
-        .enumerate()
-        .filter(|(j, _)| !problem.track_level.get(*j).copied().unwrap_or(false))
-        .map(|(_, c)| c.clone())
-        .collect();
+    let within_base = varying_within_tracks(&base, &problem.track_level);
     let within = Null::new(rows, &within_base, y, &groups, Some(&prediction), None);
     let within = match RunWhitening::estimate(rows, &within.e0) {
         Some(w) => Null::new(rows, &within_base, y, &groups, Some(&prediction), Some(w)),

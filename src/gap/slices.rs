@@ -46,11 +46,12 @@ pub struct Slice {
     pub members: Vec<bool>,
 }
 
-/// A named row predicate: (variable, level name, members).
+/// A named row predicate: (variable, level name, members as a [`packed`]
+/// mask).
 struct Single {
     variable: String,
     name: String,
-    members: Vec<bool>,
+    members: Vec<u64>,
 }
 
 /// Name of the predicted wear's bands (measured − residual). Slicing by
@@ -78,7 +79,7 @@ fn singles(rows: &[&KpiRow], residual: &[f64]) -> Vec<Single> {
             out.push(Single {
                 variable: var.into(),
                 name: format!("{var} = {l}"),
-                members: rows.iter().map(|r| get(r) == l).collect(),
+                members: packed(&rows.iter().map(|r| get(r) == l).collect::<Vec<_>>()),
             });
         }
     }
@@ -123,7 +124,7 @@ fn singles(rows: &[&KpiRow], residual: &[f64]) -> Vec<Single> {
             out.push(Single {
                 variable: col.into(),
                 name: format!("{col} in Q{} [{}, {}]", b + 1, shown[b], shown[b + 1]),
-                members,
+                members: packed(&members),
             });
         }
     }
@@ -244,14 +245,13 @@ pub(crate) fn slice_residuals(rows: &[&KpiRow], residual: &[f64], fdr: f64) -> (
         }
     };
     let s = singles(rows, residual);
-    let packed_s: Vec<Vec<u64>> = s.iter().map(|a| packed(&a.members)).collect();
-    for (a, bits) in s.iter().zip(&packed_s) {
-        add(a.name.clone(), bits.clone(), &mut tested);
+    for a in &s {
+        add(a.name.clone(), a.members.clone(), &mut tested);
     }
     for (i, a) in s.iter().enumerate() {
-        for (j, b) in s.iter().enumerate().skip(i + 1) {
+        for b in &s[i + 1..] {
             if a.variable != b.variable {
-                let both = packed_s[i].iter().zip(&packed_s[j]).map(|(x, y)| x & y);
+                let both = a.members.iter().zip(&b.members).map(|(x, y)| x & y);
                 add(
                     format!("{} & {}", a.name, b.name),
                     both.collect(),
@@ -349,7 +349,7 @@ mod tests {
         let refs: Vec<&KpiRow> = rows.iter().collect();
         let s = singles(&refs, &residual);
         let band = |name: &str| s.iter().find(|x| x.name.starts_with(name)).unwrap();
-        let top = band("predicted_wear_pct in Q4");
+        let top = unpacked(&band("predicted_wear_pct in Q4").members, n);
         let mean_in = |m: &[bool]| {
             let v: Vec<f64> = m
                 .iter()
@@ -359,11 +359,7 @@ mod tests {
                 .collect();
             v.iter().sum::<f64>() / v.len() as f64
         };
-        assert!(
-            mean_in(&top.members).abs() < 0.25,
-            "{}",
-            mean_in(&top.members)
-        );
+        assert!(mean_in(&top).abs() < 0.25, "{}", mean_in(&top));
         // The measured wear's top band, for contrast: its mean residual is
         // var(e)/sd(y)·E[z | z > 0.67] ≈ 0.5 here.
         let measured: Vec<f64> = rows.iter().map(|r| r.wear_mean_pct).collect();

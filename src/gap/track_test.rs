@@ -28,7 +28,7 @@
 
 use super::candidates::{Candidate, KpiScale, track_value};
 use super::linear::{Solver, orthonormal_basis};
-use super::scoring::{max_f, projected, track_cells};
+use super::scoring::{max_f, projected, track_cells, varying_within_tracks};
 use super::stats::levels;
 use crate::Axle;
 use crate::kpi::KpiRow;
@@ -190,12 +190,7 @@ impl<'a> Severities<'a> {
     ) -> Severities<'a> {
         let tracks = Tracks::new(rows);
         let all: Vec<usize> = (0..rows.len()).collect();
-        let mut stage1: Vec<Vec<f64>> = base
-            .iter()
-            .zip(track_level)
-            .filter(|(_, t)| !**t)
-            .map(|(c, _)| c.clone())
-            .collect();
+        let mut stage1 = varying_within_tracks(base, track_level);
         let n_within = stage1.len();
         let (cells, cell_cols) = track_cells(rows, prediction, &all);
         stage1.extend(cell_cols);
