@@ -349,53 +349,6 @@ fn strong_graining_takes_its_rear_axle_term_and_no_generic_kpi() {
     );
 }
 
-/// `--worn-through size-tobit` on two seasons at real-data noise. Seed 352
-/// (generated effect: every car's FR tire wears 1.75 times what its
-/// telemetry gives, 13 % of the wear variance; 8 % of the tires wear
-/// through): the terms are the ones `leave-out` chooses, and the planted
-/// set-up sized with the training events' worn-through tires imputed closes
-/// the testing events' gap within 20 % of the simulator's ideal, where left
-/// out it closes 0.60 of it (the FR tires wear through most, so leaving them
-/// out sizes their factor low). Seed 349, where `tobit` chooses another
-/// first term than `leave-out`: `size-tobit` keeps `leave-out`'s choice and
-/// imputes `tobit`'s tires.
-#[test]
-fn the_terms_chosen_left_out_and_sized_imputed_close_the_gap() {
-    use tirewear::gap::report::WornThrough;
-    let dir = tempfile::tempdir().unwrap();
-    let mut s = season_settings(dir.path());
-    s.scatter = tirewear::sim::WearScatter::REALISTIC;
-    (s.keep, s.reuse) = (true, true);
-    let mut case = |seed: u64, how: WornThrough| {
-        s.gap.worn_through = how;
-        let planted = Planted::Generated(tirewear::sim::GeneratedEffect::draw(seed));
-        run_case(&planted, seed, &s).unwrap()
-    };
-    let (left_out, d_left_out) = case(352, WornThrough::LeaveOut);
-    let (sized, d_sized) = case(352, WornThrough::SizeTobit);
-    assert_eq!(added(&d_sized), added(&d_left_out));
-    assert!(
-        added(&d_sized)[1].starts_with("set-up: FR"),
-        "{:?}",
-        added(&d_sized)
-    );
-    assert!(!d_sized.imputed.is_empty());
-    assert!(left_out.shrinkage_ratio < 0.7, "{left_out:?}");
-    assert!(
-        sized.hit && (sized.shrinkage_ratio - 1.0).abs() <= 0.2,
-        "{sized:?}\n{:?}",
-        added(&d_sized)
-    );
-
-    let (_, d_left_out) = case(349, WornThrough::LeaveOut);
-    let (_, d_tobit) = case(349, WornThrough::Tobit);
-    let (_, d_sized) = case(349, WornThrough::SizeTobit);
-    assert_ne!(added(&d_tobit), added(&d_left_out));
-    assert_eq!(added(&d_sized), added(&d_left_out));
-    assert!(!d_sized.imputed.is_empty());
-    assert_eq!(d_sized.imputed, d_tobit.imputed);
-}
-
 /// A set-up effect no KPI shows: one car's rear tires wear 1.3 times what
 /// their telemetry gives (toe, say), planted in the measured wear of a clean
 /// season-preset season (wear is linear in the readings, so scaling

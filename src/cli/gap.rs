@@ -70,9 +70,7 @@ pub(crate) struct GapStatsArgs {
     /// the relative residuals beyond their own), or `tobit`: the same with
     /// the residuals' tail log-normal, its mean and sd fitted by censored
     /// likelihood (reaches beyond the largest measured residual, where the
-    /// heavily worn tires lie when most of them wore through), or
-    /// `size-tobit`: the terms chosen as `leave-out` chooses them, then
-    /// sized as `tobit` sizes them.
+    /// heavily worn tires lie when most of them wore through).
     /// Measured side by side in docs/gap.md ("Worn-through tires imputed").
     #[arg(long, value_enum, default_value = "leave-out")]
     worn_through: WornThroughArg,
@@ -83,7 +81,6 @@ pub(crate) enum WornThroughArg {
     LeaveOut,
     Impute,
     Tobit,
-    SizeTobit,
 }
 
 impl GapStatsArgs {
@@ -106,7 +103,6 @@ impl GapStatsArgs {
                 WornThroughArg::LeaveOut => tirewear::gap::report::WornThrough::LeaveOut,
                 WornThroughArg::Impute => tirewear::gap::report::WornThrough::Impute,
                 WornThroughArg::Tobit => tirewear::gap::report::WornThrough::Tobit,
-                WornThroughArg::SizeTobit => tirewear::gap::report::WornThrough::SizeTobit,
             },
         }
     }

@@ -201,9 +201,6 @@ pub fn render_markdown(d: &Diagnosis, max_slices: usize) -> String {
                 WornThrough::Tobit => {
                     "E[e^r | r > r_i] of the log residuals r = ln(wear/prediction), normal with their mean and sd fitted by censored likelihood (Tobit)"
                 }
-                WornThrough::SizeTobit => {
-                    "E[e^r | r > r_i] of the log residuals r = ln(wear/prediction), normal with their mean and sd fitted by censored likelihood (Tobit), where the terms are sized; the terms were chosen with them left out"
-                }
                 _ => {
                     "1 plus the Kaplan–Meier mean of the relative residuals wear/prediction − 1 beyond their own"
                 }
@@ -935,7 +932,6 @@ mod tests {
         for (how, says) in [
             (WornThrough::Impute, "Kaplan–Meier"),
             (WornThrough::Tobit, "Tobit"),
-            (WornThrough::SizeTobit, "chosen with them left out"),
         ] {
             d.worn_through = how;
             let t = text(&d);

@@ -286,11 +286,6 @@ pub enum WornThrough {
     /// As `Impute`, the tail from a log-normal scatter of wear about the
     /// law fitted by censored likelihood (Tobit).
     Tobit,
-    /// The terms chosen as `LeaveOut` chooses them, then sized as `Tobit`
-    /// sizes them: the choice is not made on wear imputed from a law that
-    /// lacks the terms, the sizes are not biased low by the tires the terms
-    /// wore through (docs/gap.md, "Chosen left out, sized imputed").
-    SizeTobit,
 }
 
 impl WornThrough {
@@ -300,7 +295,6 @@ impl WornThrough {
             WornThrough::LeaveOut => "leave-out",
             WornThrough::Impute => "impute",
             WornThrough::Tobit => "tobit",
-            WornThrough::SizeTobit => "size-tobit",
         }
     }
 
@@ -309,7 +303,7 @@ impl WornThrough {
         match self {
             WornThrough::LeaveOut => None,
             WornThrough::Impute => Some(CensoredTail::KaplanMeier),
-            WornThrough::Tobit | WornThrough::SizeTobit => Some(CensoredTail::LogNormal),
+            WornThrough::Tobit => Some(CensoredTail::LogNormal),
         }
     }
 }
@@ -380,37 +374,6 @@ pub fn diagnose(
     baseline: &Baseline,
     settings: &GapSettings,
 ) -> Result<Diagnosis, ModelError> {
-    if settings.worn_through != WornThrough::SizeTobit {
-        return Ok(diagnose_with(rows, maps, baseline, settings, None)?.0);
-    }
-    let with = |worn_through| GapSettings {
-        worn_through,
-        ..settings.clone()
-    };
-    let (_, chosen) = diagnose_with(rows, maps, baseline, &with(WornThrough::LeaveOut), None)?;
-    let (mut d, _) = diagnose_with(
-        rows,
-        maps,
-        baseline,
-        &with(WornThrough::Tobit),
-        Some(&chosen),
-    )?;
-    d.worn_through = WornThrough::SizeTobit;
-    d.findings = super::render::findings_lines(&d);
-    Ok(d)
-}
-
-/// [`diagnose`] with one setting of the worn-through tires; with `forced`,
-/// the terms enter in that order instead of by step 3's rule (each still
-/// refused where [`Selection::add`] refuses it). Also returns the scores of
-/// the terms that entered.
-fn diagnose_with(
-    rows: &[KpiRow],
-    maps: &BTreeMap<TireRun, EnergyMaps>,
-    baseline: &Baseline,
-    settings: &GapSettings,
-    forced: Option<&[Score]>,
-) -> Result<(Diagnosis, Vec<Score>), ModelError> {
     let fdr = settings.fdr;
     let (measured, worn) = censor(rows);
     let censored: Vec<String> = worn.iter().map(tire_name).collect();
@@ -459,17 +422,10 @@ fn diagnose_with(
         track_level,
     );
     let mut steps = vec![record.step("baseline".into(), None, None, &observed.residual)];
-    let (candidates, chosen) = if maps.is_empty() {
-        (Vec::new(), Vec::new())
+    let candidates = if maps.is_empty() {
+        Vec::new()
     } else {
-        forward_selection(
-            &mut sel,
-            &record,
-            &observed.residual,
-            settings,
-            forced,
-            &mut steps,
-        )
+        forward_selection(&mut sel, &record, &observed.residual, settings, &mut steps)
     };
     let terms_wear = terms_wear(&sel);
     let final_terms = final_terms(&sel, &steps, settings.scoring.seed);
@@ -495,7 +451,7 @@ fn diagnose_with(
         findings: Vec::new(),
     };
     d.findings = super::render::findings_lines(&d);
-    Ok((d, chosen))
+    Ok(d)
 }
 
 /// A tire-run as the diagnosis names it: run/wheel.
@@ -754,30 +710,23 @@ impl StepRecord<'_> {
 
 /// Steps 2 and 3: ranks the candidates, and adds the best significant one
 /// in rounds (one per term added, plus one per term refused), each added
-/// term's step pushed to `steps`. With `forced`, the first round ranks the
-/// candidates (for the report) and the terms enter in `forced`'s order.
-/// Returns the first round's ranking, with where the leading candidates act
-/// among the flagged slices, and the scores of the terms that entered.
+/// term's step pushed to `steps`. Returns the first round's ranking, with
+/// where the leading candidates act among the flagged slices.
 fn forward_selection(
     sel: &mut Selection,
     record: &StepRecord,
     residual: &[f64],
     settings: &GapSettings,
-    forced: Option<&[Score]>,
     steps: &mut Vec<Step>,
-) -> (Vec<Score>, Vec<Score>) {
+) -> Vec<Score> {
     let fdr = settings.fdr;
     let mut lib = library(&record.rows[..record.n_train]);
     lib.extend(settings.user_effects.iter().cloned());
     let mut candidates = Vec::new();
-    let mut chosen = Vec::new();
     let mut round = 0;
     while steps.len() <= settings.max_terms && round < 2 * settings.max_terms + 2 {
         round += 1;
-        let ranked = match forced {
-            Some(_) if round > 1 => Vec::new(),
-            _ => rank(&sel.problem(), &lib, &settings.scoring, fdr),
-        };
+        let ranked = rank(&sel.problem(), &lib, &settings.scoring, fdr);
         for c in ranked.iter().take(8) {
             tracing::trace!(
                 round,
@@ -800,11 +749,7 @@ fn forward_selection(
             let leading = ACTS_FOR.min(candidates.len());
             sel.acts_in(&mut candidates[..leading], &lib, &named, residual);
         }
-        let best = match forced {
-            Some(forced) => forced.get(round - 1),
-            None => next_term(&ranked, &candidates, &sel.terms, &sel.used, fdr),
-        };
-        let Some(best) = best else {
+        let Some(best) = next_term(&ranked, &candidates, &sel.terms, &sel.used, fdr) else {
             break;
         };
         tracing::debug!(
@@ -817,10 +762,9 @@ fn forward_selection(
         );
         if let Some((refitted, res)) = sel.add(best, &lib) {
             steps.push(record.step(best.name.clone(), Some(&refitted), sel.terms.last(), &res));
-            chosen.push(best.clone());
         }
     }
-    (candidates, chosen)
+    candidates
 }
 
 /// Each tire's wear from the final model's terms (none without terms).
