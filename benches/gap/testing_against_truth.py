@@ -55,9 +55,9 @@ def uncapped_copy(season, dst, testing_events):
     return changed
 
 
-def gap(tirewear, kpis, out, setting):
+def gap(tirewear, kpis, out, setting, extra=()):
     subprocess.run(
-        [tirewear, "gap", kpis, "--worn-through", setting, "--out", out, "--quiet"],
+        [tirewear, "gap", kpis, "--worn-through", setting, "--out", out, "--quiet", *extra],
         check=True,
         stdout=subprocess.DEVNULL,
         stderr=subprocess.DEVNULL,
@@ -76,8 +76,15 @@ def main():
     with tempfile.TemporaryDirectory() as work:
         for season in seasons:
             name = os.path.basename(os.path.normpath(season))
-            # The testing events as the diagnosis picks them on the season itself.
-            first = gap(tirewear, os.path.join(season, "kpis.parquet"), os.path.join(work, name, "as-is"), settings[0])
+            # The testing events as the diagnosis picks them on the season
+            # itself (the split alone: no terms needed for it).
+            first = gap(
+                tirewear,
+                os.path.join(season, "kpis.parquet"),
+                os.path.join(work, name, "as-is"),
+                settings[0],
+                ("--max-terms", "0"),
+            )
             copy = os.path.join(work, name, "uncapped")
             n = uncapped_copy(season, copy, set(first["testing_events"]))
             line = f"{name}: {n} worn-through testing tires at their true wear"
