@@ -222,6 +222,89 @@ fn clean_season_reports_no_effect() {
     );
 }
 
+/// The validation's second measure of the testing events: against every
+/// testing tire's true wear (`truth/wear_truth.csv`, `wear_total_pct`),
+/// worn-through tires included. At real-data scatter seed 6 wears three
+/// testing tires through. Checked by a second route: the law the diagnosis
+/// calibrated, applied to each testing tire by hand, against the truth file
+/// read here; and the diagnosis's own measure, the same law against the
+/// measured wear of the tires not worn through.
+#[test]
+fn the_testing_gap_is_also_measured_against_every_testing_tires_true_wear() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut s = settings(dir.path());
+    s.scatter = tirewear::sim::WearScatter::REALISTIC;
+    s.keep = true;
+    let (case, d) = run_case(&Planted::Clean, 6, &s).unwrap();
+    let t = case
+        .against_truth
+        .clone()
+        .expect("the truth has wear_total_pct");
+    let season = dir.path().join("clean-s6");
+    let kpis = season.join("kpis.parquet");
+    let rows = tirewear::kpi::table::read_parquet(&kpis).unwrap();
+    let maps = tirewear::kpi::energy_maps::read_tire_maps(&kpis).unwrap();
+    let mut truth = std::collections::BTreeMap::new();
+    for rec in csv::Reader::from_path(season.join("truth/wear_truth.csv"))
+        .unwrap()
+        .deserialize::<std::collections::HashMap<String, String>>()
+    {
+        let rec = rec.unwrap();
+        let wear: f64 = rec["wear_total_pct"].parse().unwrap();
+        truth.insert((rec["run"].clone(), rec["wheel"].clone()), wear);
+    }
+    let law = d.physics.as_ref().expect("the physics baseline");
+    let testing: Vec<_> = rows
+        .iter()
+        .filter(|r| d.testing_events.contains(&r.event))
+        .collect();
+    let worn = testing
+        .iter()
+        .filter(|r| r.worn_through_readings > 0.0)
+        .count();
+    assert_eq!(t.testing_tires, testing.len());
+    assert_eq!(t.testing_worn_through, worn);
+    assert!(worn > 0, "the case needs a worn-through testing tire");
+    let rmse = |pairs: Vec<(f64, f64)>| {
+        (pairs.iter().map(|(y, p)| (y - p).powi(2)).sum::<f64>() / pairs.len() as f64).sqrt()
+    };
+    let predict = |r: &tirewear::kpi::KpiRow| law.predict(r, maps.get(&r.tire_run()));
+    let against_truth = rmse(
+        testing
+            .iter()
+            .map(|r| (truth[&(r.run.clone(), r.wheel.to_string())], predict(r)))
+            .collect(),
+    );
+    let measured = rmse(
+        testing
+            .iter()
+            .filter(|r| r.worn_through_readings <= 0.0)
+            .map(|r| (r.wear_mean_pct, predict(r)))
+            .collect(),
+    );
+    let close = |a: f64, b: f64| (a - b).abs() <= 1e-9 * b;
+    assert!(
+        close(t.rmse_baseline_pct, against_truth),
+        "{t:?} {against_truth}"
+    );
+    assert!(
+        close(case.rmse_baseline_pct, measured),
+        "{case:?} {measured}"
+    );
+    // Not the same measure: the worn-through tires are the season's most worn.
+    assert!(
+        (against_truth - measured).abs() > 0.05,
+        "{against_truth} {measured}"
+    );
+    // Clean: nothing planted, so the ideal is the law itself, no term is
+    // added on either measure and there is no expected shape.
+    assert!(t.same_terms);
+    assert_eq!(case.significant_terms, 0);
+    assert_eq!(t.rmse_diagnosed_pct, t.rmse_baseline_pct);
+    assert!(close(t.rmse_ideal_pct, t.rmse_baseline_pct), "{t:?}");
+    assert!(t.rmse_expected_pct.is_nan());
+}
+
 /// The season preset at scale 0.5: 12 events on 12 tracks, 8 of them in
 /// training (the validation matrix of docs/gap.md).
 fn season_settings(work: &std::path::Path) -> ValidateSettings {

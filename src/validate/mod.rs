@@ -21,8 +21,11 @@
 //! over the tires diagnosed, and beside its shrinkage stands that of the
 //! planted wear itself as the term, sized with the law on the training
 //! events (`score::exact_shape_sized`: what the term's shape costs, apart
-//! from what estimating its size costs). `render` writes the tables of
-//! docs/gap.md.
+//! from what estimating its size costs). Each season's testing events are
+//! measured a second time against every testing tire's true wear
+//! (`AgainstTruth`): the diagnosis's own measure leaves the worn-through
+//! tires out, which favours a law biased low, and carries the gauge's
+//! error. `render` writes the tables of docs/gap.md.
 
 mod error;
 mod render;
@@ -123,7 +126,36 @@ pub struct Case {
     /// Pearson correlation, over the tires diagnosed, of the wear the
     /// diagnosis's terms add with the planted wear (0 without terms).
     pub terms_correlation: f64,
+    /// The testing events measured against every testing tire's true wear
+    /// (None for a truth without it, or a season that failed).
+    pub against_truth: Option<AgainstTruth>,
     pub error: Option<String>,
+}
+
+/// The testing events measured against the simulator's true wear of every
+/// testing tire (`wear_total_pct`: without the gauge's error, not capped
+/// where the tread wore through), where the diagnosis's own measure uses
+/// the measured wear and leaves worn-through tires out. The baseline and
+/// the diagnosed model are the diagnosis's own (its training rows and
+/// choices are the same); the ideal and the expected shape as in [`Case`].
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct AgainstTruth {
+    /// Testing tires, and those of them whose tread wore through.
+    pub testing_tires: usize,
+    pub testing_worn_through: usize,
+    /// Testing RMSE (%) against the true wear: baseline, after the
+    /// diagnosis's terms, ideal, the expected shape at its size.
+    pub rmse_baseline_pct: f64,
+    pub rmse_diagnosed_pct: f64,
+    pub rmse_ideal_pct: f64,
+    pub rmse_expected_pct: f64,
+    /// (baseline − diagnosed) / (baseline − ideal), and the same for the
+    /// expected shape.
+    pub shrinkage_ratio: f64,
+    pub expected_shrinkage: f64,
+    /// Whether the diagnosis on the true testing wear added the same terms
+    /// (it should: the testing rows enter no fit and no choice).
+    pub same_terms: bool,
 }
 
 /// What a season of the matrix has planted.
@@ -332,6 +364,7 @@ pub fn validate(s: &ValidateSettings) -> Vec<Case> {
                     expected_size: f64::NAN,
                     rmse_expected_pct: f64::NAN,
                     expected_shrinkage: f64::NAN,
+                    against_truth: None,
                     error: Some(e.to_string()),
                 }
             }

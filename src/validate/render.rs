@@ -105,6 +105,7 @@ pub fn render(cases: &[Case]) -> String {
         }
     }
     render_generated(&mut s, cases);
+    render_against_truth(&mut s, cases);
     let clean: Vec<&Case> = cases
         .iter()
         .filter(|c| c.effect.is_none() && c.generated.is_none())
@@ -152,6 +153,58 @@ pub fn render(cases: &[Case]) -> String {
         );
     }
     s
+}
+
+/// The testing events measured against every testing tire's true wear
+/// (`AgainstTruth`), beside the diagnosis's own measure, per group of
+/// seasons.
+fn render_against_truth(s: &mut String, cases: &[Case]) {
+    let with: Vec<&Case> = cases
+        .iter()
+        .filter(|c| c.error.is_none() && c.against_truth.is_some())
+        .collect();
+    if with.is_empty() {
+        return;
+    }
+    s.push_str(
+        "\nAgainst the true wear of every testing tire (the simulator's `wear_total_pct`: no gauge error, and the worn-through tires, which the diagnosis's measure leaves out, at their uncapped wear; the same terms, the ideal and the expected shape recomputed on it):\n\n| seasons | n | testing tires worn through (median) | shrinkage / ideal (median): measured tires | against the true wear | expected shape, against the true wear | RMSE diagnosed, against the true wear (median, %) | terms differ |\n|---|---|---|---|---|---|---|---|\n",
+    );
+    let line = |s: &mut String, label: &str, g: &[&Case]| {
+        if g.is_empty() {
+            return;
+        }
+        let t = |c: &Case| c.against_truth.clone().expect("filtered");
+        let _ = writeln!(
+            s,
+            "| {label} | {} | {:.1} % | {:.2} | {:.2} | {:.2} | {:.3} | {} |",
+            g.len(),
+            100.0
+                * median(
+                    g.iter()
+                        .map(|c| t(c).testing_worn_through as f64 / t(c).testing_tires as f64)
+                        .collect()
+                ),
+            median(g.iter().map(|c| c.shrinkage_ratio).collect()),
+            median(g.iter().map(|c| t(c).shrinkage_ratio).collect()),
+            median(g.iter().map(|c| t(c).expected_shrinkage).collect()),
+            median(g.iter().map(|c| t(c).rmse_diagnosed_pct).collect()),
+            g.iter().filter(|c| !t(c).same_terms).count(),
+        );
+    };
+    let of = |f: &dyn Fn(&Case) -> bool| -> Vec<&Case> {
+        with.iter().copied().filter(|c| f(c)).collect()
+    };
+    line(s, "named effects", &of(&|c| c.effect.is_some()));
+    line(
+        s,
+        "generated, ≥ 10 % of the variance",
+        &of(&|c| c.generated.is_some() && c.variance_share >= 0.1),
+    );
+    line(
+        s,
+        "clean",
+        &of(&|c| c.effect.is_none() && c.generated.is_none()),
+    );
 }
 
 /// The generated effects: the targets over those at ≥ 10 % of the
@@ -241,13 +294,13 @@ fn render_generated(s: &mut String, cases: &[Case]) {
         );
     }
     s.push_str(
-        "\n| effect | variance share | terms | correlation | RMSE baseline / diagnosed / ideal | shrinkage / ideal | exact shape: size, shrinkage | expected shape: size, shrinkage |\n|---|---|---|---|---|---|---|---|\n",
+        "\n| effect | variance share | terms | correlation | RMSE baseline / diagnosed / ideal | shrinkage / ideal | exact shape: size, shrinkage | expected shape: size, shrinkage | against the true wear: worn through, RMSE baseline / diagnosed / ideal, shrinkage |\n|---|---|---|---|---|---|---|---|---|\n",
     );
     for c in &generated {
         let g = c.generated.as_ref().expect("generated");
         let _ = writeln!(
             s,
-            "| {g} | {:.1} % | {} | {:.2} | {:.3} / {:.3} / {:.3} | {:.2} | {:.3}, {:.2} | {:.3}, {:.2} |",
+            "| {g} | {:.1} % | {} | {:.2} | {:.3} / {:.3} / {:.3} | {:.2} | {:.3}, {:.2} | {:.3}, {:.2} | {} |",
             100.0 * c.variance_share,
             c.first_term.as_deref().map_or(
                 c.leads_scope
@@ -269,6 +322,18 @@ fn render_generated(s: &mut String, cases: &[Case]) {
             c.oracle_shrinkage,
             c.expected_size,
             c.expected_shrinkage,
+            c.against_truth
+                .as_ref()
+                .map_or("–".to_string(), |t| format!(
+                    "{}/{}, {:.3} / {:.3} / {:.3}, {:.2}{}",
+                    t.testing_worn_through,
+                    t.testing_tires,
+                    t.rmse_baseline_pct,
+                    t.rmse_diagnosed_pct,
+                    t.rmse_ideal_pct,
+                    t.shrinkage_ratio,
+                    if t.same_terms { "" } else { " (terms differ)" }
+                )),
         );
     }
 }
@@ -305,6 +370,7 @@ mod tests {
             expected_shrinkage: f64::NAN,
             terms_correlation: f64::NAN,
             generated: None,
+            against_truth: None,
             error: None,
         }
     }

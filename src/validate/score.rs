@@ -2,7 +2,7 @@
 //! tire, the ideal diagnosis (the law calibrated on wear minus the planted
 //! part), hit, shrinkage and the terms' correlation with the planted wear.
 
-use super::{Case, Planted, ValidateError};
+use super::{AgainstTruth, Case, Planted, ValidateError};
 use crate::gap::report::{Baseline, Diagnosis, GapSettings, diagnose};
 use crate::kpi::{KpiRow, TireRun};
 use crate::sim::GeneratedEffect;
@@ -17,11 +17,16 @@ pub(crate) struct PlantedWear {
     /// Each tire's wear scatter factor, already in `wear` (None for a
     /// season simulated before `truth/wear_truth.csv` had the column).
     pub scatter_factors: Option<BTreeMap<TireRun, f64>>,
+    /// Each tire's true mean wear (%, `wear_total_pct`): without the
+    /// gauge's error and not capped where the tread wore through (None
+    /// for a truth without the column).
+    pub true_wear: Option<BTreeMap<TireRun, f64>>,
 }
 
 /// Planted wear (%) per (run, wheel) from `truth/wear_truth.csv`: the
-/// column `wear_<column>_pct` (None: zero); and each tire's wear scatter
-/// factor (`wear_scatter_factor`) where the file has it.
+/// column `wear_<column>_pct` (None: zero); each tire's wear scatter
+/// factor (`wear_scatter_factor`) and true wear (`wear_total_pct`) where
+/// the file has them.
 pub(super) fn read_planted(
     truth: &Path,
     column: Option<&str>,
@@ -56,8 +61,10 @@ pub(super) fn read_planted(
         None => None,
     };
     let factor_col = headers.iter().position(|h| h == "wear_scatter_factor");
+    let total_col = headers.iter().position(|h| h == "wear_total_pct");
     let mut out = BTreeMap::new();
     let mut factors = BTreeMap::new();
+    let mut totals = BTreeMap::new();
     for (i, rec) in rd.records().enumerate() {
         let rec = rec.map_err(|e| ValidateError::Truth {
             file: file.clone(),
@@ -92,11 +99,15 @@ pub(super) fn read_planted(
             }
             factors.insert((rec[run].to_string(), w), f);
         }
+        if let Some(c) = total_col {
+            totals.insert((rec[run].to_string(), w), number(c)?);
+        }
         out.insert((rec[run].to_string(), w), v);
     }
     Ok(PlantedWear {
         wear: out,
         scatter_factors: factor_col.map(|_| factors),
+        true_wear: total_col.map(|_| totals),
     })
 }
 
@@ -141,31 +152,7 @@ pub(crate) fn score_case(
         .filter(|(r, _)| r.axle == crate::Axle::Front)
         .map(|(_, v)| v)
         .sum();
-    // The law alone calibrated on wear `y` (per row): its (training,
-    // testing) RMSE (%).
-    let law_alone = |y: &[f64]| -> Result<(f64, f64), ValidateError> {
-        let rows: Vec<KpiRow> = rows
-            .iter()
-            .zip(y)
-            .map(|(r, v)| KpiRow {
-                wear_mean_pct: *v,
-                ..r.clone()
-            })
-            .collect();
-        let fit = diagnose(
-            &rows,
-            maps,
-            &Baseline::Physics,
-            &GapSettings {
-                max_terms: 0,
-                ..gap.clone()
-            },
-        )?;
-        Ok((
-            fit.training.rmse_pct,
-            fit.testing.map_or(f64::NAN, |t| t.rmse_pct),
-        ))
-    };
+    let law_alone = |y: &[f64]| law_alone(rows, y, maps, gap);
     // Ideal: the same baseline calibrated on wear minus the planted part,
     // the planted part then added back exactly.
     let cleaned: Vec<f64> = rows
@@ -200,6 +187,7 @@ pub(crate) fn score_case(
         _ => None,
     };
     let terms_correlation = terms_correlation(d, planted);
+    let against_truth = against_truth(rows, maps, truth, &p, expected_size, d, gap)?;
     let hit = match planted_kind {
         Planted::Named(e) => first_mechanism.as_deref() == Some(e.kind.name()),
         Planted::Generated(_) => terms_correlation >= 0.8,
@@ -240,8 +228,140 @@ pub(crate) fn score_case(
         expected_size,
         rmse_expected_pct: rmse_expected,
         expected_shrinkage: (rmse_base - rmse_expected) / (rmse_base - rmse_ideal),
+        against_truth,
         error: None,
     })
+}
+
+/// The law alone calibrated on wear `y` (per row of `rows`): its
+/// (training, testing) RMSE (%).
+fn law_alone(
+    rows: &[KpiRow],
+    y: &[f64],
+    maps: &BTreeMap<TireRun, crate::kpi::energy_maps::EnergyMaps>,
+    gap: &GapSettings,
+) -> Result<(f64, f64), ValidateError> {
+    let rows: Vec<KpiRow> = rows
+        .iter()
+        .zip(y)
+        .map(|(r, v)| KpiRow {
+            wear_mean_pct: *v,
+            ..r.clone()
+        })
+        .collect();
+    let fit = diagnose(
+        &rows,
+        maps,
+        &Baseline::Physics,
+        &GapSettings {
+            max_terms: 0,
+            ..gap.clone()
+        },
+    )?;
+    Ok((
+        fit.training.rmse_pct,
+        fit.testing.map_or(f64::NAN, |t| t.rmse_pct),
+    ))
+}
+
+/// The testing events measured against every testing tire's true wear
+/// (`PlantedWear::true_wear`), worn-through ones included (None where the
+/// truth has no true wear or the diagnosis no testing events).
+///
+/// The diagnosis measures the testing events on the tires it can measure:
+/// a worn-through tire's reading is only a lower bound, so it is left out,
+/// and that measure favours a law biased low; it also carries the gauge's
+/// error. Here the season is diagnosed again with each testing tire's wear
+/// set to its true wear (the testing events fixed to the diagnosis's).
+/// The training rows are untouched and the testing rows never enter a fit
+/// or a choice, so the same terms are chosen (`same_terms` checks it) and
+/// only the measure changes. The ideal and the expected shape are the
+/// law's alone on the same rows, the latter at the size `expected_size`
+/// the training events chose (`exact_shape_sized`).
+fn against_truth(
+    rows: &[KpiRow],
+    maps: &BTreeMap<TireRun, crate::kpi::energy_maps::EnergyMaps>,
+    truth: &PlantedWear,
+    planted: &[f64],
+    expected_size: f64,
+    d: &Diagnosis,
+    gap: &GapSettings,
+) -> Result<Option<AgainstTruth>, ValidateError> {
+    let Some(true_wear) = &truth.true_wear else {
+        return Ok(None);
+    };
+    if d.testing_events.is_empty() {
+        return Ok(None);
+    }
+    let testing = |r: &KpiRow| d.testing_events.contains(&r.event);
+    let (mut tires, mut worn) = (0, 0);
+    let mut true_rows = Vec::with_capacity(rows.len());
+    for r in rows {
+        if !testing(r) {
+            true_rows.push(r.clone());
+            continue;
+        }
+        let wear = true_wear
+            .get(&r.tire_run())
+            .ok_or_else(|| ValidateError::Truth {
+                file: "truth/wear_truth.csv".into(),
+                line: 0,
+                message: format!("no true wear of testing tire {}/{}", r.run, r.wheel),
+            })?;
+        tires += 1;
+        worn += usize::from(r.worn_through_readings > 0.0);
+        true_rows.push(KpiRow {
+            wear_mean_pct: *wear,
+            worn_through_readings: 0.0,
+            ..r.clone()
+        });
+    }
+    let gap = GapSettings {
+        test_events: Some(d.testing_events.clone()),
+        ..gap.clone()
+    };
+    let again = diagnose(&true_rows, maps, &Baseline::Physics, &gap)?;
+    let added =
+        |d: &Diagnosis| -> Vec<String> { d.steps.iter().map(|s| s.added.clone()).collect() };
+    let rmse_base = again.testing.map_or(f64::NAN, |t| t.rmse_pct);
+    let rmse_diag = again
+        .steps
+        .last()
+        .and_then(|s| s.testing)
+        .map_or(f64::NAN, |t| t.rmse_pct);
+    // The law on the true wear less `c` times the planted part, which is
+    // then added back.
+    let law_at = |c: f64, part: &[f64]| -> Result<f64, ValidateError> {
+        let y: Vec<f64> = true_rows
+            .iter()
+            .zip(part)
+            .map(|(r, p)| r.wear_mean_pct - c * p)
+            .collect();
+        Ok(law_alone(&true_rows, &y, maps, &gap)?.1)
+    };
+    let rmse_ideal = law_at(1.0, planted)?;
+    let rmse_expected = match &truth.scatter_factors {
+        Some(f) if expected_size.is_finite() => {
+            let e: Vec<f64> = rows
+                .iter()
+                .zip(planted)
+                .map(|(r, p)| f.get(&r.tire_run()).map_or(f64::NAN, |f| p / f))
+                .collect();
+            law_at(expected_size, &e)?
+        }
+        _ => f64::NAN,
+    };
+    Ok(Some(AgainstTruth {
+        testing_tires: tires,
+        testing_worn_through: worn,
+        rmse_baseline_pct: rmse_base,
+        rmse_diagnosed_pct: rmse_diag,
+        rmse_ideal_pct: rmse_ideal,
+        rmse_expected_pct: rmse_expected,
+        shrinkage_ratio: (rmse_base - rmse_diag) / (rmse_base - rmse_ideal),
+        expected_shrinkage: (rmse_base - rmse_expected) / (rmse_base - rmse_ideal),
+        same_terms: added(&again) == added(d),
+    }))
 }
 
 /// The best any term of the planted effect's exact shape can do when its
