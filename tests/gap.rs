@@ -225,15 +225,17 @@ fn clean_season_reports_no_effect() {
 /// The validation's second measure of the testing events: against every
 /// testing tire's true wear (`truth/wear_truth.csv`, `wear_total_pct`),
 /// worn-through tires included. At real-data scatter seed 6 wears three
-/// testing tires through. Checked by a second route: the law the diagnosis
-/// calibrated, applied to each testing tire by hand, against the truth file
-/// read here; and the diagnosis's own measure, the same law against the
-/// measured wear of the tires not worn through.
+/// testing tires through and six training ones (imputed here, Tobit).
+/// Checked by a second route: the law the diagnosis calibrated, applied to
+/// each testing tire by hand, against the truth file read here; the
+/// diagnosis's own measure, the same law against the measured wear of the
+/// tires not worn through; the imputed tires' error against the truth.
 #[test]
 fn the_testing_gap_is_also_measured_against_every_testing_tires_true_wear() {
     let dir = tempfile::tempdir().unwrap();
     let mut s = settings(dir.path());
     s.scatter = tirewear::sim::WearScatter::REALISTIC;
+    s.gap.worn_through = tirewear::gap::report::WornThrough::Tobit;
     s.keep = true;
     let (case, d) = run_case(&Planted::Clean, 6, &s).unwrap();
     let t = case
@@ -303,6 +305,26 @@ fn the_testing_gap_is_also_measured_against_every_testing_tires_true_wear() {
     assert_eq!(t.rmse_diagnosed_pct, t.rmse_baseline_pct);
     assert!(close(t.rmse_ideal_pct, t.rmse_baseline_pct), "{t:?}");
     assert!(t.rmse_expected_pct.is_nan());
+    // The imputed training tires: every worn-through one of the training
+    // events, each imputed above its measured lower bound.
+    let worn_training: Vec<_> = rows
+        .iter()
+        .filter(|r| r.worn_through_readings > 0.0 && d.training_events.contains(&r.event))
+        .collect();
+    assert!(!worn_training.is_empty());
+    assert_eq!(t.imputed_tires, worn_training.len());
+    let mut errors = Vec::new();
+    for r in &worn_training {
+        let i = d
+            .imputed
+            .iter()
+            .position(|n| *n == format!("{}/{}", r.run, r.wheel))
+            .expect("imputed");
+        assert!(d.imputed_wear_pct[i] > r.wear_mean_pct, "{}", d.imputed[i]);
+        errors.push(d.imputed_wear_pct[i] - truth[&(r.run.clone(), r.wheel.to_string())]);
+    }
+    let bias = errors.iter().sum::<f64>() / errors.len() as f64;
+    assert!(close(t.imputed_bias_pct.abs(), bias.abs()) && t.imputed_bias_pct * bias > 0.0);
 }
 
 /// The season preset at scale 0.5: 12 events on 12 tracks, 8 of them in

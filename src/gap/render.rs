@@ -855,6 +855,7 @@ mod tests {
             testing_events: vec!["E2".into()],
             censored: Vec::new(),
             imputed: Vec::new(),
+            imputed_wear_pct: Vec::new(),
             worn_through: Default::default(),
             training: size,
             testing: Some(size),

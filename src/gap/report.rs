@@ -148,6 +148,9 @@ pub struct Diagnosis {
     /// `PhysicsBaseline::fit_censored`); the rest (the testing events') are
     /// left out of the gap's measure.
     pub imputed: Vec<String>,
+    /// Their wear (%) as the baseline's calibration imputed it (same
+    /// order); the terms' recalibration imputes it again.
+    pub imputed_wear_pct: Vec<f64>,
     /// What was done with the worn-through tires (`--worn-through`).
     pub worn_through: WornThrough,
     pub training: GapSize,
@@ -440,6 +443,7 @@ pub fn diagnose(
         testing_events: s.test_events.clone(),
         censored,
         imputed: imputed_tires,
+        imputed_wear_pct: imputed.iter().map(|r| r.wear_mean_pct).collect(),
         worn_through: settings.worn_through,
         training: size(trv),
         testing: (!tev.is_empty()).then(|| size(tev)),

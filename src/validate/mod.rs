@@ -156,6 +156,13 @@ pub struct AgainstTruth {
     /// Whether the diagnosis on the true testing wear added the same terms
     /// (it should: the testing rows enter no fit and no choice).
     pub same_terms: bool,
+    /// The training events' worn-through tires whose wear the baseline's
+    /// calibration imputed (`--worn-through impute` or `tobit`; 0 when they
+    /// are left out), and the imputed wear's mean error and RMSE (%)
+    /// against their true wear (NaN without any).
+    pub imputed_tires: usize,
+    pub imputed_bias_pct: f64,
+    pub imputed_rmse_pct: f64,
 }
 
 /// What a season of the matrix has planted.

@@ -167,7 +167,7 @@ fn render_against_truth(s: &mut String, cases: &[Case]) {
         return;
     }
     s.push_str(
-        "\nAgainst the true wear of every testing tire (the simulator's `wear_total_pct`: no gauge error, and the worn-through tires, which the diagnosis's measure leaves out, at their uncapped wear; the same terms, the ideal and the expected shape recomputed on it):\n\n| seasons | n | testing tires worn through (median) | shrinkage / ideal (median): measured tires | against the true wear | expected shape, against the true wear | RMSE diagnosed, against the true wear (median, %) | terms differ |\n|---|---|---|---|---|---|---|---|\n",
+        "\nAgainst the true wear of every testing tire (the simulator's `wear_total_pct`: no gauge error, and the worn-through tires, which the diagnosis's measure leaves out, at their uncapped wear; the same terms, the ideal and the expected shape recomputed on it):\n\n| seasons | n | testing tires worn through (median) | shrinkage / ideal (median): measured tires | against the true wear | expected shape, against the true wear | RMSE diagnosed, against the true wear (median, %) | terms differ | imputed training tires: n, mean error (median, %) |\n|---|---|---|---|---|---|---|---|---|\n",
     );
     let line = |s: &mut String, label: &str, g: &[&Case]| {
         if g.is_empty() {
@@ -176,7 +176,7 @@ fn render_against_truth(s: &mut String, cases: &[Case]) {
         let t = |c: &Case| c.against_truth.clone().expect("filtered");
         let _ = writeln!(
             s,
-            "| {label} | {} | {:.1} % | {:.2} | {:.2} | {:.2} | {:.3} | {} |",
+            "| {label} | {} | {:.1} % | {:.2} | {:.2} | {:.2} | {:.3} | {} | {}, {:+.2} |",
             g.len(),
             100.0
                 * median(
@@ -189,6 +189,8 @@ fn render_against_truth(s: &mut String, cases: &[Case]) {
             median(g.iter().map(|c| t(c).expected_shrinkage).collect()),
             median(g.iter().map(|c| t(c).rmse_diagnosed_pct).collect()),
             g.iter().filter(|c| !t(c).same_terms).count(),
+            g.iter().map(|c| t(c).imputed_tires).sum::<usize>(),
+            median(g.iter().map(|c| t(c).imputed_bias_pct).collect()),
         );
     };
     let of = |f: &dyn Fn(&Case) -> bool| -> Vec<&Case> {

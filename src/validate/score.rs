@@ -351,7 +351,23 @@ fn against_truth(
         }
         _ => f64::NAN,
     };
+    // The training events' worn-through tires as the baseline imputed them.
+    let names: BTreeMap<String, TireRun> = rows
+        .iter()
+        .filter(|r| r.worn_through_readings > 0.0)
+        .map(|r| (format!("{}/{}", r.run, r.wheel), r.tire_run()))
+        .collect();
+    let imputed_error: Vec<f64> = d
+        .imputed
+        .iter()
+        .zip(&d.imputed_wear_pct)
+        .filter_map(|(name, y)| Some(y - true_wear.get(names.get(name)?)?))
+        .collect();
+    let n = imputed_error.len() as f64;
     Ok(Some(AgainstTruth {
+        imputed_tires: imputed_error.len(),
+        imputed_bias_pct: imputed_error.iter().sum::<f64>() / n,
+        imputed_rmse_pct: (imputed_error.iter().map(|e| e * e).sum::<f64>() / n).sqrt(),
         testing_tires: tires,
         testing_worn_through: worn,
         rmse_baseline_pct: rmse_base,
