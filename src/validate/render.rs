@@ -396,6 +396,50 @@ mod tests {
         assert!(md.contains("| road-abrasion | 2 | 2/2 (100 %) | 2/2 (100 %) | 1/2 (50 %) |"));
     }
 
+    /// The second measure's table: medians over the generated seasons at
+    /// ≥ 10 % of the variance, beside the measured tires' shrinkage.
+    #[test]
+    fn the_gap_against_the_true_wear_is_tabled_beside_the_measured_one() {
+        use super::super::AgainstTruth;
+        let generated = |seed: u64, measured: f64, worn: usize, truth: f64, same: bool| {
+            let t = AgainstTruth {
+                testing_tires: 100,
+                testing_worn_through: worn,
+                rmse_baseline_pct: 14.0,
+                rmse_diagnosed_pct: 8.0 + 4.0 * truth,
+                rmse_ideal_pct: 6.0,
+                rmse_expected_pct: 9.0,
+                shrinkage_ratio: truth,
+                expected_shrinkage: 2.0 * truth,
+                same_terms: same,
+                imputed_tires: seed as usize,
+                imputed_bias_pct: if seed == 1 { -1.0 } else { 2.0 },
+                imputed_rmse_pct: 3.0,
+            };
+            Case {
+                effect: None,
+                generated: Some(crate::sim::generated::GeneratedEffect::draw(seed)),
+                against_truth: Some(t),
+                ..case(EffectKind::Graining, seed, 0.2, measured)
+            }
+        };
+        let cases = [
+            generated(1, 0.5, 10, 0.2, true),
+            generated(2, 0.7, 30, 0.4, false),
+        ];
+        let md = render(&cases);
+        assert!(
+            md.contains(
+                "| generated, ≥ 10 % of the variance | 2 | 20.0 % | 0.60 | 0.30 | 0.60 | 9.200 | 1 | 3, +0.50 |"
+            ),
+            "{md}"
+        );
+        assert!(
+            md.contains("| 30/100, 14.000 / 9.600 / 6.000, 0.40 (terms differ) |"),
+            "{md}"
+        );
+    }
+
     /// Seasons without a term: the tires their leads share are counted
     /// against the planted tires; clean seasons' leads are listed.
     #[test]

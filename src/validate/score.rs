@@ -499,8 +499,9 @@ mod tests {
         assert_eq!(c, 0.0);
     }
 
-    /// The planted column and the scatter factors, by run and wheel; a
-    /// truth without the factor column (an older season) gives none.
+    /// The planted column, the scatter factors and the true wear, by run
+    /// and wheel; a truth without those columns (an older season) gives
+    /// none.
     #[test]
     fn planted_wear_and_scatter_factors_are_read_by_tire() {
         let dir = tempfile::tempdir().unwrap();
@@ -518,12 +519,16 @@ mod tests {
         let factors = truth.scatter_factors.unwrap();
         assert_eq!(factors[&key(crate::Wheel::FL)], 1.25);
         assert_eq!(factors[&key(crate::Wheel::RR)], 0.8);
+        let true_wear = truth.true_wear.unwrap();
+        assert_eq!(true_wear[&key(crate::Wheel::FL)], 40.0);
+        assert_eq!(true_wear[&key(crate::Wheel::RR)], 30.0);
 
         let without = dir.path().join("without.csv");
         std::fs::write(&without, "run,wheel,wear_generated_pct\nR1,FL,2.5\n").unwrap();
         let truth = read_planted(&without, Some("generated")).unwrap();
         assert_eq!(truth.wear.len(), 1);
         assert!(truth.scatter_factors.is_none());
+        assert!(truth.true_wear.is_none());
 
         let bad = dir.path().join("bad.csv");
         std::fs::write(
