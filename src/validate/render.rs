@@ -173,7 +173,9 @@ fn render_against_truth(s: &mut String, cases: &[Case]) {
         if g.is_empty() {
             return;
         }
-        let t = |c: &Case| c.against_truth.clone().expect("filtered");
+        fn t(c: &Case) -> &super::AgainstTruth {
+            c.against_truth.as_ref().expect("filtered")
+        }
         let _ = writeln!(
             s,
             "| {label} | {} | {:.1} % | {:.2} | {:.2} | {:.2} | {:.3} | {} | {}, {:+.2} |",

@@ -187,7 +187,8 @@ pub(crate) fn score_case(
         _ => None,
     };
     let terms_correlation = terms_correlation(d, planted);
-    let against_truth = against_truth(rows, maps, truth, &p, expected_size, d, gap)?;
+    let expected_sized = expected.as_deref().map(|e| (e, expected_size));
+    let against_truth = against_truth(rows, maps, truth, &p, expected_sized, d, gap)?;
     let hit = match planted_kind {
         Planted::Named(e) => first_mechanism.as_deref() == Some(e.kind.name()),
         Planted::Generated(_) => terms_correlation >= 0.8,
@@ -276,14 +277,15 @@ fn law_alone(
 /// The training rows are untouched and the testing rows never enter a fit
 /// or a choice, so the same terms are chosen (`same_terms` checks it) and
 /// only the measure changes. The ideal and the expected shape are the
-/// law's alone on the same rows, the latter at the size `expected_size`
-/// the training events chose (`exact_shape_sized`).
+/// law's alone on the same rows, the latter (`expected`: the expected
+/// shape per row and the size the training events chose for it,
+/// `exact_shape_sized`) at that size.
 fn against_truth(
     rows: &[KpiRow],
     maps: &BTreeMap<TireRun, crate::kpi::energy_maps::EnergyMaps>,
     truth: &PlantedWear,
     planted: &[f64],
-    expected_size: f64,
+    expected: Option<(&[f64], f64)>,
     d: &Diagnosis,
     gap: &GapSettings,
 ) -> Result<Option<AgainstTruth>, ValidateError> {
@@ -340,15 +342,8 @@ fn against_truth(
         Ok(law_alone(&true_rows, &y, maps, &gap)?.1)
     };
     let rmse_ideal = law_at(1.0, planted)?;
-    let rmse_expected = match &truth.scatter_factors {
-        Some(f) if expected_size.is_finite() => {
-            let e: Vec<f64> = rows
-                .iter()
-                .zip(planted)
-                .map(|(r, p)| f.get(&r.tire_run()).map_or(f64::NAN, |f| p / f))
-                .collect();
-            law_at(expected_size, &e)?
-        }
+    let rmse_expected = match expected {
+        Some((e, size)) if size.is_finite() => law_at(size, e)?,
         _ => f64::NAN,
     };
     // The training events' worn-through tires as the baseline imputed them.
