@@ -333,6 +333,7 @@ pub(crate) fn run(a: GapArgs, progress: bool) -> Result<()> {
             keep,
             reuse,
             gap: stats.settings(None),
+            against_truth: true,
             progress,
         };
         run_validate(&settings, &out)?;

@@ -69,6 +69,9 @@ pub struct ValidateSettings {
     /// simulated with the same settings and this version of tirewear.
     pub reuse: bool,
     pub gap: GapSettings,
+    /// Measure each season a second time against every testing tire's
+    /// true wear (`Case::against_truth`): a second diagnosis per season.
+    pub against_truth: bool,
     pub progress: bool,
 }
 
@@ -317,7 +320,11 @@ pub fn run_case(
         ),
         Planted::Clean => (Planted::Clean, None),
     };
-    let planted = read_planted(&truth.join("wear_truth.csv"), column)?;
+    let mut planted = read_planted(&truth.join("wear_truth.csv"), column)?;
+    if !s.against_truth {
+        // Without the true wear, score_case leaves the second measure out.
+        planted.true_wear = None;
+    }
     let case = score_case(&resolved, seed, &rows, &maps, &planted, &d, &gap)?;
     if !s.keep {
         std::fs::remove_dir_all(&dir).map_err(|e| ValidateError::Io {
