@@ -298,13 +298,24 @@ pub(crate) fn next_term<'a>(
             }
             // The same tires: the scope as the report names it.
             let tires = best.as_candidate().scope_description();
+            let se = best.cv_gain_se();
             ranked
                 .iter()
                 .filter(eligible)
                 .find(|s| {
                     fewest_choices(s.feature)
-                        && s.cv_gain >= best.cv_gain - best.cv_gain_se()
+                        && s.cv_gain >= best.cv_gain - se
                         && s.as_candidate().scope_description() == tires
+                })
+                .inspect(|s| {
+                    tracing::debug!(
+                        "{} (CV gain {:.3}) enters in place of {} ({:.3}, standard error {:.3})",
+                        s.name,
+                        s.cv_gain,
+                        best.name,
+                        best.cv_gain,
+                        se
+                    )
                 })
                 .unwrap_or(best)
         });
