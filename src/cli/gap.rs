@@ -4,7 +4,7 @@ use super::simulate::PresetArg;
 use anyhow::{Context, Result};
 use clap::Subcommand;
 use std::path::PathBuf;
-use tirewear::gap::scoring::MultipleTesting;
+use tirewear::gap::scoring::{Exchangeable, MultipleTesting};
 use tirewear::model::saved::SavedModel;
 
 #[derive(clap::Args)]
@@ -61,6 +61,14 @@ pub(crate) struct GapStatsArgs {
     /// Seed of the permutations (the same seed gives the same p-values).
     #[arg(long, default_value_t = 2026)]
     perm_seed: u64,
+    /// What the within-track permutation test exchanges: `runs` (whole
+    /// runs within their track, each tire to the same wheel of the other
+    /// run) or `runs-and-sides` (the same, and each axle's left and right
+    /// tires swapped half the time: an effect on one side of every car,
+    /// which `runs` cannot tell from the null, becomes testable). Measured
+    /// in docs/gap.md ("The left and right tires exchanged").
+    #[arg(long, value_enum, default_value = "runs")]
+    exchange: ExchangeArg,
     /// Most terms forward selection adds.
     #[arg(long, default_value_t = 4)]
     max_terms: usize,
@@ -74,6 +82,12 @@ pub(crate) struct GapStatsArgs {
     /// Measured side by side in docs/gap.md ("Worn-through tires imputed").
     #[arg(long, value_enum, default_value = "leave-out")]
     worn_through: WornThroughArg,
+}
+
+#[derive(Clone, Copy, clap::ValueEnum)]
+pub(crate) enum ExchangeArg {
+    Runs,
+    RunsAndSides,
 }
 
 #[derive(Clone, Copy, clap::ValueEnum)]
@@ -94,6 +108,10 @@ impl GapStatsArgs {
                 multiple_testing: match self.multiple_testing {
                     MultipleTestingArg::Bh => MultipleTesting::BenjaminiHochberg,
                     MultipleTestingArg::MaxT => MultipleTesting::MaxStatistic,
+                },
+                exchange: match self.exchange {
+                    ExchangeArg::Runs => Exchangeable::Runs,
+                    ExchangeArg::RunsAndSides => Exchangeable::RunsAndSides,
                 },
             },
             max_terms: self.max_terms,

@@ -153,6 +153,8 @@ pub struct Diagnosis {
     pub imputed_wear_pct: Vec<f64>,
     /// What was done with the worn-through tires (`--worn-through`).
     pub worn_through: WornThrough,
+    /// What the within-track permutation test exchanged (`--exchange`).
+    pub exchange: crate::gap::scoring::Exchangeable,
     pub training: GapSize,
     pub testing: Option<GapSize>,
     /// False-discovery rate of the slice tests.
@@ -445,6 +447,7 @@ pub fn diagnose(
         imputed: imputed_tires,
         imputed_wear_pct: imputed.iter().map(|r| r.wear_mean_pct).collect(),
         worn_through: settings.worn_through,
+        exchange: settings.scoring.exchange,
         training: size(trv),
         testing: (!tev.is_empty()).then(|| size(tev)),
         fdr,
