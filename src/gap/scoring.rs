@@ -1943,7 +1943,7 @@ mod tests {
         let all: Vec<usize> = (0..n).collect();
         let q = orthonormal_basis(&refs, &all);
         let rl: Vec<f64> = (0..n).map(|i| (i % wheels == 2) as u8 as f64).collect();
-        let (ft, nf) = projected(&q, &[rl.clone()]);
+        let (ft, nf) = projected(&q, std::slice::from_ref(&rl));
         let runs_only = unit_permutations(&whole_runs, 99, 5, false);
         let sides = unit_permutations(&whole_runs, 99, 5, true);
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(2026);
