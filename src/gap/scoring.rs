@@ -1725,13 +1725,9 @@ mod tests {
         }
     }
 
-    #[test]
-    fn runs_move_whole_within_their_track_wheel_for_wheel() {
-        // 3 tracks × 5 runs × 4 wheels, minus run 7's wheel 2 (a censored
-        // tire) and with run 12 holding wheels 0 and 1 only: every
-        // permutation is a bijection, keeps each row's track and wheel,
-        // sends a run's rows to one run, and runs 7 and 12 (alone with
-        // their wheel sets in their tracks) stay put.
+    /// 3 tracks × 5 runs × 4 wheels, minus run 7's wheel 2 (a censored
+    /// tire) and with run 12 holding wheels 0 and 1 only.
+    fn gappy_runs() -> Vec<Exchange> {
         let mut keys = Vec::new();
         for run in 0..15 {
             for slot in 0..4 {
@@ -1745,26 +1741,44 @@ mod tests {
                 });
             }
         }
+        keys
+    }
+
+    /// `perm` is a bijection that keeps each row's track, and every run's
+    /// rows of `keys` come from one run.
+    fn assert_runs_whole(keys: &[Exchange], perm: &[usize]) {
+        let mut seen = vec![false; keys.len()];
+        for (to, &from) in perm.iter().enumerate() {
+            assert!(!seen[from], "not a bijection");
+            seen[from] = true;
+            assert_eq!(keys[to].block, keys[from].block);
+        }
+        for unit in 0..15 {
+            let sources: std::collections::BTreeSet<usize> = (0..keys.len())
+                .filter(|&i| keys[i].unit == unit)
+                .map(|i| keys[perm[i]].unit)
+                .collect();
+            assert_eq!(sources.len(), 1, "run {unit} split: {sources:?}");
+        }
+    }
+
+    #[test]
+    fn runs_move_whole_within_their_track_wheel_for_wheel() {
+        // `gappy_runs`: every
+        // permutation is a bijection, keeps each row's track and wheel,
+        // sends a run's rows to one run, and runs 7 and 12 (alone with
+        // their wheel sets in their tracks) stay put.
+        let keys = gappy_runs();
         let perms = unit_permutations(&keys, 200, 11, false);
         let mut moved = 0;
         for perm in &perms {
-            let mut seen = vec![false; keys.len()];
+            assert_runs_whole(&keys, perm);
             for (to, &from) in perm.iter().enumerate() {
-                assert!(!seen[from], "not a bijection");
-                seen[from] = true;
-                assert_eq!(keys[to].block, keys[from].block);
                 assert_eq!(keys[to].slot, keys[from].slot);
                 if [7, 12].contains(&keys[to].unit) {
                     assert_eq!(to, from);
                 }
                 moved += (to != from) as usize;
-            }
-            for unit in 0..15 {
-                let sources: std::collections::BTreeSet<usize> = (0..keys.len())
-                    .filter(|&i| keys[i].unit == unit)
-                    .map(|i| keys[perm[i]].unit)
-                    .collect();
-                assert_eq!(sources.len(), 1, "run {unit} split: {sources:?}");
             }
         }
         assert!(moved > 0);
@@ -1777,27 +1791,12 @@ mod tests {
         // one run; a tire takes its axle partner's place half the time
         // (binomial: 200 permutations × 56 rows with a partner, sd 0.0047),
         // and run 7's RR, whose partner is censored, never moves.
-        let mut keys = Vec::new();
-        for run in 0..15 {
-            for slot in 0..4 {
-                if (run == 7 && slot == 2) || (run == 12 && slot >= 2) {
-                    continue;
-                }
-                keys.push(Exchange {
-                    block: run / 5,
-                    unit: run,
-                    slot,
-                });
-            }
-        }
+        let keys = gappy_runs();
         let perms = unit_permutations(&keys, 200, 11, true);
         let (mut paired, mut swapped) = (0usize, 0usize);
         for perm in &perms {
-            let mut seen = vec![false; keys.len()];
+            assert_runs_whole(&keys, perm);
             for (to, &from) in perm.iter().enumerate() {
-                assert!(!seen[from], "not a bijection");
-                seen[from] = true;
-                assert_eq!(keys[to].block, keys[from].block);
                 assert_eq!(keys[to].slot / 2, keys[from].slot / 2);
                 if keys[to].unit == 7 && keys[to].slot == 3 {
                     assert_eq!(to, from);
@@ -1806,18 +1805,11 @@ mod tests {
                 paired += 1;
                 swapped += usize::from(keys[to].slot != keys[from].slot);
             }
-            for unit in 0..15 {
-                let sources: std::collections::BTreeSet<usize> = (0..keys.len())
-                    .filter(|&i| keys[i].unit == unit)
-                    .map(|i| keys[perm[i]].unit)
-                    .collect();
-                assert_eq!(sources.len(), 1, "run {unit} split: {sources:?}");
-            }
         }
         assert_eq!(paired, 200 * 56);
         let share = swapped as f64 / paired as f64;
         assert!((share - 0.5).abs() < 0.02, "{share}");
-        // Without sides the same seed draws the same runs' order as before.
+        // The swaps draw after the runs' order: without them, other permutations.
         assert_ne!(perms, unit_permutations(&keys, 200, 11, false));
     }
 
