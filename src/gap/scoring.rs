@@ -72,12 +72,13 @@ impl Default for ScoringSettings {
 /// What the within-track permutation test exchanges under the null
 /// (docs/gap.md, "The left and right tires exchanged").
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
 pub enum Exchangeable {
-    #[default]
     /// Whole runs within their track, each tire to the same wheel of the
     /// other run ([`run_exchange`]). A difference between wheel positions
     /// that every run shares ("the RL tire of every car") moves with its
     /// wheel and cannot be told from the null.
+    #[default]
     Runs,
     /// The same, and in each run the left and right tires of an axle
     /// swapped with probability ½: the null's scale is per track and axle,
@@ -1782,6 +1783,13 @@ mod tests {
             }
         }
         assert!(moved > 0);
+    }
+
+    #[test]
+    fn gap_json_spells_the_exchange_as_the_option_does() {
+        let spelled = |e: Exchangeable| serde_json::to_value(e).unwrap();
+        assert_eq!(spelled(Exchangeable::Runs), "runs");
+        assert_eq!(spelled(Exchangeable::RunsAndSides), "runs-and-sides");
     }
 
     #[test]
