@@ -280,11 +280,7 @@ pub fn render_markdown(d: &Diagnosis, max_slices: usize) -> String {
         let _ = writeln!(
             s,
             "\n## Which unmodelled effect\n\nEach candidate term is refitted with the baseline's per-group energy terms on the training events, on the relative scale (rows divided by the baseline). CV gain: 1 − held-out SSE / held-out SSE of the baseline alone, whole tracks left out in turn, the threshold scanned on the training folds only. p: Freedman–Lane permutation test of the nested models (whole runs' residuals permuted within their track, wheel for wheel{}), max F over the threshold grid; road terms: F test of the tracks' severities on their road value, max F over the grid against Monte Carlo draws. p adj.: Benjamini–Hochberg within each family (within-track, road) over {} candidates, then times the number of families, so that together they hold the rate. Coefficient (physics baseline): how many times the law's abrasion per joule a mechanism adds; for a road term, % per MJ of the law's energy term per unit of its road value; for a generic KPI, % per MJ and sd. Front share: the part of the term's wear on the front axle. Acts in: the flagged slices of step 1 whose gap the fitted term follows most, with the part of the slice's mean residual it accounts for. Definitions: docs/gap.md.\n\n| candidate | threshold | coefficient | CV gain | p adj. | front share | acts in (part of the slice's mean gap) |\n|---|---|---|---|---|---|---|",
-            match d.exchange {
-                crate::gap::scoring::Exchangeable::Runs => "",
-                crate::gap::scoring::Exchangeable::RunsAndSides =>
-                    ", each axle's left and right tires swapped half the time",
-            },
+            d.exchange.also_exchanged(),
             d.candidates.len()
         );
         for c in d.candidates.iter().take(max_slices.min(10)) {

@@ -87,6 +87,19 @@ pub enum Exchangeable {
     RunsAndSides,
 }
 
+impl Exchangeable {
+    /// What the permutations exchange besides whole runs, as a clause for
+    /// the report ("…wheel for wheel{clause}"); empty for [`Self::Runs`].
+    pub fn also_exchanged(self) -> &'static str {
+        match self {
+            Exchangeable::Runs => "",
+            Exchangeable::RunsAndSides => {
+                ", each axle's left and right tires swapped half the time"
+            }
+        }
+    }
+}
+
 /// The adjustment of the candidates' p-values (docs/gap.md, "Multiple testing").
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
 pub enum MultipleTesting {
@@ -305,10 +318,16 @@ struct Exchange {
 /// permutation is a bijection that keeps each slot (a wheel, hence an
 /// axle) in place.
 ///
-/// With `sides`, each unit's rows at slots 2k and 2k + 1 (a left and a
-/// right wheel of one axle, [`crate::Wheel::index`]) then swap places with
-/// probability ½, so a slot keeps its axle but not its side.
-fn unit_permutations(keys: &[Exchange], count: usize, seed: u64, sides: bool) -> Vec<Vec<usize>> {
+/// With [`Exchangeable::RunsAndSides`], each unit's rows at slots 2k and
+/// 2k + 1 (a left and a right wheel of one axle, [`crate::Wheel::index`])
+/// then swap places with probability ½, so a slot keeps its axle but not
+/// its side.
+fn unit_permutations(
+    keys: &[Exchange],
+    count: usize,
+    seed: u64,
+    exchange: Exchangeable,
+) -> Vec<Vec<usize>> {
     use std::collections::BTreeMap;
     let mut units: BTreeMap<(usize, usize), Vec<(usize, usize)>> = BTreeMap::new();
     for (i, k) in keys.iter().enumerate() {
@@ -324,31 +343,49 @@ fn unit_permutations(keys: &[Exchange], count: usize, seed: u64, sides: bool) ->
         let rows = members.iter().map(|m| m.1).collect();
         classes.entry((block, slots)).or_default().push(rows);
     }
+    // Each class's left/right pairs, as positions in its slots: the same
+    // for every unit of the class and every permutation.
+    let classes: Vec<_> = classes
+        .into_iter()
+        .map(|((_, slots), class)| {
+            let pairs = match exchange {
+                Exchangeable::Runs => Vec::new(),
+                Exchangeable::RunsAndSides => side_pairs(&slots),
+            };
+            (pairs, class)
+        })
+        .collect();
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
     (0..count)
         .map(|_| {
             let mut perm: Vec<usize> = (0..keys.len()).collect();
-            for ((_, slots), class) in &classes {
+            for (pairs, class) in &classes {
                 let mut order: Vec<usize> = (0..class.len()).collect();
                 order.shuffle(&mut rng);
                 for (to, &from) in class.iter().zip(&order) {
                     for (&t, &f) in to.iter().zip(&class[from]) {
                         perm[t] = f;
                     }
-                    if sides {
-                        for (i, &slot) in slots.iter().enumerate() {
-                            if slot % 2 == 0
-                                && let Some(j) = slots.iter().position(|&o| o == slot + 1)
-                                && rand::Rng::random_bool(&mut rng, 0.5)
-                            {
-                                perm.swap(to[i], to[j]);
-                            }
+                    for &(i, j) in pairs {
+                        if rand::Rng::random_bool(&mut rng, 0.5) {
+                            perm.swap(to[i], to[j]);
                         }
                     }
                 }
             }
             perm
         })
+        .collect()
+}
+
+/// The positions (i, j) in `slots` (sorted) of each axle's left wheel
+/// (slot 2k) and right wheel (2k + 1) where a unit has both.
+fn side_pairs(slots: &[usize]) -> Vec<(usize, usize)> {
+    slots
+        .iter()
+        .enumerate()
+        .filter(|(_, slot)| *slot % 2 == 0)
+        .filter_map(|(i, &slot)| Some((i, slots.iter().position(|&o| o == slot + 1)?)))
         .collect()
 }
 
@@ -942,12 +979,11 @@ pub(crate) fn rank(
     };
     let across = Null::new(rows, &base, y, &groups, None, None);
     let severities = Severities::new(rows, y, &base, &problem.track_level, &prediction);
-    let sides = settings.exchange == Exchangeable::RunsAndSides;
     let perms = unit_permutations(
         &run_exchange(rows),
         settings.permutations,
         settings.seed,
-        sides,
+        settings.exchange,
     );
     let permuted = PermutedNull::new(&within.e0, &within.q, &perms);
 
@@ -1188,7 +1224,7 @@ impl FloorRefinement<'_> {
             &run_exchange(self.rows),
             more,
             self.settings.seed ^ 0x0066_6c6f_6f72,
-            self.settings.exchange == Exchangeable::RunsAndSides,
+            self.settings.exchange,
         );
         let permuted = PermutedNull::new(self.e0, self.q, &perms);
         let refined: Vec<(usize, f64)> = todo
@@ -1710,7 +1746,7 @@ mod tests {
                 slot: 0,
             })
             .collect();
-        let perms = unit_permutations(&keys, 50, 3, false);
+        let perms = unit_permutations(&keys, 50, 3, Exchangeable::Runs);
         let permuted = PermutedNull::new(&e0, &q, &perms);
         for positive in [false, true] {
             let got = permuted.max_f(&ft, &nf, positive);
@@ -1770,7 +1806,7 @@ mod tests {
         // sends a run's rows to one run, and runs 7 and 12 (alone with
         // their wheel sets in their tracks) stay put.
         let keys = gappy_runs();
-        let perms = unit_permutations(&keys, 200, 11, false);
+        let perms = unit_permutations(&keys, 200, 11, Exchangeable::Runs);
         let mut moved = 0;
         for perm in &perms {
             assert_runs_whole(&keys, perm);
@@ -1800,7 +1836,7 @@ mod tests {
         // (binomial: 200 permutations × 56 rows with a partner, sd 0.0047),
         // and run 7's RR, whose partner is censored, never moves.
         let keys = gappy_runs();
-        let perms = unit_permutations(&keys, 200, 11, true);
+        let perms = unit_permutations(&keys, 200, 11, Exchangeable::RunsAndSides);
         let (mut paired, mut swapped) = (0usize, 0usize);
         for perm in &perms {
             assert_runs_whole(&keys, perm);
@@ -1818,7 +1854,7 @@ mod tests {
         let share = swapped as f64 / paired as f64;
         assert!((share - 0.5).abs() < 0.02, "{share}");
         // The swaps draw after the runs' order: without them, other permutations.
-        assert_ne!(perms, unit_permutations(&keys, 200, 11, false));
+        assert_ne!(perms, unit_permutations(&keys, 200, 11, Exchangeable::Runs));
     }
 
     /// Null data's layout: 6 tracks × 8 runs × 4 wheels, row by row.
@@ -1877,7 +1913,7 @@ mod tests {
         let refs: Vec<&[f64]> = cells.iter().map(|c| c.as_slice()).collect();
         let all: Vec<usize> = (0..n).collect();
         let q = orthonormal_basis(&refs, &all);
-        let by_run = unit_permutations(&whole_runs, 99, 5, false);
+        let by_run = unit_permutations(&whole_runs, 99, 5, Exchangeable::Runs);
         // Single tires within track and axle: the scheme this replaces.
         let single: Vec<Exchange> = (0..n)
             .map(|i| Exchange {
@@ -1886,7 +1922,7 @@ mod tests {
                 slot: 0,
             })
             .collect();
-        let by_tire = unit_permutations(&single, 99, 5, false);
+        let by_tire = unit_permutations(&single, 99, 5, Exchangeable::Runs);
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(2026);
         let (mut reject_run, mut reject_tire) = (0, 0);
         let seasons = 300;
@@ -1944,8 +1980,8 @@ mod tests {
         let q = orthonormal_basis(&refs, &all);
         let rl: Vec<f64> = (0..n).map(|i| (i % wheels == 2) as u8 as f64).collect();
         let (ft, nf) = projected(&q, std::slice::from_ref(&rl));
-        let runs_only = unit_permutations(&whole_runs, 99, 5, false);
-        let sides = unit_permutations(&whole_runs, 99, 5, true);
+        let runs_only = unit_permutations(&whole_runs, 99, 5, Exchangeable::Runs);
+        let sides = unit_permutations(&whole_runs, 99, 5, Exchangeable::RunsAndSides);
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(2026);
         let seasons = 200;
         let mut reject = [[0usize; 2]; 2]; // [excess][sides]
@@ -2034,7 +2070,7 @@ mod tests {
         let (cells, whole_runs) = layout();
         let all: Vec<usize> = (0..n).collect();
         let run_of: Vec<usize> = (0..n).map(|i| i / wheels).collect();
-        let perms = unit_permutations(&whole_runs, 99, 5, false);
+        let perms = unit_permutations(&whole_runs, 99, 5, Exchangeable::Runs);
         // The p-value of `x` against the null of the track-axle cells, on
         // the scale `on`.
         let p_value = |y: &[f64], x: &[f64], on: &dyn Fn(&[f64]) -> Vec<f64>| {
