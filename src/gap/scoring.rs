@@ -9,8 +9,9 @@
 //!   term) / SSE(baseline) over the held-out rows;
 //! - significance: a Freedman–Lane permutation test of the nested models,
 //!   within tracks for a term that varies within tracks (whole runs'
-//!   residuals permuted within their track, wheel for wheel, a scale per
-//!   track and axle in the null, and the rows and columns whitened for
+//!   residuals permuted within their track, wheel for wheel, each axle's
+//!   two sides swapped half the time by default (`Exchangeable`), a scale
+//!   per track and axle in the null, and the rows and columns whitened for
 //!   the scatter a run's tires share, `RunWhitening`); the
 //!   statistic is the largest F ratio over the threshold grid, so the scan
 //!   is paid for. A per-sample mechanism (a named one, a condition or a
@@ -64,7 +65,7 @@ impl Default for ScoringSettings {
             permutations: 1999,
             seed: 2026,
             multiple_testing: MultipleTesting::BenjaminiHochberg,
-            exchange: Exchangeable::Runs,
+            exchange: Exchangeable::RunsAndSides,
         }
     }
 }
@@ -78,12 +79,13 @@ pub enum Exchangeable {
     /// other run ([`run_exchange`]). A difference between wheel positions
     /// that every run shares ("the RL tire of every car") moves with its
     /// wheel and cannot be told from the null.
-    #[default]
     Runs,
     /// The same, and in each run the left and right tires of an axle
     /// swapped with probability ½: the null's scale is per track and axle,
     /// so under it the two sides' residuals are exchangeable, and an effect
-    /// on one side of every car becomes testable.
+    /// on one side of every car becomes testable. The default since
+    /// 2026-11-30 (0 of 56 clean seasons with a within-track term).
+    #[default]
     RunsAndSides,
 }
 
@@ -930,7 +932,9 @@ fn squared_norms(vs: &[Vec<f64>]) -> Vec<f64> {
 /// model has a scale factor per track (the road's hidden abrasiveness, which
 /// no KPI measures, would otherwise make anything that differs between
 /// tracks look like an effect), and whole runs' residuals are permuted
-/// within their track, wheel for wheel ([`run_exchange`]). A track-level candidate (road) is tested across tracks: its CV gain
+/// within their track, wheel for wheel ([`run_exchange`]; each axle's two
+/// sides also swapped half the time with [`Exchangeable::RunsAndSides`]).
+/// A track-level candidate (road) is tested across tracks: its CV gain
 /// uses the null without track factors, its p-value the F test of the
 /// tracks' severities (`track_test`).
 pub(crate) fn rank(
