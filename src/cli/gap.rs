@@ -65,9 +65,9 @@ pub(crate) struct GapStatsArgs {
     /// runs within their track, each tire to the same wheel of the other
     /// run) or `runs-and-sides` (the same, and each axle's left and right
     /// tires swapped half the time: an effect on one side of every car,
-    /// which `runs` cannot tell from the null, becomes testable; the
-    /// default). Measured in docs/gap.md ("The left and right tires
-    /// exchanged").
+    /// which `runs` cannot tell from the null, becomes testable; a term
+    /// on one car's tires is still tested on whole runs; the default).
+    /// Measured in docs/gap.md ("The left and right tires exchanged").
     #[arg(long, value_enum, default_value = "runs-and-sides")]
     exchange: ExchangeArg,
     /// Most terms forward selection adds.

@@ -10,7 +10,8 @@
 //! - significance: a Freedman–Lane permutation test of the nested models,
 //!   within tracks for a term that varies within tracks (whole runs'
 //!   residuals permuted within their track, wheel for wheel, each axle's
-//!   two sides swapped half the time by default (`Exchangeable`), a scale
+//!   two sides swapped half the time by default for a term on every car's
+//!   tires (`Exchangeable`, `PermutedNulls`), a scale
 //!   per track and axle in the null, and the rows and columns whitened for
 //!   the scatter a run's tires share, `RunWhitening`); the
 //!   statistic is the largest F ratio over the threshold grid, so the scan
@@ -83,8 +84,11 @@ pub enum Exchangeable {
     /// The same, and in each run the left and right tires of an axle
     /// swapped with probability ½: the null's scale is per track and axle,
     /// so under it the two sides' residuals are exchangeable, and an effect
-    /// on one side of every car becomes testable. The default since
-    /// 2026-11-30 (0 of 56 clean seasons with a within-track term).
+    /// on one side of every car becomes testable. A term on one car's
+    /// tires is still tested on the whole runs alone ([`PermutedNulls`]):
+    /// a left/right difference every car shares would otherwise count for
+    /// it. The default since 2026-11-30 (0 of 56 clean seasons with a
+    /// within-track term).
     #[default]
     RunsAndSides,
 }
@@ -96,7 +100,7 @@ impl Exchangeable {
         match self {
             Exchangeable::Runs => "",
             Exchangeable::RunsAndSides => {
-                ", each axle's left and right tires swapped half the time"
+                ", each axle's left and right tires swapped half the time for a term on every car's tires"
             }
         }
     }
@@ -314,70 +318,102 @@ struct Exchange {
     slot: usize,
 }
 
-/// Permutations of the rows that exchange whole units within their block,
-/// each row going to the same slot of the other unit. Units exchange only
-/// with units of the same block holding the same slots, so every
-/// permutation is a bijection that keeps each slot (a wheel, hence an
-/// axle) in place.
-///
-/// With [`Exchangeable::RunsAndSides`], each unit's rows at slots 2k and
-/// 2k + 1 (a left and a right wheel of one axle, [`crate::Wheel::index`])
-/// then swap places with probability ½, so a slot keeps its axle but not
-/// its side.
+/// The permutations a term spanning every car is tested on
+/// ([`Permutations::draw`]'s `sides` where drawn, else its `runs`).
+#[cfg(test)]
 fn unit_permutations(
     keys: &[Exchange],
     count: usize,
     seed: u64,
     exchange: Exchangeable,
 ) -> Vec<Vec<usize>> {
-    use std::collections::BTreeMap;
-    let mut units: BTreeMap<(usize, usize), Vec<(usize, usize)>> = BTreeMap::new();
-    for (i, k) in keys.iter().enumerate() {
-        units
-            .entry((k.block, k.unit))
-            .or_default()
-            .push((k.slot, i));
-    }
-    let mut classes: BTreeMap<(usize, Vec<usize>), Vec<Vec<usize>>> = BTreeMap::new();
-    for ((block, _), mut members) in units {
-        members.sort_unstable();
-        let slots = members.iter().map(|m| m.0).collect();
-        let rows = members.iter().map(|m| m.1).collect();
-        classes.entry((block, slots)).or_default().push(rows);
-    }
-    // Each class's left/right pairs, as positions in its slots: the same
-    // for every unit of the class and every permutation.
-    let classes: Vec<_> = classes
-        .into_iter()
-        .map(|((_, slots), class)| {
-            let pairs = match exchange {
-                Exchangeable::Runs => Vec::new(),
-                Exchangeable::RunsAndSides => side_pairs(&slots),
-            };
-            (pairs, class)
-        })
-        .collect();
-    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
-    (0..count)
-        .map(|_| {
+    let drawn = Permutations::draw(keys, count, seed, exchange);
+    drawn.sides.unwrap_or(drawn.runs)
+}
+
+/// Permutations of the rows that exchange whole units within their block,
+/// each row going to the same slot of the other unit (`runs`). Units
+/// exchange only with units of the same block holding the same slots, so
+/// every permutation is a bijection that keeps each slot (a wheel, hence
+/// an axle) in place.
+///
+/// With [`Exchangeable::RunsAndSides`] also `sides`: the same permutations,
+/// index for index, with each unit's rows at slots 2k and 2k + 1 (a left
+/// and a right wheel of one axle, [`crate::Wheel::index`]) then swapped
+/// with probability ½, so a slot keeps its axle but not its side.
+struct Permutations {
+    runs: Vec<Vec<usize>>,
+    sides: Option<Vec<Vec<usize>>>,
+}
+
+impl Permutations {
+    /// `count` permutations from `seed` (the `sides` drawn from the same
+    /// stream, so `runs` differ between the two settings; each is uniform).
+    fn draw(keys: &[Exchange], count: usize, seed: u64, exchange: Exchangeable) -> Permutations {
+        use std::collections::BTreeMap;
+        let mut units: BTreeMap<(usize, usize), Vec<(usize, usize)>> = BTreeMap::new();
+        for (i, k) in keys.iter().enumerate() {
+            units
+                .entry((k.block, k.unit))
+                .or_default()
+                .push((k.slot, i));
+        }
+        let mut classes: BTreeMap<(usize, Vec<usize>), Vec<Vec<usize>>> = BTreeMap::new();
+        for ((block, _), mut members) in units {
+            members.sort_unstable();
+            let slots = members.iter().map(|m| m.0).collect();
+            let rows = members.iter().map(|m| m.1).collect();
+            classes.entry((block, slots)).or_default().push(rows);
+        }
+        let swapping = exchange == Exchangeable::RunsAndSides;
+        // Each class's left/right pairs, as positions in its slots: the
+        // same for every unit of the class and every permutation.
+        let classes: Vec<_> = classes
+            .into_iter()
+            .map(|((_, slots), class)| {
+                let pairs = if swapping {
+                    side_pairs(&slots)
+                } else {
+                    Vec::new()
+                };
+                (pairs, class)
+            })
+            .collect();
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+        let mut runs = Vec::with_capacity(count);
+        let mut sides = Vec::with_capacity(if swapping { count } else { 0 });
+        for _ in 0..count {
             let mut perm: Vec<usize> = (0..keys.len()).collect();
+            let mut swapped = perm.clone();
             for (pairs, class) in &classes {
                 let mut order: Vec<usize> = (0..class.len()).collect();
                 order.shuffle(&mut rng);
                 for (to, &from) in class.iter().zip(&order) {
                     for (&t, &f) in to.iter().zip(&class[from]) {
                         perm[t] = f;
+                        swapped[t] = f;
                     }
                     for &(i, j) in pairs {
                         if rand::Rng::random_bool(&mut rng, 0.5) {
-                            perm.swap(to[i], to[j]);
+                            swapped.swap(to[i], to[j]);
                         }
                     }
                 }
             }
-            perm
-        })
-        .collect()
+            runs.push(perm);
+            if swapping {
+                sides.push(swapped);
+            }
+        }
+        Permutations {
+            runs,
+            sides: swapping.then_some(sides),
+        }
+    }
+
+    fn len(&self) -> usize {
+        self.runs.len()
+    }
 }
 
 /// The positions (i, j) in `slots` (sorted) of each axle's left wheel
@@ -568,6 +604,68 @@ impl PermutedNull {
             );
             max_f_from_products(d.as_ref(), &self.sse0, nf, positive_only)
         })
+    }
+}
+
+/// The within-track null under both sets of [`Permutations`]: a term on
+/// one car's tires is tested on whole runs exchanged, a term that spans
+/// every car on the same runs with their sides swapped (where drawn).
+///
+/// A car's scope is a contrast between cars, which whole runs exchanged
+/// test as they are; a left/right difference that every car shares (a
+/// wheel position's effect, or one the law misses on every car) stays on
+/// its wheel under them, as it does in the data, but swapping the sides
+/// would break it and count it for any of one car's terms that follows
+/// the sides (docs/gap.md, "One car's terms on the runs alone").
+struct PermutedNulls {
+    runs: PermutedNull,
+    sides: Option<PermutedNull>,
+}
+
+impl PermutedNulls {
+    fn new(e0: &[f64], q: &[Vec<f64>], perms: &Permutations) -> PermutedNulls {
+        PermutedNulls {
+            runs: PermutedNull::new(e0, q, &perms.runs),
+            sides: perms.sides.as_ref().map(|s| PermutedNull::new(e0, q, s)),
+        }
+    }
+
+    /// Each permutation's [`max_f`] over the terms `ft` (squared norms
+    /// `nf`), the terms on one car's tires (`on_one_car`) under the whole
+    /// runs exchanged, the others under the sides swapped as well.
+    fn max_f(
+        &self,
+        ft: &[Vec<f64>],
+        nf: &[f64],
+        positive_only: bool,
+        on_one_car: &[bool],
+    ) -> Vec<f64> {
+        let Some(sides) = &self.sides else {
+            return self.runs.max_f(ft, nf, positive_only);
+        };
+        if on_one_car.iter().all(|&c| !c) {
+            return sides.max_f(ft, nf, positive_only);
+        }
+        if on_one_car.iter().all(|&c| c) {
+            return self.runs.max_f(ft, nf, positive_only);
+        }
+        let part = |car: bool| -> (Vec<Vec<f64>>, Vec<f64>) {
+            ft.iter()
+                .zip(nf)
+                .zip(on_one_car)
+                .filter(|&(_, &c)| c == car)
+                .map(|((f, &n), _)| (f.clone(), n))
+                .unzip()
+        };
+        let (car_ft, car_nf) = part(true);
+        let (all_ft, all_nf) = part(false);
+        let by_runs = self.runs.max_f(&car_ft, &car_nf, positive_only);
+        let by_sides = sides.max_f(&all_ft, &all_nf, positive_only);
+        by_runs
+            .iter()
+            .zip(&by_sides)
+            .map(|(a, b)| a.max(*b))
+            .collect()
     }
 }
 
@@ -933,7 +1031,8 @@ fn squared_norms(vs: &[Vec<f64>]) -> Vec<f64> {
 /// no KPI measures, would otherwise make anything that differs between
 /// tracks look like an effect), and whole runs' residuals are permuted
 /// within their track, wheel for wheel ([`run_exchange`]; each axle's two
-/// sides also swapped half the time with [`Exchangeable::RunsAndSides`]).
+/// sides also swapped half the time with [`Exchangeable::RunsAndSides`]
+/// for the scopes that span every car, [`PermutedNulls`]).
 /// A track-level candidate (road) is tested across tracks: its CV gain
 /// uses the null without track factors, its p-value the F test of the
 /// tracks' severities (`track_test`).
@@ -983,13 +1082,13 @@ pub(crate) fn rank(
     };
     let across = Null::new(rows, &base, y, &groups, None, None);
     let severities = Severities::new(rows, y, &base, &problem.track_level, &prediction);
-    let perms = unit_permutations(
+    let perms = Permutations::draw(
         &run_exchange(rows),
         settings.permutations,
         settings.seed,
         settings.exchange,
     );
-    let permuted = PermutedNull::new(&within.e0, &within.q, &perms);
+    let permuted = PermutedNulls::new(&within.e0, &within.q, &perms);
 
     let scored: Vec<(Score, Option<NullDraws>, Option<AtTheFloor>)> = library
         .par_iter()
@@ -1063,6 +1162,14 @@ pub(crate) fn rank(
                 None => c,
             };
             let (ft, nf) = projected(&null.q, &xs);
+            let on_one_car: Vec<bool> = (0..x.len())
+                .map(|j| {
+                    scopes[j / n_thresholds]
+                        .group
+                        .as_ref()
+                        .is_some_and(|g| g.car.is_some())
+                })
+                .collect();
             let observed = max_f(&null.e0, &null.q, &ft, &nf, positive);
             let testable = fit.is_some() && observed > 0.0;
             // The statistic under every permutation: for a candidate's own
@@ -1072,7 +1179,7 @@ pub(crate) fn rank(
             let family = settings.multiple_testing == MultipleTesting::MaxStatistic;
             let draws = (!track_level && (testable || family)).then(|| NullDraws {
                 observed: if fit.is_none() { 0.0 } else { observed },
-                stats: permuted.max_f(&ft, &nf, positive),
+                stats: permuted.max_f(&ft, &nf, positive, &on_one_car),
             });
             // A per-sample mechanism's between-track part (under
             // Benjamini–Hochberg; the max-statistic's family is the
@@ -1115,6 +1222,7 @@ pub(crate) fn rank(
                     floor = Some(AtTheFloor {
                         ft: ft.clone(),
                         nf: nf.clone(),
+                        on_one_car,
                         observed,
                         positive,
                     });
@@ -1177,6 +1285,7 @@ pub(crate) fn rank(
 struct AtTheFloor {
     ft: Vec<Vec<f64>>,
     nf: Vec<f64>,
+    on_one_car: Vec<bool>,
     observed: f64,
     positive: bool,
 }
@@ -1224,19 +1333,19 @@ impl FloorRefinement<'_> {
         todo.truncate(FLOOR_REFINED_MOST);
         let first = self.settings.permutations;
         let more = (FLOOR_REFINEMENT - 1) * (first + 1);
-        let perms = unit_permutations(
+        let perms = Permutations::draw(
             &run_exchange(self.rows),
             more,
             self.settings.seed ^ 0x0066_6c6f_6f72,
             self.settings.exchange,
         );
-        let permuted = PermutedNull::new(self.e0, self.q, &perms);
+        let permuted = PermutedNulls::new(self.e0, self.q, &perms);
         let refined: Vec<(usize, f64)> = todo
             .par_iter()
             .map(|&i| {
                 let f = floors[i].as_ref().expect("at the floor");
                 let exceed = permuted
-                    .max_f(&f.ft, &f.nf, f.positive)
+                    .max_f(&f.ft, &f.nf, f.positive, &f.on_one_car)
                     .iter()
                     .filter(|&&s| s >= f.observed)
                     .count();
@@ -2023,6 +2132,113 @@ mod tests {
         );
         assert!(rate(reject[0][1]) <= 0.09, "null, sides: {reject:?}");
         assert!(rate(reject[1][1]) >= 0.9, "excess, sides: {reject:?}");
+    }
+
+    #[test]
+    fn one_car_s_terms_are_tested_on_whole_runs_where_every_car_shares_a_side() {
+        // The realistic noise's structure as above, and an FL excess of 0.4
+        // on every run (a wheel position's effect, or one the law misses on
+        // every car): null data for a term on one car's FL tires (car 0:
+        // the even runs). With the sides swapped for it the shared excess
+        // counts for that term (measured: 64 of 200 seasons rejected at
+        // 5 %, six times the level); on whole runs it does not (7 of 200,
+        // binomial sd 1.5 %), while the FL tire of every car, tested with
+        // the sides swapped by the same null, is found (198 of 200).
+        use rand::Rng;
+        use rand_distr::StandardNormal;
+        let (tracks, runs, wheels, n) = (TRACKS, RUNS, WHEELS, LAYOUT_ROWS);
+        let (cells, whole_runs) = layout();
+        let refs: Vec<&[f64]> = cells.iter().map(|c| c.as_slice()).collect();
+        let all: Vec<usize> = (0..n).collect();
+        let q = orthonormal_basis(&refs, &all);
+        let fl_of = |car0_only: bool| -> Vec<f64> {
+            (0..n)
+                .map(|i| (i % wheels == 0 && (!car0_only || (i / wheels) % 2 == 0)) as u8 as f64)
+                .collect()
+        };
+        let (one_car, every_car) = (fl_of(true), fl_of(false));
+        let (ft_one, nf_one) = projected(&q, std::slice::from_ref(&one_car));
+        let (ft_every, nf_every) = projected(&q, std::slice::from_ref(&every_car));
+        let perms = Permutations::draw(&whole_runs, 99, 5, Exchangeable::RunsAndSides);
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(2027);
+        let seasons = 200;
+        let mut reject = [0usize; 3]; // one car: sides, runs; every car: sides
+        for _ in 0..seasons {
+            let mut e = vec![0.0; n];
+            for t in 0..tracks {
+                for r in 0..runs {
+                    let run_draw: f64 = rng.sample(StandardNormal);
+                    for w in 0..wheels {
+                        let tire: f64 = rng.sample(StandardNormal);
+                        let excess = if w == 0 { 0.4 } else { 0.0 };
+                        e[layout_index(t, r, w)] = run_draw + 0.5 * tire + excess;
+                    }
+                }
+            }
+            project_out(&q, &mut e);
+            let null = PermutedNulls::new(&e, &q, &perms);
+            let p = |ft: &[Vec<f64>], nf: &[f64], on_one_car: bool| {
+                let observed = max_f(&e, &q, ft, nf, true);
+                let stats = null.max_f(ft, nf, true, &[on_one_car]);
+                let exceed = stats
+                    .iter()
+                    .filter(|&&f| f >= observed * (1.0 - 1e-9))
+                    .count();
+                (1 + exceed) as f64 / (1 + perms.len()) as f64
+            };
+            reject[0] += (p(&ft_one, &nf_one, false) <= 0.05) as usize;
+            reject[1] += (p(&ft_one, &nf_one, true) <= 0.05) as usize;
+            reject[2] += (p(&ft_every, &nf_every, false) <= 0.05) as usize;
+        }
+        let rate = |k: usize| reject[k] as f64 / seasons as f64;
+        assert!(rate(0) >= 0.2, "one car, sides swapped: {reject:?}");
+        assert!(rate(1) <= 0.09, "one car, whole runs: {reject:?}");
+        assert!(rate(2) >= 0.9, "every car, sides swapped: {reject:?}");
+    }
+
+    #[test]
+    fn a_term_s_permuted_statistic_is_the_larger_of_its_two_parts() {
+        // A candidate with one car's scope and one spanning every car: each
+        // permutation's max-F is the larger of the one-car column's under
+        // the whole runs and the other's under the sides swapped.
+        use rand::Rng;
+        use rand_distr::StandardNormal;
+        let n = LAYOUT_ROWS;
+        let (cells, whole_runs) = layout();
+        let refs: Vec<&[f64]> = cells.iter().map(|c| c.as_slice()).collect();
+        let all: Vec<usize> = (0..n).collect();
+        let q = orthonormal_basis(&refs, &all);
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+        let mut e: Vec<f64> = (0..n).map(|_| rng.sample(StandardNormal)).collect();
+        project_out(&q, &mut e);
+        let columns: Vec<Vec<f64>> = (0..2)
+            .map(|_| (0..n).map(|_| rng.sample(StandardNormal)).collect())
+            .collect();
+        let (ft, nf) = projected(&q, &columns);
+        let perms = Permutations::draw(&whole_runs, 49, 3, Exchangeable::RunsAndSides);
+        let sides = perms.sides.as_ref().expect("drawn");
+        let both = PermutedNulls::new(&e, &q, &perms).max_f(&ft, &nf, false, &[true, false]);
+        for (p, &stat) in both.iter().enumerate() {
+            let by_runs: Vec<f64> = perms.runs[p].iter().map(|&i| e[i]).collect();
+            let by_sides: Vec<f64> = sides[p].iter().map(|&i| e[i]).collect();
+            let expected = max_f(&by_runs, &q, &ft[..1], &nf[..1], false).max(max_f(
+                &by_sides,
+                &q,
+                &ft[1..],
+                &nf[1..],
+                false,
+            ));
+            assert!(
+                (stat - expected).abs() <= 1e-9 * expected,
+                "{p}: {stat} vs {expected}"
+            );
+        }
+        // Permutation p of the sides is permutation p of the runs with
+        // some axles' two tires swapped (rows i and i ^ 1 in this layout).
+        for (r, s) in perms.runs.iter().zip(sides) {
+            assert!((0..n).all(|i| s[i] == r[i] || s[i] == r[i ^ 1]));
+        }
+        assert!(perms.runs.iter().zip(sides).any(|(r, s)| r != s));
     }
 
     #[test]
