@@ -384,26 +384,32 @@ impl Permutations {
         let mut sides = Vec::with_capacity(if swapping { count } else { 0 });
         for _ in 0..count {
             let mut perm: Vec<usize> = (0..keys.len()).collect();
-            let mut swapped = perm.clone();
+            // The rows whose sides swap, applied to a copy once the runs
+            // are placed (each pair lies in one unit, so the order of the
+            // swaps does not matter; the draws are in the same order).
+            let mut swaps = Vec::new();
             for (pairs, class) in &classes {
                 let mut order: Vec<usize> = (0..class.len()).collect();
                 order.shuffle(&mut rng);
                 for (to, &from) in class.iter().zip(&order) {
                     for (&t, &f) in to.iter().zip(&class[from]) {
                         perm[t] = f;
-                        swapped[t] = f;
                     }
                     for &(i, j) in pairs {
                         if rand::Rng::random_bool(&mut rng, 0.5) {
-                            swapped.swap(to[i], to[j]);
+                            swaps.push((to[i], to[j]));
                         }
                     }
                 }
             }
-            runs.push(perm);
             if swapping {
+                let mut swapped = perm.clone();
+                for (a, b) in swaps {
+                    swapped.swap(a, b);
+                }
                 sides.push(swapped);
             }
+            runs.push(perm);
         }
         Permutations {
             runs,
@@ -2006,6 +2012,33 @@ mod tests {
         (cells, whole_runs)
     }
 
+    /// The null's orthonormal basis of [`layout`]'s track-and-axle cells,
+    /// and its whole runs.
+    fn layout_basis() -> (Vec<Vec<f64>>, Vec<Exchange>) {
+        let (cells, whole_runs) = layout();
+        let refs: Vec<&[f64]> = cells.iter().map(|c| c.as_slice()).collect();
+        let all: Vec<usize> = (0..LAYOUT_ROWS).collect();
+        (orthonormal_basis(&refs, &all), whole_runs)
+    }
+
+    /// Residuals with the realistic noise's structure on [`layout`]: a
+    /// run's draw (sd 1, shared by its tires), each tire's own (sd 0.5),
+    /// and `excess(wheel)`.
+    fn realistic_residuals(rng: &mut impl rand::Rng, excess: impl Fn(usize) -> f64) -> Vec<f64> {
+        use rand_distr::StandardNormal;
+        let mut e = vec![0.0; LAYOUT_ROWS];
+        for t in 0..TRACKS {
+            for r in 0..RUNS {
+                let run_draw: f64 = rng.sample(StandardNormal);
+                for w in 0..WHEELS {
+                    let tire: f64 = rng.sample(StandardNormal);
+                    e[layout_index(t, r, w)] = run_draw + 0.5 * tire + excess(w);
+                }
+            }
+        }
+        e
+    }
+
     #[test]
     fn whole_run_permutations_hold_the_level_where_single_tires_do_not() {
         // Null data with the realistic noise's structure: residuals = a
@@ -2084,13 +2117,8 @@ mod tests {
         // binomial sd 1.5 % over 200 seasons; 9 of 200 measured) and finds
         // an RL excess of 0.4 (0.8 of a tire's own sd; 199 of 200
         // measured).
-        use rand::Rng;
-        use rand_distr::StandardNormal;
-        let (tracks, runs, wheels, n) = (TRACKS, RUNS, WHEELS, LAYOUT_ROWS);
-        let (cells, whole_runs) = layout();
-        let refs: Vec<&[f64]> = cells.iter().map(|c| c.as_slice()).collect();
-        let all: Vec<usize> = (0..n).collect();
-        let q = orthonormal_basis(&refs, &all);
+        let (wheels, n) = (WHEELS, LAYOUT_ROWS);
+        let (q, whole_runs) = layout_basis();
         let rl: Vec<f64> = (0..n).map(|i| (i % wheels == 2) as u8 as f64).collect();
         let (ft, nf) = projected(&q, std::slice::from_ref(&rl));
         let runs_only = unit_permutations(&whole_runs, 99, 5, Exchangeable::Runs);
@@ -2099,16 +2127,7 @@ mod tests {
         let seasons = 200;
         let mut reject = [[0usize; 2]; 2]; // [excess][sides]
         for _ in 0..seasons {
-            let mut e0 = vec![0.0; n];
-            for t in 0..tracks {
-                for r in 0..runs {
-                    let run_draw: f64 = rng.sample(StandardNormal);
-                    for w in 0..wheels {
-                        let tire: f64 = rng.sample(StandardNormal);
-                        e0[layout_index(t, r, w)] = run_draw + 0.5 * tire;
-                    }
-                }
-            }
+            let e0 = realistic_residuals(&mut rng, |_| 0.0);
             for (k, excess) in [0.0, 0.4].into_iter().enumerate() {
                 let mut e: Vec<f64> = e0.iter().zip(&rl).map(|(v, x)| v + excess * x).collect();
                 project_out(&q, &mut e);
@@ -2144,13 +2163,8 @@ mod tests {
         // 5 %, six times the level); on whole runs it does not (7 of 200,
         // binomial sd 1.5 %), while the FL tire of every car, tested with
         // the sides swapped by the same null, is found (198 of 200).
-        use rand::Rng;
-        use rand_distr::StandardNormal;
-        let (tracks, runs, wheels, n) = (TRACKS, RUNS, WHEELS, LAYOUT_ROWS);
-        let (cells, whole_runs) = layout();
-        let refs: Vec<&[f64]> = cells.iter().map(|c| c.as_slice()).collect();
-        let all: Vec<usize> = (0..n).collect();
-        let q = orthonormal_basis(&refs, &all);
+        let (wheels, n) = (WHEELS, LAYOUT_ROWS);
+        let (q, whole_runs) = layout_basis();
         let fl_of = |car0_only: bool| -> Vec<f64> {
             (0..n)
                 .map(|i| (i % wheels == 0 && (!car0_only || (i / wheels) % 2 == 0)) as u8 as f64)
@@ -2164,17 +2178,7 @@ mod tests {
         let seasons = 200;
         let mut reject = [0usize; 3]; // one car: sides, runs; every car: sides
         for _ in 0..seasons {
-            let mut e = vec![0.0; n];
-            for t in 0..tracks {
-                for r in 0..runs {
-                    let run_draw: f64 = rng.sample(StandardNormal);
-                    for w in 0..wheels {
-                        let tire: f64 = rng.sample(StandardNormal);
-                        let excess = if w == 0 { 0.4 } else { 0.0 };
-                        e[layout_index(t, r, w)] = run_draw + 0.5 * tire + excess;
-                    }
-                }
-            }
+            let mut e = realistic_residuals(&mut rng, |w| if w == 0 { 0.4 } else { 0.0 });
             project_out(&q, &mut e);
             let null = PermutedNulls::new(&e, &q, &perms);
             let p = |ft: &[Vec<f64>], nf: &[f64], on_one_car: bool| {
