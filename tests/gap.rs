@@ -813,3 +813,35 @@ fn bench_gap_lines_time_the_demo_diagnosis_against_its_target() {
         assert!((l.items_per_s * l.seconds - 320.0).abs() < 1e-9);
     }
 }
+
+/// `gap validate --hypotheses FILE` reads the user's hypotheses before it
+/// simulates anything: a file with an unknown variable is refused with its
+/// name, the effect and the variable, exit code 1, and no season written.
+#[test]
+fn validate_refuses_a_bad_hypotheses_file_before_simulating() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("mine.toml");
+    std::fs::write(
+        &file,
+        "[[effect]]\nname = \"hot\"\nexpression = \"t_surfce > 90\"\n",
+    )
+    .unwrap();
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_tirewear"))
+        .args(["--quiet", "gap", "validate", "--effects", "none"])
+        .args(["--clean-seeds", "1", "--hypotheses"])
+        .arg(&file)
+        .arg("--out")
+        .arg(dir.path().join("out"))
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&out.stderr);
+    for part in [
+        "mine.toml",
+        "effect 1 ('hot')",
+        "unknown variable 't_surfce'",
+    ] {
+        assert!(err.contains(part), "{part} not in {err}");
+    }
+    assert!(!dir.path().join("out").exists());
+}

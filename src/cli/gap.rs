@@ -207,6 +207,11 @@ pub(crate) enum GapAction {
         /// seasons.
         #[arg(long, requires = "keep")]
         reuse: bool,
+        /// Your own hypotheses (TOML, as `tirewear gap --effects`), scored
+        /// in every season's diagnosis beside the built-in candidates: how
+        /// a hypothesis fares on seasons whose truth is known.
+        #[arg(long)]
+        hypotheses: Option<PathBuf>,
         #[command(flatten)]
         stats: GapStatsArgs,
         #[arg(long, default_value = "gap-validate")]
@@ -319,6 +324,7 @@ pub(crate) fn run(a: GapArgs, progress: bool) -> Result<()> {
         work,
         keep,
         reuse,
+        hypotheses,
         stats,
         out,
     }) = action
@@ -337,6 +343,10 @@ pub(crate) fn run(a: GapArgs, progress: bool) -> Result<()> {
                     })
             })
             .collect::<Result<Vec<_>>>()?;
+        let mut gap = stats.settings(None);
+        if let Some(f) = &hypotheses {
+            gap.user_effects = tirewear::gap::user_effects::load(f)?;
+        }
         let settings = tirewear::validate::ValidateSettings {
             effects,
             magnitudes,
@@ -351,7 +361,7 @@ pub(crate) fn run(a: GapArgs, progress: bool) -> Result<()> {
             work: work.unwrap_or_else(|| out.join("seasons")),
             keep,
             reuse,
-            gap: stats.settings(None),
+            gap,
             against_truth: true,
             progress,
         };
