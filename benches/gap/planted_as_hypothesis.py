@@ -21,7 +21,7 @@ map to the planted expected wear divided by k_true, and the diagnosis
 charges it at its own law's k like a built-in mechanism, so its term is
 the planted expected wear up to the ratio of the law's k to the truth's.
 
-`gap validate --work DST --keep --reuse --effects DST/planted.toml` with
+`gap validate --work DST --keep --reuse --hypotheses DST/planted.toml` with
 the seasons' own flags then diagnoses the copies.
 
 usage: planted_as_hypothesis.py SRC_SEASONS DST_SEASONS
