@@ -494,6 +494,15 @@ impl Candidate {
     /// wheel of the axle is the same fit with the sign turned (equal CV gain
     /// and p): of the two readings the one that adds wear is kept, naming the
     /// tire that wears more, where the other said "wears −0.01 times the law".
+    /// Its between-track part is tested in the first round: a per-sample
+    /// mechanism's ([`Feature::tested_between_tracks`]), and a user
+    /// hypothesis that adds wear, which sums per-sample energy as those do
+    /// (so that one restating a built-in mechanism scores exactly like it).
+    pub(crate) fn tested_between_tracks(&self) -> bool {
+        self.feature.tested_between_tracks()
+            || (self.feature == Feature::User && self.adds_wear_only())
+    }
+
     pub(crate) fn adds_wear_only(&self) -> bool {
         match (&self.user, &self.group) {
             (Some(u), _) => u.adds_wear,

@@ -1194,7 +1194,7 @@ pub(crate) fn rank(
                 && testable
                 && !track_level
                 && !family
-                && c.feature.tested_between_tracks()
+                && c.tested_between_tracks()
             {
                 let columns: Vec<(Option<Axle>, &[f64])> = x
                     .iter()
@@ -1605,6 +1605,62 @@ mod tests {
         // With it, the same candidate's p combines both halves.
         let with = score_with(0.5, 0.25, true);
         assert_eq!(with[0].p, tippett(1.0 / 200.0, with[0].p_between));
+    }
+
+    #[test]
+    fn a_user_hypothesis_restating_a_mechanism_is_tested_between_tracks_alike() {
+        use crate::gap::user_effects::UserEffect;
+        let (rows, maps) = planted(0.5);
+        let refs: Vec<&KpiRow> = rows.iter().collect();
+        let mref: Vec<Option<&EnergyMaps>> = maps.iter().map(Some).collect();
+        let built_in = library(&refs)
+            .into_iter()
+            .find(|c| c.feature == Feature::HotSurfaceEnergy && c.axle.is_none())
+            .expect("thermal degradation on both axles");
+        assert!(built_in.scopes.is_empty() && built_in.group.is_none());
+        let user = |name: &str, adds_wear: bool| Candidate {
+            name: format!("user: {name}"),
+            feature: Feature::User,
+            thresholds: built_in.thresholds.clone(),
+            axle: None,
+            user: Some(std::sync::Arc::new(
+                UserEffect::compile(name, "t_surface > theta", adds_wear).unwrap(),
+            )),
+            group: None,
+            scopes: Vec::new(),
+        };
+        let lib = vec![
+            built_in.clone(),
+            user("hot", true),
+            user("hot, either sign", false),
+        ];
+        let y: Vec<f64> = rows.iter().map(|r| r.wear_mean_pct).collect();
+        let law: Vec<LawRow> = rows.iter().map(LawRow::raw).collect();
+        let problem = Problem {
+            rows: &refs,
+            maps: &mref,
+            y: &y,
+            base: vec![rows.iter().map(|r| r.friction_energy_j / 1e6).collect()],
+            law: &law,
+            track_level: vec![false],
+            relative: true,
+            between_tracks: true,
+        };
+        let settings = ScoringSettings {
+            permutations: 199,
+            seed: 1,
+            ..Default::default()
+        };
+        let s = rank(&problem, &lib, &settings, 0.25);
+        let of = |name: &str| s.iter().find(|c| c.name == name).expect("scored");
+        let (a, b) = (of(&built_in.name), of("user: hot"));
+        // The same column: the same within-track test, and now the same
+        // between-track part, so the same combined p.
+        assert!(a.p_between.is_finite(), "{a:?}");
+        assert_eq!(a.p_between, b.p_between);
+        assert_eq!((a.p, a.cv_gain), (b.p, b.cv_gain));
+        // A two-sided hypothesis is no mechanism: within tracks only.
+        assert!(of("user: hot, either sign").p_between.is_nan(), "{s:?}");
     }
 
     #[test]
