@@ -18,8 +18,7 @@ import csv
 import os
 import sys
 
-import pyarrow as pa
-import pyarrow.parquet as pq
+from season_copies import copy_seasons
 
 WORN_THROUGH_FRACTION = 0.05  # src/kpi/wear.rs
 
@@ -35,25 +34,17 @@ def capped_shares(season):
 
 def main():
     src, dst, share = sys.argv[1], sys.argv[2], float(sys.argv[3])
-    for name in sorted(os.listdir(src)):
-        season, copy = os.path.join(src, name), os.path.join(dst, name)
-        if not os.path.isfile(os.path.join(season, "kpis.parquet")):
-            continue
-        os.makedirs(copy, exist_ok=True)
-        for f in os.listdir(season):
-            if f != "kpis.parquet" and not os.path.exists(os.path.join(copy, f)):
-                os.symlink(os.path.abspath(os.path.join(season, f)), os.path.join(copy, f))
+
+    def change(season, d):
         shares = capped_shares(season)
-        table = pq.read_table(os.path.join(season, "kpis.parquet"))
-        d = table.to_pydict()
         changed = 0
         for i, (run, wheel, worn) in enumerate(zip(d["run"], d["wheel"], d["worn_through_readings"])):
             if worn > 0 and shares[(run, wheel)] < share:
                 d["worn_through_readings"][i] = 0.0
                 changed += 1
-        out = pa.Table.from_pydict(d, schema=table.schema)
-        pq.write_table(out.replace_schema_metadata(table.schema.metadata), os.path.join(copy, "kpis.parquet"))
-        print(f"{name}: {changed} worn-through tires counted as measured")
+        return f"{changed} worn-through tires counted as measured"
+
+    copy_seasons(src, dst, change)
 
 
 if __name__ == "__main__":

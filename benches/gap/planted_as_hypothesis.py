@@ -5,7 +5,7 @@ form offered as a hypothesis"): how often a diagnosis that is handed the
 right answer among its candidates finds it, the ceiling of the hit rate
 at a noise level.
 
-Every file of each season is linked but kpis.parquet, which is written
+Every file of each season is linked but kpis.parquet (season_copies.py), which is written
 with the data-quality column `invalid_samples` (no model input, read by no
 step of the diagnosis; zero in every simulated season) replaced by
 
@@ -33,8 +33,7 @@ import os
 import statistics
 import sys
 
-import pyarrow as pa
-import pyarrow.parquet as pq
+from season_copies import copy_seasons
 
 EFFECTS_TOML = """[[effect]]
 name = "planted"
@@ -65,23 +64,15 @@ def main():
     os.makedirs(dst, exist_ok=True)
     with open(os.path.join(dst, "planted.toml"), "w") as f:
         f.write(EFFECTS_TOML)
-    for name in sorted(os.listdir(src)):
-        season, copy = os.path.join(src, name), os.path.join(dst, name)
-        if not os.path.isfile(os.path.join(season, "kpis.parquet")):
-            continue
-        os.makedirs(copy, exist_ok=True)
-        for f in os.listdir(season):
-            if f != "kpis.parquet" and not os.path.exists(os.path.join(copy, f)):
-                os.symlink(os.path.abspath(os.path.join(season, f)), os.path.join(copy, f))
+
+    def change(season, d):
         value = planted_per_mj(season)
-        table = pq.read_table(os.path.join(season, "kpis.parquet"))
-        d = table.to_pydict()
         if any(x != 0.0 for x in d["invalid_samples"]):
-            sys.exit(f"{name}: invalid_samples is not zero everywhere; pick another column")
+            sys.exit(f"{season}: invalid_samples is not zero everywhere; pick another column")
         d["invalid_samples"] = [value[(run, wheel)] for run, wheel in zip(d["run"], d["wheel"])]
-        out = pa.Table.from_pydict(d, schema=table.schema)
-        pq.write_table(out.replace_schema_metadata(table.schema.metadata), os.path.join(copy, "kpis.parquet"))
-        print(f"{name}: planted wear per MJ written over invalid_samples")
+        return "planted wear per MJ written over invalid_samples"
+
+    copy_seasons(src, dst, change)
 
 
 if __name__ == "__main__":
