@@ -488,12 +488,6 @@ impl Candidate {
             .collect()
     }
 
-    /// Only positive coefficients count: built-in mechanisms, user
-    /// hypotheses unless they say otherwise, and the set-up of a wheel
-    /// position on every car. The law is calibrated per axle, so the other
-    /// wheel of the axle is the same fit with the sign turned (equal CV gain
-    /// and p): of the two readings the one that adds wear is kept, naming the
-    /// tire that wears more, where the other said "wears −0.01 times the law".
     /// Its between-track part is tested in the first round: a per-sample
     /// mechanism's ([`Feature::tested_between_tracks`]), and a user
     /// hypothesis that adds wear, which sums per-sample energy as those do
@@ -503,6 +497,12 @@ impl Candidate {
             || (self.feature == Feature::User && self.adds_wear_only())
     }
 
+    /// Only positive coefficients count: built-in mechanisms, user
+    /// hypotheses unless they say otherwise, and the set-up of a wheel
+    /// position on every car. The law is calibrated per axle, so the other
+    /// wheel of the axle is the same fit with the sign turned (equal CV gain
+    /// and p): of the two readings the one that adds wear is kept, naming the
+    /// tire that wears more, where the other said "wears −0.01 times the law".
     pub(crate) fn adds_wear_only(&self) -> bool {
         match (&self.user, &self.group) {
             (Some(u), _) => u.adds_wear,
