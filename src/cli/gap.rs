@@ -99,8 +99,14 @@ pub(crate) enum WornThroughArg {
 }
 
 impl GapStatsArgs {
-    fn settings(&self, test_events: Option<Vec<String>>) -> tirewear::gap::report::GapSettings {
-        tirewear::gap::report::GapSettings {
+    /// The diagnosis settings, with the user's hypotheses read from
+    /// `effects` (`--effects` of `gap`, `--hypotheses` of `gap validate`).
+    fn settings(
+        &self,
+        test_events: Option<Vec<String>>,
+        effects: Option<&std::path::Path>,
+    ) -> Result<tirewear::gap::report::GapSettings> {
+        Ok(tirewear::gap::report::GapSettings {
             test_events,
             fdr: self.fdr,
             scoring: tirewear::gap::scoring::ScoringSettings {
@@ -117,13 +123,16 @@ impl GapStatsArgs {
             },
             max_terms: self.max_terms,
             wlf: Default::default(),
-            user_effects: Vec::new(),
+            user_effects: match effects {
+                Some(f) => tirewear::gap::user_effects::load(f)?,
+                None => Vec::new(),
+            },
             worn_through: match self.worn_through {
                 WornThroughArg::LeaveOut => tirewear::gap::report::WornThrough::LeaveOut,
                 WornThroughArg::Impute => tirewear::gap::report::WornThrough::Impute,
                 WornThroughArg::Tobit => tirewear::gap::report::WornThrough::Tobit,
             },
-        }
+        })
     }
 }
 
@@ -343,10 +352,7 @@ pub(crate) fn run(a: GapArgs, progress: bool) -> Result<()> {
                     })
             })
             .collect::<Result<Vec<_>>>()?;
-        let mut gap = stats.settings(None);
-        if let Some(f) = &hypotheses {
-            gap.user_effects = tirewear::gap::user_effects::load(f)?;
-        }
+        let gap = stats.settings(None, hypotheses.as_deref())?;
         let settings = tirewear::validate::ValidateSettings {
             effects,
             magnitudes,
@@ -370,10 +376,7 @@ pub(crate) fn run(a: GapArgs, progress: bool) -> Result<()> {
     }
     let kpis =
         kpis.ok_or_else(|| anyhow::anyhow!("a KPI database is needed: tirewear gap KPIS"))?;
-    let mut settings = stats.settings(test_events);
-    if let Some(f) = &effects {
-        settings.user_effects = tirewear::gap::user_effects::load(f)?;
-    }
+    let mut settings = stats.settings(test_events, effects.as_deref())?;
     let dir = compounds.clone().unwrap_or_else(|| {
         kpis.parent()
             .unwrap_or(std::path::Path::new("."))

@@ -1569,10 +1569,24 @@ mod tests {
         between_tracks: bool,
     ) -> Vec<Score> {
         let refs: Vec<&KpiRow> = rows.iter().collect();
+        let lib: Vec<Candidate> = library(&refs).into_iter().take(15).collect();
+        rank_on(rows, maps, base, track_level, fdr, between_tracks, &lib)
+    }
+
+    /// `lib` ranked as [`score_on`] ranks the library's first 15.
+    fn rank_on(
+        rows: &[KpiRow],
+        maps: &[EnergyMaps],
+        base: Vec<Vec<f64>>,
+        track_level: Vec<bool>,
+        fdr: f64,
+        between_tracks: bool,
+        lib: &[Candidate],
+    ) -> Vec<Score> {
+        let refs: Vec<&KpiRow> = rows.iter().collect();
         let mref: Vec<Option<&EnergyMaps>> = maps.iter().map(Some).collect();
         let y: Vec<f64> = rows.iter().map(|r| r.wear_mean_pct).collect();
         let law: Vec<LawRow> = rows.iter().map(LawRow::raw).collect();
-        let lib: Vec<Candidate> = library(&refs).into_iter().take(15).collect();
         let problem = Problem {
             rows: &refs,
             maps: &mref,
@@ -1588,7 +1602,7 @@ mod tests {
             seed: 1,
             ..Default::default()
         };
-        rank(&problem, &lib, &settings, fdr)
+        rank(&problem, lib, &settings, fdr)
     }
 
     #[test]
@@ -1612,7 +1626,6 @@ mod tests {
         use crate::gap::user_effects::UserEffect;
         let (rows, maps) = planted(0.5);
         let refs: Vec<&KpiRow> = rows.iter().collect();
-        let mref: Vec<Option<&EnergyMaps>> = maps.iter().map(Some).collect();
         let built_in = library(&refs)
             .into_iter()
             .find(|c| c.feature == Feature::HotSurfaceEnergy && c.axle.is_none())
@@ -1634,24 +1647,8 @@ mod tests {
             user("hot", true),
             user("hot, either sign", false),
         ];
-        let y: Vec<f64> = rows.iter().map(|r| r.wear_mean_pct).collect();
-        let law: Vec<LawRow> = rows.iter().map(LawRow::raw).collect();
-        let problem = Problem {
-            rows: &refs,
-            maps: &mref,
-            y: &y,
-            base: vec![rows.iter().map(|r| r.friction_energy_j / 1e6).collect()],
-            law: &law,
-            track_level: vec![false],
-            relative: true,
-            between_tracks: true,
-        };
-        let settings = ScoringSettings {
-            permutations: 199,
-            seed: 1,
-            ..Default::default()
-        };
-        let s = rank(&problem, &lib, &settings, 0.25);
+        let base = vec![rows.iter().map(|r| r.friction_energy_j / 1e6).collect()];
+        let s = rank_on(&rows, &maps, base, vec![false], 0.25, true, &lib);
         let of = |name: &str| s.iter().find(|c| c.name == name).expect("scored");
         let (a, b) = (of(&built_in.name), of("user: hot"));
         // The same column: the same within-track test, and now the same
