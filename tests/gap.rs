@@ -845,3 +845,87 @@ fn validate_refuses_a_bad_hypotheses_file_before_simulating() {
     }
     assert!(!dir.path().join("out").exists());
 }
+
+/// `gap validate --hypotheses FILE` scores the user's hypotheses in every
+/// season and reports how each fared: on the demo season with blistering
+/// planted (seed 3, magnitude 1) a hypothesis restating it (energy with the
+/// inner liner above θ on the rear axle, where the truth puts nearly all
+/// of it) is significant in the first round; on a clean season (seed 2) it
+/// is not, and neither is the law's own energy offered again.
+#[test]
+fn validate_scores_the_users_hypotheses_in_every_season() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("mine.toml");
+    std::fs::write(
+        &file,
+        "[[effect]]\nname = \"hot liner\"\nexpression = \"t_inner > theta\"\n\
+         thresholds = [110, 115, 120, 125, 130, 135]\naxle = \"rear\"\n\n\
+         [[effect]]\nname = \"all energy\"\nexpression = \"1\"\n",
+    )
+    .unwrap();
+    let out = dir.path().join("out");
+    let run = std::process::Command::new(env!("CARGO_BIN_EXE_tirewear"))
+        .args(["--quiet", "gap", "validate", "--preset", "demo"])
+        .args([
+            "--effects",
+            "blistering",
+            "--magnitudes",
+            "1",
+            "--seeds",
+            "3",
+        ])
+        .args([
+            "--clean-seeds",
+            "2",
+            "--permutations",
+            "999",
+            "--hypotheses",
+        ])
+        .arg(&file)
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let json: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("validate.json")).unwrap()).unwrap();
+    let seasons = json.as_array().unwrap();
+    assert_eq!(seasons.len(), 2);
+    let outcome = |season: &serde_json::Value, name: &str| {
+        season["hypotheses"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|h| h["name"] == name)
+            .unwrap_or_else(|| panic!("{name} not scored in {season}"))
+            .clone()
+    };
+    let (planted, clean) = (&seasons[0], &seasons[1]);
+    assert_eq!(planted["seed"], 3);
+    assert_eq!(clean["first_term"], serde_json::Value::Null);
+    let hot = outcome(planted, "user: hot liner");
+    assert_eq!(hot["significant"], true, "{hot}");
+    assert!(hot["p_adjusted"].as_f64().unwrap() <= 0.05, "{hot}");
+    assert!(hot["cv_gain"].as_f64().unwrap() > 0.0, "{hot}");
+    for name in ["user: hot liner", "user: all energy"] {
+        let h = outcome(clean, name);
+        assert_eq!(h["significant"], false, "{h}");
+        assert_eq!(h["added_as"], serde_json::Value::Null, "{h}");
+    }
+    // The report's table counts them over both seasons.
+    let md = std::fs::read_to_string(out.join("validate.md")).unwrap();
+    let row = md
+        .lines()
+        .find(|l| l.starts_with("| user: hot liner | 2 | 1 | "))
+        .unwrap_or_else(|| panic!("{md}"));
+    assert!(md.contains("| user: all energy | 2 | "), "{md}");
+    let added_first = (planted["hypotheses"][0]["added_as"] == 1) as usize;
+    assert!(
+        row.starts_with(&format!("| user: hot liner | 2 | 1 | {added_first} | ")),
+        "{row}"
+    );
+}

@@ -132,7 +132,27 @@ pub struct Case {
     /// The testing events measured against every testing tire's true wear
     /// (None for a truth without it, or a season that failed).
     pub against_truth: Option<AgainstTruth>,
+    /// How each of the user's hypotheses (`--hypotheses`) fared in this
+    /// season's diagnosis, in the file's order (empty without them).
+    pub hypotheses: Vec<HypothesisOutcome>,
     pub error: Option<String>,
+}
+
+/// One user hypothesis (`gap validate --hypotheses`) in one season: its
+/// first-round score among every candidate and whether forward selection
+/// added it.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct HypothesisOutcome {
+    /// As the diagnosis names it (`user: NAME`).
+    pub name: String,
+    /// Held-out gain and adjusted p-value in the first round.
+    pub cv_gain: f64,
+    pub p_adjusted: f64,
+    /// Significant in the first round (adjusted p ≤ the false-discovery
+    /// rate, held-out gain > 0): a candidate forward selection may add.
+    pub significant: bool,
+    /// The term it became (1: the first term added); None: not added.
+    pub added_as: Option<usize>,
 }
 
 /// The testing events measured against the simulator's true wear of every
@@ -379,6 +399,7 @@ pub fn validate(s: &ValidateSettings) -> Vec<Case> {
                     rmse_expected_pct: f64::NAN,
                     expected_shrinkage: f64::NAN,
                     against_truth: None,
+                    hypotheses: Vec::new(),
                     error: Some(e.to_string()),
                 }
             }

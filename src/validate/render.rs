@@ -106,6 +106,7 @@ pub fn render(cases: &[Case]) -> String {
     }
     render_generated(&mut s, cases);
     render_against_truth(&mut s, cases);
+    render_hypotheses(&mut s, cases);
     let clean: Vec<&Case> = cases
         .iter()
         .filter(|c| c.effect.is_none() && c.generated.is_none())
@@ -153,6 +154,43 @@ pub fn render(cases: &[Case]) -> String {
         );
     }
     s
+}
+
+/// The user's hypotheses (`--hypotheses`) over the seasons diagnosed, in
+/// the file's order: in how many each was significant in the first round,
+/// entered first or later, and its median held-out gain and adjusted p.
+fn render_hypotheses(s: &mut String, cases: &[Case]) {
+    let mut names: Vec<&str> = Vec::new();
+    for h in cases.iter().flat_map(|c| &c.hypotheses) {
+        if !names.contains(&h.name.as_str()) {
+            names.push(&h.name);
+        }
+    }
+    if names.is_empty() {
+        return;
+    }
+    s.push_str(
+        "\nYour hypotheses (`--hypotheses`), scored among every candidate of each season's first round:\n\n| hypothesis | seasons | significant | entered first | entered later | held-out gain (median) | adjusted p (median) |\n|---|---|---|---|---|---|---|\n",
+    );
+    for name in names {
+        let of: Vec<&super::HypothesisOutcome> = cases
+            .iter()
+            .flat_map(|c| &c.hypotheses)
+            .filter(|h| h.name == name)
+            .collect();
+        let count =
+            |f: &dyn Fn(&super::HypothesisOutcome) -> bool| of.iter().filter(|h| f(h)).count();
+        let _ = writeln!(
+            s,
+            "| {name} | {} | {} | {} | {} | {:.3} | {:.3} |",
+            of.len(),
+            count(&|h| h.significant),
+            count(&|h| h.added_as == Some(1)),
+            count(&|h| h.added_as.is_some_and(|k| k > 1)),
+            median(of.iter().map(|h| h.cv_gain).collect()),
+            median(of.iter().map(|h| h.p_adjusted).collect()),
+        );
+    }
 }
 
 /// The testing events measured against every testing tire's true wear
@@ -375,6 +413,7 @@ mod tests {
             terms_correlation: f64::NAN,
             generated: None,
             against_truth: None,
+            hypotheses: Vec::new(),
             error: None,
         }
     }
@@ -440,6 +479,54 @@ mod tests {
             md.contains("| 30/100, 14.000 / 9.600 / 6.000, 0.40 (terms differ) |"),
             "{md}"
         );
+    }
+
+    /// The user's hypotheses: counted over the seasons in the file's order,
+    /// medians of three seasons' gains and p-values by hand.
+    #[test]
+    fn the_users_hypotheses_are_counted_over_the_seasons() {
+        use super::super::HypothesisOutcome;
+        let h = |name: &str, cv_gain: f64, p_adjusted: f64, added_as: Option<usize>| {
+            HypothesisOutcome {
+                name: name.into(),
+                cv_gain,
+                p_adjusted,
+                significant: p_adjusted <= 0.05 && cv_gain > 0.0,
+                added_as,
+            }
+        };
+        let with = |seed: u64, hypotheses: Vec<HypothesisOutcome>| Case {
+            hypotheses,
+            ..case(EffectKind::Blistering, seed, 0.2, 0.9)
+        };
+        let cases = [
+            with(
+                1,
+                vec![
+                    h("user: b", 0.2, 0.01, Some(1)),
+                    h("user: a", 0.0, 1.0, None),
+                ],
+            ),
+            with(
+                2,
+                vec![
+                    h("user: b", 0.1, 0.04, Some(2)),
+                    h("user: a", -0.1, 0.5, None),
+                ],
+            ),
+            with(
+                3,
+                vec![h("user: b", 0.3, 0.2, None), h("user: a", 0.05, 0.03, None)],
+            ),
+            // A season that failed scores none.
+            with(4, vec![]),
+        ];
+        let md = render(&cases);
+        let b = md.find("| user: b | 3 | 2 | 1 | 1 | 0.200 | 0.040 |");
+        let a = md.find("| user: a | 3 | 1 | 0 | 0 | 0.000 | 0.500 |");
+        assert!(b.is_some() && a.is_some() && b < a, "{md}");
+        // Without hypotheses, no table.
+        assert!(!render(&cases[3..]).contains("Your hypotheses"));
     }
 
     /// Seasons without a term: the tires their leads share are counted

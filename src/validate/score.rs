@@ -2,7 +2,7 @@
 //! tire, the ideal diagnosis (the law calibrated on wear minus the planted
 //! part), hit, shrinkage and the terms' correlation with the planted wear.
 
-use super::{AgainstTruth, Case, Planted, ValidateError};
+use super::{AgainstTruth, Case, HypothesisOutcome, Planted, ValidateError};
 use crate::gap::report::{Baseline, Diagnosis, GapSettings, diagnose};
 use crate::kpi::{KpiRow, TireRun};
 use crate::sim::GeneratedEffect;
@@ -230,8 +230,24 @@ pub(crate) fn score_case(
         rmse_expected_pct: rmse_expected,
         expected_shrinkage: (rmse_base - rmse_expected) / (rmse_base - rmse_ideal),
         against_truth,
+        hypotheses: hypotheses(d, gap.fdr),
         error: None,
     })
+}
+
+/// The user's hypotheses among the diagnosis's first-round candidates.
+fn hypotheses(d: &Diagnosis, fdr: f64) -> Vec<HypothesisOutcome> {
+    d.candidates
+        .iter()
+        .filter(|c| c.feature == crate::gap::candidates::Feature::User)
+        .map(|c| HypothesisOutcome {
+            name: c.name.clone(),
+            cv_gain: c.cv_gain,
+            p_adjusted: c.p_adjusted,
+            significant: c.significant(fdr),
+            added_as: d.steps.iter().position(|s| s.added == c.name),
+        })
+        .collect()
 }
 
 /// The law alone calibrated on wear `y` (per row of `rows`): its
