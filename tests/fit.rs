@@ -1,8 +1,9 @@
 //! `tirewear fit` end to end on the demo season: the three methods fit on
 //! whole training events and are tested on others; the physical method's
 //! rear-axle testing R² beats PCA's (the paper's ranking, table 11 vs 9);
-//! saved models reload and predict the same numbers; `predict` refuses a
-//! table with a missing column or a different unit, naming it.
+//! saved models reload and predict the same numbers, and a damaged one is
+//! refused by its field or predicts alike; `predict` refuses a table with a
+//! missing column or a different unit, naming it.
 
 mod common;
 
@@ -86,6 +87,8 @@ fn demo_fit_ranks_like_the_paper_and_models_round_trip() {
             assert_eq!(back.predict_row(r).unwrap(), m.predict_row(r).unwrap());
         }
     }
+    damaged_models_are_refused_by_field_or_predict_alike(&models, &out, &rows);
+
     // The indicators recomputed from the reloaded model's predictions on the testing events.
     let phys = SavedModel::load(&out.join("physical.json")).unwrap();
     let rear_test: Vec<&KpiRow> = s
@@ -157,4 +160,77 @@ fn demo_fit_ranks_like_the_paper_and_models_round_trip() {
         e.contains("t_surface_avg_c") && e.contains("is in K"),
         "{e}"
     );
+}
+
+/// JSON pointers of every non-empty array in `v`.
+fn array_pointers(v: &serde_json::Value, at: String, out: &mut Vec<String>) {
+    match v {
+        serde_json::Value::Object(m) => {
+            for (k, x) in m {
+                array_pointers(x, format!("{at}/{k}"), out);
+            }
+        }
+        serde_json::Value::Array(a) if !a.is_empty() => {
+            out.push(at.clone());
+            for (i, x) in a.iter().enumerate() {
+                array_pointers(x, format!("{at}/{i}"), out);
+            }
+        }
+        _ => {}
+    }
+}
+
+/// Each saved model with one array one element short, every array in
+/// turn (a damaged or hand-edited file): `SavedModel::load` refuses it,
+/// naming the file and the field, or the model it reads predicts every
+/// row exactly as the undamaged one (the arrays a prediction does not read:
+/// standard errors, the training curve, loadings beyond the components
+/// kept...). Before the shapes were checked, a short weight or mean array
+/// panicked and a short coefficient array predicted wrong numbers silently.
+fn damaged_models_are_refused_by_field_or_predict_alike(
+    models: &HashMap<&str, SavedModel>,
+    dir: &std::path::Path,
+    rows: &[KpiRow],
+) {
+    let damaged = dir.join("damaged.json");
+    let mut refused = 0;
+    for m in models.values() {
+        let text = std::fs::read_to_string(dir.join(format!("{}.json", m.method()))).unwrap();
+        let json: serde_json::Value = serde_json::from_str(&text).unwrap();
+        let mut pointers = Vec::new();
+        array_pointers(&json, String::new(), &mut pointers);
+        for p in pointers {
+            let mut v = json.clone();
+            let a = v.pointer_mut(&p).unwrap().as_array_mut().unwrap();
+            a.pop();
+            std::fs::write(&damaged, serde_json::to_string(&v).unwrap()).unwrap();
+            // The field as the refusal names it: /model/pca/means → model.pca.means.
+            let field = p.trim_start_matches('/').replace('/', ".");
+            match SavedModel::load(&damaged) {
+                Err(e) => {
+                    let e = e.to_string();
+                    assert!(e.contains("damaged.json"), "{p}: {e}");
+                    // By its field (model.pca.loadings[3] for /model/pca/loadings/3);
+                    // serde's own refusals (a pair one short) by line and column;
+                    // a feature fewer by what no longer fits it.
+                    let named = e.replace('[', ".").replace(']', "").contains(&field)
+                        || e.contains(" line ")
+                        || (p == "/features" && e.contains("features"));
+                    assert!(named, "{p}: {e}");
+                    refused += 1;
+                }
+                Ok(back) => {
+                    for r in rows {
+                        assert_eq!(
+                            back.predict_row(r).ok(),
+                            m.predict_row(r).ok(),
+                            "{} with {p} one short predicts otherwise",
+                            m.method()
+                        );
+                    }
+                }
+            }
+        }
+    }
+    assert!(refused >= 10, "{refused}");
 }

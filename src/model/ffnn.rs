@@ -43,7 +43,7 @@ fn sigmoid(x: f64) -> f64 {
     1.0 / (1.0 + (-x).exp())
 }
 
-fn n_weights(d: usize, h1: usize, h2: usize) -> usize {
+pub(crate) fn n_weights(d: usize, h1: usize, h2: usize) -> usize {
     h1 * d + h1 + h2 * h1 + h2 + h2 + 1
 }
 

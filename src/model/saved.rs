@@ -8,7 +8,7 @@ use super::metrics::Metrics;
 use super::network::{NetworkFit, NetworkSettings};
 use super::ols::OlsFit;
 use super::pca::PcaFit;
-use super::physical::{AxleAnalysis, inputs_of};
+use super::physical::{AxleAnalysis, PHYSICAL_INPUTS, inputs_of};
 use crate::kpi::{KpiRow, table::unit};
 use std::path::Path;
 
@@ -155,7 +155,82 @@ impl SavedModel {
                 )));
             }
         }
-        serde_json::from_str(&text).map_err(|e| file(e.to_string()))
+        let model: SavedModel = serde_json::from_str(&text).map_err(|e| file(e.to_string()))?;
+        model.check_shapes().map_err(file)?;
+        Ok(model)
+    }
+
+    /// Refuses a model whose parts do not fit together (a damaged or
+    /// hand-edited file), which would otherwise index out of bounds or
+    /// predict wrong numbers without a word: every array a prediction reads
+    /// against the features and the layer sizes, its numbers finite and the
+    /// standard deviations positive. The first problem, by its field.
+    fn check_shapes(&self) -> Result<(), String> {
+        let d = self.features.len();
+        match &self.model {
+            ModelBody::Ffnn { network, .. } => {
+                let net = &network.net;
+                let at = "model.network.net";
+                if net.inputs != d {
+                    return Err(format!(
+                        "{at}.inputs is {}, the model has {d} features",
+                        net.inputs
+                    ));
+                }
+                let weights = super::ffnn::n_weights(d, net.hidden1, net.hidden2);
+                let why = format!(
+                    "{d} inputs, hidden layers of {} and {}",
+                    net.hidden1, net.hidden2
+                );
+                length(&format!("{at}.weights"), &net.weights, weights, &why)?;
+                length(
+                    &format!("{at}.input_mean"),
+                    &net.input_mean,
+                    d,
+                    "the features",
+                )?;
+                length(
+                    &format!("{at}.input_std"),
+                    &net.input_std,
+                    d,
+                    "the features",
+                )?;
+                positive(&format!("{at}.input_std"), &net.input_std)?;
+                finite(&format!("{at}.target_mean"), &[net.target_mean])?;
+                positive(&format!("{at}.target_std"), &[net.target_std])
+            }
+            ModelBody::Pca {
+                pca, regression, ..
+            } => {
+                let at = "model.pca";
+                if pca.inputs.iter().ne(self.features.iter().map(|f| &f.name)) {
+                    return Err(format!("{at}.inputs are not the model's features"));
+                }
+                length(&format!("{at}.means"), &pca.means, d, "the features")?;
+                length(&format!("{at}.stds"), &pca.stds, d, "the features")?;
+                positive(&format!("{at}.stds"), &pca.stds)?;
+                if pca.kept == 0 || pca.kept > pca.loadings.len() {
+                    return Err(format!(
+                        "{at}.kept is {} with {} components in {at}.loadings",
+                        pca.kept,
+                        pca.loadings.len()
+                    ));
+                }
+                for (c, a) in pca.loadings[..pca.kept].iter().enumerate() {
+                    length(&format!("{at}.loadings[{c}]"), a, d, "the features")?;
+                }
+                let why = "an intercept and one per component kept";
+                length("model.regression.coef", &regression.coef, pca.kept + 1, why)
+            }
+            ModelBody::Physical { front, rear } => {
+                let why = "an intercept and one per physical input";
+                for (axle, a) in [("front", front), ("rear", rear)] {
+                    let field = format!("model.{axle}.regression.coef");
+                    length(&field, &a.regression.coef, PHYSICAL_INPUTS.len() + 1, why)?;
+                }
+                Ok(())
+            }
+        }
     }
 
     /// Checks a KPI table's columns and units against the model's features;
@@ -183,6 +258,35 @@ impl SavedModel {
                 problems.join("; ")
             )))
         }
+    }
+}
+
+/// `values` has `want` numbers (`why`: what sets that) and each is finite.
+fn length(field: &str, values: &[f64], want: usize, why: &str) -> Result<(), String> {
+    if values.len() != want {
+        return Err(format!(
+            "{field} has {} values, {want} expected ({why})",
+            values.len()
+        ));
+    }
+    finite(field, values)
+}
+
+fn finite(field: &str, values: &[f64]) -> Result<(), String> {
+    match values.iter().position(|v| !v.is_finite()) {
+        Some(i) => Err(format!("{field}[{i}] is {}", values[i])),
+        None => Ok(()),
+    }
+}
+
+fn positive(field: &str, values: &[f64]) -> Result<(), String> {
+    finite(field, values)?;
+    match values.iter().position(|&v| v <= 0.0) {
+        Some(i) => Err(format!(
+            "{field}[{i}] is {}, a standard deviation must be positive",
+            values[i]
+        )),
+        None => Ok(()),
     }
 }
 
