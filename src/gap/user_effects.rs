@@ -231,9 +231,8 @@ pub fn load(path: &Path) -> Result<Vec<Candidate>, GapError> {
         path: file.clone(),
         source: e,
     })?;
-    let parsed: EffectsFile = toml::from_str(&text).map_err(|e| GapError::Effects {
+    let parsed: EffectsFile = toml::from_str(&text).map_err(|e| GapError::EffectsFile {
         file: file.clone(),
-        effect: String::new(),
         message: e.to_string(),
     })?;
     parsed
@@ -425,6 +424,14 @@ mod tests {
             "[[effect]]\nname = \"i\"\nexpression = \"sliding_speed > 2\"\nenergy = \"lateral\"\n",
         );
         assert!(e.contains("no sliding-speed map"), "{e}");
+        // Not TOML of the documented shape: the file and TOML's own words
+        // (line, column, what), no empty effect.
+        let e = msg("[[effect]]\nname = \"j\"\nexpression = \"1\"\nexpression = \"2\"\n");
+        assert!(
+            e.contains("effects.toml: TOML parse error at line 4"),
+            "{e}"
+        );
+        assert!(e.contains("duplicate key") && !e.contains(": :"), "{e}");
         // A good one: a rear-axle candidate that is zero on the fronts.
         let c = load(&write(
             "[[effect]]\nname = \"g\"\nexpression = \"t_inner > theta\"\nthresholds = [100, 120]\naxle = \"rear\"\n",
