@@ -323,8 +323,17 @@ fn tick(v: f64) -> String {
     }
 }
 
+/// Most decades a log axis spans, from its top down: the demo's road PSD
+/// spans 14. A damaged side table's values (1e-302 to 1e305) on an axis of
+/// every decade made plotters' tick search run for ever.
+const MAX_DECADES: i32 = 30;
+
+/// Largest value a log axis reaches: its ticks stay finite (10^300).
+const LOG_AXIS_TOP: f64 = 1e300;
+
 /// The range of positive `values` widened by 20 % each way (for a log
-/// axis); (1, 10) when there are none.
+/// axis), at most [`MAX_DECADES`] below its top and within
+/// (1e-300, [`LOG_AXIS_TOP`]); (1, 10) when there are none.
 fn log_range(values: impl Iterator<Item = f64>) -> (f64, f64) {
     let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
     for v in values.filter(|v| *v > 0.0 && v.is_finite()) {
@@ -332,7 +341,11 @@ fn log_range(values: impl Iterator<Item = f64>) -> (f64, f64) {
         hi = hi.max(v);
     }
     if lo.is_finite() && hi > lo {
-        (lo / 1.2, hi * 1.2)
+        let hi = (hi * 1.2).min(LOG_AXIS_TOP);
+        let lo = (lo / 1.2)
+            .max(hi * 10f64.powi(-MAX_DECADES))
+            .max(1.0 / LOG_AXIS_TOP);
+        if hi > lo { (lo, hi) } else { (hi / 10.0, hi) }
     } else {
         (1.0, 10.0)
     }
@@ -494,4 +507,46 @@ pub(crate) fn curves_with_marks(
         }
         Ok(())
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A damaged road side table's curves (values found by mutating one:
+    /// 1e-302 to 1e305, 2e-308 to 1.6e308) draw in bounded time on an
+    /// axis of at most 30 decades; before, the report hung in plotters.
+    #[test]
+    fn absurd_values_on_log_axes_draw_and_are_bounded() {
+        let axes = Axes {
+            title: "t",
+            x: "x",
+            y: "y",
+        };
+        for ys in [
+            [1.138e-302, 1.0, 8.72e304],
+            [2.19e-308, 3.0, 1.593e308],
+            [f64::MIN_POSITIVE, 1.0, f64::MAX],
+        ] {
+            let series = [Points {
+                label: "a".into(),
+                color: 0,
+                xy: ys
+                    .iter()
+                    .enumerate()
+                    .map(|(k, &y)| (1.0 + k as f64, y))
+                    .collect(),
+                filled: false,
+            }];
+            let (lo, hi) = log_range(ys.into_iter());
+            assert!(hi <= LOG_AXIS_TOP && lo > 0.0, "{lo} {hi}");
+            assert!((hi / lo).log10() <= MAX_DECADES as f64 + 1e-9, "{lo} {hi}");
+            assert!(log_curves(&axes, &series, &[], false).is_ok());
+        }
+        // An ordinary range: 20 % wider each way, by hand.
+        let (lo, hi) = log_range([2.0, 50.0].into_iter());
+        assert!((lo - 2.0 / 1.2).abs() < 1e-12 && (hi - 60.0).abs() < 1e-12);
+        // One value, no range: the default decade.
+        assert_eq!(log_range([5.0].into_iter()), (1.0, 10.0));
+    }
 }
