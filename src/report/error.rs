@@ -14,3 +14,38 @@ pub enum ReportError {
     #[error("drawing a figure: {0}")]
     Figure(String),
 }
+
+impl ReportError {
+    /// An input file's error, named once: the readers' own errors already
+    /// begin with the file, which `Input` prints first.
+    pub(crate) fn input(path: &std::path::Path, e: impl std::fmt::Display) -> ReportError {
+        let message = e.to_string();
+        let named = format!("{}: ", path.display());
+        ReportError::Input {
+            path: path.to_path_buf(),
+            message: message
+                .strip_prefix(&named)
+                .map_or(message.clone(), str::to_string),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn an_input_file_is_named_once() {
+        let p = std::path::Path::new("/d/kpis.road.parquet");
+        let e = ReportError::input(p, "/d/kpis.road.parquet: Parquet: corrupt footer");
+        assert_eq!(
+            e.to_string(),
+            "/d/kpis.road.parquet: Parquet: corrupt footer"
+        );
+        let e = ReportError::input(p, "Parquet: corrupt footer");
+        assert_eq!(
+            e.to_string(),
+            "/d/kpis.road.parquet: Parquet: corrupt footer"
+        );
+    }
+}

@@ -155,30 +155,20 @@ impl Inputs {
                 message: "missing: run `tirewear extract` on the season first".into(),
             });
         }
-        let rows = crate::kpi::table::read_parquet(&kpis).map_err(|e| ReportError::Input {
-            path: kpis.clone(),
-            message: e.to_string(),
-        })?;
+        let rows =
+            crate::kpi::table::read_parquet(&kpis).map_err(|e| ReportError::input(&kpis, e))?;
         let mut models = Vec::new();
         for method in ["physical", "pca", "ffnn"] {
             let path = newest(dir, "models", &format!("{method}.json"));
             if path.exists() {
-                let m = crate::model::saved::SavedModel::load(&path).map_err(|e| {
-                    ReportError::Input {
-                        path: path.clone(),
-                        message: e.to_string(),
-                    }
-                })?;
+                let m = crate::model::saved::SavedModel::load(&path)
+                    .map_err(|e| ReportError::input(&path, e))?;
                 models.push((path, m));
             }
         }
         let side = |suffix: &str| crate::kpi::table::side_table_path(&kpis, suffix);
-        let input = |path: PathBuf| {
-            move |e: crate::ingest::IngestError| ReportError::Input {
-                path,
-                message: e.to_string(),
-            }
-        };
+        let input =
+            |path: PathBuf| move |e: crate::ingest::IngestError| ReportError::input(&path, e);
         let road_path = side("road.parquet");
         let road = if road_path.exists() {
             crate::kpi::extract::read_road_curves(&road_path).map_err(input(road_path.clone()))?
