@@ -756,7 +756,11 @@ pub fn library(rows: &[&KpiRow]) -> Vec<Candidate> {
     camber.pop();
     camber.insert(0, 0.0);
     let mut patch = deciles("contact_patch_mm2", |x| x);
-    patch.remove(0);
+    // The smallest patch is no threshold (nothing lies below it); a column
+    // with no finite value gives no thresholds and no candidate.
+    if !patch.is_empty() {
+        patch.remove(0);
+    }
     let setup: [(&str, Feature, Vec<f64>); 3] = [
         (
             "camber (energy × camber beyond θ)",
@@ -1355,6 +1359,29 @@ pub(crate) fn track_value(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A KPI table whose set-up columns hold no finite value (a damaged or
+    /// foreign table) gives no set-up candidates on them and no panic (the
+    /// contact patch's grid dropped its first decile of an empty list).
+    #[test]
+    fn set_up_columns_without_a_finite_value_give_no_candidate() {
+        let rows: Vec<KpiRow> = (0..8)
+            .map(|k| KpiRow {
+                contact_patch_mm2: f64::NAN,
+                camber_avg_deg: f64::INFINITY,
+                pressure_avg_pa: 1.8e5 + 1e3 * k as f64,
+                ..Default::default()
+            })
+            .collect();
+        let refs: Vec<&KpiRow> = rows.iter().collect();
+        let lib = library(&refs);
+        let has = |f: Feature| lib.iter().any(|c| c.feature == f);
+        assert!(!has(Feature::SmallPatchEnergy));
+        assert!(has(Feature::PressureEnergy));
+        // Camber's grid starts at 0 whatever the column holds.
+        let camber = lib.iter().find(|c| c.feature == Feature::CamberEnergy);
+        assert_eq!(camber.map(|c| c.thresholds.clone()), Some(vec![0.0]));
+    }
 
     #[test]
     fn condition_and_pair_sums_are_the_bin_by_bin_filters_bits() {
