@@ -4,9 +4,14 @@
 //! undamaged input (MCAP), or finite KPIs wherever the row's `quality` says
 //! "ok" (the other formats, where a mutation can be valid data).
 //!
+//! A valid KPI table with absurd numbers must not panic the diagnosis, the
+//! fits or the predictions.
+//!
 //! The MCAP files are the committed fixtures: two written by tirewear and
 //! two by Python's `mcap` writer (tests/oracles/write_python_mcap.py), so the
 //! checks do not rest on our own writer alone.
+
+mod common;
 
 use rand::{Rng, RngCore, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -513,4 +518,116 @@ fn mutated_manifests_compounds_roads_and_wear_never_panic() {
     );
     assert!(tried >= 160);
     assert!(failures.is_empty(), "{}", failures.join("\n"));
+}
+
+/// KPI tables with absurd numbers (NaN, ±inf, ±1e300, 0, −1, denormals,
+/// values scaled by 1e±6; one cell, a whole column, or many cells of the
+/// demo's table) never panic the gap diagnosis, the physical and PCA fits
+/// or the saved models' predictions: each gives a result or an error. A
+/// column without a finite value once panicked the diagnosis's candidate
+/// library (the contact patch's threshold grid).
+#[test]
+fn kpi_tables_with_absurd_values_never_panic_the_models_or_the_diagnosis() {
+    use std::panic::{AssertUnwindSafe, catch_unwind};
+    use tirewear::gap::report::{Baseline, GapSettings, diagnose};
+    use tirewear::gap::scoring::ScoringSettings;
+    use tirewear::kpi::KpiRow;
+    use tirewear::model::fit::{FitSettings, Method, fit_method, split};
+    let _one = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    let dir = tempfile::tempdir().unwrap();
+    let clean = common::demo_kpis(dir.path());
+    let maps =
+        tirewear::kpi::energy_maps::read_tire_maps(&dir.path().join("kpis.parquet")).unwrap();
+    let settings = FitSettings::default();
+    let models: Vec<_> = [Method::Physical, Method::Pca]
+        .into_iter()
+        .map(|m| {
+            fit_method(m, &split(&clean, None).unwrap(), &settings)
+                .unwrap()
+                .0
+        })
+        .collect();
+    let gap = GapSettings {
+        scoring: ScoringSettings {
+            permutations: 99,
+            ..Default::default()
+        },
+        ..Default::default()
+    };
+    const ABSURD: [f64; 9] = [
+        f64::NAN,
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+        1e300,
+        -1e300,
+        0.0,
+        -1.0,
+        1e-300,
+        5e-324,
+    ];
+    let columns = KpiRow::NUMBER_COLUMNS;
+    let mut rng = ChaCha8Rng::seed_from_u64(2026);
+    let mut failures = Vec::new();
+    let (mut diagnosed, mut refused) = (0, 0);
+    for case in 0..17 {
+        let mut rows = clean.clone();
+        let mut what = Vec::new();
+        if case == 16 {
+            // The case that panicked, by hand.
+            rows.iter_mut().for_each(|r| r.contact_patch_mm2 = f64::NAN);
+            what.push("contact_patch_mm2[..] = NaN".to_string());
+        }
+        for _ in 0..[1, 2, 5, 30][case % 4] * usize::from(case < 16) {
+            let col = columns[rng.random_range(0..columns.len())];
+            let v = ABSURD[rng.random_range(0..ABSURD.len())];
+            match case % 3 {
+                0 => {
+                    let i = rng.random_range(0..rows.len());
+                    rows[i].set_number(col, v);
+                    what.push(format!("{col}[{i}] = {v}"));
+                }
+                1 => {
+                    rows.iter_mut().for_each(|r| {
+                        r.set_number(col, v);
+                    });
+                    what.push(format!("{col}[..] = {v}"));
+                }
+                _ => {
+                    let i = rng.random_range(0..rows.len());
+                    let scale = [1e6, 1e-6, -1.0][rng.random_range(0..3)];
+                    let x = rows[i].number(col).unwrap() * scale;
+                    rows[i].set_number(col, x);
+                    what.push(format!("{col}[{i}] × {scale}"));
+                }
+            }
+        }
+        let tag = what.join(", ");
+        match catch_unwind(AssertUnwindSafe(|| {
+            diagnose(&rows, &maps, &Baseline::Physics, &gap)
+        })) {
+            Err(_) => failures.push(format!("diagnosis panicked: {tag}")),
+            Ok(Ok(_)) => diagnosed += 1,
+            Ok(Err(_)) => refused += 1,
+        }
+        for method in [Method::Physical, Method::Pca] {
+            let fitted = catch_unwind(AssertUnwindSafe(|| {
+                split(&rows, None).and_then(|s| fit_method(method, &s, &settings))
+            }));
+            if fitted.is_err() {
+                failures.push(format!("{method:?} fit panicked: {tag}"));
+            }
+        }
+        for m in &models {
+            let predicted = catch_unwind(AssertUnwindSafe(|| {
+                rows.iter().map(|r| m.predict_row(r).ok()).count()
+            }));
+            if predicted.is_err() {
+                failures.push(format!("{} prediction panicked: {tag}", m.method()));
+            }
+        }
+    }
+    println!("absurd KPI values: 17 tables, {diagnosed} diagnosed, {refused} refused");
+    assert!(failures.is_empty(), "{}", failures.join("\n"));
+    // The mutations are not all refused: most tables still diagnose.
+    assert!(diagnosed >= 8, "{diagnosed}");
 }

@@ -66,7 +66,7 @@ macro_rules! kpi_table {
             }
 
             /// Sets a numeric column by name; false if there is no such column.
-            pub(crate) fn set_number(&mut self, name: &str, v: f64) -> bool {
+            pub fn set_number(&mut self, name: &str, v: f64) -> bool {
                 match name {
                     $(stringify!($n) => { self.$n = v; true })*
                     _ => false,
