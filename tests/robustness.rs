@@ -618,11 +618,16 @@ fn kpi_tables_with_absurd_values_never_panic_the_models_or_the_diagnosis() {
             }
         }
         for m in &models {
+            // A prediction is a finite number or an error (a `note` in predict).
             let predicted = catch_unwind(AssertUnwindSafe(|| {
-                rows.iter().map(|r| m.predict_row(r).ok()).count()
+                rows.iter()
+                    .filter_map(|r| m.predict_row(r).ok())
+                    .all(f64::is_finite)
             }));
-            if predicted.is_err() {
-                failures.push(format!("{} prediction panicked: {tag}", m.method()));
+            match predicted {
+                Err(_) => failures.push(format!("{} prediction panicked: {tag}", m.method())),
+                Ok(false) => failures.push(format!("{} predicted a non-finite: {tag}", m.method())),
+                Ok(true) => {}
             }
         }
     }
