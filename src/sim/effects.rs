@@ -39,6 +39,10 @@ impl EffectKind {
     }
 }
 
+/// Largest magnitude of a planted effect: 100 times the base wear where
+/// it acts (the validation plants 0.5 to 4).
+pub const MAX_MAGNITUDE: f64 = 100.0;
+
 /// One planted effect with its settings.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Effect {
@@ -66,6 +70,29 @@ impl Effect {
             threshold,
             width,
         }
+    }
+
+    /// Refuses settings that cannot describe an effect: a magnitude outside
+    /// 0..[`MAX_MAGNITUDE`] (1e308 made the wear infinite), a threshold
+    /// that is not a number (NaN silently planted nothing), a width that
+    /// is not positive.
+    pub fn check(&self) -> Result<(), String> {
+        if !(0.0..=MAX_MAGNITUDE).contains(&self.magnitude) {
+            return Err(format!(
+                "magnitude must be within 0..{MAX_MAGNITUDE} (abrasion per joule relative to base wear where it acts), got {}",
+                self.magnitude
+            ));
+        }
+        if !self.threshold.is_finite() {
+            return Err(format!(
+                "threshold must be a number, got {}",
+                self.threshold
+            ));
+        }
+        if !(self.width > 0.0 && self.width.is_finite()) {
+            return Err(format!("width must be > 0, got {}", self.width));
+        }
+        Ok(())
     }
 
     /// Weight 0..1 of a sample. Temperatures in °C.
@@ -110,9 +137,6 @@ impl FromStr for Effect {
                     "unknown effect '{name}' (graining, blistering, thermal, road-abrasion, none)"
                 )
             })?;
-        if !(mag >= 0.0 && mag.is_finite()) {
-            return Err(format!("magnitude must be >= 0, got {mag}"));
-        }
         let mut e = Effect::with_defaults(kind, mag);
         for kv in parts {
             let (k, v) = kv
@@ -121,14 +145,11 @@ impl FromStr for Effect {
             let v: f64 = v.parse().map_err(|_| format!("bad number '{v}' for {k}"))?;
             match k {
                 "threshold" => e.threshold = v,
-                "width" if v > 0.0 => e.width = v,
-                _ => {
-                    return Err(format!(
-                        "unknown or invalid setting '{kv}' (threshold, width > 0)"
-                    ));
-                }
+                "width" => e.width = v,
+                _ => return Err(format!("unknown setting '{kv}' (threshold, width)")),
             }
         }
+        e.check()?;
         Ok(e)
     }
 }
@@ -157,6 +178,20 @@ mod tests {
         assert_eq!((e.magnitude, e.threshold, e.width), (0.4, 80.0, 3.0));
         assert!("wobble=1".parse::<Effect>().is_err());
         assert!("thermal=-1".parse::<Effect>().is_err());
+        // Settings that cannot describe an effect, each refused with its reason.
+        for (spec, reason) in [
+            ("graining=1e308", "magnitude must be within 0..100"),
+            ("graining=nan", "magnitude must be within 0..100"),
+            ("graining=1,threshold=nan", "threshold must be a number"),
+            ("graining=1,threshold=inf", "threshold must be a number"),
+            ("graining=1,width=-3", "width must be > 0"),
+            ("graining=1,width=0", "width must be > 0"),
+            ("graining=1,depth=3", "unknown setting 'depth=3'"),
+        ] {
+            let e = spec.parse::<Effect>().unwrap_err();
+            assert!(e.contains(reason), "{spec}: {e}");
+        }
+        assert!("graining=100,threshold=1e3".parse::<Effect>().is_ok());
         // Smooth onset: half weight at the threshold.
         let b = Effect::with_defaults(EffectKind::Blistering, 1.0);
         assert!((b.weight(80.0, 122.0) - 0.5).abs() < 1e-12);

@@ -104,6 +104,21 @@ pub fn simulate(opts: &SimOptions) -> Result<SimSummary, SimError> {
             preset::MAX_TRACKS
         )));
     }
+    if opts.preset == Preset::Season {
+        let events = (24.0 * opts.scale).round();
+        if events > preset::MAX_EVENTS as f64 {
+            return Err(SimError::Config(format!(
+                "scale {} gives {events} events; a season has at most {} (scale {:.1}; scale 1 is 24 events, about 20 GB at 200 Hz)",
+                opts.scale,
+                preset::MAX_EVENTS,
+                preset::MAX_EVENTS as f64 / 24.0
+            )));
+        }
+    }
+    for e in &opts.effects {
+        e.check()
+            .map_err(|m| SimError::Config(format!("effect {}: {m}", e.kind.name())))?;
+    }
     let mut kinds: Vec<_> = opts.effects.iter().map(|e| e.kind).collect();
     kinds.sort();
     kinds.dedup();
@@ -745,6 +760,48 @@ fn write_csv<T: serde::Serialize>(path: &Path, rows: &[T]) -> Result<(), SimErro
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A season scale beyond 1000 events (`--scale 1e9` once asked for 1.7 TB
+    /// and aborted) and an effect that cannot be planted are refused before
+    /// any file is written.
+    #[test]
+    fn huge_scales_and_bad_effects_are_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("s");
+        let opts = |preset: Preset, scale: f64, effects: Vec<Effect>| SimOptions {
+            preset,
+            scale,
+            tracks: None,
+            seed: 1,
+            effects,
+            generated: None,
+            scatter: WearScatter::NONE,
+            encoding: Encoding::Block,
+            rate_hz: Some(5.0),
+            out: out.clone(),
+            sensor_noise: true,
+            logger_export: None,
+            progress: false,
+        };
+        for scale in [1e9, 41.7] {
+            let e = simulate(&opts(Preset::Season, scale, vec![]))
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains("at most 1000"), "{e}");
+        }
+        let nan = Effect {
+            threshold: f64::NAN,
+            ..Effect::with_defaults(EffectKind::Graining, 1.0)
+        };
+        let e = simulate(&opts(Preset::Tiny, 1.0, vec![nan]))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("effect graining: threshold must be a number"),
+            "{e}"
+        );
+        assert!(!out.exists());
+    }
 
     /// A number of tracks outside 1..=64 is refused by name before any file
     /// is written.

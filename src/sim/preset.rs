@@ -243,6 +243,11 @@ pub fn track_catalogue() -> Vec<TrackDef> {
 /// The most tracks a season may have (`SimOptions::tracks`).
 pub const MAX_TRACKS: usize = 64;
 
+/// Most events of a season preset (`--scale` up to 41.7): the calendar and
+/// the plan are sized from it, so `--scale 1e9` is refused instead of
+/// asking for terabytes.
+pub const MAX_EVENTS: usize = 1000;
+
 /// The first `n` tracks of a season: the catalogue's twelve, then tracks
 /// generated from their index alone (`generated_track`), so that track 13
 /// is the same in every season that has it.
