@@ -17,8 +17,8 @@ pub(crate) struct ExtractArgs {
     /// Engine for the heavy reductions: cpu, gpu, or auto (GPU when usable, else CPU).
     #[arg(long, value_enum, default_value = "auto")]
     engine: EngineArg,
-    /// Worker threads (default: all cores).
-    #[arg(long)]
+    /// Worker threads, 1 to 1024 (default: all cores).
+    #[arg(long, value_parser = super::parse_jobs)]
     jobs: Option<usize>,
     /// Accept manifest paths outside the archive folder (absolute, or with
     /// '..'). Off by default, so an archive from elsewhere cannot make
@@ -99,7 +99,7 @@ pub(crate) fn run_extract(
 pub(crate) fn run(a: ExtractArgs, progress: bool) -> Result<tirewear::kpi::ExtractSummary> {
     if let Some(j) = a.jobs {
         rayon::ThreadPoolBuilder::new()
-            .num_threads(j.max(1))
+            .num_threads(j)
             .build_global()?;
     }
     run_extract(&tirewear::kpi::ExtractOptions {

@@ -106,7 +106,7 @@ impl GapStatsArgs {
         test_events: Option<Vec<String>>,
         effects: Option<&std::path::Path>,
     ) -> Result<tirewear::gap::report::GapSettings> {
-        Ok(tirewear::gap::report::GapSettings {
+        let settings = tirewear::gap::report::GapSettings {
             test_events,
             fdr: self.fdr,
             scoring: tirewear::gap::scoring::ScoringSettings {
@@ -132,7 +132,10 @@ impl GapStatsArgs {
                 WornThroughArg::Impute => tirewear::gap::report::WornThrough::Impute,
                 WornThroughArg::Tobit => tirewear::gap::report::WornThrough::Tobit,
             },
-        })
+        };
+        // Before a season is read or simulated.
+        settings.check()?;
+        Ok(settings)
     }
 }
 

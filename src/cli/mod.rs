@@ -14,3 +14,15 @@ pub(crate) mod predict;
 pub(crate) mod process;
 pub(crate) mod report;
 pub(crate) mod simulate;
+
+/// Most worker threads `--jobs` takes: far above any machine's cores here;
+/// `--jobs 100000` once spent minutes creating threads.
+pub(crate) const MAX_JOBS: usize = 1024;
+
+/// `--jobs N`: 1 to [`MAX_JOBS`] worker threads.
+pub(crate) fn parse_jobs(s: &str) -> Result<usize, String> {
+    match s.parse::<usize>() {
+        Ok(n) if (1..=MAX_JOBS).contains(&n) => Ok(n),
+        _ => Err(format!("'{s}': worker threads are 1 to {MAX_JOBS}")),
+    }
+}

@@ -28,8 +28,8 @@ pub(crate) struct ProcessArgs {
     /// of every run's key: changing it reprocesses every run.
     #[arg(long, value_enum, default_value = "auto")]
     engine: super::extract::EngineArg,
-    /// Worker threads (default: all cores).
-    #[arg(long)]
+    /// Worker threads, 1 to 1024 (default: all cores).
+    #[arg(long, value_parser = super::parse_jobs)]
     jobs: Option<usize>,
     /// Process only share K of N (1-based, e.g. 3/8): stage its parts and
     /// commit nothing; `--commit` (or a later whole run) commits them.
@@ -150,7 +150,7 @@ fn print_summary(s: &ProcessSummary) {
 pub(crate) fn run(a: ProcessArgs, progress: bool) -> Result<Outcome> {
     if let Some(j) = a.jobs {
         rayon::ThreadPoolBuilder::new()
-            .num_threads(j.max(1))
+            .num_threads(j)
             .build_global()?;
     }
     let mode = match (a.shard, a.commit) {

@@ -327,6 +327,31 @@ impl Default for GapSettings {
     }
 }
 
+impl GapSettings {
+    /// Refuses settings no diagnosis can honour: an error rate outside
+    /// (0, 1] (`--fdr 2` once reported every candidate significant, NaN
+    /// none), or so few permutations that no p-value can reach it (the
+    /// smallest is 1/(permutations + 1)).
+    pub fn check(&self) -> Result<(), ModelError> {
+        if !(self.fdr > 0.0 && self.fdr <= 1.0) {
+            return Err(ModelError::Setting {
+                name: "fdr",
+                value: self.fdr.to_string(),
+                expected: "an error rate in (0, 1]",
+            });
+        }
+        let n = self.scoring.permutations;
+        if 1.0 / (n as f64 + 1.0) > self.fdr {
+            return Err(ModelError::Setting {
+                name: "permutations",
+                value: n.to_string(),
+                expected: "at least 1/fdr - 1 (19 at 0.05), or no p-value can reach the rate",
+            });
+        }
+        Ok(())
+    }
+}
+
 /// Reads a KPI table and its energy and condition maps (missing maps leave
 /// the candidates and shrinkage out) and diagnoses it: what `tirewear gap`,
 /// `tirewear demo` and `process --then gap` run.
@@ -379,6 +404,7 @@ pub fn diagnose(
     baseline: &Baseline,
     settings: &GapSettings,
 ) -> Result<Diagnosis, ModelError> {
+    settings.check()?;
     let fdr = settings.fdr;
     let (measured, worn) = censor(rows);
     let censored: Vec<String> = worn.iter().map(tire_name).collect();
@@ -827,6 +853,36 @@ fn final_terms(sel: &Selection, steps: &[Step], seed: u64) -> Vec<FinalTerm> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// An error rate outside (0, 1] and too few permutations for a p-value
+    /// to reach the rate are refused by name; the edges are accepted.
+    #[test]
+    fn settings_no_diagnosis_can_honour_are_refused() {
+        let with = |fdr: f64, permutations: usize| GapSettings {
+            fdr,
+            scoring: ScoringSettings {
+                permutations,
+                ..Default::default()
+            },
+            ..Default::default()
+        };
+        for (fdr, n, name) in [
+            (2.0, 1999, "fdr"),
+            (0.0, 1999, "fdr"),
+            (f64::NAN, 1999, "fdr"),
+            (0.05, 0, "permutations"),
+            (0.05, 18, "permutations"),
+        ] {
+            let e = with(fdr, n).check().unwrap_err().to_string();
+            assert!(e.starts_with(&format!("setting {name} = ")), "{e}");
+        }
+        // 1/(19 + 1) = 0.05 exactly; a rate of 1 takes any permutations.
+        assert!(with(0.05, 19).check().is_ok());
+        assert!(with(1.0, 1).check().is_ok());
+        // The diagnosis refuses them before it reads a row.
+        let e = diagnose(&[], &BTreeMap::new(), &Baseline::Physics, &with(2.0, 1999));
+        assert!(matches!(e, Err(ModelError::Setting { name: "fdr", .. })));
+    }
 
     #[test]
     fn worn_through_tires_are_imputed_in_the_training_events_only() {
