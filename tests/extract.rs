@@ -507,6 +507,31 @@ fn manifest_paths_stay_inside_the_archive() {
     assert_eq!(extract(&o).unwrap().skipped.len(), 0);
 }
 
+/// `tirewear bench --season DIR` with a folder that is no season archive
+/// fails (exit 1) naming it, and writes no bench.json: a bench that
+/// measured the demo instead would mislead the comparison.
+#[test]
+fn bench_refuses_a_season_it_cannot_open() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("bench.json");
+    let run = std::process::Command::new(env!("CARGO_BIN_EXE_tirewear"))
+        .args([
+            "--quiet", "bench", "--only", "decode", "--small", "--season",
+        ])
+        .arg(dir.path().join("no-season"))
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert_eq!(run.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&run.stderr);
+    assert!(
+        err.contains("--season") && err.contains("no-season"),
+        "{err}"
+    );
+    assert!(!out.exists());
+}
+
 /// `tirewear bench --only decode --season DIR` measures the given archive:
 /// its lines name it, count every sample the simulator wrote (without
 /// sensor noise no sample is dropped), and nothing is skipped.

@@ -11,9 +11,9 @@ pub(crate) struct BenchArgs {
     /// Small sizes (a quick check that everything runs).
     #[arg(long)]
     small: bool,
-    /// Repeats per measurement (the best is kept).
-    #[arg(long, default_value_t = 3)]
-    repeats: usize,
+    /// Repeats per measurement, at least 1 (the best is kept).
+    #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u32).range(1..))]
+    repeats: u32,
     /// Measure only one part: `kernels` (the engines on synthetic buffers),
     /// `decode` (MCAP decoding against zstd alone on a simulated season) or
     /// `gap` (the gap diagnosis of the demo season and of `gap validate`'s
@@ -54,10 +54,16 @@ pub(crate) fn run(a: BenchArgs) -> Result<()> {
         out,
     } = a;
     use tirewear::bench::BenchParts;
+    // A season asked for by name is read, or the command fails: a bench
+    // that silently measured something else would mislead the comparison.
+    if let Some(dir) = &season {
+        tirewear::ingest::manifest::Season::open(dir)
+            .with_context(|| format!("--season {}", dir.display()))?;
+    }
     let r = tirewear::bench::run_bench(&tirewear::bench::BenchOptions {
         small,
         gpu: engine != BenchEngine::Cpu,
-        repeats,
+        repeats: repeats as usize,
         parts: match only {
             None => BenchParts::All,
             Some(BenchPart::Kernels) => BenchParts::Kernels,
