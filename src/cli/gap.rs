@@ -235,6 +235,7 @@ pub(crate) fn run_validate(
     settings: &tirewear::validate::ValidateSettings,
     out: &std::path::Path,
 ) -> Result<()> {
+    settings.check()?;
     let started = std::time::Instant::now();
     let cases = tirewear::validate::validate(settings);
     let table = tirewear::validate::render(&cases);

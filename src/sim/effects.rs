@@ -79,7 +79,7 @@ impl Effect {
     pub fn check(&self) -> Result<(), String> {
         if !(0.0..=MAX_MAGNITUDE).contains(&self.magnitude) {
             return Err(format!(
-                "magnitude must be within 0..{MAX_MAGNITUDE} (abrasion per joule relative to base wear where it acts), got {}",
+                "magnitude must be within 0..{MAX_MAGNITUDE} (abrasion per joule relative to base wear where it acts), got {:?}",
                 self.magnitude
             ));
         }
@@ -90,7 +90,7 @@ impl Effect {
             ));
         }
         if !(self.width > 0.0 && self.width.is_finite()) {
-            return Err(format!("width must be > 0, got {}", self.width));
+            return Err(format!("width must be > 0, got {:?}", self.width));
         }
         Ok(())
     }

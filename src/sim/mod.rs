@@ -80,51 +80,61 @@ pub struct SimSummary {
 
 const ROAD_MICRO_LAMBDA_MM: f64 = 0.5;
 
+impl SimOptions {
+    /// Refuses options no season can be simulated with (scale, rate,
+    /// tracks, events, each planted effect), before any file is written:
+    /// `simulate` calls it, and `gap validate` for every season first.
+    pub fn check(&self) -> Result<(), SimError> {
+        if !(self.scale > 0.0 && self.scale.is_finite()) {
+            return Err(SimError::Config(format!(
+                "the scale must be > 0, got {}",
+                self.scale
+            )));
+        }
+        if let Some(r) = self.rate_hz
+            && !(1.0..=1000.0).contains(&r)
+        {
+            return Err(SimError::Config(format!(
+                "the sample rate must be within 1..1000 Hz, got {r}"
+            )));
+        }
+        if let Some(n) = self.tracks
+            && !(1..=preset::MAX_TRACKS).contains(&n)
+        {
+            return Err(SimError::Config(format!(
+                "the number of tracks must be within 1..{}, got {n}",
+                preset::MAX_TRACKS
+            )));
+        }
+        if self.preset == Preset::Season {
+            let events = (24.0 * self.scale).round();
+            if events > preset::MAX_EVENTS as f64 {
+                return Err(SimError::Config(format!(
+                    "scale {} gives {events} events; a season has at most {} (scale {:.1}; scale 1 is 24 events, about 20 GB at 200 Hz)",
+                    self.scale,
+                    preset::MAX_EVENTS,
+                    preset::MAX_EVENTS as f64 / 24.0
+                )));
+            }
+        }
+        for e in &self.effects {
+            e.check()
+                .map_err(|m| SimError::Config(format!("effect {}: {m}", e.kind.name())))?;
+        }
+        let mut kinds: Vec<_> = self.effects.iter().map(|e| e.kind).collect();
+        kinds.sort();
+        kinds.dedup();
+        if kinds.len() != self.effects.len() {
+            return Err(SimError::Config("each effect may be given once".into()));
+        }
+        Ok(())
+    }
+}
+
 /// Simulates a season into `opts.out`. The manifest is written last, so a
 /// folder with `season.toml` is a complete archive.
 pub fn simulate(opts: &SimOptions) -> Result<SimSummary, SimError> {
-    if !(opts.scale > 0.0 && opts.scale.is_finite()) {
-        return Err(SimError::Config(format!(
-            "the scale must be > 0, got {}",
-            opts.scale
-        )));
-    }
-    if let Some(r) = opts.rate_hz
-        && !(1.0..=1000.0).contains(&r)
-    {
-        return Err(SimError::Config(format!(
-            "the sample rate must be within 1..1000 Hz, got {r}"
-        )));
-    }
-    if let Some(n) = opts.tracks
-        && !(1..=preset::MAX_TRACKS).contains(&n)
-    {
-        return Err(SimError::Config(format!(
-            "the number of tracks must be within 1..{}, got {n}",
-            preset::MAX_TRACKS
-        )));
-    }
-    if opts.preset == Preset::Season {
-        let events = (24.0 * opts.scale).round();
-        if events > preset::MAX_EVENTS as f64 {
-            return Err(SimError::Config(format!(
-                "scale {} gives {events} events; a season has at most {} (scale {:.1}; scale 1 is 24 events, about 20 GB at 200 Hz)",
-                opts.scale,
-                preset::MAX_EVENTS,
-                preset::MAX_EVENTS as f64 / 24.0
-            )));
-        }
-    }
-    for e in &opts.effects {
-        e.check()
-            .map_err(|m| SimError::Config(format!("effect {}: {m}", e.kind.name())))?;
-    }
-    let mut kinds: Vec<_> = opts.effects.iter().map(|e| e.kind).collect();
-    kinds.sort();
-    kinds.dedup();
-    if kinds.len() != opts.effects.len() {
-        return Err(SimError::Config("each effect may be given once".into()));
-    }
+    opts.check()?;
     let plan = Plan::new(
         opts.preset,
         opts.scale,

@@ -284,12 +284,13 @@ fn simulated_season(opts: &crate::sim::SimOptions, reuse: bool) -> Result<PathBu
     Ok(kpis)
 }
 
-/// Simulates, extracts, diagnoses and scores one season.
-pub fn run_case(
+/// The simulator's options for one season of the matrix (its folder under
+/// `s.work` named by what is planted and the seed).
+fn season_options(
     planted_kind: &Planted,
     seed: u64,
     s: &ValidateSettings,
-) -> Result<(Case, Diagnosis), ValidateError> {
+) -> crate::sim::SimOptions {
     let name = match planted_kind {
         Planted::Named(e) => format!(
             "{}-m{}-t{}-s{seed}",
@@ -300,8 +301,7 @@ pub fn run_case(
         Planted::Generated(g) => format!("generated-{}-s{seed}", g.seed),
         Planted::Clean => format!("clean-s{seed}"),
     };
-    let dir = s.work.join(name);
-    let opts = crate::sim::SimOptions {
+    crate::sim::SimOptions {
         preset: s.preset,
         scale: s.scale,
         tracks: s.tracks,
@@ -317,11 +317,35 @@ pub fn run_case(
         scatter: s.scatter,
         encoding: crate::ingest::telemetry::Encoding::Block,
         rate_hz: Some(s.rate_hz),
-        out: dir.clone(),
+        out: s.work.join(name),
         sensor_noise: true,
         logger_export: None,
         progress: false,
-    };
+    }
+}
+
+impl ValidateSettings {
+    /// Refuses settings no season of the matrix can run with (the
+    /// diagnosis's, and each season's simulator options), before anything
+    /// is simulated: `--rate 0` or a magnitude of 1e308 once failed every
+    /// season in turn.
+    pub fn check(&self) -> Result<(), ValidateError> {
+        self.gap.check()?;
+        for (planted, seed) in matrix(self) {
+            season_options(&planted, seed, self).check()?;
+        }
+        Ok(())
+    }
+}
+
+/// Simulates, extracts, diagnoses and scores one season.
+pub fn run_case(
+    planted_kind: &Planted,
+    seed: u64,
+    s: &ValidateSettings,
+) -> Result<(Case, Diagnosis), ValidateError> {
+    let opts = season_options(planted_kind, seed, s);
+    let dir = opts.out.clone();
     let kpis = simulated_season(&opts, s.reuse)?;
     let rows = crate::kpi::table::read_parquet(&kpis)?;
     let maps = crate::kpi::energy_maps::read_tire_maps(&kpis)?;
@@ -423,6 +447,56 @@ pub fn validate(s: &ValidateSettings) -> Vec<Case> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Settings no season can run with are refused before anything is
+    /// simulated, naming what is wrong: a rate of 0, a magnitude of 1e308,
+    /// an error rate of 2; the same settings with sane values pass.
+    #[test]
+    fn settings_no_season_can_run_with_are_refused_first() {
+        let dir = tempfile::tempdir().unwrap();
+        let ok = ValidateSettings {
+            effects: vec![EffectKind::Graining],
+            magnitudes: vec![1.0],
+            seeds: vec![1],
+            clean_seeds: vec![2],
+            random: vec![3],
+            preset: crate::sim::Preset::Demo,
+            scale: 1.0,
+            tracks: None,
+            rate_hz: 5.0,
+            scatter: crate::sim::WearScatter::NONE,
+            work: dir.path().to_path_buf(),
+            keep: false,
+            reuse: false,
+            gap: GapSettings::default(),
+            against_truth: false,
+            progress: false,
+        };
+        ok.check().unwrap();
+        let refused = |s: ValidateSettings, what: &str| {
+            let e = s.check().unwrap_err().to_string();
+            assert!(e.contains(what), "{e}");
+        };
+        refused(
+            ValidateSettings {
+                rate_hz: 0.0,
+                ..ok.clone()
+            },
+            "sample rate must be within 1..1000 Hz, got 0",
+        );
+        refused(
+            ValidateSettings {
+                magnitudes: vec![1.0, 1e308],
+                ..ok.clone()
+            },
+            "effect graining: magnitude must be within 0..100 (abrasion per joule relative to base wear where it acts), got 1e308",
+        );
+        let mut gap = GapSettings::default();
+        gap.fdr = 2.0;
+        refused(ValidateSettings { gap, ..ok.clone() }, "setting fdr = 2");
+        // Nothing was simulated.
+        assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0);
+    }
 
     fn options(out: &std::path::Path, seed: u64) -> crate::sim::SimOptions {
         crate::sim::SimOptions {
