@@ -491,8 +491,10 @@ mod tests {
             },
             "effect graining: magnitude must be within 0..100 (abrasion per joule relative to base wear where it acts), got 1e308",
         );
-        let mut gap = GapSettings::default();
-        gap.fdr = 2.0;
+        let gap = GapSettings {
+            fdr: 2.0,
+            ..Default::default()
+        };
         refused(ValidateSettings { gap, ..ok.clone() }, "setting fdr = 2");
         // Nothing was simulated.
         assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0);
