@@ -233,4 +233,14 @@ fn damaged_models_are_refused_by_field_or_predict_alike(
         }
     }
     assert!(refused >= 10, "{refused}");
+    // A layer size that would overflow the weights' count.
+    let text = std::fs::read_to_string(dir.join("ffnn.json")).unwrap();
+    let mut v: serde_json::Value = serde_json::from_str(&text).unwrap();
+    *v.pointer_mut("/model/network/net/hidden1").unwrap() = u64::MAX.into();
+    std::fs::write(&damaged, serde_json::to_string(&v).unwrap()).unwrap();
+    let e = SavedModel::load(&damaged).unwrap_err().to_string();
+    assert!(
+        e.contains("model.network.net.hidden1 is 18446744073709551615"),
+        "{e}"
+    );
 }

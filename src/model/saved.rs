@@ -177,6 +177,13 @@ impl SavedModel {
                         net.inputs
                     ));
                 }
+                for (name, h) in [("hidden1", net.hidden1), ("hidden2", net.hidden2)] {
+                    // Sizes the weights' count is computed from: a damaged
+                    // one must not overflow it.
+                    if !(1..=MAX_HIDDEN).contains(&h) {
+                        return Err(format!("{at}.{name} is {h}, a layer of 1 to {MAX_HIDDEN}"));
+                    }
+                }
                 let weights = super::ffnn::n_weights(d, net.hidden1, net.hidden2);
                 let why = format!(
                     "{d} inputs, hidden layers of {} and {}",
@@ -260,6 +267,10 @@ impl SavedModel {
         }
     }
 }
+
+/// Largest hidden layer a saved network may declare (`fit` tries up to the
+/// number of inputs plus 4).
+const MAX_HIDDEN: usize = 4096;
 
 /// `values` has `want` numbers (`why`: what sets that) and each is finite.
 fn length(field: &str, values: &[f64], want: usize, why: &str) -> Result<(), String> {
