@@ -470,6 +470,25 @@ fn a_damaged_part_or_table_is_made_again() {
     named(&s, &cond_part);
     assert_eq!(tree(&dataset), t);
     assert_eq!(processed_rows(&dataset), extracted(&archive, dir.path()));
+
+    // The manifest itself: refused by name with what to do, nothing
+    // changed; once it is moved aside, the next run makes the same dataset.
+    let manifest = dataset.join("dataset.json");
+    cut(&manifest);
+    let damaged = tree(&dataset);
+    let e = process(&ProcessOptions::new(vec![archive.clone()], &dataset))
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("dataset.json: not a tirewear dataset manifest"),
+        "{e}"
+    );
+    assert!(e.contains("move the file aside"), "{e}");
+    assert_eq!(tree(&dataset), damaged);
+    std::fs::remove_file(&manifest).unwrap();
+    let s = run(&archive, &dataset);
+    assert_eq!(s.processed, 4);
+    assert_eq!(tree(&dataset), t);
 }
 
 /// The documented exit codes: 4 while another process holds the dataset,

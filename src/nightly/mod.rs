@@ -258,7 +258,8 @@ fn read_manifest(dataset: &Path) -> Result<Option<DatasetManifest>, NightlyError
     };
     let m: DatasetManifest = serde_json::from_slice(&text).map_err(|e| {
         NightlyError::Invalid(format!(
-            "{}: not a tirewear dataset manifest: {e}",
+            "{}: not a tirewear dataset manifest: {e} (nothing was changed; move the file \
+             aside and the next run processes every run of the archives again)",
             path.display()
         ))
     })?;
