@@ -525,7 +525,8 @@ fn mutated_manifests_compounds_roads_and_wear_never_panic() {
 /// demo's table) never panic the gap diagnosis, the physical and PCA fits
 /// or the saved models' predictions: each gives a result or an error. A
 /// column without a finite value once panicked the diagnosis's candidate
-/// library (the contact patch's threshold grid).
+/// library (the contact patch's threshold grid), and a wear column of
+/// denormals the fits (statrs, on 0/0 t-values).
 #[test]
 fn kpi_tables_with_absurd_values_never_panic_the_models_or_the_diagnosis() {
     use std::panic::{AssertUnwindSafe, catch_unwind};
@@ -569,13 +570,17 @@ fn kpi_tables_with_absurd_values_never_panic_the_models_or_the_diagnosis() {
     let mut rng = ChaCha8Rng::seed_from_u64(2026);
     let mut failures = Vec::new();
     let (mut diagnosed, mut refused) = (0, 0);
-    for case in 0..17 {
+    for case in 0..18 {
         let mut rows = clean.clone();
         let mut what = Vec::new();
+        // The cases that panicked, by hand.
         if case == 16 {
-            // The case that panicked, by hand.
             rows.iter_mut().for_each(|r| r.contact_patch_mm2 = f64::NAN);
             what.push("contact_patch_mm2[..] = NaN".to_string());
+        }
+        if case == 17 {
+            rows.iter_mut().for_each(|r| r.wear_mean_pct = 5e-324);
+            what.push("wear_mean_pct[..] = 5e-324".to_string());
         }
         for _ in 0..[1, 2, 5, 30][case % 4] * usize::from(case < 16) {
             let col = columns[rng.random_range(0..columns.len())];
@@ -631,7 +636,7 @@ fn kpi_tables_with_absurd_values_never_panic_the_models_or_the_diagnosis() {
             }
         }
     }
-    println!("absurd KPI values: 17 tables, {diagnosed} diagnosed, {refused} refused");
+    println!("absurd KPI values: 18 tables, {diagnosed} diagnosed, {refused} refused");
     assert!(failures.is_empty(), "{}", failures.join("\n"));
     // The mutations are not all refused: most tables still diagnose.
     assert!(diagnosed >= 8, "{diagnosed}");

@@ -155,7 +155,7 @@ pub fn clustered_difference(
     }
     let se = var.sqrt();
     let t = StudentsT::new(0.0, 1.0, df).expect("df > 0");
-    let p = 2.0 * (1.0 - t.cdf((d / se).abs()));
+    let p = crate::model::ols::two_sided_p(&t, d / se);
     let q = t.inverse_cdf(0.975);
     (d, (d - q * se, d + q * se), p)
 }

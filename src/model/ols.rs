@@ -44,6 +44,19 @@ impl Predict for OlsFit {
     }
 }
 
+/// The two-sided p-value of a t statistic: NaN for a NaN statistic (0/0
+/// where a table's target is constant down to denormals; statrs panics on
+/// it) and 0 for an infinite one.
+pub(crate) fn two_sided_p(dist: &StudentsT, t: f64) -> f64 {
+    if t.is_nan() {
+        f64::NAN
+    } else if t.is_infinite() {
+        0.0
+    } else {
+        2.0 * (1.0 - dist.cdf(t.abs()))
+    }
+}
+
 impl OlsFit {
     /// Fits on rows of inputs (n × k) and the target.
     fn fit_rows(rows: &[Vec<f64>], y: &[f64], inputs: &[String]) -> Result<OlsFit, ModelError> {
@@ -81,10 +94,7 @@ impl OlsFit {
         let t_values: Vec<f64> = coef.iter().zip(&std_err).map(|(b, s)| b / s).collect();
         let dist = StudentsT::new(0.0, 1.0, df_resid as f64)
             .map_err(|e| ModelError::Invalid(e.to_string()))?;
-        let p_values = t_values
-            .iter()
-            .map(|t| 2.0 * (1.0 - dist.cdf(t.abs())))
-            .collect();
+        let p_values = t_values.iter().map(|&t| two_sided_p(&dist, t)).collect();
         Ok(OlsFit {
             inputs: inputs.to_vec(),
             coef,
@@ -114,6 +124,22 @@ impl OlsFit {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A target constant down to denormals (every wear 5e-324, from a
+    /// damaged table) is refused as constant; it panicked in statrs on the
+    /// 0/0 t-values. The p-value of a NaN or infinite t by hand.
+    #[test]
+    fn a_denormal_constant_target_is_refused_not_a_panic() {
+        let rows: Vec<Vec<f64>> = (0..8).map(|i| vec![i as f64, (i * i) as f64]).collect();
+        let y = vec![5e-324; 8];
+        let two = ["a".to_string(), "b".to_string()];
+        let e = OlsSettings.fit(Dataset::new(&rows, &y, &two));
+        assert!(matches!(e, Err(ModelError::ConstantTarget(_))), "{e:?}");
+        let t = StudentsT::new(0.0, 1.0, 5.0).unwrap();
+        assert!(two_sided_p(&t, f64::NAN).is_nan());
+        assert_eq!(two_sided_p(&t, f64::INFINITY), 0.0);
+        assert_eq!(two_sided_p(&t, 0.0), 1.0);
+    }
 
     #[test]
     fn exact_line_by_hand() {
