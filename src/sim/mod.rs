@@ -110,10 +110,11 @@ impl SimOptions {
             let events = (24.0 * self.scale).round();
             if events > preset::MAX_EVENTS as f64 {
                 return Err(SimError::Config(format!(
-                    "scale {} gives {events} events; a season has at most {} (scale {:.1}; scale 1 is 24 events, about 20 GB at 200 Hz)",
+                    "scale {} gives {events} events; a season has at most {} (scale {}; scale 1 is 24 events, about 20 GB at 200 Hz)",
                     self.scale,
                     preset::MAX_EVENTS,
-                    preset::MAX_EVENTS as f64 / 24.0
+                    // The largest scale with one decimal that stays within.
+                    (preset::MAX_EVENTS as f64 / 24.0 * 10.0).floor() / 10.0
                 )));
             }
         }
@@ -797,7 +798,7 @@ mod tests {
             let e = simulate(&opts(Preset::Season, scale, vec![]))
                 .unwrap_err()
                 .to_string();
-            assert!(e.contains("at most 1000"), "{e}");
+            assert!(e.contains("at most 1000 (scale 41.6;"), "{e}");
         }
         let nan = Effect {
             threshold: f64::NAN,

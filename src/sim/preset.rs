@@ -243,7 +243,7 @@ pub fn track_catalogue() -> Vec<TrackDef> {
 /// The most tracks a season may have (`SimOptions::tracks`).
 pub const MAX_TRACKS: usize = 64;
 
-/// Most events of a season preset (`--scale` up to 41.7): the calendar and
+/// Most events of a season preset (`--scale` up to 41.6): the calendar and
 /// the plan are sized from it, so `--scale 1e9` is refused instead of
 /// asking for terabytes.
 pub const MAX_EVENTS: usize = 1000;
