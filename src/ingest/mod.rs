@@ -1,6 +1,7 @@
 //! The season archive: the documented input formats (`docs/formats.md`),
 //! their readers with clear errors, and the writers the simulator uses.
 
+pub(crate) mod checksum;
 pub mod compound;
 pub mod error;
 pub mod manifest;

@@ -181,8 +181,9 @@ pub fn write_profiles_parquet(path: &Path, profiles: &[Profile]) -> Result<()> {
         .set_compression(parquet::basic::Compression::ZSTD(Default::default()))
         .build();
     let schema = bulk_schema();
-    let mut w = parquet::arrow::ArrowWriter::try_new(out.file(), schema.clone(), Some(props))
-        .map_err(pq)?;
+    let sink = super::checksum::CrcWriter::new(out.file());
+    let mut w =
+        parquet::arrow::ArrowWriter::try_new(sink, schema.clone(), Some(props)).map_err(pq)?;
     for p in profiles {
         let n = p.z_mm.len();
         let batch = RecordBatch::try_new(
@@ -199,6 +200,7 @@ pub fn write_profiles_parquet(path: &Path, profiles: &[Profile]) -> Result<()> {
         .map_err(|e| pq(e.into()))?;
         w.write(&batch).map_err(pq)?;
     }
+    super::checksum::seal_arrow(&mut w).map_err(pq)?;
     w.close().map_err(pq)?;
     out.commit().map_err(|e| IngestError::io(path, e))
 }
@@ -225,10 +227,10 @@ pub(crate) fn read_profiles_parquet_each(path: &Path) -> Result<Vec<ProfileResul
         source,
     };
     let file = std::fs::File::open(path).map_err(|e| IngestError::io(path, e))?;
-    let reader = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file)
-        .map_err(pq)?
-        .build()
-        .map_err(pq)?;
+    let builder =
+        parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file).map_err(pq)?;
+    super::checksum::verify(path, builder.metadata())?;
+    let reader = builder.build().map_err(pq)?;
     struct Acc {
         key: (String, String),
         x: Vec<f64>,

@@ -193,10 +193,10 @@ pub(crate) fn side_batches(
     path: &Path,
 ) -> Result<impl Iterator<Item = Result<RecordBatch, IngestError>> + use<>, IngestError> {
     let file = std::fs::File::open(path).map_err(|e| IngestError::io(path, e))?;
-    let reader = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file)
-        .map_err(|e| parquet_err(path, e))?
-        .build()
+    let builder = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file)
         .map_err(|e| parquet_err(path, e))?;
+    crate::ingest::checksum::verify(path, builder.metadata())?;
+    let reader = builder.build().map_err(|e| parquet_err(path, e))?;
     let path = path.to_path_buf();
     Ok(reader.map(move |b| b.map_err(|e| parquet_err(&path, e))))
 }
@@ -287,7 +287,8 @@ fn write_row_groups(
     use parquet::arrow::arrow_writer::{ArrowColumnChunk, compute_leaves};
     use rayon::prelude::*;
     let props = writer_properties(&batch.schema(), rows_per_group);
-    let w = parquet::arrow::ArrowWriter::try_new(file, batch.schema(), Some(props))?;
+    let sink = crate::ingest::checksum::CrcWriter::new(file);
+    let w = parquet::arrow::ArrowWriter::try_new(sink, batch.schema(), Some(props))?;
     let (mut file_writer, columns) = w.into_serialized_writer()?;
     let (rows, schema) = (batch.num_rows(), batch.schema());
     for (group, start) in (0..rows).step_by(rows_per_group.max(1)).enumerate() {
@@ -318,6 +319,7 @@ fn write_row_groups(
         }
         row_group.close()?;
     }
+    crate::ingest::checksum::seal(&mut file_writer)?;
     file_writer.close()?;
     Ok(())
 }
@@ -485,6 +487,7 @@ pub fn read_parquet(path: &Path) -> Result<Vec<KpiRow>, IngestError> {
     let file = std::fs::File::open(path).map_err(|e| IngestError::io(path, e))?;
     let builder = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file)
         .map_err(|e| parquet_err(path, e))?;
+    crate::ingest::checksum::verify(path, builder.metadata())?;
     check_units(path, builder.schema())?;
     let reader = builder.build().map_err(|e| parquet_err(path, e))?;
     let mut rows = Vec::new();
@@ -551,13 +554,17 @@ pub fn read_parquet(path: &Path) -> Result<Vec<KpiRow>, IngestError> {
 mod tests {
     use super::*;
 
-    /// `ArrowWriter` itself, the route `write_row_groups` replaces.
+    /// `ArrowWriter` itself, the route `write_row_groups` replaces, sealed
+    /// with the data checksum as the road profiles' writer seals it.
     fn arrow_writer_bytes(batch: &RecordBatch, rows_per_group: usize) -> Vec<u8> {
+        use crate::ingest::checksum::{CrcWriter, seal_arrow};
         let props = writer_properties(&batch.schema(), rows_per_group);
         let mut out = Vec::new();
+        let sink = CrcWriter::new(&mut out);
         let mut w =
-            parquet::arrow::ArrowWriter::try_new(&mut out, batch.schema(), Some(props)).unwrap();
+            parquet::arrow::ArrowWriter::try_new(sink, batch.schema(), Some(props)).unwrap();
         w.write(batch).unwrap();
+        seal_arrow(&mut w).unwrap();
         w.close().unwrap();
         out
     }

@@ -282,20 +282,20 @@ fn read_batches(path: &Path) -> Result<Vec<RecordBatch>, NightlyError> {
             path.display()
         ))
     };
-    let reader = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file)
-        .and_then(|b| b.build())
+    let builder = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file)
         .map_err(|e| bad(&e))?;
+    if let Some(why) = crate::ingest::checksum::mismatch(path, builder.metadata()) {
+        return Err(bad(&format!("data checksum: {why}")));
+    }
+    let reader = builder.build().map_err(|e| bad(&e))?;
     reader.collect::<Result<Vec<_>, _>>().map_err(|e| bad(&e))
 }
 
 /// Whether every committed part of `e` can still be read: its Parquet
-/// footer parses and, for the KPI part, holds the rows the manifest
-/// recorded. A part that is missing or fails this is reported in
-/// `warnings` and its run is processed again. Only the footer is read (a
-/// few KiB, so the check stays cheap every night): damage inside a data
-/// page passes it, and shows only if the part itself must be read at the
-/// commit, whose error names the part (docs/nightly.md, "Damaged parts and
-/// tables").
+/// footer parses, its data match the footer's checksum and, for the KPI
+/// part, it holds the rows the manifest recorded. A part that is missing
+/// or fails this is reported in `warnings` and its run is processed again
+/// (docs/nightly.md, "Damaged parts and tables").
 fn parts_intact(dataset: &Path, e: &RunEntry, warnings: &mut Vec<String>) -> bool {
     PART_KINDS.iter().all(|kind| {
         let path = committed_part(dataset, kind, e);
@@ -326,6 +326,9 @@ fn part_damage(path: &Path, rows: Option<usize>) -> Option<String> {
         Ok(m) => m,
         Err(e) => return Some(format!("damaged (not a readable Parquet file: {e})")),
     };
+    if let Some(why) = crate::ingest::checksum::mismatch(path, &meta) {
+        return Some(format!("damaged (data checksum: {why})"));
+    }
     let found = meta.file_metadata().num_rows();
     match rows {
         Some(want) if found != want as i64 => Some(format!(

@@ -1,0 +1,221 @@
+//! A checksum over the data of the Parquet files tirewear writes.
+//!
+//! Parquet allows a CRC per page, but the Rust writer does not write them,
+//! so a bit flipped inside a data page of a KPI table or a side table would
+//! be read as a valid number. Each file tirewear writes therefore carries,
+//! in its footer's key-value metadata under [`CHECKSUM_KEY`], the CRC-32
+//! (IEEE, as zlib and `crc32fast`) of its first bytes — everything before
+//! the page indexes and the footer: the magic and every row group's pages —
+//! written as `"<byte count> <crc as 8 hex digits>"`. Readers check it when
+//! it is present; files from other tools or from before it have none and
+//! are read as before (docs/formats.md, "Checksum of tirewear's Parquet
+//! files").
+
+use std::io::{Read, Write};
+use std::path::Path;
+
+use parquet::file::metadata::{KeyValue, ParquetMetaData};
+use parquet::file::writer::SerializedFileWriter;
+
+/// Footer key-value key holding the data checksum.
+pub(crate) const CHECKSUM_KEY: &str = "tirewear.data_crc32";
+
+/// A writer that counts and checksums every byte it passes on.
+pub(crate) struct CrcWriter<W> {
+    inner: W,
+    crc: crc32fast::Hasher,
+    bytes: u64,
+}
+
+impl<W: Write> CrcWriter<W> {
+    pub(crate) fn new(inner: W) -> Self {
+        Self {
+            inner,
+            crc: crc32fast::Hasher::new(),
+            bytes: 0,
+        }
+    }
+}
+
+impl<W: Write> Write for CrcWriter<W> {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        let n = self.inner.write(buf)?;
+        self.crc.update(&buf[..n]);
+        self.bytes += n as u64;
+        Ok(n)
+    }
+
+    fn flush(&mut self) -> std::io::Result<()> {
+        self.inner.flush()
+    }
+}
+
+/// Records the checksum of everything written so far (every row group) in
+/// the footer that `close` writes next. Call it after the last row group.
+pub(crate) fn seal<W: Write + Send>(
+    writer: &mut SerializedFileWriter<CrcWriter<W>>,
+) -> std::io::Result<()> {
+    // The file writer buffers: push its bytes through the checksum first.
+    writer.flush()?;
+    let sink = writer.inner();
+    let value = format!("{} {:08x}", sink.bytes, sink.crc.clone().finalize());
+    writer.append_key_value_metadata(KeyValue::new(CHECKSUM_KEY.to_string(), value));
+    Ok(())
+}
+
+/// [`seal`] for a writer that makes its own row groups: flushes the rows
+/// it still holds as a row group first.
+pub(crate) fn seal_arrow<W: Write + Send>(
+    writer: &mut parquet::arrow::ArrowWriter<CrcWriter<W>>,
+) -> parquet::errors::Result<()> {
+    writer.flush()?;
+    writer.sync()?;
+    let sink = writer.inner();
+    let value = format!("{} {:08x}", sink.bytes, sink.crc.clone().finalize());
+    writer.append_key_value_metadata(KeyValue::new(CHECKSUM_KEY.to_string(), value));
+    Ok(())
+}
+
+/// Why a file's data does not match the checksum its footer records, or
+/// `None` when it matches or the footer records none.
+pub(crate) fn mismatch(path: &Path, metadata: &ParquetMetaData) -> Option<String> {
+    let recorded = metadata
+        .file_metadata()
+        .key_value_metadata()?
+        .iter()
+        .find(|kv| kv.key == CHECKSUM_KEY)?
+        .value
+        .clone();
+    let Some((bytes, crc)) = recorded.as_deref().and_then(parse) else {
+        return Some(format!(
+            "footer key {CHECKSUM_KEY} is {recorded:?}, not \"<bytes> <8 hex digits>\""
+        ));
+    };
+    match crc_of_prefix(path, bytes) {
+        Ok(Some(found)) if found == crc => None,
+        Ok(Some(found)) => Some(format!(
+            "bytes 0..{bytes} have CRC-32 {found:08x} where the footer recorded {crc:08x}: \
+             the file was damaged after it was written; make it again"
+        )),
+        Ok(None) => Some(format!(
+            "the footer's checksum covers {bytes} bytes, more than the file holds: \
+             the file was cut or damaged after it was written; make it again"
+        )),
+        Err(e) => Some(format!("cannot be read to check its checksum: {e}")),
+    }
+}
+
+fn parse(value: &str) -> Option<(u64, u32)> {
+    let (bytes, crc) = value.split_once(' ')?;
+    if crc.len() != 8 {
+        return None;
+    }
+    Some((bytes.parse().ok()?, u32::from_str_radix(crc, 16).ok()?))
+}
+
+/// CRC-32 of the first `bytes` bytes of the file, `None` if it is shorter.
+fn crc_of_prefix(path: &Path, bytes: u64) -> std::io::Result<Option<u32>> {
+    let mut file = std::fs::File::open(path)?.take(bytes);
+    let mut crc = crc32fast::Hasher::new();
+    let mut buf = vec![0u8; bytes.clamp(1, 1 << 20) as usize];
+    let mut seen = 0u64;
+    loop {
+        let n = file.read(&mut buf)?;
+        if n == 0 {
+            break;
+        }
+        crc.update(&buf[..n]);
+        seen += n as u64;
+    }
+    Ok((seen == bytes).then(|| crc.finalize()))
+}
+
+/// Checks the checksum of a Parquet file whose footer has been read: an
+/// error naming the file when its data does not match.
+pub(crate) fn verify(path: &Path, metadata: &ParquetMetaData) -> crate::ingest::Result<()> {
+    match mismatch(path, metadata) {
+        None => Ok(()),
+        Some(why) => Err(crate::ingest::IngestError::invalid(
+            path,
+            "data checksum",
+            why,
+        )),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_recorded_value_parses_only_in_its_own_form() {
+        assert_eq!(parse("1234 0000abcd"), Some((1234, 0xabcd)));
+        assert_eq!(parse("1234 abcd"), None);
+        assert_eq!(parse("x 0000abcd"), None);
+        assert_eq!(parse("1234"), None);
+        assert_eq!(parse("1234 0000abcg"), None);
+    }
+
+    /// Every byte of a small table's checksummed data changed in turn is
+    /// reported; the undamaged file and a file without the key are not.
+    #[test]
+    fn every_changed_byte_of_the_data_is_a_mismatch() {
+        use arrow_array::{Float64Array, RecordBatch};
+        use parquet::file::metadata::ParquetMetaDataReader;
+        use std::sync::Arc;
+        let values = Float64Array::from_iter_values((0..40).map(|i| i as f64 * 1.25));
+        let batch = RecordBatch::try_from_iter([("energy_j", Arc::new(values) as _)]).unwrap();
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("t.parquet");
+        let mut clean = Vec::new();
+        crate::kpi::table::write_batch_to(&mut clean, &batch).unwrap();
+        std::fs::write(&path, &clean).unwrap();
+        let footer = |p: &Path| {
+            ParquetMetaDataReader::new()
+                .parse_and_finish(&std::fs::File::open(p).unwrap())
+                .unwrap()
+        };
+        let meta = footer(&path);
+        assert_eq!(mismatch(&path, &meta), None);
+        let value = meta
+            .file_metadata()
+            .key_value_metadata()
+            .and_then(|kv| kv.iter().find(|kv| kv.key == CHECKSUM_KEY)?.value.clone())
+            .unwrap();
+        let (covered, _) = parse(&value).unwrap();
+        assert!(covered > 100 && (covered as usize) < clean.len());
+        for at in 0..covered as usize {
+            let mut bytes = clean.clone();
+            bytes[at] ^= 0x80 >> (at % 8);
+            std::fs::write(&path, &bytes).unwrap();
+            let why = mismatch(&path, &meta).unwrap_or_else(|| panic!("byte {at}"));
+            assert!(why.contains("damaged after it was written"), "{why}");
+        }
+        // Cut inside the data: the file holds fewer bytes than recorded.
+        std::fs::write(&path, &clean[..covered as usize - 1]).unwrap();
+        assert!(
+            mismatch(&path, &meta)
+                .unwrap()
+                .contains("more than the file holds")
+        );
+        // A footer without the key (another writer): nothing to check.
+        let mut plain = Vec::new();
+        let mut w = parquet::arrow::ArrowWriter::try_new(&mut plain, batch.schema(), None).unwrap();
+        w.write(&batch).unwrap();
+        w.close().unwrap();
+        let other = dir.path().join("other.parquet");
+        std::fs::write(&other, plain).unwrap();
+        assert_eq!(mismatch(&other, &footer(&other)), None);
+    }
+
+    #[test]
+    fn the_writer_checksums_what_it_passes_on() {
+        // zlib's CRC-32 of "123456789" is cbf43926 (the standard check value).
+        let mut w = CrcWriter::new(Vec::new());
+        w.write_all(b"12345").unwrap();
+        w.write_all(b"6789").unwrap();
+        assert_eq!(w.bytes, 9);
+        assert_eq!(w.crc.clone().finalize(), 0xcbf4_3926);
+        assert_eq!(w.inner, b"123456789");
+    }
+}
