@@ -14,6 +14,7 @@
 use std::io::{Read, Write};
 use std::path::Path;
 
+use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
 use parquet::file::metadata::{KeyValue, ParquetMetaData};
 use parquet::file::writer::SerializedFileWriter;
 
@@ -130,16 +131,21 @@ fn crc_of_prefix(path: &Path, bytes: u64) -> std::io::Result<Option<u32>> {
     Ok((seen == bytes).then(|| crc.finalize()))
 }
 
-/// Checks the checksum of a Parquet file whose footer has been read: an
-/// error naming the file when its data does not match.
-pub(crate) fn verify(path: &Path, metadata: &ParquetMetaData) -> crate::ingest::Result<()> {
-    match mismatch(path, metadata) {
-        None => Ok(()),
-        Some(why) => Err(crate::ingest::IngestError::invalid(
-            path,
-            "data checksum",
-            why,
-        )),
+/// A Parquet file opened for reading, its footer read and its data checked
+/// against the footer's checksum; every error names the file.
+pub(crate) fn open_parquet(
+    path: &Path,
+) -> crate::ingest::Result<ParquetRecordBatchReaderBuilder<std::fs::File>> {
+    use crate::ingest::IngestError;
+    let file = std::fs::File::open(path).map_err(|e| IngestError::io(path, e))?;
+    let builder =
+        ParquetRecordBatchReaderBuilder::try_new(file).map_err(|source| IngestError::Parquet {
+            path: path.to_path_buf(),
+            source,
+        })?;
+    match mismatch(path, builder.metadata()) {
+        None => Ok(builder),
+        Some(why) => Err(IngestError::invalid(path, "data checksum", why)),
     }
 }
 

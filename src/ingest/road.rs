@@ -226,11 +226,7 @@ pub(crate) fn read_profiles_parquet_each(path: &Path) -> Result<Vec<ProfileResul
         path: path.to_path_buf(),
         source,
     };
-    let file = std::fs::File::open(path).map_err(|e| IngestError::io(path, e))?;
-    let builder =
-        parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file).map_err(pq)?;
-    super::checksum::verify(path, builder.metadata())?;
-    let reader = builder.build().map_err(pq)?;
+    let reader = super::checksum::open_parquet(path)?.build().map_err(pq)?;
     struct Acc {
         key: (String, String),
         x: Vec<f64>,

@@ -192,11 +192,9 @@ fn parquet_err(path: &Path, e: impl Into<parquet::errors::ParquetError>) -> Inge
 pub(crate) fn side_batches(
     path: &Path,
 ) -> Result<impl Iterator<Item = Result<RecordBatch, IngestError>> + use<>, IngestError> {
-    let file = std::fs::File::open(path).map_err(|e| IngestError::io(path, e))?;
-    let builder = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file)
+    let reader = crate::ingest::checksum::open_parquet(path)?
+        .build()
         .map_err(|e| parquet_err(path, e))?;
-    crate::ingest::checksum::verify(path, builder.metadata())?;
-    let reader = builder.build().map_err(|e| parquet_err(path, e))?;
     let path = path.to_path_buf();
     Ok(reader.map(move |b| b.map_err(|e| parquet_err(&path, e))))
 }
@@ -484,10 +482,7 @@ pub fn read_parquet(path: &Path) -> Result<Vec<KpiRow>, IngestError> {
             format!("is a folder, not a KPI database (the Parquet file `extract` writes){hint}"),
         ));
     }
-    let file = std::fs::File::open(path).map_err(|e| IngestError::io(path, e))?;
-    let builder = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file)
-        .map_err(|e| parquet_err(path, e))?;
-    crate::ingest::checksum::verify(path, builder.metadata())?;
+    let builder = crate::ingest::checksum::open_parquet(path)?;
     check_units(path, builder.schema())?;
     let reader = builder.build().map_err(|e| parquet_err(path, e))?;
     let mut rows = Vec::new();

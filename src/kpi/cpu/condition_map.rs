@@ -1061,10 +1061,7 @@ pub fn read_condition_maps(
         path: path.to_path_buf(),
         source: e,
     };
-    let file = std::fs::File::open(path).map_err(|e| IngestError::io(path, e))?;
-    let builder = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file)
-        .map_err(perr)?;
-    crate::ingest::checksum::verify(path, builder.metadata())?;
+    let builder = crate::ingest::checksum::open_parquet(path)?;
     let version: u32 = match builder.schema().metadata().get(VERSION_KEY) {
         Some(v) if matches!(v.as_str(), "1" | "2" | "3" | "4") => v.parse().expect("a digit"),
         Some(v) => {
