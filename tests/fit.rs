@@ -88,6 +88,7 @@ fn demo_fit_ranks_like_the_paper_and_models_round_trip() {
         }
     }
     damaged_models_are_refused_by_field_or_predict_alike(&models, &out, &rows);
+    changed_bytes_of_a_model_file_are_refused(&models, &out);
 
     // The indicators recomputed from the reloaded model's predictions on the testing events.
     let phys = SavedModel::load(&out.join("physical.json")).unwrap();
@@ -180,6 +181,67 @@ fn array_pointers(v: &serde_json::Value, at: String, out: &mut Vec<String>) {
     }
 }
 
+/// Every byte of the physical and PCA model files changed in turn (one bit
+/// flipped): `SavedModel::load` refuses the file naming it, or reads the
+/// very model that was saved (a change in the checksum field's name, or in
+/// the trailing newline). A digit changed in a coefficient is valid JSON
+/// and a valid model: before the file's checksum it was read without a word
+/// (docs/models.md, "Checksum"). The same file with the field deleted, as
+/// someone editing it on purpose would, reads again and predicts otherwise.
+fn changed_bytes_of_a_model_file_are_refused(
+    models: &HashMap<&str, SavedModel>,
+    dir: &std::path::Path,
+) {
+    let damaged = dir.join("changed.json");
+    for method in ["physical", "pca"] {
+        let text = std::fs::read(dir.join(format!("{method}.json"))).unwrap();
+        let (mut refused, mut same) = (0, 0);
+        for at in 0..text.len() {
+            let mut bytes = text.clone();
+            bytes[at] ^= 1 << (at % 7);
+            std::fs::write(&damaged, &bytes).unwrap();
+            match SavedModel::load(&damaged) {
+                Err(e) => {
+                    assert!(e.to_string().contains("changed.json"), "byte {at}: {e}");
+                    refused += 1;
+                }
+                Ok(back) => {
+                    assert_eq!(&back, &models[method], "{method}: byte {at} changed, read");
+                    same += 1;
+                }
+            }
+        }
+        println!(
+            "{method}.json: {refused} of {} changes refused, {same} read the same",
+            text.len()
+        );
+        assert!(
+            refused >= text.len() * 99 / 100,
+            "{refused} of {}",
+            text.len()
+        );
+    }
+    // A coefficient's digit changed by hand: refused by the checksum, then
+    // read once the field is deleted.
+    let text = std::fs::read_to_string(dir.join("physical.json")).unwrap();
+    let at = text.find("\"coef\"").unwrap();
+    // The second decimal of the first coefficient, one up.
+    let digit = at + text[at..].find('.').unwrap() + 2;
+    let up = (text.as_bytes()[digit] - b'0' + 1) % 10;
+    let mut edited = text.clone();
+    edited.replace_range(digit..digit + 1, &up.to_string());
+    std::fs::write(&damaged, &edited).unwrap();
+    let e = SavedModel::load(&damaged).unwrap_err().to_string();
+    assert!(
+        e.contains("data_crc32") && e.contains("delete the field"),
+        "{e}"
+    );
+    let mut v: serde_json::Value = serde_json::from_str(&edited).unwrap();
+    v.as_object_mut().unwrap().remove("data_crc32");
+    std::fs::write(&damaged, serde_json::to_string(&v).unwrap()).unwrap();
+    assert_ne!(&SavedModel::load(&damaged).unwrap(), &models["physical"]);
+}
+
 /// Each saved model with one array one element short, every array in
 /// turn (a damaged or hand-edited file): `SavedModel::load` refuses it,
 /// naming the file and the field, or the model it reads predicts every
@@ -196,7 +258,9 @@ fn damaged_models_are_refused_by_field_or_predict_alike(
     let mut refused = 0;
     for m in models.values() {
         let text = std::fs::read_to_string(dir.join(format!("{}.json", m.method()))).unwrap();
-        let json: serde_json::Value = serde_json::from_str(&text).unwrap();
+        let mut json: serde_json::Value = serde_json::from_str(&text).unwrap();
+        // Edited on purpose: the checksum deleted, so the shapes stand guard.
+        assert!(json.as_object_mut().unwrap().remove("data_crc32").is_some());
         let mut pointers = Vec::new();
         array_pointers(&json, String::new(), &mut pointers);
         for p in pointers {
@@ -236,6 +300,7 @@ fn damaged_models_are_refused_by_field_or_predict_alike(
     // A layer size that would overflow the weights' count.
     let text = std::fs::read_to_string(dir.join("ffnn.json")).unwrap();
     let mut v: serde_json::Value = serde_json::from_str(&text).unwrap();
+    v.as_object_mut().unwrap().remove("data_crc32");
     *v.pointer_mut("/model/network/net/hidden1").unwrap() = u64::MAX.into();
     std::fs::write(&damaged, serde_json::to_string(&v).unwrap()).unwrap();
     let e = SavedModel::load(&damaged).unwrap_err().to_string();
