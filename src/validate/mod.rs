@@ -345,7 +345,7 @@ pub fn run_case(
     s: &ValidateSettings,
 ) -> Result<(Case, Diagnosis), ValidateError> {
     let opts = season_options(planted_kind, seed, s);
-    let dir = opts.out.clone();
+    let dir = &opts.out;
     let kpis = simulated_season(&opts, s.reuse)?;
     let rows = crate::kpi::table::read_parquet(&kpis)?;
     let maps = crate::kpi::energy_maps::read_tire_maps(&kpis)?;
@@ -371,7 +371,7 @@ pub fn run_case(
     }
     let case = score_case(&resolved, seed, &rows, &maps, &planted, &d, &gap)?;
     if !s.keep {
-        std::fs::remove_dir_all(&dir).map_err(|e| ValidateError::Io {
+        std::fs::remove_dir_all(dir).map_err(|e| ValidateError::Io {
             path: dir.display().to_string(),
             source: e,
         })?;
