@@ -221,9 +221,12 @@ fn changed_bytes_of_a_model_file_are_refused(
             text.len()
         );
     }
+    // Line ends turned into CRLF by a checkout (git's autocrlf): the same file.
+    let text = std::fs::read_to_string(dir.join("physical.json")).unwrap();
+    std::fs::write(&damaged, text.replace('\n', "\r\n")).unwrap();
+    assert_eq!(&SavedModel::load(&damaged).unwrap(), &models["physical"]);
     // A coefficient's digit changed by hand: refused by the checksum, then
     // read once the field is deleted.
-    let text = std::fs::read_to_string(dir.join("physical.json")).unwrap();
     let at = text.find("\"coef\"").unwrap();
     // The second decimal of the first coefficient, one up.
     let digit = at + text[at..].find('.').unwrap() + 2;

@@ -35,6 +35,9 @@ fn check_checksum(text: &str, head: &serde_json::Value) -> Result<(), String> {
         .and_then(|s| u32::from_str_radix(s, 16).ok())
         .ok_or_else(|| format!("{CHECKSUM_FIELD} is {recorded}, not 8 hex digits: {edited}"))?;
     let field = format!(",\n  \"{CHECKSUM_FIELD}\": \"{recorded:08x}\"\n}}");
+    // A checkout that turned the line ends into CRLF (git's autocrlf) is
+    // the same file: the JSON `fit` writes has no other carriage return.
+    let text = text.replace("\r\n", "\n");
     let body = text
         .trim_end()
         .strip_suffix(field.as_str())
