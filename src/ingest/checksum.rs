@@ -51,6 +51,14 @@ impl<W: Write> Write for CrcWriter<W> {
     }
 }
 
+impl<W> CrcWriter<W> {
+    /// The footer entry recording what has passed so far.
+    fn entry(&self) -> KeyValue {
+        let value = format!("{} {:08x}", self.bytes, self.crc.clone().finalize());
+        KeyValue::new(CHECKSUM_KEY.to_string(), value)
+    }
+}
+
 /// Records the checksum of everything written so far (every row group) in
 /// the footer that `close` writes next. Call it after the last row group.
 pub(crate) fn seal<W: Write + Send>(
@@ -58,9 +66,8 @@ pub(crate) fn seal<W: Write + Send>(
 ) -> std::io::Result<()> {
     // The file writer buffers: push its bytes through the checksum first.
     writer.flush()?;
-    let sink = writer.inner();
-    let value = format!("{} {:08x}", sink.bytes, sink.crc.clone().finalize());
-    writer.append_key_value_metadata(KeyValue::new(CHECKSUM_KEY.to_string(), value));
+    let entry = writer.inner().entry();
+    writer.append_key_value_metadata(entry);
     Ok(())
 }
 
@@ -71,9 +78,8 @@ pub(crate) fn seal_arrow<W: Write + Send>(
 ) -> parquet::errors::Result<()> {
     writer.flush()?;
     writer.sync()?;
-    let sink = writer.inner();
-    let value = format!("{} {:08x}", sink.bytes, sink.crc.clone().finalize());
-    writer.append_key_value_metadata(KeyValue::new(CHECKSUM_KEY.to_string(), value));
+    let entry = writer.inner().entry();
+    writer.append_key_value_metadata(entry);
     Ok(())
 }
 
@@ -116,19 +122,12 @@ fn parse(value: &str) -> Option<(u64, u32)> {
 
 /// CRC-32 of the first `bytes` bytes of the file, `None` if it is shorter.
 fn crc_of_prefix(path: &Path, bytes: u64) -> std::io::Result<Option<u32>> {
-    let mut file = std::fs::File::open(path)?.take(bytes);
-    let mut crc = crc32fast::Hasher::new();
-    let mut buf = vec![0u8; bytes.clamp(1, 1 << 20) as usize];
-    let mut seen = 0u64;
-    loop {
-        let n = file.read(&mut buf)?;
-        if n == 0 {
-            break;
-        }
-        crc.update(&buf[..n]);
-        seen += n as u64;
-    }
-    Ok((seen == bytes).then(|| crc.finalize()))
+    let file = std::fs::File::open(path)?.take(bytes);
+    // Parts are tens of KiB, side tables up to some MB: a buffer to fit.
+    let mut reader = std::io::BufReader::with_capacity(bytes.clamp(1, 1 << 20) as usize, file);
+    let mut crc = CrcWriter::new(std::io::sink());
+    let seen = std::io::copy(&mut reader, &mut crc)?;
+    Ok((seen == bytes).then(|| crc.crc.finalize()))
 }
 
 /// A Parquet file opened for reading, its footer read and its data checked
