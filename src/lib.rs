@@ -9,6 +9,7 @@ pub mod bench;
 pub mod engine;
 pub mod gap;
 pub mod gpu;
+mod guard;
 pub mod import;
 pub mod ingest;
 pub mod kpi;

@@ -391,7 +391,19 @@ pub fn import_logs(
     let mut summary = ImportSummary::default();
     for (log, run) in logs.iter().zip(run_ids) {
         let before = manifest.clone();
-        match import_log(log, run, &season, &mut manifest, settings) {
+        // A panic is this log's error: the others are still imported.
+        let outcome =
+            crate::guard::catch_panic(|| import_log(log, run, &season, &mut manifest, settings))
+                .unwrap_or_else(|msg| {
+                    Err(ImportError::log(
+                        log,
+                        "import",
+                        format!(
+                            "internal error while importing this log ({msg}); please report it"
+                        ),
+                    ))
+                });
+        match outcome {
             Ok(r) => {
                 tracing::info!(log = %log.display(), run = %r.run, samples = r.samples, "imported");
                 summary.imported.push(r);

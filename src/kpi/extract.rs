@@ -746,12 +746,7 @@ pub fn extract(opts: &ExtractOptions) -> Result<ExtractSummary, IngestError> {
 /// Runs `f`, turning a panic into an error: a bug met by one run's data
 /// skips that run (with the panic's message) instead of ending the season.
 fn guarded<T>(f: impl FnOnce() -> Result<T, String>) -> Result<T, String> {
-    std::panic::catch_unwind(std::panic::AssertUnwindSafe(f)).unwrap_or_else(|p| {
-        let msg = p
-            .downcast_ref::<&str>()
-            .map(|s| s.to_string())
-            .or_else(|| p.downcast_ref::<String>().cloned())
-            .unwrap_or_else(|| "unknown panic".into());
+    crate::guard::catch_panic(f).unwrap_or_else(|msg| {
         Err(format!(
             "internal error while extracting this run ({msg}); please report it"
         ))

@@ -15,6 +15,9 @@ pub enum ValidateError {
         line: usize,
         message: String,
     },
+    /// A panic met while simulating, extracting or diagnosing one season.
+    #[error("internal error ({0}); please report it")]
+    Internal(String),
     #[error("{path}: {source}")]
     Io {
         path: String,

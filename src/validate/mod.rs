@@ -386,7 +386,10 @@ pub fn validate(s: &ValidateSettings) -> Vec<Case> {
     let mut out = Vec::new();
     for (planted, seed) in &cases {
         pb.set_message(planted.label());
-        let case = match run_case(planted, *seed, s) {
+        // A panic fails this season alone: the matrix goes on.
+        let outcome = crate::guard::catch_panic(|| run_case(planted, *seed, s))
+            .unwrap_or_else(|msg| Err(ValidateError::Internal(msg)));
+        let case = match outcome {
             Ok((c, _)) => c,
             Err(e) => {
                 tracing::error!("season {} seed {seed}: {e}", planted.label());
