@@ -10,6 +10,11 @@
 //! it is present; files from other tools or from before it have none and
 //! are read as before (docs/formats.md, "Checksum of tirewear's Parquet
 //! files").
+//!
+//! Every Parquet file read, tirewear's or another tool's, also has its
+//! footer's byte ranges checked against the file ([`layout_fault`]): the
+//! Parquet reader panics on some damaged footers instead of returning an
+//! error.
 
 use std::io::{Read, Write};
 use std::path::Path;
@@ -130,18 +135,53 @@ fn crc_of_prefix(path: &Path, bytes: u64) -> std::io::Result<Option<u32>> {
     Ok((seen == bytes).then(|| crc.crc.finalize()))
 }
 
-/// A Parquet file opened for reading, its footer read and its data checked
-/// against the footer's checksum; every error names the file.
+/// Why the footer's byte ranges cannot be the file's, or `None`: a column
+/// chunk that starts before the file or runs past its end. arrow-rs asserts
+/// on a negative offset or length (`ColumnChunkMetaData::byte_range`)
+/// instead of returning an error, so a damaged footer is refused here
+/// first, naming the row group and column.
+pub(crate) fn layout_fault(metadata: &ParquetMetaData, file_len: u64) -> Option<String> {
+    for (r, group) in metadata.row_groups().iter().enumerate() {
+        for (c, col) in group.columns().iter().enumerate() {
+            let data = col.data_page_offset();
+            let start = col.dictionary_page_offset().unwrap_or(data);
+            let len = col.compressed_size();
+            let inside = data >= 0
+                && start >= 0
+                && len >= 0
+                && start
+                    .checked_add(len)
+                    .is_some_and(|end| end as u64 <= file_len);
+            if !inside {
+                return Some(format!(
+                    "footer: row group {r}, column {c} ({}): bytes {start}..{start}+{len} \
+                     (data pages at {data}) lie outside the file's {file_len} bytes: \
+                     the file is damaged",
+                    col.column_path().string()
+                ));
+            }
+        }
+    }
+    None
+}
+
+/// A Parquet file opened for reading, its footer read and its byte ranges
+/// checked against the file (any file) and its data against the footer's
+/// checksum (tirewear's files); every error names the file.
 pub(crate) fn open_parquet(
     path: &Path,
 ) -> crate::ingest::Result<ParquetRecordBatchReaderBuilder<std::fs::File>> {
     use crate::ingest::IngestError;
     let file = std::fs::File::open(path).map_err(|e| IngestError::io(path, e))?;
+    let file_len = file.metadata().map_err(|e| IngestError::io(path, e))?.len();
     let builder =
         ParquetRecordBatchReaderBuilder::try_new(file).map_err(|source| IngestError::Parquet {
             path: path.to_path_buf(),
             source,
         })?;
+    if let Some(why) = layout_fault(builder.metadata(), file_len) {
+        return Err(IngestError::invalid(path, "footer", why));
+    }
     match mismatch(path, builder.metadata()) {
         None => Ok(builder),
         Some(why) => Err(IngestError::invalid(path, "data checksum", why)),
@@ -222,5 +262,69 @@ mod tests {
         assert_eq!(w.bytes, 9);
         assert_eq!(w.crc.clone().finalize(), 0xcbf4_3926);
         assert_eq!(w.inner, b"123456789");
+    }
+
+    /// A column chunk's range outside the file (a negative offset or size,
+    /// one that overflows or ends past the file) is a fault naming the row
+    /// group and column; the undamaged footer is not. The Parquet reader
+    /// panicked on the negative ones (found by the robustness suite).
+    #[test]
+    fn column_ranges_outside_the_file_are_faults() {
+        use arrow_array::{Float64Array, RecordBatch};
+        use parquet::file::metadata::{ColumnChunkMetaDataBuilder, ParquetMetaDataReader};
+        use std::sync::Arc;
+        let values = Float64Array::from_iter_values((0..40).map(f64::from));
+        let batch = RecordBatch::try_from_iter([("energy_j", Arc::new(values) as _)]).unwrap();
+        let mut bytes = Vec::new();
+        crate::kpi::table::write_batch_to(&mut bytes, &batch).unwrap();
+        let file = tempfile::tempfile().unwrap();
+        std::io::Write::write_all(&mut &file, &bytes).unwrap();
+        let meta = ParquetMetaDataReader::new()
+            .parse_and_finish(&file)
+            .unwrap();
+        let len = bytes.len() as u64;
+        assert_eq!(layout_fault(&meta, len), None);
+        let col = meta.row_group(0).column(0);
+        let end = (col
+            .dictionary_page_offset()
+            .unwrap_or(col.data_page_offset())
+            + col.compressed_size()) as u64;
+        assert_eq!(layout_fault(&meta, end), None);
+        assert!(layout_fault(&meta, end - 1).is_some(), "ends past the file");
+        type Edit = fn(ColumnChunkMetaDataBuilder) -> ColumnChunkMetaDataBuilder;
+        let edits: [(&str, Edit); 4] = [
+            ("negative data offset", |b| {
+                b.set_data_page_offset(-4).set_dictionary_page_offset(None)
+            }),
+            ("negative dictionary offset", |b| {
+                b.set_dictionary_page_offset(Some(-1))
+            }),
+            ("negative size", |b| b.set_total_compressed_size(-100)),
+            ("size that overflows", |b| {
+                b.set_total_compressed_size(i64::MAX)
+            }),
+        ];
+        for (what, edit) in edits {
+            let column = edit(meta.row_group(0).column(0).clone().into_builder())
+                .build()
+                .unwrap();
+            let group = meta
+                .row_group(0)
+                .clone()
+                .into_builder()
+                .set_column_metadata(vec![column])
+                .build()
+                .unwrap();
+            let damaged = meta
+                .clone()
+                .into_builder()
+                .set_row_groups(vec![group])
+                .build();
+            let why = layout_fault(&damaged, len).unwrap_or_else(|| panic!("{what}"));
+            assert!(
+                why.contains("row group 0, column 0 (energy_j)"),
+                "{what}: {why}"
+            );
+        }
     }
 }

@@ -282,8 +282,12 @@ fn read_batches(path: &Path) -> Result<Vec<RecordBatch>, NightlyError> {
             path.display()
         ))
     };
+    let file_len = file.metadata().map_err(NightlyError::io(path))?.len();
     let builder = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file)
         .map_err(|e| bad(&e))?;
+    if let Some(why) = crate::ingest::checksum::layout_fault(builder.metadata(), file_len) {
+        return Err(bad(&why));
+    }
     if let Some(why) = crate::ingest::checksum::mismatch(path, builder.metadata()) {
         return Err(bad(&format!("data checksum: {why}")));
     }
@@ -326,6 +330,10 @@ fn part_damage(path: &Path, rows: Option<usize>) -> Option<String> {
         Ok(m) => m,
         Err(e) => return Some(format!("damaged (not a readable Parquet file: {e})")),
     };
+    let file_len = file.metadata().map_or(0, |m| m.len());
+    if let Some(why) = crate::ingest::checksum::layout_fault(&meta, file_len) {
+        return Some(format!("damaged ({why})"));
+    }
     if let Some(why) = crate::ingest::checksum::mismatch(path, &meta) {
         return Some(format!("damaged (data checksum: {why})"));
     }
