@@ -722,3 +722,533 @@ fn a_bit_flipped_in_a_parquet_file_tirewear_wrote_is_refused_by_name() {
         std::fs::write(&path, &clean).unwrap();
     }
 }
+
+/// One seeded change of a binary file: bit flips, a 32- or 16-bit
+/// little-endian field set to a value that broke readers before, random or
+/// zero bytes, bytes cut out, or the file truncated. Most changes land in
+/// `hot` (a format's header and index, where a value steers the reader
+/// rather than being read as data).
+fn mutate_binary(b: &[u8], hot: std::ops::Range<usize>, rng: &mut ChaCha8Rng) -> (Vec<u8>, String) {
+    let mut m = b.to_vec();
+    let n = m.len();
+    let at = |rng: &mut ChaCha8Rng, width: usize| {
+        let (lo, hi) = if rng.random_bool(0.8) && hot.end > hot.start + width {
+            (hot.start, hot.end - width)
+        } else {
+            (0, n - width)
+        };
+        rng.random_range(lo..=hi)
+    };
+    let what = match rng.random_range(0..7) {
+        0 => {
+            let mut done = Vec::new();
+            for _ in 0..rng.random_range(1..=4) {
+                let (i, bit) = (at(rng, 1), rng.random_range(0..8));
+                m[i] ^= 1 << bit;
+                done.push(format!("{i}.{bit}"));
+            }
+            format!("bit flips at {}", done.join(","))
+        }
+        1 => {
+            let i = at(rng, 4) & !3;
+            let old = u32::from_le_bytes(m[i..i + 4].try_into().unwrap());
+            let new = match rng.random_range(0..6) {
+                0 => 0,
+                1 => u32::MAX - rng.random_range(0..4),
+                2 => 1 << rng.random_range(0..32),
+                3 => n as u32 + rng.random_range(0..16),
+                4 => i as u32,
+                _ => old.wrapping_add_signed(rng.random_range(-8..=8)),
+            };
+            m[i..i + 4].copy_from_slice(&new.to_le_bytes());
+            format!("u32 at {i}: {old} -> {new}")
+        }
+        2 => {
+            let i = at(rng, 2) & !1;
+            let old = u16::from_le_bytes(m[i..i + 2].try_into().unwrap());
+            let new = [0, 1, 2, 3, 4, 5, 6, 7, 8, 0x8000, u16::MAX][rng.random_range(0..11)];
+            m[i..i + 2].copy_from_slice(&new.to_le_bytes());
+            format!("u16 at {i}: {old} -> {new}")
+        }
+        3 => {
+            let start = at(rng, 1);
+            let len = rng.random_range(1..=64).min(n - start);
+            rng.fill_bytes(&mut m[start..start + len]);
+            format!("{len} random bytes at {start}")
+        }
+        4 => {
+            let start = at(rng, 1);
+            let len = rng.random_range(1..=256).min(n - start);
+            m[start..start + len].fill(0);
+            format!("{len} zero bytes at {start}")
+        }
+        5 => {
+            let start = at(rng, 1);
+            let len = rng.random_range(1..=32).min(n - start);
+            m.drain(start..start + len);
+            format!("{len} bytes removed at {start}")
+        }
+        _ => {
+            let len = at(rng, 1);
+            m.truncate(len);
+            format!("truncated to {len}")
+        }
+    };
+    (m, what)
+}
+
+/// The offsets of a `.ld` file's channel-metadata entries (124 bytes each,
+/// linked by the `next` pointer at +4 from the header's pointer at 8).
+fn ld_channels(b: &[u8]) -> Vec<usize> {
+    let u32_at = |i: usize| u32::from_le_bytes(b[i..i + 4].try_into().unwrap()) as usize;
+    let (mut at, mut out) = (u32_at(8), Vec::new());
+    while at != 0 && at + 124 <= b.len() && out.len() < 10_000 {
+        out.push(at);
+        at = u32_at(at + 4);
+    }
+    out
+}
+
+/// One seeded change of a `.ld` file: half the time one field of a
+/// channel's metadata set to what breaks readers (its `next` pointer back to
+/// an earlier channel or past the end, its data pointer, sample count,
+/// type, size, rate, scale, offset, multiplier or decimals), else a
+/// [`mutate_binary`] change, mostly in the header and channel list.
+fn mutate_ld(b: &[u8], rng: &mut ChaCha8Rng) -> (Vec<u8>, String) {
+    let channels = ld_channels(b);
+    let (first, last) = (channels[0], *channels.last().unwrap());
+    if rng.random_bool(0.5) {
+        return mutate_binary(b, 0..last + 124, rng);
+    }
+    let mut m = b.to_vec();
+    let k = rng.random_range(0..channels.len());
+    let at = channels[k];
+    let n = b.len() as u32;
+    // (field, offset in the entry, width, values)
+    let (field, off, width, value): (&str, usize, usize, u32) = match rng.random_range(0..10) {
+        0 => ("next", 4, 4, channels[rng.random_range(0..=k)] as u32),
+        1 => (
+            "next",
+            4,
+            4,
+            [n, n - 60, u32::MAX, 1][rng.random_range(0..4)],
+        ),
+        2 => (
+            "data",
+            8,
+            4,
+            [n, n - 2, u32::MAX, 0, first as u32][rng.random_range(0..5)],
+        ),
+        3 => (
+            "count",
+            12,
+            4,
+            [u32::MAX, n, 1 << 30, 0, 1][rng.random_range(0..5)],
+        ),
+        4 => ("type", 18, 2, rng.random_range(0..10)),
+        5 => (
+            "size",
+            20,
+            2,
+            [0, 1, 2, 3, 4, 8, 0xFFFF][rng.random_range(0..7)],
+        ),
+        6 => ("rate", 22, 2, [0, 1, 0xFFFF][rng.random_range(0..3)]),
+        7 => (
+            "offset",
+            24,
+            2,
+            [0x7FFF, 0x8000, 0xFFFF][rng.random_range(0..3)],
+        ),
+        8 => (
+            "mul/scale",
+            26 + 2 * rng.random_range(0..2),
+            2,
+            [0, 0xFFFF][rng.random_range(0..2)],
+        ),
+        _ => (
+            "dec_places",
+            30,
+            2,
+            [0x7FFF, 0x8000, 0xFFFF, 400][rng.random_range(0..4)],
+        ),
+    };
+    m[at + off..at + off + width].copy_from_slice(&value.to_le_bytes()[..width]);
+    (
+        m,
+        format!("channel {k} at {at}: {field} (+{off}) -> {value}"),
+    )
+}
+
+/// The bytes of a Parquet file's footer (its metadata and length, at the end).
+fn parquet_footer(b: &[u8]) -> std::ops::Range<usize> {
+    let n = b.len();
+    let len = u32::from_le_bytes(b[n - 8..n - 4].try_into().unwrap()) as usize;
+    n - 8 - len..n
+}
+
+/// A logger table as Parquet, written as another tool would (no tirewear
+/// checksum): one Float64 column per channel, named `name [unit]`.
+fn write_parquet_log(log: &tirewear::import::log::RawLog, path: &Path) {
+    use arrow_array::{ArrayRef, Float64Array, RecordBatch};
+    let columns: Vec<(String, ArrayRef)> = log
+        .channels
+        .iter()
+        .map(|c| {
+            let name = if c.unit.is_empty() {
+                c.name.clone()
+            } else {
+                format!("{} [{}]", c.name, c.unit)
+            };
+            let values: ArrayRef = std::sync::Arc::new(Float64Array::from(c.values.clone()));
+            (name, values)
+        })
+        .collect();
+    let batch = RecordBatch::try_from_iter(columns).unwrap();
+    let file = std::fs::File::create(path).unwrap();
+    let mut w = parquet::arrow::ArrowWriter::try_new(file, batch.schema(), None).unwrap();
+    w.write(&batch).unwrap();
+    w.close().unwrap();
+}
+
+/// Damaged logger files never panic `import` and never sink its batch:
+/// seeded changes to a MoTeC `.ld` (mostly its header and channel list), a
+/// MoTeC CSV, a Parquet log written without tirewear, a `.ldx` sidecar, a
+/// `car.toml` and a channel map. Each damaged log is imported beside an
+/// undamaged one: the damaged log is imported or refused with its file
+/// named, the undamaged one is imported, the manifest stays valid, and one
+/// import's heap stays bounded.
+#[test]
+fn mutated_logger_files_never_panic_the_import() {
+    use std::panic::{AssertUnwindSafe, catch_unwind};
+    use tirewear::import::{
+        CarDescription, ChannelMap, ImportSettings, ImportSummary, NewRun, import_logs,
+    };
+    use tirewear::ingest::manifest::{Season, TireSets};
+    let _one = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    let dir = tempfile::tempdir().unwrap();
+    let arch = dir.path().join("season");
+    common::simulate_preset(
+        tirewear::sim::Preset::Tiny,
+        5,
+        20.0,
+        Some(tirewear::sim::logger::LoggerFormat::MotecLd),
+        &arch,
+    );
+    let logger = arch.join("logger");
+    let listed = |ext: &str| {
+        let mut v: Vec<PathBuf> = std::fs::read_dir(&logger)
+            .unwrap()
+            .map(|e| e.unwrap().path())
+            .filter(|p| p.to_string_lossy().ends_with(ext))
+            .collect();
+        v.sort();
+        v
+    };
+    let stem = |p: &Path| p.file_stem().unwrap().to_string_lossy().into_owned();
+    let (lds, car_files) = (listed(".ld"), listed(".car.toml"));
+    let ld_settings = ImportSettings {
+        channels: ChannelMap::default_map(),
+        cars: car_files
+            .iter()
+            .map(|p| CarDescription::read(p).unwrap())
+            .collect(),
+        rate_hz: None,
+        calibrate_radius: false,
+        new_run: NewRun::default(),
+    };
+    // The Python-written MoTeC CSV and a Parquet copy of it go in as new runs.
+    let compound = Season::open(&arch).unwrap().manifest.compounds[0]
+        .id
+        .clone();
+    let csv_settings = ImportSettings {
+        cars: vec![
+            CarDescription::read(Path::new(concat!(
+                env!("CARGO_MANIFEST_DIR"),
+                "/datasets/import/car.toml"
+            )))
+            .unwrap(),
+        ],
+        new_run: NewRun {
+            event: Some("E99-logged".into()),
+            track: Some(Season::open(&arch).unwrap().manifest.tracks[0].id.clone()),
+            compound: Some(compound),
+            tire_sets: Some(TireSets {
+                fl: "P1".into(),
+                fr: "P2".into(),
+                rl: "P3".into(),
+                rr: "P4".into(),
+            }),
+        },
+        ..ld_settings.clone()
+    };
+    let csv = fixture("import/python-motec.csv");
+    let pq = dir.path().join("python-motec.parquet");
+    write_parquet_log(&tirewear::import::log::read_log(&csv).unwrap(), &pq);
+
+    let work = dir.path().join("damaged");
+    std::fs::create_dir_all(&work).unwrap();
+    let (mut tried, mut refused, mut imported, mut failures) = (0, 0, 0, Vec::new());
+    let mut peak_max = 0;
+    // Imports `damaged` (run `run`) beside the undamaged `good` (run
+    // `good_run`) and checks the outcome; `named` is the file a refusal
+    // must name.
+    let mut check = |tag: String,
+                     damaged: &Path,
+                     run: &str,
+                     (good, good_run): (&Path, &str),
+                     settings: &ImportSettings,
+                     named: &Path,
+                     failures: &mut Vec<String>| {
+        tried += 1;
+        let base = LIVE.load(Ordering::Relaxed);
+        PEAK.store(base, Ordering::Relaxed);
+        let logs = [damaged.to_path_buf(), good.to_path_buf()];
+        let runs = [run.to_string(), good_run.to_string()];
+        let r = catch_unwind(AssertUnwindSafe(|| {
+            import_logs(&arch, &logs, &runs, settings)
+        }));
+        let peak = PEAK.load(Ordering::Relaxed).saturating_sub(base);
+        peak_max = peak_max.max(peak);
+        if peak > MEMORY_BOUND {
+            failures.push(format!("{tag}: {peak} bytes of heap"));
+        }
+        let s: ImportSummary = match r {
+            Err(_) => return failures.push(format!("{tag}: panicked")),
+            Ok(Err(e)) => return failures.push(format!("{tag}: the batch failed: {e}")),
+            Ok(Ok(s)) => s,
+        };
+        if !s.imported.iter().any(|i| i.log == good) {
+            failures.push(format!(
+                "{tag}: the undamaged log was not imported: {:?}",
+                s.failed
+            ));
+        }
+        match s.failed.iter().find(|(p, _)| p == damaged) {
+            // `import` turns a panic into this log's error: still a failure here.
+            Some((_, msg)) if msg.contains("internal error") => {
+                failures.push(format!("{tag}: panicked inside the import: {msg}"))
+            }
+            Some((_, msg)) if msg.contains(named.to_str().unwrap()) => refused += 1,
+            Some((_, msg)) => failures.push(format!("{tag}: error does not name the file: {msg}")),
+            None => imported += 1,
+        }
+        if let Err(e) = Season::open(&arch) {
+            failures.push(format!("{tag}: the manifest no longer reads: {e}"));
+        }
+    };
+    let mut rng = ChaCha8Rng::seed_from_u64(77);
+    // The .ld: its header and channel list take most changes.
+    let ld = std::fs::read(&lds[0]).unwrap();
+    let target = work.join(lds[0].file_name().unwrap());
+    for case in 0..160 {
+        let (bytes, what) = mutate_ld(&ld, &mut rng);
+        std::fs::write(&target, &bytes).unwrap();
+        let tag = format!(".ld case {case} ({what})");
+        check(
+            tag,
+            &target,
+            &stem(&lds[0]),
+            (&lds[1], &stem(&lds[1])),
+            &ld_settings,
+            &target,
+            &mut failures,
+        );
+    }
+    // Its .ldx sidecar (a valid one first, then changed).
+    let ldx_text = "<?xml version=\"1.0\"?>\n<LDXFile Version=\"1.6\">\n <Layers>\n  <Layer>\n   \
+        <MarkerBlock>\n    <MarkerGroup Name=\"Beacons\" Index=\"3\">\n     \
+        <Marker Version=\"100\" ClassName=\"BCN\" Name=\"Manual.1\" Flags=\"77\" Time=\"250000.5\"/>\n     \
+        <Marker Version=\"100\" ClassName=\"BCN\" Name=\"Manual.2\" Flags=\"77\" Time=\"1500000\"/>\n    \
+        </MarkerGroup>\n   </MarkerBlock>\n  </Layer>\n  <Details>\n   \
+        <String Id=\"Total Laps\" Value=\"3\"/>\n  </Details>\n </Layers>\n</LDXFile>\n";
+    std::fs::write(&target, &ld).unwrap();
+    let ldx = target.with_extension("ldx");
+    for case in 0..30 {
+        let (bytes, what) = mutate_text(ldx_text, &mut rng);
+        std::fs::write(&ldx, &bytes).unwrap();
+        let tag = format!(".ldx case {case} ({what})");
+        check(
+            tag,
+            &target,
+            &stem(&lds[0]),
+            (&lds[1], &stem(&lds[1])),
+            &ld_settings,
+            &ldx,
+            &mut failures,
+        );
+    }
+    std::fs::remove_file(&ldx).unwrap();
+    // The CSV: numbers, lines and the end changed.
+    let csv_text = std::fs::read_to_string(&csv).unwrap();
+    let target = work.join("py.csv");
+    for case in 0..60 {
+        let (bytes, what) = mutate_text(&csv_text, &mut rng);
+        std::fs::write(&target, &bytes).unwrap();
+        let tag = format!("CSV case {case} ({what})");
+        check(
+            tag,
+            &target,
+            "py",
+            (&csv, "py-good"),
+            &csv_settings,
+            &target,
+            &mut failures,
+        );
+    }
+    // The Parquet log: its footer takes most changes.
+    let pq_bytes = std::fs::read(&pq).unwrap();
+    let target = work.join("py.parquet");
+    for case in 0..60 {
+        let (bytes, what) = mutate_binary(&pq_bytes, parquet_footer(&pq_bytes), &mut rng);
+        std::fs::write(&target, &bytes).unwrap();
+        let tag = format!("Parquet case {case} ({what})");
+        check(
+            tag,
+            &target,
+            "pq",
+            (&pq, "pq-good"),
+            &csv_settings,
+            &target,
+            &mut failures,
+        );
+    }
+    // The car description and the channel map: refused naming the file, or
+    // used for an import that may fail but does not panic.
+    let map_path = Path::new(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/datasets/import/channels.toml"
+    ));
+    let configs = [
+        (car_files[0].clone(), "car.toml"),
+        (map_path.to_path_buf(), "channels.toml"),
+    ];
+    for (original, name) in configs {
+        let text = std::fs::read_to_string(&original).unwrap();
+        let target = work.join(name);
+        for case in 0..30 {
+            let (bytes, what) = mutate_text(&text, &mut rng);
+            std::fs::write(&target, &bytes).unwrap();
+            let tag = format!("{name} case {case} ({what})");
+            tried += 1;
+            let settings = if name == "car.toml" {
+                CarDescription::read(&target).map(|car| ImportSettings {
+                    cars: vec![car],
+                    ..ld_settings.clone()
+                })
+            } else {
+                ChannelMap::read(&target).map(|channels| ImportSettings {
+                    channels,
+                    ..ld_settings.clone()
+                })
+            };
+            let settings = match settings {
+                Err(e) if e.to_string().contains(target.to_str().unwrap()) => {
+                    refused += 1;
+                    continue;
+                }
+                Err(e) => {
+                    failures.push(format!("{tag}: error does not name the file: {e}"));
+                    continue;
+                }
+                Ok(s) => s,
+            };
+            let r = catch_unwind(AssertUnwindSafe(|| {
+                import_logs(&arch, &lds[..1], &[stem(&lds[0])], &settings)
+            }));
+            match r {
+                Err(_) => failures.push(format!("{tag}: panicked")),
+                Ok(Ok(s)) if s.failed.iter().any(|(_, m)| m.contains("internal error")) => {
+                    failures.push(format!("{tag}: panicked inside the import: {:?}", s.failed))
+                }
+                Ok(_) => imported += 1,
+            }
+        }
+    }
+    println!(
+        "logger mutations: {tried} tried, {refused} refused with the file named, {imported} \
+         imported or used, {} failures; peak heap of one import {peak_max} bytes",
+        failures.len()
+    );
+    assert!(tried >= 370 && refused >= 120, "{tried} {refused}");
+    assert!(failures.is_empty(), "{}", failures.join("\n"));
+}
+
+/// A KPI table written by another tool (pyarrow, pandas: no tirewear data
+/// checksum) and then damaged is refused naming the file, or read, but never
+/// panics the reader or takes unbounded memory: without the checksum the
+/// Parquet reader itself meets the damage.
+#[test]
+fn a_damaged_kpi_table_from_another_tool_never_panics_the_reader() {
+    use parquet::arrow::ArrowWriter;
+    use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
+    let _one = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    let dir = tempfile::tempdir().unwrap();
+    common::demo_kpis(dir.path());
+    // The table rewritten as another tool writes it: same schema, rows and
+    // key/value metadata but the checksum.
+    let ours = std::fs::File::open(dir.path().join("kpis.parquet")).unwrap();
+    let builder = ParquetRecordBatchReaderBuilder::try_new(ours).unwrap();
+    let kv: Vec<_> = builder
+        .metadata()
+        .file_metadata()
+        .key_value_metadata()
+        .into_iter()
+        .flatten()
+        .filter(|kv| kv.key != "tirewear.data_crc32" && kv.key != "ARROW:schema")
+        .cloned()
+        .collect();
+    let batches: Vec<_> = builder.build().unwrap().map(|b| b.unwrap()).collect();
+    let foreign = dir.path().join("foreign.parquet");
+    let props = parquet::file::properties::WriterProperties::builder()
+        .set_key_value_metadata(Some(kv))
+        .build();
+    let mut w = ArrowWriter::try_new(
+        std::fs::File::create(&foreign).unwrap(),
+        batches[0].schema(),
+        Some(props),
+    )
+    .unwrap();
+    for b in &batches {
+        w.write(b).unwrap();
+    }
+    w.close().unwrap();
+    let clean_rows = tirewear::kpi::table::read_parquet(&foreign).unwrap();
+    assert_eq!(clean_rows.len(), 320);
+    let bytes = std::fs::read(&foreign).unwrap();
+    let footer = parquet_footer(&bytes);
+    let target = dir.path().join("damaged.parquet");
+    let mut rng = ChaCha8Rng::seed_from_u64(61);
+    let (mut refused, mut read, mut failures, mut peak_max) = (0, 0, Vec::new(), 0);
+    for case in 0..200 {
+        // Half the changes in the footer, half anywhere.
+        let hot = if case % 2 == 0 {
+            footer.clone()
+        } else {
+            0..bytes.len()
+        };
+        let (m, what) = mutate_binary(&bytes, hot, &mut rng);
+        std::fs::write(&target, &m).unwrap();
+        let tag = format!("case {case} ({what})");
+        let base = LIVE.load(Ordering::Relaxed);
+        PEAK.store(base, Ordering::Relaxed);
+        let r = std::panic::catch_unwind(|| tirewear::kpi::table::read_parquet(&target));
+        let peak = PEAK.load(Ordering::Relaxed).saturating_sub(base);
+        peak_max = peak_max.max(peak);
+        if peak > MEMORY_BOUND {
+            failures.push(format!("{tag}: {peak} bytes of heap"));
+        }
+        match r {
+            Err(_) => failures.push(format!("{tag}: panicked")),
+            Ok(Err(e)) if e.to_string().contains(target.to_str().unwrap()) => refused += 1,
+            Ok(Err(e)) => failures.push(format!("{tag}: error does not name the file: {e}")),
+            Ok(Ok(_)) => read += 1,
+        }
+    }
+    println!(
+        "foreign KPI table mutations: {refused} refused with the file named, {read} read, {} \
+         failures; peak heap of one read {peak_max} bytes",
+        failures.len()
+    );
+    assert!(refused >= 50, "{refused}");
+    assert!(failures.is_empty(), "{}", failures.join("\n"));
+}
