@@ -345,7 +345,7 @@ pub(crate) fn read_parquet(path: &Path) -> Result<RawLog, ImportError> {
     let file_len = file.metadata().map_err(|e| ImportError::io(path, e))?.len();
     let builder = ParquetRecordBatchReaderBuilder::try_new(file).map_err(|e| bad(e.to_string()))?;
     if let Some(why) = crate::ingest::checksum::layout_fault(builder.metadata(), file_len) {
-        return Err(bad(why));
+        return Err(ImportError::log(path, "footer", why));
     }
     let schema = builder.schema().clone();
     let reader = builder.build().map_err(|e| bad(e.to_string()))?;

@@ -154,7 +154,7 @@ pub(crate) fn layout_fault(metadata: &ParquetMetaData, file_len: u64) -> Option<
                     .is_some_and(|end| end as u64 <= file_len);
             if !inside {
                 return Some(format!(
-                    "footer: row group {r}, column {c} ({}): bytes {start}..{start}+{len} \
+                    "row group {r}, column {c} ({}): bytes {start}..{start}+{len} \
                      (data pages at {data}) lie outside the file's {file_len} bytes: \
                      the file is damaged",
                     col.column_path().string()

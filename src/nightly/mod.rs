@@ -286,7 +286,7 @@ fn read_batches(path: &Path) -> Result<Vec<RecordBatch>, NightlyError> {
     let builder = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file)
         .map_err(|e| bad(&e))?;
     if let Some(why) = crate::ingest::checksum::layout_fault(builder.metadata(), file_len) {
-        return Err(bad(&why));
+        return Err(bad(&format!("footer: {why}")));
     }
     if let Some(why) = crate::ingest::checksum::mismatch(path, builder.metadata()) {
         return Err(bad(&format!("data checksum: {why}")));
@@ -332,7 +332,7 @@ fn part_damage(path: &Path, rows: Option<usize>) -> Option<String> {
     };
     let file_len = file.metadata().map_or(0, |m| m.len());
     if let Some(why) = crate::ingest::checksum::layout_fault(&meta, file_len) {
-        return Some(format!("damaged ({why})"));
+        return Some(format!("damaged (footer: {why})"));
     }
     if let Some(why) = crate::ingest::checksum::mismatch(path, &meta) {
         return Some(format!("damaged (data checksum: {why})"));
