@@ -910,6 +910,23 @@ fn write_parquet_log(log: &tirewear::import::log::RawLog, path: &Path) {
     w.close().unwrap();
 }
 
+type Mutate<'a> = Box<dyn Fn(&mut ChaCha8Rng) -> (Vec<u8>, String) + 'a>;
+
+/// One logger format of [`mutated_logger_files_never_panic_the_import`].
+struct LogCase<'a> {
+    name: &'static str,
+    cases: usize,
+    /// The file each case changes: the log, or its sidecar.
+    changed: PathBuf,
+    /// The log imported, and its run id.
+    log: PathBuf,
+    run: &'a str,
+    /// The undamaged log imported beside it, and its run id.
+    good: (&'a Path, &'a str),
+    settings: &'a tirewear::import::ImportSettings,
+    mutate: Mutate<'a>,
+}
+
 /// Damaged logger files never panic `import` and never sink its batch:
 /// seeded changes to a MoTeC `.ld` (mostly its header and channel list), a
 /// MoTeC CSV, a Parquet log written without tirewear, a `.ldx` sidecar, a
@@ -1037,80 +1054,80 @@ fn mutated_logger_files_never_panic_the_import() {
         }
     };
     let mut rng = ChaCha8Rng::seed_from_u64(77);
-    // The .ld: its header and channel list take most changes.
     let ld = std::fs::read(&lds[0]).unwrap();
-    let target = work.join(lds[0].file_name().unwrap());
-    for case in 0..160 {
-        let (bytes, what) = mutate_ld(&ld, &mut rng);
-        std::fs::write(&target, &bytes).unwrap();
-        let tag = format!(".ld case {case} ({what})");
-        check(
-            tag,
-            &target,
-            &stem(&lds[0]),
-            (&lds[1], &stem(&lds[1])),
-            &ld_settings,
-            &target,
-            &mut failures,
-        );
-    }
-    // Its .ldx sidecar (a valid one first, then changed).
+    let ld_target = work.join(lds[0].file_name().unwrap());
+    let ld_run = (stem(&lds[0]), stem(&lds[1]));
+    // The .ldx sidecar: a valid one, then changed.
     let ldx_text = "<?xml version=\"1.0\"?>\n<LDXFile Version=\"1.6\">\n <Layers>\n  <Layer>\n   \
         <MarkerBlock>\n    <MarkerGroup Name=\"Beacons\" Index=\"3\">\n     \
         <Marker Version=\"100\" ClassName=\"BCN\" Name=\"Manual.1\" Flags=\"77\" Time=\"250000.5\"/>\n     \
         <Marker Version=\"100\" ClassName=\"BCN\" Name=\"Manual.2\" Flags=\"77\" Time=\"1500000\"/>\n    \
         </MarkerGroup>\n   </MarkerBlock>\n  </Layer>\n  <Details>\n   \
         <String Id=\"Total Laps\" Value=\"3\"/>\n  </Details>\n </Layers>\n</LDXFile>\n";
-    std::fs::write(&target, &ld).unwrap();
-    let ldx = target.with_extension("ldx");
-    for case in 0..30 {
-        let (bytes, what) = mutate_text(ldx_text, &mut rng);
-        std::fs::write(&ldx, &bytes).unwrap();
-        let tag = format!(".ldx case {case} ({what})");
-        check(
-            tag,
-            &target,
-            &stem(&lds[0]),
-            (&lds[1], &stem(&lds[1])),
-            &ld_settings,
-            &ldx,
-            &mut failures,
-        );
-    }
-    std::fs::remove_file(&ldx).unwrap();
-    // The CSV: numbers, lines and the end changed.
     let csv_text = std::fs::read_to_string(&csv).unwrap();
-    let target = work.join("py.csv");
-    for case in 0..60 {
-        let (bytes, what) = mutate_text(&csv_text, &mut rng);
-        std::fs::write(&target, &bytes).unwrap();
-        let tag = format!("CSV case {case} ({what})");
-        check(
-            tag,
-            &target,
-            "py",
-            (&csv, "py-good"),
-            &csv_settings,
-            &target,
-            &mut failures,
-        );
-    }
-    // The Parquet log: its footer takes most changes.
     let pq_bytes = std::fs::read(&pq).unwrap();
-    let target = work.join("py.parquet");
-    for case in 0..60 {
-        let (bytes, what) = mutate_binary(&pq_bytes, parquet_footer(&pq_bytes), &mut rng);
-        std::fs::write(&target, &bytes).unwrap();
-        let tag = format!("Parquet case {case} ({what})");
-        check(
-            tag,
-            &target,
-            "pq",
-            (&pq, "pq-good"),
-            &csv_settings,
-            &target,
-            &mut failures,
-        );
+    let logs = [
+        // The .ld: its header and channel list take most changes.
+        LogCase {
+            name: ".ld",
+            cases: 160,
+            changed: ld_target.clone(),
+            log: ld_target.clone(),
+            run: &ld_run.0,
+            good: (&lds[1], &ld_run.1),
+            settings: &ld_settings,
+            mutate: Box::new(|rng| mutate_ld(&ld, rng)),
+        },
+        LogCase {
+            name: ".ldx",
+            cases: 30,
+            changed: ld_target.with_extension("ldx"),
+            log: ld_target.clone(),
+            run: &ld_run.0,
+            good: (&lds[1], &ld_run.1),
+            settings: &ld_settings,
+            mutate: Box::new(|rng| mutate_text(ldx_text, rng)),
+        },
+        // The CSV: numbers, lines and the end changed.
+        LogCase {
+            name: "CSV",
+            cases: 60,
+            changed: work.join("py.csv"),
+            log: work.join("py.csv"),
+            run: "py",
+            good: (&csv, "py-good"),
+            settings: &csv_settings,
+            mutate: Box::new(|rng| mutate_text(&csv_text, rng)),
+        },
+        // The Parquet log: its footer takes most changes.
+        LogCase {
+            name: "Parquet",
+            cases: 60,
+            changed: work.join("py.parquet"),
+            log: work.join("py.parquet"),
+            run: "pq",
+            good: (&pq, "pq-good"),
+            settings: &csv_settings,
+            mutate: Box::new(|rng| mutate_binary(&pq_bytes, parquet_footer(&pq_bytes), rng)),
+        },
+    ];
+    for c in logs {
+        std::fs::write(&ld_target, &ld).unwrap();
+        for case in 0..c.cases {
+            let (bytes, what) = (c.mutate)(&mut rng);
+            std::fs::write(&c.changed, &bytes).unwrap();
+            let tag = format!("{} case {case} ({what})", c.name);
+            check(
+                tag,
+                &c.log,
+                c.run,
+                c.good,
+                c.settings,
+                &c.changed,
+                &mut failures,
+            );
+        }
+        std::fs::remove_file(&c.changed).unwrap();
     }
     // The car description and the channel map: refused naming the file, or
     // used for an import that may fail but does not panic.
