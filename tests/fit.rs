@@ -80,6 +80,13 @@ fn demo_fit_ranks_like_the_paper_and_models_round_trip() {
         tirewear::model::saved::save_all(&models.values().cloned().collect::<Vec<_>>(), &out)
             .unwrap();
     assert_eq!(paths.len(), 3);
+    // Written as one set: its journal and temporary files are gone.
+    let mut names: Vec<String> = std::fs::read_dir(&out)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    names.sort();
+    assert_eq!(names, ["ffnn.json", "pca.json", "physical.json"]);
     for m in models.values() {
         let back = SavedModel::load(&out.join(format!("{}.json", m.method()))).unwrap();
         assert_eq!(&back, m);

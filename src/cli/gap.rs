@@ -240,11 +240,6 @@ pub(crate) fn run_validate(
     let cases = tirewear::validate::validate(settings);
     let table = tirewear::validate::render(&cases);
     println!("{table}");
-    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
-    tirewear::atomic::write_bytes(
-        &out.join("validate.json"),
-        serde_json::to_string_pretty(&cases)?.as_bytes(),
-    )?;
     let md = format!(
         "# Gap diagnosis on withheld effects\n\n{} seasons ({:?} preset, scale {}, {} tracks, {} Hz; wear scatter σ per event {}, run {}, tire {}, gauge bias {} mm; worn-through tires: {}) in {:.0} s.\n\n{table}",
         cases.len(),
@@ -261,12 +256,9 @@ pub(crate) fn run_validate(
         settings.gap.worn_through.name(),
         started.elapsed().as_secs_f64()
     );
-    tirewear::atomic::write_bytes(&out.join("validate.md"), md.as_bytes())?;
-    println!(
-        "wrote {} and {}",
-        out.join("validate.json").display(),
-        out.join("validate.md").display()
-    );
+    let [json, md] = tirewear::validate::write_outputs(out, &cases, &md)
+        .with_context(|| format!("writing the validation to {}", out.display()))?;
+    println!("wrote {} and {}", json.display(), md.display());
     if cases.iter().any(|c| c.error.is_some()) {
         anyhow::bail!("some seasons failed (listed above)");
     }

@@ -351,16 +351,25 @@ fn positive(field: &str, values: &[f64]) -> Result<(), String> {
     }
 }
 
-/// Writes a file atomically (re-exported for the CLI).
+/// Journal of the model files' commit in their folder (`atomic::OutputSet`).
+pub const MODELS_JOURNAL: &str = ".models.journal";
+
+/// Writes the models of one fit to `dir` as `<method>.json`; they become
+/// visible together (`atomic::OutputSet`), so a fit killed while writing
+/// leaves the previous fit's files, not a mix of two fits.
 pub fn save_all(models: &[SavedModel], dir: &Path) -> std::io::Result<Vec<std::path::PathBuf>> {
+    use std::io::Write;
     std::fs::create_dir_all(dir)?;
-    models
-        .iter()
-        .map(|m| {
-            let p = dir.join(format!("{}.json", m.method()));
-            m.save(&p).map(|_| p)
-        })
-        .collect()
+    let mut set = crate::atomic::OutputSet::new(&dir.join(MODELS_JOURNAL))?;
+    let mut paths = Vec::new();
+    for m in models {
+        let p = dir.join(format!("{}.json", m.method()));
+        let text = m.to_json();
+        set.add(&p, |f| f.write_all(text.as_bytes()))?;
+        paths.push(p);
+    }
+    set.commit()?;
+    Ok(paths)
 }
 
 #[cfg(test)]

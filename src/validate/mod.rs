@@ -379,6 +379,26 @@ pub fn run_case(
     Ok((case, d))
 }
 
+/// Writes `validate.json` (the cases) and `validate.md` (`md`, the table
+/// with its heading) to `out`; they become visible together
+/// (`atomic::OutputSet`). Returns their paths.
+pub fn write_outputs(
+    out: &std::path::Path,
+    cases: &[Case],
+    md: &str,
+) -> std::io::Result<[PathBuf; 2]> {
+    use std::io::Write;
+    std::fs::create_dir_all(out)?;
+    let paths = [out.join("validate.json"), out.join("validate.md")];
+    let json = serde_json::to_string_pretty(cases).map_err(std::io::Error::other)?;
+    let mut set = crate::atomic::OutputSet::new(&out.join(".validate.journal"))?;
+    for (path, text) in paths.iter().zip([json.as_str(), md]) {
+        set.add(path, |f| f.write_all(text.as_bytes()))?;
+    }
+    set.commit()?;
+    Ok(paths)
+}
+
 /// Runs the whole matrix; a season that fails is recorded with its error and the rest go on.
 pub fn validate(s: &ValidateSettings) -> Vec<Case> {
     let cases = matrix(s);
