@@ -523,6 +523,27 @@ fn a_damaged_part_or_table_is_made_again() {
     let s = run(&archive, &dataset);
     assert_eq!(s.processed, 4);
     assert_eq!(tree(&dataset), t);
+
+    // A digit changed in the manifest is still a valid manifest: its
+    // checksum refuses it, nothing changed.
+    let text = std::fs::read_to_string(&manifest).unwrap();
+    let at = text.find("\"rows\": ").unwrap() + "\"rows\": ".len();
+    let mut changed = text.into_bytes();
+    changed[at] = if changed[at] == b'9' {
+        b'8'
+    } else {
+        changed[at] + 1
+    };
+    std::fs::write(&manifest, &changed).unwrap();
+    let damaged = tree(&dataset);
+    let e = process(&ProcessOptions::new(vec![archive.clone()], &dataset))
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("dataset.json: not a tirewear dataset manifest: data_crc32"),
+        "{e}"
+    );
+    assert_eq!(tree(&dataset), damaged);
 }
 
 /// The documented exit codes: 4 while another process holds the dataset,

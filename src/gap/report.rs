@@ -384,7 +384,9 @@ pub fn write_diagnosis(
     };
     std::fs::create_dir_all(out).map_err(io(out))?;
     let paths = [out.join("gap.json"), out.join("gap.md")];
-    let json = serde_json::to_string_pretty(d).expect("a diagnosis serialises");
+    let json = crate::ingest::checksum::seal_json(
+        &serde_json::to_string_pretty(d).expect("a diagnosis serialises"),
+    );
     let md = super::render::render_markdown(d, usize::MAX);
     let journal = out.join(".gap.journal");
     let mut set = crate::atomic::OutputSet::new(&journal).map_err(io(&journal))?;

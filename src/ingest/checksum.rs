@@ -165,6 +165,60 @@ pub(crate) fn layout_fault(metadata: &ParquetMetaData, file_len: u64) -> Option<
     None
 }
 
+/// The last field of the JSON files tirewear writes and reads back (model
+/// files, `gap.json`, `kpis.report.json`, `dataset.json`): the CRC-32 of
+/// the file's text without it (docs/formats.md, "Checksum of tirewear's
+/// JSON files"). A digit changed in a number is valid JSON; the checksum
+/// tells it from what tirewear wrote.
+pub(crate) const JSON_CHECKSUM_FIELD: &str = "data_crc32";
+
+/// `body`, an object as `serde_json`'s pretty printer writes it, with
+/// [`JSON_CHECKSUM_FIELD`] added as its last field: the CRC-32 of `body`.
+pub(crate) fn seal_json(body: &str) -> String {
+    let crc = crc32fast::hash(body.as_bytes());
+    let open = body
+        .strip_suffix("\n}")
+        .expect("a pretty JSON object ends with \\n}");
+    format!("{open},\n  \"{JSON_CHECKSUM_FIELD}\": \"{crc:08x}\"\n}}\n")
+}
+
+/// Why a JSON file's text does not match its [`JSON_CHECKSUM_FIELD`], or
+/// `None` when it matches or has none (files from before it, or with it
+/// deleted by someone who edited the file on purpose). `head` is the text
+/// parsed; `writer` names the command that wrote it, for the message.
+pub(crate) fn json_mismatch(text: &str, head: &serde_json::Value, writer: &str) -> Option<String> {
+    let recorded = head.get(JSON_CHECKSUM_FIELD)?;
+    let edited = format!(
+        "the file was damaged or edited after `{writer}` wrote it \
+         (if you edited it on purpose, delete the field)"
+    );
+    let Some(recorded) = recorded
+        .as_str()
+        .filter(|s| s.len() == 8)
+        .and_then(|s| u32::from_str_radix(s, 16).ok())
+    else {
+        return Some(format!(
+            "{JSON_CHECKSUM_FIELD} is {recorded}, not 8 hex digits: {edited}"
+        ));
+    };
+    let field = format!(",\n  \"{JSON_CHECKSUM_FIELD}\": \"{recorded:08x}\"\n}}");
+    // A checkout that turned the line ends into CRLF (git's autocrlf) is
+    // the same file: the JSON tirewear writes has no other carriage return.
+    let text = text.replace("\r\n", "\n");
+    let Some(open) = text.trim_end().strip_suffix(field.as_str()) else {
+        return Some(format!(
+            "{JSON_CHECKSUM_FIELD} is not the file's last field as written: {edited}"
+        ));
+    };
+    let found = crc32fast::hash(format!("{open}\n}}").as_bytes());
+    (found != recorded).then(|| {
+        format!(
+            "{JSON_CHECKSUM_FIELD}: the text has CRC-32 {found:08x} where the field \
+             records {recorded:08x}: {edited}"
+        )
+    })
+}
+
 /// A Parquet file opened for reading, its footer read and its byte ranges
 /// checked against the file (any file) and its data against the footer's
 /// checksum (tirewear's files); every error names the file.
@@ -326,5 +380,57 @@ mod tests {
                 "{what}: {why}"
             );
         }
+    }
+
+    /// A sealed JSON object reads back; every changed byte outside the
+    /// field's own name is a mismatch; CRLF line ends and a deleted field
+    /// pass; a value that is not 8 hex digits, or a field moved, does not.
+    #[test]
+    fn sealed_json_refuses_every_changed_byte() {
+        let body = serde_json::to_string_pretty(&serde_json::json!({
+            "run": "E01-valle-rossa-car1-R1",
+            "rows": 4,
+            "wear_pct": [12.5, 13.25],
+        }))
+        .unwrap();
+        let sealed = seal_json(&body);
+        let parse = |t: &str| serde_json::from_str::<serde_json::Value>(t);
+        let head = parse(&sealed).unwrap();
+        assert_eq!(
+            head[JSON_CHECKSUM_FIELD],
+            format!("{:08x}", crc32fast::hash(body.as_bytes()))
+        );
+        assert_eq!(json_mismatch(&sealed, &head, "w"), None);
+        assert_eq!(json_mismatch(&body, &parse(&body).unwrap(), "w"), None);
+        let crlf = sealed.replace('\n', "\r\n");
+        assert_eq!(json_mismatch(&crlf, &parse(&crlf).unwrap(), "w"), None);
+        let name = sealed.find(JSON_CHECKSUM_FIELD).unwrap();
+        let (mut refused, mut unparsed) = (0, 0);
+        for at in 0..sealed.len() {
+            let mut bytes = sealed.clone().into_bytes();
+            bytes[at] ^= 0x01;
+            let Ok(text) = String::from_utf8(bytes) else {
+                continue;
+            };
+            let Ok(head) = parse(&text) else {
+                unparsed += 1;
+                continue;
+            };
+            match json_mismatch(&text, &head, "tirewear w") {
+                Some(why) => {
+                    assert!(
+                        why.contains("`tirewear w`") && why.contains("delete the field"),
+                        "{why}"
+                    );
+                    refused += 1;
+                }
+                // The field's own name changed: the file has no checksum.
+                None => assert!(
+                    (name..name + JSON_CHECKSUM_FIELD.len()).contains(&at),
+                    "byte {at}"
+                ),
+            }
+        }
+        assert!(refused > 40 && unparsed > 10, "{refused} {unparsed}");
     }
 }

@@ -802,6 +802,7 @@ fn write_outputs(
     let report = side_table_path(&opts.out, "report.json");
     let text = serde_json::to_string_pretty(summary)
         .map_err(|e| IngestError::invalid(&report, "report", e.to_string()))?;
+    let text = crate::ingest::checksum::seal_json(&text);
     set.add(&report, |f| std::io::Write::write_all(f, text.as_bytes()))
         .map_err(io(&report))?;
     set.commit().map_err(io(&journal))

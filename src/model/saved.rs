@@ -15,47 +15,6 @@ use std::path::Path;
 pub(crate) const MODEL_FORMAT: &str = "tirewear-model";
 pub(crate) const MODEL_VERSION: u32 = 1;
 
-/// The last field of a model file: the CRC-32 of the rest (docs/models.md,
-/// "Checksum"). A digit changed in a coefficient is valid JSON and a valid
-/// model; the checksum tells it from what `fit` wrote.
-const CHECKSUM_FIELD: &str = "data_crc32";
-
-/// Checks a model file's [`CHECKSUM_FIELD`] when it has one (files from
-/// before it, or with it deleted by someone who edited the file on
-/// purpose, have none).
-fn check_checksum(text: &str, head: &serde_json::Value) -> Result<(), String> {
-    let Some(recorded) = head.get(CHECKSUM_FIELD) else {
-        return Ok(());
-    };
-    let edited = "the file was damaged or edited after `tirewear fit` wrote it \
-                  (if you edited it on purpose, delete the field)";
-    let recorded = recorded
-        .as_str()
-        .filter(|s| s.len() == 8)
-        .and_then(|s| u32::from_str_radix(s, 16).ok())
-        .ok_or_else(|| format!("{CHECKSUM_FIELD} is {recorded}, not 8 hex digits: {edited}"))?;
-    let field = format!(",\n  \"{CHECKSUM_FIELD}\": \"{recorded:08x}\"\n}}");
-    // A checkout that turned the line ends into CRLF (git's autocrlf) is
-    // the same file: the JSON `fit` writes has no other carriage return.
-    let text = text.replace("\r\n", "\n");
-    let body = text
-        .trim_end()
-        .strip_suffix(field.as_str())
-        .map(|open| format!("{open}\n}}"))
-        .ok_or_else(|| {
-            format!("{CHECKSUM_FIELD} is not the file's last field as written: {edited}")
-        })?;
-    let found = crc32fast::hash(body.as_bytes());
-    if found == recorded {
-        Ok(())
-    } else {
-        Err(format!(
-            "{CHECKSUM_FIELD}: the model's text has CRC-32 {found:08x} where the field \
-             records {recorded:08x}: {edited}"
-        ))
-    }
-}
-
 /// A column with its unit.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Feature {
@@ -162,15 +121,11 @@ impl SavedModel {
     }
 
     /// The file's text: the model as pretty JSON, then, as its last field,
-    /// [`CHECKSUM_FIELD`]: the CRC-32 of that JSON without the field (the
-    /// file up to the comma before it, and the closing `\n}`).
+    /// `data_crc32`: the CRC-32 of that JSON without the field
+    /// (`ingest::checksum::seal_json`; docs/models.md, "Checksum").
     pub(crate) fn to_json(&self) -> String {
         let body = serde_json::to_string_pretty(self).expect("model serialises");
-        let crc = crc32fast::hash(body.as_bytes());
-        let open = body
-            .strip_suffix("\n}")
-            .expect("a pretty JSON object ends with \\n}");
-        format!("{open},\n  \"{CHECKSUM_FIELD}\": \"{crc:08x}\"\n}}\n")
+        crate::ingest::checksum::seal_json(&body)
     }
 
     /// Writes the model atomically.
@@ -204,7 +159,9 @@ impl SavedModel {
                 )));
             }
         }
-        check_checksum(&text, &head).map_err(file)?;
+        if let Some(why) = crate::ingest::checksum::json_mismatch(&text, &head, "tirewear fit") {
+            return Err(file(why));
+        }
         let model: SavedModel = serde_json::from_str(&text).map_err(|e| file(e.to_string()))?;
         model.check_shapes().map_err(file)?;
         Ok(model)

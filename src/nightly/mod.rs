@@ -256,13 +256,19 @@ fn read_manifest(dataset: &Path) -> Result<Option<DatasetManifest>, NightlyError
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
         Err(e) => return Err(NightlyError::io(&path)(e)),
     };
-    let m: DatasetManifest = serde_json::from_slice(&text).map_err(|e| {
+    let invalid = |e: &dyn std::fmt::Display| {
         NightlyError::Invalid(format!(
             "{}: not a tirewear dataset manifest: {e} (nothing was changed; move the file \
              aside and the next run processes every run of the archives again)",
             path.display()
         ))
-    })?;
+    };
+    let head: serde_json::Value = serde_json::from_slice(&text).map_err(|e| invalid(&e))?;
+    let text = String::from_utf8_lossy(&text);
+    if let Some(why) = crate::ingest::checksum::json_mismatch(&text, &head, "tirewear process") {
+        return Err(invalid(&why));
+    }
+    let m: DatasetManifest = serde_json::from_value(head).map_err(|e| invalid(&e))?;
     if m.format_version != DATASET_FORMAT_VERSION {
         return Err(NightlyError::Invalid(format!(
             "{}: format_version {} (this build reads {DATASET_FORMAT_VERSION})",
@@ -857,10 +863,18 @@ fn write_run_parts(dataset: &Path, key: &str, run: &str, o: RunOutput) -> Result
     Ok(())
 }
 
+/// `dataset.json`'s text: pretty JSON ending with its checksum field
+/// (`ingest::checksum::seal_json`), checked by [`read_manifest`].
+fn manifest_text(m: &DatasetManifest) -> String {
+    crate::ingest::checksum::seal_json(
+        &serde_json::to_string_pretty(m).expect("manifest serialises"),
+    )
+}
+
 fn write_manifest(dataset: &Path, m: &DatasetManifest) -> Result<(), NightlyError> {
     let path = dataset.join("dataset.json");
-    let text = serde_json::to_vec_pretty(m).expect("manifest serialises");
-    crate::atomic::write_bytes(&path, &text).map_err(NightlyError::io(&path))
+    let text = manifest_text(m);
+    crate::atomic::write_bytes(&path, text.as_bytes()).map_err(NightlyError::io(&path))
 }
 
 /// The schema of each consolidated table when it has no rows.
@@ -1059,8 +1073,8 @@ fn commit(
             .map_err(NightlyError::io(&dest))?;
     }
     let path = dataset.join("dataset.json");
-    let text = serde_json::to_vec_pretty(&*new).expect("manifest serialises");
-    set.add(&path, |f| std::io::Write::write_all(f, &text))
+    let text = manifest_text(new);
+    set.add(&path, |f| std::io::Write::write_all(f, text.as_bytes()))
         .map_err(NightlyError::io(&path))?;
     set.commit().map_err(NightlyError::io(&journal))
 }

@@ -101,12 +101,15 @@ fn read_json(path: &Path) -> Result<Option<serde_json::Value>, ReportError> {
         path: path.into(),
         source,
     })?;
-    serde_json::from_str(&text)
-        .map(Some)
-        .map_err(|e| ReportError::Input {
-            path: path.into(),
-            message: format!("not valid JSON: {e}"),
-        })
+    let input = |message: String| ReportError::Input {
+        path: path.into(),
+        message,
+    };
+    let head = serde_json::from_str(&text).map_err(|e| input(format!("not valid JSON: {e}")))?;
+    match crate::ingest::checksum::json_mismatch(&text, &head, "tirewear") {
+        Some(why) => Err(input(why)),
+        None => Ok(Some(head)),
+    }
 }
 
 /// Where `name` lives under `dir/sub`: directly (a season folder after
@@ -356,6 +359,24 @@ mod tests {
             labels,
             ["h200/bench", "laptop/bench", "ci", "h200/bench (4)"]
         );
+    }
+
+    /// `gap.json` and `kpis.report.json` as tirewear writes them are read;
+    /// a digit changed in one is refused naming the file and the checksum;
+    /// a file without the checksum (older, or edited with it deleted) is read.
+    #[test]
+    fn a_changed_digit_in_a_json_input_is_refused_by_its_checksum() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("gap.json");
+        let body = serde_json::to_string_pretty(&serde_json::json!({"rmse_pct": 12.5})).unwrap();
+        let sealed = crate::ingest::checksum::seal_json(&body);
+        std::fs::write(&path, &sealed).unwrap();
+        assert_eq!(read_json(&path).unwrap().unwrap()["rmse_pct"], 12.5);
+        std::fs::write(&path, sealed.replace("12.5", "13.5")).unwrap();
+        let e = read_json(&path).unwrap_err().to_string();
+        assert!(e.contains("gap.json") && e.contains("data_crc32"), "{e}");
+        std::fs::write(&path, body.replace("12.5", "13.5")).unwrap();
+        assert_eq!(read_json(&path).unwrap().unwrap()["rmse_pct"], 13.5);
     }
 
     /// A folder with nothing but this gap.json.
