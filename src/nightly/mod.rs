@@ -686,8 +686,10 @@ pub fn process(opts: &ProcessOptions) -> Result<ProcessSummary, NightlyError> {
     clean_staging(dataset)?;
     summary.seconds = start.elapsed().as_secs_f64();
     let path = dataset.join("summary.json");
-    let text = serde_json::to_vec_pretty(&summary).expect("summary serialises");
-    crate::atomic::write_bytes(&path, &text).map_err(NightlyError::io(&path))?;
+    let text = crate::ingest::checksum::seal_json(
+        &serde_json::to_string_pretty(&summary).expect("summary serialises"),
+    );
+    crate::atomic::write_bytes(&path, text.as_bytes()).map_err(NightlyError::io(&path))?;
     Ok(summary)
 }
 
