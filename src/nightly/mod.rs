@@ -26,6 +26,7 @@ pub use error::NightlyError;
 
 use crate::atomic::OutputSet;
 use crate::engine::{CpuEngine, ReduceEngine};
+use crate::ingest::IngestError;
 use crate::ingest::manifest::{Run, Season};
 use crate::kpi::Engine;
 use crate::kpi::extract::{
@@ -279,24 +280,25 @@ fn read_manifest(dataset: &Path) -> Result<Option<DatasetManifest>, NightlyError
     Ok(Some(m))
 }
 
-/// Reads every record batch of a Parquet file.
+/// Reads every record batch of a Parquet file, its footer and checksum
+/// checked first (`checksum::open_parquet`).
 fn read_batches(path: &Path) -> Result<Vec<RecordBatch>, NightlyError> {
-    let file = std::fs::File::open(path).map_err(NightlyError::io(path))?;
     let bad = |e: &dyn std::fmt::Display| {
         NightlyError::Invalid(format!(
             "{}: damaged part: {e} (delete it and it is made again on the next run)",
             path.display()
         ))
     };
-    let file_len = file.metadata().map_err(NightlyError::io(path))?.len();
-    let builder = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file)
-        .map_err(|e| bad(&e))?;
-    if let Some(why) = crate::ingest::checksum::layout_fault(builder.metadata(), file_len) {
-        return Err(bad(&format!("footer: {why}")));
-    }
-    if let Some(why) = crate::ingest::checksum::mismatch(path, builder.metadata()) {
-        return Err(bad(&format!("data checksum: {why}")));
-    }
+    let builder = crate::ingest::checksum::open_parquet(path).map_err(|e| match e {
+        IngestError::Io { source, .. } => NightlyError::io(path)(source),
+        // The message without its leading path: `bad` names the file once.
+        e => {
+            let msg = e.to_string();
+            bad(&msg
+                .strip_prefix(&format!("{}: ", path.display()))
+                .unwrap_or(&msg))
+        }
+    })?;
     let reader = builder.build().map_err(|e| bad(&e))?;
     reader.collect::<Result<Vec<_>, _>>().map_err(|e| bad(&e))
 }
@@ -1133,6 +1135,37 @@ fn clean_staging(dataset: &Path) -> Result<(), NightlyError> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A part whose data no longer match its checksum is refused in the
+    /// nightly form: the file named once, what was wrong, what to do.
+    #[test]
+    fn a_damaged_part_is_named_once_with_what_to_do() {
+        use arrow_array::{Float64Array, RecordBatch};
+        let values = Float64Array::from_iter_values((0..40).map(f64::from));
+        let batch =
+            RecordBatch::try_from_iter([("wear_pct", std::sync::Arc::new(values) as _)]).unwrap();
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("part.parquet");
+        let mut bytes = Vec::new();
+        crate::kpi::table::write_batch_to(&mut bytes, &batch).unwrap();
+        std::fs::write(&path, &bytes).unwrap();
+        assert_eq!(read_batches(&path).unwrap(), [batch]);
+        bytes[40] ^= 0x10;
+        std::fs::write(&path, &bytes).unwrap();
+        let e = read_batches(&path).unwrap_err().to_string();
+        let name = path.display().to_string();
+        assert!(
+            e.starts_with(&format!("{name}: damaged part: data checksum: bytes 0..")),
+            "{e}"
+        );
+        assert!(
+            e.ends_with("(delete it and it is made again on the next run)"),
+            "{e}"
+        );
+        assert_eq!(e.matches(&name).count(), 1, "{e}");
+        std::fs::remove_file(&path).unwrap();
+        assert!(matches!(read_batches(&path), Err(NightlyError::Io { .. })));
+    }
 
     #[test]
     fn ids_become_safe_path_names() {
