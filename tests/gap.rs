@@ -657,6 +657,40 @@ fn a_predictions_file_is_a_baseline_like_the_model_it_came_from() {
     }
     assert!(from_csv.baseline.contains("predictions.csv"));
 
+    // On the measured wear's scale, or refused: a fraction of the tread, a
+    // wear 20 times too large, or predictions for other runs.
+    let good = Predictions::read(&csv).unwrap();
+    good.check_scale(&rows).unwrap();
+    let scaled = |f: f64, prefix: &str| Predictions {
+        source: good.source.clone(),
+        wear_pct: good
+            .wear_pct
+            .iter()
+            .map(|((run, w), p)| ((format!("{prefix}{run}"), *w), p * f))
+            .collect(),
+    };
+    scaled(1.5, "").check_scale(&rows).unwrap();
+    for f in [0.01, 20.0] {
+        let e = scaled(f, "").check_scale(&rows).unwrap_err();
+        assert!(
+            e.contains("predictions.csv") && e.contains("median predicted wear"),
+            "{f}: {e}"
+        );
+    }
+    let e = scaled(1.0, "x-").check_scale(&rows).unwrap_err();
+    assert!(e.contains("no prediction for a tire"), "{e}");
+    // A prediction no wear in % can be is refused by line.
+    std::fs::write(
+        &csv,
+        "run,wheel,predicted_wear_pct\nR1,FL,3.0\nR1,FR,1e308\n",
+    )
+    .unwrap();
+    let err = Predictions::read(&csv).unwrap_err().to_string();
+    assert!(
+        err.contains("line 3") && err.contains("not a wear in % of the tread"),
+        "{err}"
+    );
+
     std::fs::write(&csv, "run,wheel,predicted_wear_pct\nR1,FL,3.0\nR1,XX,2.0\n").unwrap();
     let err = Predictions::read(&csv).unwrap_err().to_string();
     assert!(

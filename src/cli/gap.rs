@@ -287,6 +287,7 @@ pub(crate) fn run_gap(
                 rows.len()
             );
         }
+        p.check_scale(&rows).map_err(anyhow::Error::msg)?;
         Baseline::Predictions(p)
     } else {
         let m = SavedModel::load(std::path::Path::new(baseline))?;

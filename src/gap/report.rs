@@ -75,6 +75,19 @@ impl Predictions {
             let Some(p) = r.predicted_wear_pct.filter(|p| p.is_finite()) else {
                 continue;
             };
+            if !PLAUSIBLE_PREDICTION_PCT.contains(&p) {
+                let shown = if p.abs() < 1e6 {
+                    p.to_string()
+                } else {
+                    format!("{p:e}")
+                };
+                return Err(bad(format!(
+                    "predicted_wear_pct = {shown} is not a wear in % of the tread depth \
+                     (accepted: {}..{} %)",
+                    PLAUSIBLE_PREDICTION_PCT.start(),
+                    PLAUSIBLE_PREDICTION_PCT.end()
+                )));
+            }
             if out.wear_pct.insert((r.run.clone(), wheel), p).is_some() {
                 return Err(bad(format!(
                     "a second prediction for run {} wheel {}",
@@ -87,7 +100,52 @@ impl Predictions {
         }
         Ok(out)
     }
+
+    /// Refuses predictions on another scale than the measured wear: the
+    /// median prediction over the tires with a measured wear more than
+    /// [`PREDICTION_SCALE_LIMIT`] times above or below the median measured
+    /// wear (a fraction of the tread instead of %, or mm of tread lost).
+    pub fn check_scale(&self, rows: &[KpiRow]) -> Result<(), String> {
+        let (mut predicted, mut measured): (Vec<f64>, Vec<f64>) = rows
+            .iter()
+            .filter_map(|r| Some((*self.wear_pct.get(&r.tire_run())?, r.wear_mean_pct)))
+            .filter(|(p, m)| p.is_finite() && m.is_finite())
+            .unzip();
+        if predicted.is_empty() {
+            return Err(format!(
+                "{}: no prediction for a tire of the KPI table with a measured wear \
+                 (are the run ids and wheels the table's?)",
+                self.source
+            ));
+        }
+        let median = |v: &mut Vec<f64>| {
+            v.sort_by(f64::total_cmp);
+            v[v.len() / 2]
+        };
+        let (p, m) = (median(&mut predicted), median(&mut measured));
+        let ratio = p / m;
+        if m > 0.0 && !(1.0 / PREDICTION_SCALE_LIMIT..=PREDICTION_SCALE_LIMIT).contains(&ratio) {
+            return Err(format!(
+                "{}: the median predicted wear ({p:.4} %) is {ratio:.3} times the median \
+                 measured wear ({m:.4} %) of the same {} tires: predictions must be the mean \
+                 wear in % of the new tread depth, as the KPI table's wear_mean_pct \
+                 (a fraction, or mm of tread lost, is on another scale)",
+                self.source,
+                predicted.len()
+            ));
+        }
+        Ok(())
+    }
 }
+
+/// Predictions a baseline CSV may hold (% of the new tread depth): a model
+/// may predict beyond worn-through or slightly below zero, never by orders
+/// of magnitude.
+pub const PLAUSIBLE_PREDICTION_PCT: std::ops::RangeInclusive<f64> = -100.0..=1000.0;
+
+/// How far the median prediction may lie from the median measured wear
+/// (a factor either way) before the predictions are taken for another unit.
+pub const PREDICTION_SCALE_LIMIT: f64 = 10.0;
 
 /// Candidates (the leading ones by CV gain) whose slices are listed.
 const ACTS_FOR: usize = 10;
