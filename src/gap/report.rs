@@ -101,10 +101,11 @@ impl Predictions {
         Ok(out)
     }
 
-    /// Refuses predictions on another scale than the measured wear: the
-    /// median prediction over the tires with a measured wear more than
+    /// Refuses predictions on another scale than the measured wear: over
+    /// the tires of `rows` with both, a median prediction more than
     /// [`PREDICTION_SCALE_LIMIT`] times above or below the median measured
-    /// wear (a fraction of the tread instead of %, or mm of tread lost).
+    /// wear (a fraction of the tread instead of %, or mm of tread lost);
+    /// and predictions for none of them.
     pub fn check_scale(&self, rows: &[KpiRow]) -> Result<(), String> {
         let (mut predicted, mut measured): (Vec<f64>, Vec<f64>) = rows
             .iter()
