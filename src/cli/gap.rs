@@ -17,8 +17,11 @@ pub(crate) struct GapArgs {
     kpis: Option<PathBuf>,
     /// `physics`, a model file written by `tirewear fit`, or a CSV of
     /// predicted wear from any simulation (columns `run`, `wheel`,
-    /// `predicted_wear_pct`; `tirewear predict` writes one): the "sim"
-    /// side of the gap can be the team's own tool.
+    /// `predicted_wear_pct`: the mean wear in % of the new tread depth, as
+    /// the KPI table's `wear_mean_pct`; `tirewear predict` writes one): the
+    /// "sim" side of the gap can be the team's own tool. Predictions outside
+    /// −100..1000 %, or whose median is more than 10 times off the measured
+    /// wear's (a fraction, mm), are refused.
     #[arg(long, default_value = "physics")]
     baseline: String,
     /// Testing events (comma-separated); default every third event.
