@@ -174,6 +174,16 @@ impl OutputSet {
     }
 }
 
+/// Writes whole files (destination, bytes) as one [`OutputSet`] behind
+/// `journal`: they become visible together.
+pub(crate) fn write_set(journal: &Path, files: &[(&Path, &[u8])]) -> io::Result<()> {
+    let mut set = OutputSet::new(journal)?;
+    for (dest, bytes) in files {
+        set.add(dest, |f| f.write_all(bytes))?;
+    }
+    set.commit()
+}
+
 /// Finishes a commit that a killed process left half done: every temporary
 /// file its journal names that still exists is renamed into place.
 pub(crate) fn recover(journal: &Path) -> io::Result<()> {

@@ -436,7 +436,6 @@ pub fn write_diagnosis(
     d: &Diagnosis,
     out: &std::path::Path,
 ) -> Result<[std::path::PathBuf; 2], GapError> {
-    use std::io::Write;
     let io = |path: &std::path::Path| {
         let path = path.display().to_string();
         move |source| GapError::Io { path, source }
@@ -447,13 +446,11 @@ pub fn write_diagnosis(
         &serde_json::to_string_pretty(d).expect("a diagnosis serialises"),
     );
     let md = super::render::render_markdown(d, usize::MAX);
-    let journal = out.join(".gap.journal");
-    let mut set = crate::atomic::OutputSet::new(&journal).map_err(io(&journal))?;
-    for (path, text) in paths.iter().zip([json, md]) {
-        set.add(path, |f| f.write_all(text.as_bytes()))
-            .map_err(io(path))?;
-    }
-    set.commit().map_err(io(out))?;
+    crate::atomic::write_set(
+        &out.join(".gap.journal"),
+        &[(&paths[0], json.as_bytes()), (&paths[1], md.as_bytes())],
+    )
+    .map_err(io(out))?;
     Ok(paths)
 }
 

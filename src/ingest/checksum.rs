@@ -166,7 +166,8 @@ pub(crate) fn layout_fault(metadata: &ParquetMetaData, file_len: u64) -> Option<
 }
 
 /// The last field of the JSON files tirewear writes and reads back (model
-/// files, `gap.json`, `kpis.report.json`, `dataset.json`): the CRC-32 of
+/// files, `gap.json`, `kpis.report.json`, `dataset.json`, `summary.json`):
+/// the CRC-32 of
 /// the file's text without it (docs/formats.md, "Checksum of tirewear's
 /// JSON files"). A digit changed in a number is valid JSON; the checksum
 /// tells it from what tirewear wrote.

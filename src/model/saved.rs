@@ -315,17 +315,18 @@ pub const MODELS_JOURNAL: &str = ".models.journal";
 /// visible together (`atomic::OutputSet`), so a fit killed while writing
 /// leaves the previous fit's files, not a mix of two fits.
 pub fn save_all(models: &[SavedModel], dir: &Path) -> std::io::Result<Vec<std::path::PathBuf>> {
-    use std::io::Write;
     std::fs::create_dir_all(dir)?;
-    let mut set = crate::atomic::OutputSet::new(&dir.join(MODELS_JOURNAL))?;
-    let mut paths = Vec::new();
-    for m in models {
-        let p = dir.join(format!("{}.json", m.method()));
-        let text = m.to_json();
-        set.add(&p, |f| f.write_all(text.as_bytes()))?;
-        paths.push(p);
-    }
-    set.commit()?;
+    let paths: Vec<_> = models
+        .iter()
+        .map(|m| dir.join(format!("{}.json", m.method())))
+        .collect();
+    let texts: Vec<String> = models.iter().map(SavedModel::to_json).collect();
+    let files: Vec<_> = paths
+        .iter()
+        .zip(&texts)
+        .map(|(p, t)| (p.as_path(), t.as_bytes()))
+        .collect();
+    crate::atomic::write_set(&dir.join(MODELS_JOURNAL), &files)?;
     Ok(paths)
 }
 

@@ -387,15 +387,13 @@ pub fn write_outputs(
     cases: &[Case],
     md: &str,
 ) -> std::io::Result<[PathBuf; 2]> {
-    use std::io::Write;
     std::fs::create_dir_all(out)?;
     let paths = [out.join("validate.json"), out.join("validate.md")];
     let json = serde_json::to_string_pretty(cases).map_err(std::io::Error::other)?;
-    let mut set = crate::atomic::OutputSet::new(&out.join(".validate.journal"))?;
-    for (path, text) in paths.iter().zip([json.as_str(), md]) {
-        set.add(path, |f| f.write_all(text.as_bytes()))?;
-    }
-    set.commit()?;
+    crate::atomic::write_set(
+        &out.join(".validate.journal"),
+        &[(&paths[0], json.as_bytes()), (&paths[1], md.as_bytes())],
+    )?;
     Ok(paths)
 }
 
