@@ -20,8 +20,8 @@ use clap::{Parser, Subcommand};
     after_help = "Exit codes: 0 done; 1 an error stopped the command (it names the file, \
 record and what was wrong); 2 bad command line; 3 extract wrote its outputs but skipped \
 some runs (listed, and in NAME.report.json), import imported some logs but not all (listed), \
-or process committed all runs but some that \
-failed (listed, and in DATASET/summary.json); 4 process found the dataset locked by another \
+fit wrote some models but not all (the others named), or process committed all runs but some that \
+failed (listed, and in DATASET/summary.json) or a --then step failed (named); 4 process found the dataset locked by another \
 process; 101 internal error (a bug, please report). \
 See docs/reliability.md."
 )]
@@ -59,7 +59,8 @@ enum Command {
     /// killed run resumes where it stopped, outputs are committed together,
     /// and `--shard K/N` + `--commit` spread the work over machines
     /// (Slurm, Kubernetes; docs/nightly.md). Exit 3: some runs failed, the
-    /// rest committed; exit 4: another process holds the dataset.
+    /// rest committed, or a `--then` step failed (the others still ran);
+    /// exit 4: another process holds the dataset.
     Process(cli::process::ProcessArgs),
     /// Import logger data (MoTeC, CSV, Parquet) into a season archive.
     ///
@@ -78,6 +79,8 @@ enum Command {
     /// PCA + regression and the physical correlations + regression per axle,
     /// trained on some events and tested on others. Prints the paper's
     /// performance tables and writes each model as JSON (OUT/METHOD.json).
+    /// A method that fails does not stop the others: exit 3 when some
+    /// models were written and others not (named), 1 when none was.
     Fit(cli::fit::FitArgs),
     /// Predict wear with a saved model.
     ///
@@ -184,7 +187,11 @@ fn run() -> Result<std::process::ExitCode> {
                 return Ok(std::process::ExitCode::from(EXIT_RUNS_SKIPPED));
             }
         }
-        Command::Fit(a) => cli::fit::run(a)?,
+        Command::Fit(a) => {
+            if !cli::fit::run(a)? {
+                return Ok(std::process::ExitCode::from(EXIT_RUNS_SKIPPED));
+            }
+        }
         Command::Predict(a) => cli::predict::run(a)?,
         Command::Gap(a) => cli::gap::run(a, progress)?,
         Command::Bench(a) => cli::bench::run(a)?,

@@ -592,3 +592,102 @@ fn exit_codes_of_the_binary() {
         .unwrap();
     assert_eq!(out.status.code(), Some(2), "a bad --shard is a usage error");
 }
+
+/// The files directly under `dir/sub/*/` (the dated folders `--then`
+/// writes), by name.
+fn dated_files(dir: &Path, sub: &str) -> Vec<String> {
+    let mut names: Vec<String> = std::fs::read_dir(dir.join(sub))
+        .into_iter()
+        .flatten()
+        .flatten()
+        .flat_map(|stamp| std::fs::read_dir(stamp.path()).unwrap().flatten())
+        .map(|f| f.file_name().to_string_lossy().into_owned())
+        .filter(|n| !n.starts_with('.'))
+        .collect();
+    names.sort();
+    names
+}
+
+/// `--then fit,gap,report`: a step that fails stops neither the commit nor
+/// the other steps; the report is skipped rather than shown beside an older
+/// night's models or gap; exit 3 names what was not done.
+#[test]
+fn a_failed_then_step_stops_neither_the_commit_nor_the_others() {
+    let dir = tempfile::tempdir().unwrap();
+    let exe = env!("CARGO_BIN_EXE_tirewear");
+    let process = |archive: &Path, dataset: &Path| {
+        let out = std::process::Command::new(exe)
+            .args(["--quiet", "--log", "error", "process", "--engine", "cpu"])
+            .args(["--then", "fit,gap,report", "--out"])
+            .arg(dataset)
+            .arg(archive)
+            .output()
+            .unwrap();
+        let text = |b: &[u8]| String::from_utf8_lossy(b).into_owned();
+        (out.status.code(), text(&out.stdout), text(&out.stderr))
+    };
+
+    // The tiny season (4 runs, 16 tires on two events): the physical
+    // model's design is singular and the gap diagnosis needs more than 20
+    // tires; the network and PCA fit.
+    let archive = dir.path().join("tiny");
+    let dataset = dir.path().join("tiny-dataset");
+    tiny(&archive, 19);
+    let (code, out, err) = process(&archive, &dataset);
+    assert_eq!(code, Some(3), "{out}\n{err}");
+    assert_eq!(
+        processed_rows(&dataset),
+        extracted(&archive, dir.path()),
+        "the commit stands"
+    );
+    // Physical fails, PCA fits; each model written is one not named as failed.
+    assert!(out.contains("Physical model not fitted"), "{out}");
+    let written = dated_files(&dataset, "models");
+    assert!(written.contains(&"pca.json".to_string()), "{written:?}");
+    for (method, file) in [
+        ("Ffnn", "ffnn.json"),
+        ("Pca", "pca.json"),
+        ("Physical", "physical.json"),
+    ] {
+        let failed = out.contains(&format!("{method} model not fitted"));
+        assert_eq!(
+            written.contains(&file.to_string()),
+            !failed,
+            "{method}: {out}"
+        );
+    }
+    assert!(err.contains("--then gap failed"), "{err}");
+    assert!(dated_files(&dataset, "gap").is_empty());
+    assert!(err.contains("--then report skipped: gap failed"), "{err}");
+    assert!(!dataset.join("report").exists());
+    assert!(
+        out.contains("--then: not done: fit (some methods), gap, report (skipped)"),
+        "{out}"
+    );
+    // `fit` alone: the same two models, exit 3.
+    let fit = std::process::Command::new(exe)
+        .args(["--quiet", "--log", "error", "fit"])
+        .arg(dataset.join("kpis.parquet"))
+        .arg("--out")
+        .arg(dir.path().join("models"))
+        .output()
+        .unwrap();
+    assert_eq!(fit.status.code(), Some(3));
+    assert!(dir.path().join("models/pca.json").exists());
+    assert!(!dir.path().join("models/physical.json").exists());
+
+    // The demo season into a dataset whose `models` is a plain file: `fit`
+    // fails before fitting, and the gap diagnosis is still written.
+    let archive = dir.path().join("demo");
+    let dataset = dir.path().join("demo-dataset");
+    common::simulate_demo(&archive);
+    std::fs::create_dir_all(&dataset).unwrap();
+    std::fs::write(dataset.join("models"), "not a folder").unwrap();
+    let (code, out, err) = process(&archive, &dataset);
+    assert_eq!(code, Some(3), "{out}\n{err}");
+    assert!(dataset.join("dataset.json").exists());
+    assert!(err.contains("--then fit failed: creating"), "{err}");
+    assert_eq!(dated_files(&dataset, "gap"), ["gap.json", "gap.md"]);
+    assert!(err.contains("--then report skipped: fit failed"), "{err}");
+    assert!(!dataset.join("report").exists());
+}

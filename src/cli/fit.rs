@@ -4,7 +4,6 @@ use anyhow::{Context, Result};
 use std::path::PathBuf;
 use std::time::Instant;
 use tirewear::model::fit::{self, FitSettings, Method};
-use tirewear::model::saved::SavedModel;
 
 #[derive(clap::Args)]
 pub(crate) struct FitArgs {
@@ -17,7 +16,7 @@ pub(crate) struct FitArgs {
     /// Default: every third event in event-id order.
     #[arg(long, value_delimiter = ',')]
     test_events: Option<Vec<String>>,
-    /// Folder for the fitted models (METHOD.json) and the summary (fit.json).
+    /// Folder for the fitted models (METHOD.json).
     #[arg(long, default_value = "models")]
     out: PathBuf,
     /// Seed of the network's initial weights and its training/validation split.
@@ -33,16 +32,22 @@ pub(crate) enum MethodArg {
     All,
 }
 
+/// Fits each method and writes the models that fitted, together, into
+/// `out`. A method that fails does not stop the others (a singular design
+/// for the physical model says nothing of the network); only when none
+/// fits is it an error. Returns the methods that failed, with their errors.
 pub(crate) fn run_fit(
     kpis: &std::path::Path,
     methods: &[Method],
     settings: &FitSettings,
     out: &std::path::Path,
-) -> Result<Vec<SavedModel>> {
+) -> Result<Vec<(Method, anyhow::Error)>> {
     let t0 = Instant::now();
     let rows = tirewear::kpi::table::read_parquet(kpis)?;
     let split = fit::split(&rows, settings.test_events.as_deref())
         .with_context(|| format!("splitting {}", kpis.display()))?;
+    // Before minutes of fitting, not after: an output folder that cannot be made.
+    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     println!(
         "{}: {} rows; training on {} events ({} rows), testing on {} events ({} rows): {}",
         kpis.display(),
@@ -54,12 +59,22 @@ pub(crate) fn run_fit(
         split.test_events.join(", ")
     );
     let mut models = Vec::new();
+    let mut failed = Vec::new();
     // The rows each method leaves out; listed again only where they differ.
     let mut listed: Option<Vec<String>> = None;
     for &m in methods {
         let t = Instant::now();
-        let (model, notes) = fit::fit_method(m, &split, settings)
-            .with_context(|| format!("fitting the {m:?} model on {}", kpis.display()))?;
+        let (model, notes) = match fit::fit_method(m, &split, settings) {
+            Ok(fitted) => fitted,
+            Err(e) => {
+                let e = anyhow::Error::new(e)
+                    .context(format!("fitting the {m:?} model on {}", kpis.display()));
+                println!("\n{m:?} model not fitted: {e:#}");
+                tracing::warn!("{e:#}");
+                failed.push((m, e));
+                continue;
+            }
+        };
         for line in left_out_lines(listed.as_deref(), &notes) {
             println!("{line}");
         }
@@ -71,6 +86,15 @@ pub(crate) fn run_fit(
         );
         models.push(model);
     }
+    if models.is_empty() {
+        let mut failed = failed.into_iter();
+        let (_, first) = failed.next().context("no method to fit")?;
+        let others: Vec<String> = failed.map(|(_, e)| format!("{e:#}")).collect();
+        return Err(match others.as_slice() {
+            [] => first,
+            _ => first.context(format!("no model fitted; also: {}", others.join("; "))),
+        });
+    }
     let paths = tirewear::model::saved::save_all(&models, out)
         .with_context(|| format!("writing models to {}", out.display()))?;
     if models.len() > 1 {
@@ -79,8 +103,15 @@ pub(crate) fn run_fit(
     for p in paths {
         println!("wrote {}", p.display());
     }
+    if !failed.is_empty() {
+        let names: Vec<String> = failed.iter().map(|(m, _)| format!("{m:?}")).collect();
+        println!(
+            "not fitted: {} (above); the other models were written",
+            names.join(", ")
+        );
+    }
     println!("fitted in {:.1} s", t0.elapsed().as_secs_f64());
-    Ok(models)
+    Ok(failed)
 }
 
 /// What `fit` prints of the rows a method leaves out: the first five and
@@ -105,8 +136,8 @@ fn left_out_lines(previous: Option<&[String]>, notes: &[String]) -> Vec<String> 
     lines
 }
 
-/// Runs `tirewear fit`.
-pub(crate) fn run(a: FitArgs) -> Result<()> {
+/// Runs `tirewear fit`; false when some methods fitted and others did not.
+pub(crate) fn run(a: FitArgs) -> Result<bool> {
     let methods = match a.method {
         MethodArg::Ffnn => vec![Method::Ffnn],
         MethodArg::Pca => vec![Method::Pca],
@@ -121,8 +152,7 @@ pub(crate) fn run(a: FitArgs) -> Result<()> {
         },
         ..Default::default()
     };
-    run_fit(&a.kpis, &methods, &settings, &a.out)?;
-    Ok(())
+    Ok(run_fit(&a.kpis, &methods, &settings, &a.out)?.is_empty())
 }
 
 #[cfg(test)]

@@ -197,9 +197,11 @@ pub(crate) fn run(a: ProcessArgs, progress: bool) -> Result<Outcome> {
     match tirewear::nightly::process(&opts) {
         Ok(s) => {
             print_summary(&s);
-            if s.committed && !a.then.is_empty() {
-                then_steps(&opts, &a.then)?;
-            }
+            let then_failed = if s.committed && !a.then.is_empty() {
+                then_steps(&opts, &a.then)
+            } else {
+                Vec::new()
+            };
             if !opts.dry_run
                 && let Some(r) = session.publish()?
             {
@@ -212,7 +214,10 @@ pub(crate) fn run(a: ProcessArgs, progress: bool) -> Result<Outcome> {
                     r.deleted
                 );
             }
-            Ok(if s.failed.is_empty() {
+            if !then_failed.is_empty() {
+                println!("--then: not done: {}", then_failed.join(", "));
+            }
+            Ok(if s.failed.is_empty() && then_failed.is_empty() {
                 Outcome::Done
             } else {
                 Outcome::SomeFailed
@@ -230,47 +235,86 @@ pub(crate) fn run(a: ProcessArgs, progress: bool) -> Result<Outcome> {
 }
 
 /// Runs the `--then` steps on the committed dataset, into dated folders.
-fn then_steps(opts: &ProcessOptions, steps: &[Then]) -> Result<()> {
+/// Each step runs whatever became of the others (`gap` does not need
+/// `fit`), except `report`: it shows the newest models and gap, so after a
+/// failed `fit` or `gap` it would show an older night's next to this
+/// dataset, and is skipped. Returns the steps that failed or were skipped.
+fn then_steps(opts: &ProcessOptions, steps: &[Then]) -> Vec<String> {
     let kpis = opts.dataset.join("kpis.parquet");
     let stamp = utc_stamp(std::time::SystemTime::now());
+    let mut failed: Vec<&str> = Vec::new();
+    let tell = |name: &str, e: &anyhow::Error| eprintln!("Error: --then {name} failed: {e:?}");
     if steps.contains(&Then::Fit) {
         println!();
-        super::fit::run_fit(
+        match super::fit::run_fit(
             &kpis,
             &tirewear::model::fit::Method::ALL,
             &tirewear::model::fit::FitSettings::default(),
             &opts.dataset.join("models").join(&stamp),
-        )?;
-    }
-    if steps.contains(&Then::Gap) {
-        // The compounds' WLF constants, from every archive's manifest.
-        let mut wlf = std::collections::BTreeMap::new();
-        for a in &opts.archives {
-            let season =
-                tirewear::ingest::manifest::Season::open_with(a, opts.allow_external_paths)?;
-            for c in &season.manifest.compounds {
-                let k = tirewear::ingest::compound::Compound::load(&season.path(&c.file))?;
-                wlf.insert(c.id.clone(), k.wlf);
+        ) {
+            // Some methods fitted: the report shows those (from this fit only).
+            Ok(not_fitted) if !not_fitted.is_empty() => failed.push("fit (some methods)"),
+            Ok(_) => {}
+            Err(e) => {
+                tell("fit", &e);
+                failed.push("fit");
             }
         }
-        let settings = tirewear::gap::report::GapSettings {
-            wlf,
-            ..Default::default()
-        };
+    }
+    if steps.contains(&Then::Gap) {
         println!();
-        super::gap::run_gap(
-            &kpis,
-            "physics",
-            &settings,
-            &opts.dataset.join("gap").join(&stamp),
-        )?;
+        if let Err(e) = then_gap(opts, &kpis, &stamp) {
+            tell("gap", &e);
+            failed.push("gap");
+        }
     }
     if steps.contains(&Then::Report) {
         println!();
-        let dir = opts.dataset.join("report").join(&stamp);
-        super::report::run_report(&opts.dataset, &dir.join("report.html"), &[])?;
+        let stale: Vec<&str> = failed
+            .iter()
+            .copied()
+            .filter(|s| ["fit", "gap"].contains(s))
+            .collect();
+        if stale.is_empty() {
+            let dir = opts.dataset.join("report").join(&stamp);
+            if let Err(e) = super::report::run_report(&opts.dataset, &dir.join("report.html"), &[])
+            {
+                tell("report", &e);
+                failed.push("report");
+            }
+        } else {
+            eprintln!(
+                "Error: --then report skipped: {} failed, so the report would show an older \
+                 result beside this dataset",
+                stale.join(" and ")
+            );
+            failed.push("report (skipped)");
+        }
     }
-    Ok(())
+    failed.into_iter().map(String::from).collect()
+}
+
+/// The gap diagnosis of the committed dataset, with the compounds' WLF
+/// constants from every archive's manifest.
+fn then_gap(opts: &ProcessOptions, kpis: &std::path::Path, stamp: &str) -> Result<()> {
+    let mut wlf = std::collections::BTreeMap::new();
+    for a in &opts.archives {
+        let season = tirewear::ingest::manifest::Season::open_with(a, opts.allow_external_paths)?;
+        for c in &season.manifest.compounds {
+            let k = tirewear::ingest::compound::Compound::load(&season.path(&c.file))?;
+            wlf.insert(c.id.clone(), k.wlf);
+        }
+    }
+    let settings = tirewear::gap::report::GapSettings {
+        wlf,
+        ..Default::default()
+    };
+    super::gap::run_gap(
+        kpis,
+        "physics",
+        &settings,
+        &opts.dataset.join("gap").join(stamp),
+    )
 }
 
 /// `YYYY-MM-DDTHHMMZ` of a time (UTC), for dated output folders.

@@ -112,21 +112,25 @@ fn read_json(path: &Path) -> Result<Option<serde_json::Value>, ReportError> {
     }
 }
 
-/// Where `name` lives under `dir/sub`: directly (a season folder after
-/// `fit`/`gap`) or in the newest dated subfolder (`tirewear process --then
+/// The folder under `dir/sub` whose files the report shows: `dir/sub`
+/// itself when it holds any of `names` (a season folder after `fit`/`gap`),
+/// else the newest dated subfolder that does (`tirewear process --then
 /// fit,gap` writes `models/2026-11-24T0230Z/…`; the names sort by time).
-fn newest(dir: &Path, sub: &str, name: &str) -> PathBuf {
-    let direct = dir.join(sub).join(name);
-    if direct.exists() {
+/// One folder for all the names, so that the models shown come from one
+/// fit: a method that failed last night is missing, not an older night's.
+fn newest(dir: &Path, sub: &str, names: &[&str]) -> PathBuf {
+    let holds = |d: &Path| names.iter().any(|n| d.join(n).exists());
+    let direct = dir.join(sub);
+    if holds(&direct) {
         return direct;
     }
-    let dated = std::fs::read_dir(dir.join(sub))
+    let dated = std::fs::read_dir(&direct)
         .into_iter()
         .flatten()
         .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| p.join(name).exists())
+        .filter(|p| holds(p))
         .max();
-    dated.map_or(direct, |d| d.join(name))
+    dated.unwrap_or(direct)
 }
 
 /// The compound folders of a season folder, or of the archives a `process`
@@ -161,8 +165,10 @@ impl Inputs {
         let rows =
             crate::kpi::table::read_parquet(&kpis).map_err(|e| ReportError::input(&kpis, e))?;
         let mut models = Vec::new();
-        for method in ["physical", "pca", "ffnn"] {
-            let path = newest(dir, "models", &format!("{method}.json"));
+        const MODEL_FILES: [&str; 3] = ["physical.json", "pca.json", "ffnn.json"];
+        let fit = newest(dir, "models", &MODEL_FILES);
+        for name in MODEL_FILES {
+            let path = fit.join(name);
             if path.exists() {
                 let m = crate::model::saved::SavedModel::load(&path)
                     .map_err(|e| ReportError::input(&path, e))?;
@@ -213,7 +219,7 @@ impl Inputs {
                 None => read_json(&dir.join("summary.json"))?,
             },
             models,
-            gap: read_json(&newest(dir, "gap", "gap.json"))?,
+            gap: read_json(&newest(dir, "gap", &["gap.json"]).join("gap.json"))?,
         })
     }
 }
@@ -316,23 +322,32 @@ mod tests {
     use super::*;
 
     #[test]
-    fn newest_takes_the_direct_file_else_the_latest_dated_folder() {
+    fn newest_takes_the_direct_folder_else_the_latest_dated_one() {
         let dir = tempfile::tempdir().unwrap();
         let d = dir.path();
+        let both = ["pca.json", "ffnn.json"];
         for stamp in ["2026-11-23T0230Z", "2026-11-24T0230Z", "2026-11-22T0230Z"] {
             std::fs::create_dir_all(d.join("models").join(stamp)).unwrap();
             std::fs::write(d.join("models").join(stamp).join("pca.json"), "{}").unwrap();
         }
-        // A later folder without the file does not count.
+        // A later folder without the files does not count.
         std::fs::create_dir_all(d.join("models/2026-11-25T0230Z")).unwrap();
         assert_eq!(
-            newest(d, "models", "pca.json"),
-            d.join("models/2026-11-24T0230Z/pca.json")
+            newest(d, "models", &both),
+            d.join("models/2026-11-24T0230Z")
+        );
+        // A later fit that wrote only one of them is the one shown: the
+        // other is missing, not taken from an older fit.
+        std::fs::create_dir_all(d.join("models/2026-11-26T0230Z")).unwrap();
+        std::fs::write(d.join("models/2026-11-26T0230Z/ffnn.json"), "{}").unwrap();
+        assert_eq!(
+            newest(d, "models", &both),
+            d.join("models/2026-11-26T0230Z")
         );
         std::fs::write(d.join("models/pca.json"), "{}").unwrap();
-        assert_eq!(newest(d, "models", "pca.json"), d.join("models/pca.json"));
-        // Nothing at all: the direct path, which does not exist.
-        assert_eq!(newest(d, "gap", "gap.json"), d.join("gap/gap.json"));
+        assert_eq!(newest(d, "models", &both), d.join("models"));
+        // Nothing at all: the direct folder, which does not exist.
+        assert_eq!(newest(d, "gap", &["gap.json"]), d.join("gap"));
     }
 
     #[test]
