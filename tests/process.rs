@@ -252,6 +252,72 @@ fn shards_then_commit_equal_one_whole_run() {
     assert_eq!(tree(&partial), tree(&whole));
 }
 
+/// What the shards leave for the commit is checked: a changed byte in a
+/// shard's record or in a run's staged failure is named, and shards given
+/// different archives are refused rather than half committed.
+#[test]
+fn damaged_or_disagreeing_shard_records_are_named() {
+    let dir = tempfile::tempdir().unwrap();
+    let archive = dir.path().join("season");
+    tiny(&archive, 16);
+    let season = tirewear::ingest::manifest::Season::open(&archive).unwrap();
+    let bad = &season.manifest.runs[0];
+    std::fs::write(season.path(&bad.telemetry), b"not an mcap file").unwrap();
+    let dataset = dir.path().join("dataset");
+    let shard = |archive: &Path, index: u32| {
+        let mut o = ProcessOptions::new(vec![archive.to_path_buf()], &dataset);
+        o.mode = Mode::Shard { index, count: 2 };
+        process(&o).unwrap()
+    };
+    let commit = || {
+        let mut c = ProcessOptions::new(vec![], &dataset);
+        c.mode = Mode::Commit;
+        process(&c)
+    };
+    shard(&archive, 0);
+    shard(&archive, 1);
+    let staging = dataset.join("staging");
+    let record = staging.join("shard-1-of-2.json");
+    let failure = std::fs::read_dir(&staging)
+        .unwrap()
+        .flatten()
+        .map(|e| e.path())
+        .find(|p| p.to_string_lossy().ends_with(".failed.json"))
+        .expect("the bad run's failure is staged");
+    let text = std::fs::read_to_string(&record).unwrap();
+    let good_failure = std::fs::read_to_string(&failure).unwrap();
+
+    // One letter of an archive's path changed: refused, naming the record.
+    let path = archive.to_str().unwrap();
+    assert!(text.contains(path));
+    let moved = text.replacen(path, &path.replace("/season", "/seasoN"), 1);
+    std::fs::write(&record, moved).unwrap();
+    let e = commit().unwrap_err().to_string();
+    assert!(e.contains("shard-1-of-2.json"), "{e}");
+    assert!(e.contains("damaged or edited"), "{e}");
+    assert!(!dataset.join("kpis.parquet").exists(), "nothing committed");
+
+    // The failure's reason edited: the commit still fails that run, and
+    // says its record is damaged instead of repeating the edited reason.
+    std::fs::write(&record, &text).unwrap();
+    std::fs::write(&failure, good_failure.replacen("mcap", "MCAP", 1)).unwrap();
+    let s = commit().unwrap();
+    assert_eq!(s.failed.len(), 1);
+    assert_eq!(s.failed[0].run, bad.id);
+    assert!(s.failed[0].reason.contains("is damaged"), "{:?}", s.failed);
+    assert_eq!(processed_rows(&dataset).len(), 12);
+
+    // Shard 2 given another archive (a copy, so its runs are the same):
+    // the records disagree, and the commit says so.
+    let copy = dir.path().join("copy");
+    common::copy_dir(&archive, &copy);
+    shard(&archive, 0);
+    shard(&copy, 1);
+    let e = commit().unwrap_err().to_string();
+    assert!(e.contains("name different archives"), "{e}");
+    assert!(e.contains("shard-2-of-2.json"), "{e}");
+}
+
 #[test]
 fn a_failed_run_is_reported_and_the_rest_committed() {
     let dir = tempfile::tempdir().unwrap();

@@ -557,13 +557,18 @@ pub fn process(opts: &ProcessOptions) -> Result<ProcessSummary, NightlyError> {
             summary.reused_staged += 1;
             ready.push(p);
         } else if opts.mode == Mode::Commit {
-            let reason = std::fs::read_to_string(staged_failure(dataset, &p.key))
-                .ok()
-                .and_then(|t| serde_json::from_str::<Failed>(&t).ok())
-                .map_or_else(
-                    || "not processed: no shard staged its parts (run the shards, or process without --commit)".to_string(),
-                    |f| f.reason,
-                );
+            let path = staged_failure(dataset, &p.key);
+            let reason = match read_sealed::<Failed>(&path) {
+                Ok(Some(f)) => f.reason,
+                Ok(None) => "not processed: no shard staged its parts \
+                             (run the shards, or process without --commit)"
+                    .to_string(),
+                Err(why) => format!(
+                    "a shard failed it, but its record {} is damaged ({why}): \
+                     run the shard again",
+                    path.display()
+                ),
+            };
             summary.failed.push(Failed {
                 run: p.run.id.clone(),
                 season: seasons[p.season].manifest.name.clone(),
@@ -602,8 +607,8 @@ pub fn process(opts: &ProcessOptions) -> Result<ProcessSummary, NightlyError> {
         let path = dataset
             .join("staging")
             .join(format!("shard-{}-of-{count}.json", index + 1));
-        let text = serde_json::to_vec_pretty(&record).expect("summary serialises");
-        crate::atomic::write_bytes(&path, &text).map_err(NightlyError::io(&path))?;
+        let text = sealed(&record);
+        crate::atomic::write_bytes(&path, text.as_bytes()).map_err(NightlyError::io(&path))?;
         return Ok(summary);
     }
 
@@ -688,9 +693,7 @@ pub fn process(opts: &ProcessOptions) -> Result<ProcessSummary, NightlyError> {
     clean_staging(dataset)?;
     summary.seconds = start.elapsed().as_secs_f64();
     let path = dataset.join("summary.json");
-    let text = crate::ingest::checksum::seal_json(
-        &serde_json::to_string_pretty(&summary).expect("summary serialises"),
-    );
+    let text = sealed(&summary);
     crate::atomic::write_bytes(&path, text.as_bytes()).map_err(NightlyError::io(&path))?;
     Ok(summary)
 }
@@ -702,7 +705,9 @@ struct ShardRecord {
     summary: ProcessSummary,
 }
 
-/// The archives the shards worked on, if any shard left a record.
+/// The archives the shards worked on, if any shard left a record. Every
+/// record must name the same archives: a shard given other archives staged
+/// runs a commit with the first record's list would not see.
 fn shard_archives(dataset: &Path) -> Result<Option<Vec<PathBuf>>, NightlyError> {
     let dir = dataset.join("staging");
     let Ok(entries) = std::fs::read_dir(&dir) else {
@@ -718,15 +723,63 @@ fn shard_archives(dataset: &Path) -> Result<Option<Vec<PathBuf>>, NightlyError> 
         })
         .collect();
     names.sort();
-    match names.first() {
-        None => Ok(None),
-        Some(p) => {
-            let text = std::fs::read(p).map_err(NightlyError::io(p))?;
-            let r: ShardRecord = serde_json::from_slice(&text)
-                .map_err(|e| NightlyError::Invalid(format!("{}: {e}", p.display())))?;
-            Ok(Some(r.archives))
+    let mut first: Option<(PathBuf, Vec<PathBuf>)> = None;
+    for p in names {
+        let r = read_sealed::<ShardRecord>(&p)
+            .map_err(|why| {
+                NightlyError::Invalid(format!(
+                    "{}: {why} (run that shard again, or give the archives to --commit)",
+                    p.display()
+                ))
+            })?
+            .ok_or_else(|| NightlyError::io(&p)(std::io::ErrorKind::NotFound.into()))?;
+        match &first {
+            None => first = Some((p, r.archives)),
+            Some((q, archives)) if *archives != r.archives => {
+                return Err(NightlyError::Invalid(format!(
+                    "{} and {} name different archives ({} and {}): run the shards \
+                     again with the same archives, or give the archives to --commit",
+                    q.display(),
+                    p.display(),
+                    show_paths(archives),
+                    show_paths(&r.archives)
+                )));
+            }
+            Some(_) => {}
         }
     }
+    Ok(first.map(|(_, archives)| archives))
+}
+
+fn show_paths(paths: &[PathBuf]) -> String {
+    let shown: Vec<String> = paths.iter().map(|p| p.display().to_string()).collect();
+    shown.join(", ")
+}
+
+/// `value` as pretty JSON sealed with its checksum (`checksum::seal_json`).
+fn sealed<T: Serialize>(value: &T) -> String {
+    crate::ingest::checksum::seal_json(
+        &serde_json::to_string_pretty(value).expect("plain data serialises"),
+    )
+}
+
+/// A record `sealed` wrote, or `None` when there is no file; the error says
+/// what is wrong with one that is there (unreadable, not JSON, checksum).
+fn read_sealed<T: serde::de::DeserializeOwned>(path: &Path) -> Result<Option<T>, String> {
+    let text = match std::fs::read(path) {
+        Ok(t) => t,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+        Err(e) => return Err(e.to_string()),
+    };
+    let head: serde_json::Value = serde_json::from_slice(&text).map_err(|e| e.to_string())?;
+    let text = String::from_utf8_lossy(&text);
+    if let Some(why) = crate::ingest::checksum::json_mismatch(&text, &head, "tirewear process")
+    {
+        return Err(why);
+    }
+    serde_json::from_value(head)
+        .map(Some)
+        .map_err(|e| e.to_string())
 }
 
 /// Processes `runs` and stages their parts (and each touched track's road
@@ -808,8 +861,9 @@ fn stage_runs<'a>(
                         reason,
                     };
                     let path = staged_failure(dataset, &p.key);
-                    let text = serde_json::to_vec(&f).expect("serialises");
-                    crate::atomic::write_bytes(&path, &text).map_err(NightlyError::io(&path))?;
+                    let text = sealed(&f);
+                    crate::atomic::write_bytes(&path, text.as_bytes())
+                        .map_err(NightlyError::io(&path))?;
                     summary.failed.push(f);
                 }
             }
@@ -870,9 +924,7 @@ fn write_run_parts(dataset: &Path, key: &str, run: &str, o: RunOutput) -> Result
 /// `dataset.json`'s text: pretty JSON ending with its checksum field
 /// (`ingest::checksum::seal_json`), checked by [`read_manifest`].
 fn manifest_text(m: &DatasetManifest) -> String {
-    crate::ingest::checksum::seal_json(
-        &serde_json::to_string_pretty(m).expect("manifest serialises"),
-    )
+    sealed(m)
 }
 
 fn write_manifest(dataset: &Path, m: &DatasetManifest) -> Result<(), NightlyError> {
