@@ -20,7 +20,8 @@ use clap::{Parser, Subcommand};
     after_help = "Exit codes: 0 done; 1 an error stopped the command (it names the file, \
 record and what was wrong); 2 bad command line; 3 extract wrote its outputs but skipped \
 some runs (listed, and in NAME.report.json), import imported some logs but not all (listed), \
-fit wrote some models but not all (the others named), or process committed all runs but some that \
+fit wrote some models but not all (the others named), report wrote the page without \
+inputs it could not read (named), or process committed all runs but some that \
 failed (listed, and in DATASET/summary.json) or a --then step failed (named); 4 process found the dataset locked by another \
 process; 101 internal error (a bug, please report). \
 See docs/reliability.md."
@@ -125,7 +126,10 @@ enum Command {
     /// nothing fetched) with the season, the physical correlations (wear
     /// against friction energy per track), the models' predictions against
     /// the measurements and the sim-to-real gap, from what `extract`, `fit`
-    /// and `gap` wrote in the season folder (docs/report.md).
+    /// and `gap` wrote in the season folder (docs/report.md). Only
+    /// `kpis.parquet` is required: a model, side table, gap or extraction
+    /// report that exists but cannot be read is named at the top of the
+    /// page and left out (exit 3), not the whole report.
     Report(cli::report::ReportArgs),
     /// Try tirewear: simulate, extract, fit, diagnose and report the demo season.
     ///
@@ -195,7 +199,11 @@ fn run() -> Result<std::process::ExitCode> {
         Command::Predict(a) => cli::predict::run(a)?,
         Command::Gap(a) => cli::gap::run(a, progress)?,
         Command::Bench(a) => cli::bench::run(a)?,
-        Command::Report(a) => cli::report::run(a)?,
+        Command::Report(a) => {
+            if !cli::report::run(a)? {
+                return Ok(std::process::ExitCode::from(EXIT_RUNS_SKIPPED));
+            }
+        }
         Command::Demo(a) => cli::demo::run(a, progress)?,
     }
     Ok(std::process::ExitCode::SUCCESS)

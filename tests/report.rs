@@ -58,6 +58,7 @@ fn the_demo_report_has_every_section_its_figures_and_no_external_url() {
 
     let out = dir.path().join("report.html");
     let summary = tirewear::report::write_report(dir.path(), &out, &[]).unwrap();
+    assert!(summary.unread.is_empty(), "{:?}", summary.unread);
     let html = std::fs::read_to_string(&out).unwrap();
 
     // Every section, in order.
@@ -284,4 +285,67 @@ fn a_folder_without_kpis_is_an_error_naming_the_file() {
         "{msg}"
     );
     assert!(!dir.path().join("r.html").exists());
+}
+
+/// One damaged optional input costs its own figures, not the page: a model
+/// with a changed digit, a road table with a flipped byte and a gap file
+/// that is not JSON are each named at the top of the page and left out; the
+/// rest is drawn, and the command exits 3.
+#[test]
+fn damaged_optional_inputs_are_named_and_left_out() {
+    let dir = tempfile::tempdir().unwrap();
+    let rows = common::demo_kpis(dir.path());
+    let s = split(&rows, None).unwrap();
+    let settings = FitSettings::default();
+    let (pca, _) = fit_method(Method::Pca, &s, &settings).unwrap();
+    let (physical, _) = fit_method(Method::Physical, &s, &settings).unwrap();
+    let models = dir.path().join("models");
+    save_all(&[pca, physical], &models).unwrap();
+
+    let model = models.join("physical.json");
+    let text = std::fs::read_to_string(&model).unwrap();
+    // A digit of the coefficients, past the format's version.
+    let after = text.find("\"features\"").unwrap();
+    let digit = after + text[after..].find(|c: char| c.is_ascii_digit() && c != '0').unwrap();
+    let mut damaged = text.into_bytes();
+    damaged[digit] = if damaged[digit] == b'9' {
+        b'8'
+    } else {
+        damaged[digit] + 1
+    };
+    std::fs::write(&model, damaged).unwrap();
+    let road = dir.path().join("kpis.road.parquet");
+    let mut bytes = std::fs::read(&road).unwrap();
+    let at = bytes.len() / 3;
+    bytes[at] ^= 0x10;
+    std::fs::write(&road, bytes).unwrap();
+    std::fs::create_dir_all(dir.path().join("gap")).unwrap();
+    std::fs::write(dir.path().join("gap/gap.json"), "{\"slices\": [").unwrap();
+
+    let out = dir.path().join("report.html");
+    let summary = tirewear::report::write_report(dir.path(), &out, &[]).unwrap();
+    assert_eq!(summary.unread.len(), 3, "{:?}", summary.unread);
+    for name in ["physical.json", "kpis.road.parquet", "gap.json"] {
+        assert!(
+            summary.unread.iter().any(|e| e.contains(name)),
+            "{name}: {:?}",
+            summary.unread
+        );
+    }
+    let page = std::fs::read_to_string(&out).unwrap();
+    assert!(page.contains("These inputs could not be read"));
+    assert!(page.contains("data_crc32"), "the model's checksum named: {:?}", summary.unread);
+    // The PCA model is still shown; every section is still on the page.
+    assert!(page.contains("pca.json"));
+    assert_eq!(summary.sections.len(), 7, "{:?}", summary.sections);
+
+    let exe = env!("CARGO_BIN_EXE_tirewear");
+    let run = std::process::Command::new(exe)
+        .args(["--quiet", "--log", "error", "report"])
+        .arg(dir.path())
+        .output()
+        .unwrap();
+    assert_eq!(run.status.code(), Some(3));
+    let text = String::from_utf8_lossy(&run.stdout);
+    assert!(text.contains("left out (could not be read)"), "{text}");
 }

@@ -277,10 +277,13 @@ fn then_steps(opts: &ProcessOptions, steps: &[Then]) -> Vec<String> {
             .collect();
         if stale.is_empty() {
             let dir = opts.dataset.join("report").join(&stamp);
-            if let Err(e) = super::report::run_report(&opts.dataset, &dir.join("report.html"), &[])
-            {
-                tell("report", &e);
-                failed.push("report");
+            match super::report::run_report(&opts.dataset, &dir.join("report.html"), &[]) {
+                Ok(true) => {}
+                Ok(false) => failed.push("report (some inputs left out)"),
+                Err(e) => {
+                    tell("report", &e);
+                    failed.push("report");
+                }
             }
         } else {
             eprintln!(

@@ -21,8 +21,9 @@ pub(crate) struct ReportArgs {
     bench: Vec<PathBuf>,
 }
 
-/// Writes the report of `dir` to `out` and says where it is.
-pub(crate) fn run_report(dir: &Path, out: &Path, bench: &[PathBuf]) -> Result<()> {
+/// Writes the report of `dir` to `out` and says where it is; false when
+/// some optional inputs could not be read and were left out (named).
+pub(crate) fn run_report(dir: &Path, out: &Path, bench: &[PathBuf]) -> Result<bool> {
     let s = tirewear::report::write_report(dir, out, bench)?;
     println!(
         "wrote {} ({} figures; sections: {})",
@@ -30,11 +31,14 @@ pub(crate) fn run_report(dir: &Path, out: &Path, bench: &[PathBuf]) -> Result<()
         s.figures,
         s.sections.join(", ")
     );
-    Ok(())
+    for e in &s.unread {
+        println!("left out (could not be read): {e}");
+    }
+    Ok(s.unread.is_empty())
 }
 
-/// Runs `tirewear report`.
-pub(crate) fn run(a: ReportArgs) -> Result<()> {
+/// Runs `tirewear report`; false when some inputs were left out.
+pub(crate) fn run(a: ReportArgs) -> Result<bool> {
     let out = a.out.unwrap_or_else(|| a.dir.join("report.html"));
     run_report(&a.dir, &out, &a.bench)
 }

@@ -773,8 +773,7 @@ fn read_sealed<T: serde::de::DeserializeOwned>(path: &Path) -> Result<Option<T>,
     };
     let head: serde_json::Value = serde_json::from_slice(&text).map_err(|e| e.to_string())?;
     let text = String::from_utf8_lossy(&text);
-    if let Some(why) = crate::ingest::checksum::json_mismatch(&text, &head, "tirewear process")
-    {
+    if let Some(why) = crate::ingest::checksum::json_mismatch(&text, &head, "tirewear process") {
         return Err(why);
     }
     serde_json::from_value(head)

@@ -21,6 +21,9 @@ pub struct ReportSummary {
     /// Section titles, in page order.
     pub sections: Vec<String>,
     pub figures: usize,
+    /// The optional inputs that could not be read and were left out, each
+    /// with its file and what was wrong (also listed at the top of the page).
+    pub unread: Vec<String>,
 }
 
 /// The season folder's inputs, read once.
@@ -39,6 +42,10 @@ pub(crate) struct Inputs {
     /// The `tirewear bench` JSONs given, or the folder's `bench.json`: one
     /// machine's lines each; two or more are compared line by line.
     pub bench: Vec<BenchFile>,
+    /// Optional inputs that exist but could not be read (damaged, another
+    /// extraction's): each named at the top of the page and left out, so
+    /// that one bad file costs its own figures, not the report.
+    pub unread: Vec<ReportError>,
 }
 
 /// One `tirewear bench` JSON and the name the report gives it.
@@ -112,6 +119,15 @@ fn read_json(path: &Path) -> Result<Option<serde_json::Value>, ReportError> {
     }
 }
 
+/// `r`'s value, or `None` with its error kept in `unread` (and logged).
+fn optional<T>(r: Result<T, ReportError>, unread: &mut Vec<ReportError>) -> Option<T> {
+    r.map_err(|e| {
+        tracing::warn!("left out of the report: {e}");
+        unread.push(e)
+    })
+    .ok()
+}
+
 /// The folder under `dir/sub` whose files the report shows: `dir/sub`
 /// itself when it holds any of `names` (a season folder after `fit`/`gap`),
 /// else the newest dated subfolder that does (`tirewear process --then
@@ -164,6 +180,7 @@ impl Inputs {
         }
         let rows =
             crate::kpi::table::read_parquet(&kpis).map_err(|e| ReportError::input(&kpis, e))?;
+        let mut unread = Vec::new();
         let mut models = Vec::new();
         const MODEL_FILES: [&str; 3] = ["physical.json", "pca.json", "ffnn.json"];
         let fit = newest(dir, "models", &MODEL_FILES);
@@ -171,8 +188,8 @@ impl Inputs {
             let path = fit.join(name);
             if path.exists() {
                 let m = crate::model::saved::SavedModel::load(&path)
-                    .map_err(|e| ReportError::input(&path, e))?;
-                models.push((path, m));
+                    .map_err(|e| ReportError::input(&path, e));
+                models.extend(optional(m, &mut unread).map(|m| (path, m)));
             }
         }
         let side = |suffix: &str| crate::kpi::table::side_table_path(&kpis, suffix);
@@ -180,32 +197,55 @@ impl Inputs {
             |path: PathBuf| move |e: crate::ingest::IngestError| ReportError::input(&path, e);
         let road_path = side("road.parquet");
         let road = if road_path.exists() {
-            crate::kpi::extract::read_road_curves(&road_path).map_err(input(road_path.clone()))?
+            optional(
+                crate::kpi::extract::read_road_curves(&road_path).map_err(input(road_path.clone())),
+                &mut unread,
+            )
+            .unwrap_or_default()
         } else {
             Vec::new()
         };
         let maps_path = side("energy_maps.parquet");
         let maps = if maps_path.exists() {
-            crate::kpi::table::check_same_extraction(&kpis, &maps_path)
-                .map_err(input(maps_path.clone()))?;
-            crate::kpi::energy_maps::read_energy_maps(&maps_path).map_err(input(maps_path))?
+            optional(
+                crate::kpi::table::check_same_extraction(&kpis, &maps_path)
+                    .and_then(|()| crate::kpi::energy_maps::read_energy_maps(&maps_path))
+                    .map_err(input(maps_path)),
+                &mut unread,
+            )
+            .unwrap_or_default()
         } else {
             Default::default()
         };
         let mut compounds: Vec<crate::ingest::compound::Compound> = Vec::new();
-        for d in compound_dirs(dir)? {
-            for c in crate::ingest::compound::read_compounds(&d).map_err(input(d.clone()))? {
+        for d in optional(compound_dirs(dir), &mut unread).unwrap_or_default() {
+            let read = crate::ingest::compound::read_compounds(&d).map_err(input(d.clone()));
+            for c in optional(read, &mut unread).unwrap_or_default() {
                 if !compounds.iter().any(|k| k.id == c.id) {
                     compounds.push(c);
                 }
             }
         }
+        // Bench files asked for on the command line are not optional.
         let default_bench = dir.join("bench.json");
         let bench = match bench {
-            [] if default_bench.exists() => read_bench_files(&[default_bench])?,
+            [] if default_bench.exists() => {
+                optional(read_bench_files(&[default_bench]), &mut unread).unwrap_or_default()
+            }
             [] => Vec::new(),
             paths => read_bench_files(paths)?,
         };
+        // A season's extraction report, or a `process` dataset's summary.
+        let extraction =
+            match optional(read_json(&dir.join("kpis.report.json")), &mut unread).flatten() {
+                Some(r) => Some(r),
+                None => optional(read_json(&dir.join("summary.json")), &mut unread).flatten(),
+            };
+        let gap = optional(
+            read_json(&newest(dir, "gap", &["gap.json"]).join("gap.json")),
+            &mut unread,
+        )
+        .flatten();
         Ok(Inputs {
             bench,
             compounds,
@@ -213,13 +253,10 @@ impl Inputs {
             maps,
             dir: dir.into(),
             rows,
-            // A season's extraction report, or a `process` dataset's summary.
-            extraction: match read_json(&dir.join("kpis.report.json"))? {
-                Some(r) => Some(r),
-                None => read_json(&dir.join("summary.json"))?,
-            },
+            extraction,
             models,
-            gap: read_json(&newest(dir, "gap", &["gap.json"]).join("gap.json"))?,
+            gap,
+            unread,
         })
     }
 }
@@ -276,6 +313,17 @@ outputs. Figures mirror the paper's; definitions in docs/report.md and docs/kpis
         );
     }
     page += "</ol></nav>\n";
+    if !inputs.unread.is_empty() {
+        page += "<p class=\"missing\">These inputs could not be read and are left out; \
+the sections that need them say their input is missing:</p>\n<ul>";
+        for e in &inputs.unread {
+            page += &format!(
+                "<li class=\"missing\">{}</li>",
+                html::escape(&e.to_string())
+            );
+        }
+        page += "</ul>\n";
+    }
     for (i, s) in sections.iter().enumerate() {
         page += &format!(
             "<section id=\"s{}\"><h2>{}. {}</h2>\n{}</section>\n",
@@ -314,6 +362,7 @@ pub fn write_report(
         path: out.into(),
         figures: sections.iter().map(|s| s.figures).sum(),
         sections: sections.into_iter().map(|s| s.title).collect(),
+        unread: inputs.unread.iter().map(ToString::to_string).collect(),
     })
 }
 
@@ -406,6 +455,7 @@ mod tests {
             maps: Default::default(),
             compounds: Vec::new(),
             bench: Vec::new(),
+            unread: Vec::new(),
         }
     }
 
@@ -458,6 +508,7 @@ mod tests {
             maps: Default::default(),
             compounds: Vec::new(),
             bench: Vec::new(),
+            unread: Vec::new(),
         };
         let s = sections::season(&inputs);
         assert!(s.html.contains("Skipped runs (1)"), "{}", s.html);
