@@ -306,7 +306,10 @@ fn damaged_optional_inputs_are_named_and_left_out() {
     let text = std::fs::read_to_string(&model).unwrap();
     // A digit of the coefficients, past the format's version.
     let after = text.find("\"features\"").unwrap();
-    let digit = after + text[after..].find(|c: char| c.is_ascii_digit() && c != '0').unwrap();
+    let digit = after
+        + text[after..]
+            .find(|c: char| c.is_ascii_digit() && c != '0')
+            .unwrap();
     let mut damaged = text.into_bytes();
     damaged[digit] = if damaged[digit] == b'9' {
         b'8'
@@ -334,7 +337,11 @@ fn damaged_optional_inputs_are_named_and_left_out() {
     }
     let page = std::fs::read_to_string(&out).unwrap();
     assert!(page.contains("These inputs could not be read"));
-    assert!(page.contains("data_crc32"), "the model's checksum named: {:?}", summary.unread);
+    assert!(
+        page.contains("data_crc32"),
+        "the model's checksum named: {:?}",
+        summary.unread
+    );
     // The PCA model is still shown; every section is still on the page.
     assert!(page.contains("pca.json"));
     assert_eq!(summary.sections.len(), 7, "{:?}", summary.sections);
