@@ -58,7 +58,7 @@ fn the_demo_report_has_every_section_its_figures_and_no_external_url() {
 
     let out = dir.path().join("report.html");
     let summary = tirewear::report::write_report(dir.path(), &out, &[]).unwrap();
-    assert!(summary.unread.is_empty(), "{:?}", summary.unread);
+    assert!(summary.left_out.is_empty(), "{:?}", summary.left_out);
     let html = std::fs::read_to_string(&out).unwrap();
 
     // Every section, in order.
@@ -327,12 +327,12 @@ fn damaged_optional_inputs_are_named_and_left_out() {
 
     let out = dir.path().join("report.html");
     let summary = tirewear::report::write_report(dir.path(), &out, &[]).unwrap();
-    assert_eq!(summary.unread.len(), 3, "{:?}", summary.unread);
+    assert_eq!(summary.left_out.len(), 3, "{:?}", summary.left_out);
     for name in ["physical.json", "kpis.road.parquet", "gap.json"] {
         assert!(
-            summary.unread.iter().any(|e| e.contains(name)),
+            summary.left_out.iter().any(|e| e.contains(name)),
             "{name}: {:?}",
-            summary.unread
+            summary.left_out
         );
     }
     let page = std::fs::read_to_string(&out).unwrap();
@@ -340,7 +340,7 @@ fn damaged_optional_inputs_are_named_and_left_out() {
     assert!(
         page.contains("data_crc32"),
         "the model's checksum named: {:?}",
-        summary.unread
+        summary.left_out
     );
     // The PCA model is still shown; every section is still on the page.
     assert!(page.contains("pca.json"));
@@ -354,5 +354,5 @@ fn damaged_optional_inputs_are_named_and_left_out() {
         .unwrap();
     assert_eq!(run.status.code(), Some(3));
     let text = String::from_utf8_lossy(&run.stdout);
-    assert!(text.contains("left out (could not be read)"), "{text}");
+    assert!(text.contains("left out: "), "{text}");
 }

@@ -692,7 +692,7 @@ fn a_bit_flipped_in_a_parquet_file_tirewear_wrote_is_refused_by_name() {
             // The report leaves a damaged side table out, naming it.
             let out = d.join("report.html");
             let s = tirewear::report::write_report(d, &out, &[]).map_err(|e| e.to_string())?;
-            s.unread.first().map_or(Ok(()), |e| Err(e.clone()))
+            s.left_out.first().map_or(Ok(()), |e| Err(e.clone()))
         }),
         ("road/profiles.parquet", |d, _| {
             tirewear::ingest::road::read_profiles_parquet(&d.join("road/profiles.parquet"))

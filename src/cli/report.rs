@@ -31,10 +31,10 @@ pub(crate) fn run_report(dir: &Path, out: &Path, bench: &[PathBuf]) -> Result<bo
         s.figures,
         s.sections.join(", ")
     );
-    for e in &s.unread {
-        println!("left out (could not be read): {e}");
+    for e in &s.left_out {
+        println!("left out: {e}");
     }
-    Ok(s.unread.is_empty())
+    Ok(s.left_out.is_empty())
 }
 
 /// Runs `tirewear report`; false when some inputs were left out.

@@ -42,7 +42,7 @@ pub fn metrics(observed: &[f64], predicted: &[f64], k: usize) -> Result<Metrics,
     }
     if n < k + 2 {
         return Err(ModelError::TooFewObservations {
-            what: "adjusted R²".into(),
+            what: format!("adjusted R² of a model with {k} inputs and an intercept"),
             needed: k + 1,
             got: n,
         });

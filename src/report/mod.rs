@@ -21,9 +21,10 @@ pub struct ReportSummary {
     /// Section titles, in page order.
     pub sections: Vec<String>,
     pub figures: usize,
-    /// The optional inputs that could not be read and were left out, each
-    /// with its file and what was wrong (also listed at the top of the page).
-    pub unread: Vec<String>,
+    /// What the page lacks, each with why: optional inputs that could not
+    /// be read (their file and what was wrong, also listed at the top of
+    /// the page) and sections that could not be drawn (said in their place).
+    pub left_out: Vec<String>,
 }
 
 /// The season folder's inputs, read once.
@@ -278,19 +279,41 @@ td.n{text-align:right;font-variant-numeric:tabular-nums}a.csv{font-size:.85em}\
 p.missing{color:#a33}@media print{a.csv{display:none}}";
 
 /// The whole page.
-pub(crate) fn render(inputs: &Inputs) -> Result<(String, Vec<Section>), ReportError> {
-    let sections: Vec<Section> = [
-        sections::season(inputs),
-        sections::road(inputs)?,
-        sections::viscoelastic(inputs)?,
-        sections::telemetry(inputs)?,
-        sections::physical(inputs)?,
-        sections::models(inputs)?,
-        sections::gap(inputs)?,
-    ]
-    .into_iter()
-    .chain(sections::performance(inputs)?)
-    .collect::<Vec<_>>();
+/// A section that could not be drawn says so in its place (and in
+/// `not_drawn`), so one figure's failure costs that section, not the page.
+fn drawn(title: &str, s: Result<Section, ReportError>, not_drawn: &mut Vec<String>) -> Section {
+    s.unwrap_or_else(|e| {
+        tracing::warn!("report section {title}: {e}");
+        not_drawn.push(format!("section {title}: could not be drawn: {e}"));
+        Section {
+            title: title.into(),
+            html: format!(
+                "<p class=\"missing\">This section could not be drawn: {}</p>\n",
+                html::escape(&e.to_string())
+            ),
+            figures: 0,
+        }
+    })
+}
+
+/// The whole page, and the sections that could not be drawn (each with why).
+pub(crate) fn render(inputs: &Inputs) -> (String, Vec<Section>, Vec<String>) {
+    let mut not_drawn = Vec::new();
+    let mut sections = vec![sections::season(inputs)];
+    for (title, s) in [
+        ("Road", sections::road(inputs)),
+        ("Viscoelastic", sections::viscoelastic(inputs)),
+        ("Telemetry", sections::telemetry(inputs)),
+        ("Physical correlations", sections::physical(inputs)),
+        ("Wear models", sections::models(inputs)),
+        ("Sim-to-real gap", sections::gap(inputs)),
+    ] {
+        sections.push(drawn(title, s, &mut not_drawn));
+    }
+    match sections::performance(inputs) {
+        Ok(p) => sections.extend(p),
+        Err(e) => sections.push(drawn("Performance", Err(e), &mut not_drawn)),
+    }
     let name = inputs
         .dir
         .file_name()
@@ -334,7 +357,7 @@ the sections that need them say their input is missing:</p>\n<ul>";
         );
     }
     page += "</body></html>\n";
-    Ok((page, sections))
+    (page, sections, not_drawn)
 }
 
 /// Writes `out` (atomically) from the season folder `dir`, with the
@@ -347,7 +370,7 @@ pub fn write_report(
     bench: &[PathBuf],
 ) -> Result<ReportSummary, ReportError> {
     let inputs = Inputs::read(dir, bench)?;
-    let (page, sections) = render(&inputs)?;
+    let (page, sections, not_drawn) = render(&inputs);
     if let Some(parent) = out.parent().filter(|p| !p.as_os_str().is_empty()) {
         std::fs::create_dir_all(parent).map_err(|source| ReportError::Io {
             path: parent.into(),
@@ -362,7 +385,12 @@ pub fn write_report(
         path: out.into(),
         figures: sections.iter().map(|s| s.figures).sum(),
         sections: sections.into_iter().map(|s| s.title).collect(),
-        unread: inputs.unread.iter().map(ToString::to_string).collect(),
+        left_out: inputs
+            .unread
+            .iter()
+            .map(ToString::to_string)
+            .chain(not_drawn)
+            .collect(),
     })
 }
 
@@ -457,6 +485,28 @@ mod tests {
             bench: Vec::new(),
             unread: Vec::new(),
         }
+    }
+
+    /// A section whose figure fails is replaced by a note saying why; the
+    /// page keeps its place and title, and the failure is listed.
+    #[test]
+    fn a_section_that_cannot_be_drawn_says_so_in_its_place() {
+        let mut not_drawn = Vec::new();
+        let s = drawn(
+            "Road",
+            Err(ReportError::Figure("axis range <NaN>".into())),
+            &mut not_drawn,
+        );
+        assert_eq!(s.title, "Road");
+        assert_eq!(s.figures, 0);
+        assert_eq!(
+            s.html,
+            "<p class=\"missing\">This section could not be drawn: drawing a figure: axis range &lt;NaN&gt;</p>\n"
+        );
+        assert_eq!(
+            not_drawn,
+            ["section Road: could not be drawn: drawing a figure: axis range <NaN>"]
+        );
     }
 
     #[test]
