@@ -1269,3 +1269,179 @@ fn a_damaged_kpi_table_from_another_tool_never_panics_the_reader() {
     assert!(refused >= 50, "{refused}");
     assert!(failures.is_empty(), "{}", failures.join("\n"));
 }
+
+/// Every node of a JSON value, as a JSON pointer ("" is the root).
+fn json_pointers(v: &serde_json::Value, at: String, out: &mut Vec<String>) {
+    out.push(at.clone());
+    match v {
+        serde_json::Value::Object(m) => {
+            for (k, x) in m {
+                let key = k.replace('~', "~0").replace('/', "~1");
+                json_pointers(x, format!("{at}/{key}"), out);
+            }
+        }
+        serde_json::Value::Array(a) => {
+            for (i, x) in a.iter().enumerate() {
+                json_pointers(x, format!("{at}/{i}"), out);
+            }
+        }
+        _ => {}
+    }
+}
+
+/// One seeded change of a JSON file's structure, its checksum field
+/// dropped so the change reaches the reader's own checks: a node (of any
+/// depth) replaced by a value of another kind or an absurd number, or a
+/// member deleted.
+fn mutate_json(text: &str, rng: &mut ChaCha8Rng) -> (String, String) {
+    let mut v: serde_json::Value = serde_json::from_str(text).unwrap();
+    if let Some(m) = v.as_object_mut() {
+        m.remove("data_crc32");
+    }
+    let mut nodes = Vec::new();
+    json_pointers(&v, String::new(), &mut nodes);
+    let at = nodes[rng.random_range(1..nodes.len())].clone();
+    let replacement = match rng.random_range(0..10) {
+        0 => serde_json::Value::Null,
+        1 => serde_json::json!("x"),
+        2 => serde_json::json!(1e308),
+        3 => serde_json::json!(-1e308),
+        4 => serde_json::json!(0),
+        5 => serde_json::json!(-1),
+        6 => serde_json::json!([]),
+        7 => serde_json::json!({}),
+        8 => serde_json::json!(5e-324),
+        _ => {
+            let (parent, key) = at.rsplit_once('/').unwrap();
+            match v.pointer_mut(parent) {
+                Some(serde_json::Value::Object(m)) => {
+                    m.remove(&key.replace("~1", "/").replace("~0", "~"));
+                }
+                Some(serde_json::Value::Array(a)) => {
+                    a.remove(key.parse::<usize>().unwrap());
+                }
+                _ => unreachable!("a pointer's parent holds it"),
+            }
+            return (
+                serde_json::to_string_pretty(&v).unwrap(),
+                format!("{at} deleted"),
+            );
+        }
+    };
+    let what = format!("{at} = {replacement}");
+    *v.pointer_mut(&at).unwrap() = replacement;
+    (serde_json::to_string_pretty(&v).unwrap(), what)
+}
+
+/// The report's optional inputs damaged (models, gap.json, the extraction
+/// report, a bench file: their structure changed with the checksum dropped;
+/// the road and energy-map tables and a compound: bytes changed) never
+/// panic it or sink the page: it is written every time, and each input
+/// left out is named with its file.
+#[test]
+fn damaged_report_inputs_never_panic_or_sink_the_page() {
+    use std::panic::{AssertUnwindSafe, catch_unwind};
+    use tirewear::model::fit::{FitSettings, Method, fit_method, split};
+    let _one = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let rows = common::demo_kpis(d);
+    let s = split(&rows, None).unwrap();
+    let models: Vec<_> = [Method::Physical, Method::Pca]
+        .into_iter()
+        .map(|m| fit_method(m, &s, &FitSettings::default()).unwrap().0)
+        .collect();
+    tirewear::model::saved::save_all(&models, &d.join("models")).unwrap();
+    use tirewear::gap::report::{Baseline, GapSettings, diagnose_file, write_diagnosis};
+    let gap = GapSettings {
+        wlf: tirewear::ingest::compound::read_wlf(&d.join("compounds")).unwrap(),
+        ..Default::default()
+    };
+    let diagnosis = diagnose_file(&d.join("kpis.parquet"), &Baseline::Physics, &gap).unwrap();
+    write_diagnosis(&diagnosis, &d.join("gap")).unwrap();
+    std::fs::write(
+        d.join("bench.json"),
+        r#"{"cpu": "CPU", "gpu": null, "threads": 2, "lines": [
+            {"kernel": "energy_map", "size": "1 M samples", "engine": "cpu, 1 thread",
+             "seconds": 0.004, "vs_memory_pass": 0.5, "reference": "memory pass"},
+            {"kernel": "decode, block", "size": "80 runs", "engine": "tirewear, 1 thread",
+             "seconds": 0.3, "vs_memory_pass": 0.73, "reference": "zstd only"}]}"#,
+    )
+    .unwrap();
+    let compound = std::fs::read_dir(d.join("compounds"))
+        .unwrap()
+        .flatten()
+        .map(|e| e.path())
+        .find(|p| p.extension().is_some_and(|x| x == "toml"))
+        .unwrap();
+    let compound = compound
+        .strip_prefix(d)
+        .unwrap()
+        .to_str()
+        .unwrap()
+        .to_string();
+    let out = d.join("report.html");
+    let clean = tirewear::report::write_report(d, &out, &[]).unwrap();
+    assert!(clean.left_out.is_empty(), "{:?}", clean.left_out);
+
+    let json_inputs = [
+        "models/physical.json",
+        "models/pca.json",
+        "gap/gap.json",
+        "kpis.report.json",
+        "bench.json",
+    ];
+    let byte_inputs = [
+        "kpis.road.parquet",
+        "kpis.energy_maps.parquet",
+        compound.as_str(),
+    ];
+    let mut rng = ChaCha8Rng::seed_from_u64(30);
+    let (mut tried, mut left_out, mut drawn) = (0, 0, 0);
+    let mut failures = Vec::new();
+    for name in json_inputs.iter().chain(&byte_inputs) {
+        let path = d.join(name);
+        let original = std::fs::read(&path).unwrap();
+        let cases = if json_inputs.contains(name) { 24 } else { 8 };
+        for _ in 0..cases {
+            let (bytes, what) = if json_inputs.contains(name) {
+                let (t, w) = mutate_json(std::str::from_utf8(&original).unwrap(), &mut rng);
+                (t.into_bytes(), w)
+            } else if name.ends_with(".toml") {
+                mutate_text(std::str::from_utf8(&original).unwrap(), &mut rng)
+            } else {
+                mutate_binary(&original, 0..original.len(), &mut rng)
+            };
+            std::fs::write(&path, &bytes).unwrap();
+            tried += 1;
+            let tag = format!("{name}: {what}");
+            match catch_unwind(AssertUnwindSafe(|| {
+                tirewear::report::write_report(d, &out, &[])
+            })) {
+                Err(_) => failures.push(format!("{tag}: panicked")),
+                Ok(Err(e)) => failures.push(format!("{tag}: no page: {e}")),
+                Ok(Ok(s)) => {
+                    let file = Path::new(name).file_name().unwrap().to_str().unwrap();
+                    if s.left_out.is_empty() {
+                        drawn += 1;
+                    } else if s.left_out.iter().all(|e| e.contains(file)) {
+                        left_out += 1;
+                    } else {
+                        failures.push(format!(
+                            "{tag}: left out without the file: {:?}",
+                            s.left_out
+                        ));
+                    }
+                }
+            }
+        }
+        std::fs::write(&path, &original).unwrap();
+    }
+    println!(
+        "report inputs: {tried} damaged, {left_out} left out and named, {drawn} drawn with the \
+         changed values, {} failures",
+        failures.len()
+    );
+    assert!(failures.is_empty(), "{}", failures.join("\n"));
+    assert!(left_out >= tried / 5, "{left_out} of {tried}");
+}

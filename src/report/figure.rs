@@ -46,10 +46,23 @@ fn draw_error<E: std::error::Error + Send + Sync>(e: DrawingAreaErrorKind<E>) ->
     ReportError::Figure(e.to_string())
 }
 
+/// Largest magnitude a linear axis reaches: its width stays finite.
+const LINEAR_AXIS_LIMIT: f64 = 1e300;
+
+/// Narrowest width of a linear axis, relative to its largest magnitude:
+/// plotters steps from tick to tick by adding a tenth of the width, which
+/// must not vanish in the values' rounding.
+const LINEAR_AXIS_MIN_WIDTH: f64 = 1e-9;
+
 /// The range of `values` with 5 % of padding; (0, 1) when there are none.
+/// Bounded for plotters' tick search, which runs for ever on an infinite
+/// width (values ±1e308 in a damaged model file) or on one too narrow for
+/// its values (1e16 to 1e16 + 2): within ±[`LINEAR_AXIS_LIMIT`], at least
+/// [`LINEAR_AXIS_MIN_WIDTH`] of the largest magnitude wide.
 pub(crate) fn padded(values: impl Iterator<Item = f64>, from_zero: bool) -> (f64, f64) {
     let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
     for v in values.filter(|v| v.is_finite()) {
+        let v = v.clamp(-LINEAR_AXIS_LIMIT, LINEAR_AXIS_LIMIT);
         lo = lo.min(v);
         hi = hi.max(v);
     }
@@ -60,8 +73,20 @@ pub(crate) fn padded(values: impl Iterator<Item = f64>, from_zero: bool) -> (f64
         lo = lo.min(0.0);
         hi = hi.max(0.0);
     }
-    let pad = if hi > lo { 0.05 * (hi - lo) } else { 0.5 };
+    let narrowest = LINEAR_AXIS_MIN_WIDTH * lo.abs().max(hi.abs());
+    let pad = if hi - lo > narrowest {
+        0.05 * (hi - lo)
+    } else {
+        narrowest.max(0.5)
+    };
     (lo - pad, hi + pad)
+}
+
+/// `v` held inside the axis range `(lo, hi)` (NaN stays NaN): plotters
+/// turns a coordinate into pixels with an `i32` sum that overflows for a
+/// value millions of axis widths outside it.
+fn clip(v: f64, (lo, hi): (f64, f64)) -> f64 {
+    if v.is_nan() { v } else { v.clamp(lo, hi) }
 }
 
 type Root<'a> = DrawingArea<SVGBackend<'a>, plotters::coord::Shift>;
@@ -139,6 +164,7 @@ pub(crate) fn scatter(
         .chain(ends().map(|q| q.1));
     let (x0, x1) = padded(xs, from_zero);
     let (y0, y1) = padded(ys, from_zero);
+    let at = |(x, y): (f64, f64)| (clip(x, (x0, x1)), clip(y, (y0, y1)));
     svg(|root| {
         let mut chart = frame(root, axes)
             .build_cartesian_2d(x0..x1, y0..y1)
@@ -147,7 +173,7 @@ pub(crate) fn scatter(
         for l in lines {
             let c = color(l.color);
             chart
-                .draw_series(LineSeries::new([l.from, l.to], c.stroke_width(2)))
+                .draw_series(LineSeries::new([at(l.from), at(l.to)], c.stroke_width(2)))
                 .map_err(draw_error)?;
         }
         for p in points {
@@ -158,7 +184,7 @@ pub(crate) fn scatter(
                 c.stroke_width(1)
             };
             chart
-                .draw_series(p.xy.iter().map(|&q| Circle::new(q, 3, style)))
+                .draw_series(p.xy.iter().map(|&q| Circle::new(at(q), 3, style)))
                 .map_err(draw_error)?
                 .label(p.label.as_str())
                 .legend(move |(x, y)| Circle::new((x + 8, y), 4, style));
@@ -186,6 +212,7 @@ pub(crate) fn bars(axes: &Axes, bars: &[Bar]) -> Result<String, ReportError> {
         [b.value, lo, hi]
     });
     let (y0, y1) = padded(values, true);
+    let y = |v: f64| clip(v, (y0, y1));
     let x1 = bars.len() as f64 + 0.5;
     svg(|root| {
         let mut chart = frame(root, axes)
@@ -200,14 +227,20 @@ pub(crate) fn bars(axes: &Axes, bars: &[Bar]) -> Result<String, ReportError> {
             .draw_series(bars.iter().enumerate().map(|(i, b)| {
                 let x = i as f64 + 1.0;
                 let fill = b.color.map_or(RGBColor(70, 110, 160), |c| color(Some(c)));
-                Rectangle::new([(x - 0.3, 0.0), (x + 0.3, b.value)], fill.mix(0.8).filled())
+                Rectangle::new(
+                    [(x - 0.3, 0.0), (x + 0.3, y(b.value))],
+                    fill.mix(0.8).filled(),
+                )
             }))
             .map_err(draw_error)?;
         for (i, b) in bars.iter().enumerate() {
             if let Some((lo, hi)) = b.interval {
                 let x = i as f64 + 1.0;
                 chart
-                    .draw_series(LineSeries::new([(x, lo), (x, hi)], BLACK.stroke_width(2)))
+                    .draw_series(LineSeries::new(
+                        [(x, y(lo)), (x, y(hi))],
+                        BLACK.stroke_width(2),
+                    ))
                     .map_err(draw_error)?;
             }
         }
@@ -247,6 +280,7 @@ pub(crate) fn grouped_bars(
             chart
                 .draw_series(groups.iter().enumerate().filter_map(|(g, values)| {
                     let v = values.get(s).copied().flatten()?;
+                    let v = clip(v, (y0, y1));
                     Some(Rectangle::new([(left(g), 0.0), (left(g) + width, v)], fill))
                 }))
                 .map_err(draw_error)?
@@ -258,7 +292,10 @@ pub(crate) fn grouped_bars(
             .map_err(draw_error)?;
         chart
             .draw_series(DashedLineSeries::new(
-                [(0.5, reference), (x1, reference)],
+                [
+                    (0.5, clip(reference, (y0, y1))),
+                    (x1, clip(reference, (y0, y1))),
+                ],
                 6,
                 4,
                 BLACK.stroke_width(1),
@@ -287,7 +324,11 @@ pub(crate) fn steps(
             .map_err(draw_error)?;
         for (label, c, ys) in series {
             let c = color(Some(*c));
-            let pts: Vec<(f64, f64)> = ys.iter().enumerate().map(|(i, &y)| (i as f64, y)).collect();
+            let pts: Vec<(f64, f64)> = ys
+                .iter()
+                .enumerate()
+                .map(|(i, &y)| (i as f64, clip(y, (y0, y1))))
+                .collect();
             chart
                 .draw_series(LineSeries::new(pts.clone(), c.stroke_width(2)))
                 .map_err(draw_error)?
@@ -406,6 +447,18 @@ pub(crate) fn heatmap(
     y_edges: &[f64],
     cells: &[Vec<f64>],
 ) -> Result<String, ReportError> {
+    let increasing = |e: &[f64]| {
+        e.len() >= 2
+            && e.iter().all(|v| v.abs() <= LINEAR_AXIS_LIMIT)
+            && e.windows(2).all(|w| w[1] > w[0])
+            && e[e.len() - 1] - e[0] > LINEAR_AXIS_MIN_WIDTH * e[0].abs().max(e[e.len() - 1].abs())
+    };
+    if !increasing(x_edges) || !increasing(y_edges) {
+        return Err(ReportError::Figure(format!(
+            "{}: bin edges not finite and increasing ({x_edges:?}, {y_edges:?})",
+            axes.title
+        )));
+    }
     let max = cells.iter().flatten().copied().fold(0.0f64, f64::max);
     let (x0, x1) = (x_edges[0], x_edges[x_edges.len() - 1]);
     let (y0, y1) = (y_edges[0], y_edges[y_edges.len() - 1]);
@@ -458,7 +511,8 @@ pub(crate) fn curves_with_marks(
     };
     let (x0, x1) = padded(all().map(|p| p.0), false);
     macro_rules! draw {
-        ($chart:expr) => {{
+        ($chart:expr, $y:expr) => {{
+            let at = |(x, y): (f64, f64)| (clip(x, (x0, x1)), $y(y));
             let mut chart = $chart;
             mesh!(chart, axes)
                 .y_label_formatter(&|v| tick(*v))
@@ -466,7 +520,7 @@ pub(crate) fn curves_with_marks(
                 .map_err(draw_error)?;
             for s in curves {
                 let c = color(Some(s.color));
-                let pts: Vec<(f64, f64)> = s.xy.iter().filter(ok).copied().collect();
+                let pts: Vec<(f64, f64)> = s.xy.iter().filter(ok).map(|&q| at(q)).collect();
                 chart
                     .draw_series(LineSeries::new(pts, c.stroke_width(2)))
                     .map_err(draw_error)?
@@ -479,7 +533,7 @@ pub(crate) fn curves_with_marks(
                     .draw_series(
                         s.xy.iter()
                             .filter(ok)
-                            .map(|&q| Circle::new(q, 3, c.stroke_width(1))),
+                            .map(|&q| Circle::new(at(q), 3, c.stroke_width(1))),
                     )
                     .map_err(draw_error)?;
             }
@@ -492,17 +546,21 @@ pub(crate) fn curves_with_marks(
             // would squash everything else.
             let (y0, y1) = log_range(all().map(|p| p.1));
             let y0 = y0.max(y1 * 1e-6);
+            // Within 30 decades a log axis maps any positive value to a
+            // pixel i32 holds: y is not clipped.
             draw!(
                 frame(root, axes)
                     .build_cartesian_2d(x0..x1, (y0..y1).log_scale())
-                    .map_err(draw_error)?
+                    .map_err(draw_error)?,
+                |y: f64| y
             );
         } else {
             let (y0, y1) = padded(all().map(|p| p.1), false);
             draw!(
                 frame(root, axes)
                     .build_cartesian_2d(x0..x1, y0..y1)
-                    .map_err(draw_error)?
+                    .map_err(draw_error)?,
+                |y: f64| clip(y, (y0, y1))
             );
         }
         Ok(())
@@ -548,5 +606,42 @@ mod tests {
         assert!((lo - 2.0 / 1.2).abs() < 1e-12 && (hi - 60.0).abs() < 1e-12);
         // One value, no range: the default decade.
         assert_eq!(log_range([5.0].into_iter()), (1.0, 10.0));
+    }
+
+    /// Values of a damaged model file (±1e308: an infinite width) or a
+    /// range too narrow for its magnitude made plotters' tick search on a
+    /// linear axis run for ever; the range is now bounded and each draws.
+    #[test]
+    fn absurd_values_on_linear_axes_draw_and_are_bounded() {
+        let axes = Axes {
+            title: "t",
+            x: "x",
+            y: "y",
+        };
+        for ys in [
+            [-1e308, 0.0, 1e308],
+            [f64::MAX, f64::MAX, f64::MAX],
+            [1e16, 1e16 + 2.0, 1e16],
+            [5e-324, 0.0, 1e-300],
+        ] {
+            let (lo, hi) = padded(ys.into_iter(), false);
+            assert!(
+                lo.is_finite() && hi.is_finite() && (hi - lo).is_finite(),
+                "{lo} {hi}"
+            );
+            assert!(hi - lo >= 1e-9 * lo.abs().max(hi.abs()), "{lo} {hi}");
+            let points = [Points {
+                label: "a".into(),
+                color: 0,
+                xy: ys.iter().map(|&y| (y, y)).collect(),
+                filled: false,
+            }];
+            assert!(scatter(&axes, &points, &[], false).is_ok());
+        }
+        // An ordinary range: 5 % wider each way, by hand; one value: ±0.5.
+        assert_eq!(padded([0.0, 10.0].into_iter(), false), (-0.5, 10.5));
+        assert_eq!(padded([3.0].into_iter(), false), (2.5, 3.5));
+        let (lo, hi) = padded([3.0].into_iter(), true);
+        assert!((lo + 0.15).abs() < 1e-15 && (hi - 3.15).abs() < 1e-15, "{lo} {hi}");
     }
 }
