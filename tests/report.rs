@@ -288,8 +288,8 @@ fn a_folder_without_kpis_is_an_error_naming_the_file() {
 }
 
 /// One damaged optional input costs its own figures, not the page: a model
-/// with a changed digit, a road table with a flipped byte and a gap file
-/// that is not JSON are each named at the top of the page and left out; the
+/// with a changed digit, a road table with a flipped byte, a gap file that
+/// is not JSON and one compound file that is not TOML are each named at the top of the page and left out; the
 /// rest is drawn, and the command exits 3.
 #[test]
 fn damaged_optional_inputs_are_named_and_left_out() {
@@ -301,6 +301,13 @@ fn damaged_optional_inputs_are_named_and_left_out() {
     let (physical, _) = fit_method(Method::Physical, &s, &settings).unwrap();
     let models = dir.path().join("models");
     save_all(&[pca, physical], &models).unwrap();
+    // A legend's compound names in the clean page (plotters writes a
+    // label's text on its own line).
+    let out = dir.path().join("report.html");
+    tirewear::report::write_report(dir.path(), &out, &[]).unwrap();
+    let legends = |page: &str, id: &str| page.matches(&format!("\n{id}\n</text>")).count();
+    let clean = std::fs::read_to_string(&out).unwrap();
+    assert!(legends(&clean, "hard") > 0 && legends(&clean, "medium") > 0);
 
     let model = models.join("physical.json");
     let text = std::fs::read_to_string(&model).unwrap();
@@ -324,11 +331,16 @@ fn damaged_optional_inputs_are_named_and_left_out() {
     std::fs::write(&road, bytes).unwrap();
     std::fs::create_dir_all(dir.path().join("gap")).unwrap();
     std::fs::write(dir.path().join("gap/gap.json"), "{\"slices\": [").unwrap();
+    std::fs::write(dir.path().join("compounds/hard.toml"), "id = [").unwrap();
 
-    let out = dir.path().join("report.html");
     let summary = tirewear::report::write_report(dir.path(), &out, &[]).unwrap();
-    assert_eq!(summary.left_out.len(), 3, "{:?}", summary.left_out);
-    for name in ["physical.json", "kpis.road.parquet", "gap.json"] {
+    assert_eq!(summary.left_out.len(), 4, "{:?}", summary.left_out);
+    for name in [
+        "physical.json",
+        "kpis.road.parquet",
+        "gap.json",
+        "hard.toml",
+    ] {
         assert!(
             summary.left_out.iter().any(|e| e.contains(name)),
             "{name}: {:?}",
@@ -342,8 +354,11 @@ fn damaged_optional_inputs_are_named_and_left_out() {
         "the model's checksum named: {:?}",
         summary.left_out
     );
-    // The PCA model is still shown; every section is still on the page.
+    // The PCA model and the other compounds' curves are still shown; every
+    // section is still on the page.
     assert!(page.contains("pca.json"));
+    assert_eq!(legends(&page, "hard"), 0);
+    assert_eq!(legends(&page, "medium"), legends(&clean, "medium"));
     assert_eq!(summary.sections.len(), 7, "{:?}", summary.sections);
 
     let exe = env!("CARGO_BIN_EXE_tirewear");

@@ -244,13 +244,21 @@ fn interp(xs: &[f64], ys: &[f64], x: f64, map: impl Fn(f64) -> f64) -> f64 {
 
 /// Every `*.toml` compound file in `dir`, in file-name order.
 pub(crate) fn read_compounds(dir: &Path) -> Result<Vec<Compound>> {
+    compound_files(dir)?
+        .iter()
+        .map(|f| Compound::load(f))
+        .collect()
+}
+
+/// The `*.toml` files of a compounds folder, in name order.
+pub(crate) fn compound_files(dir: &Path) -> Result<Vec<std::path::PathBuf>> {
     let mut files: Vec<std::path::PathBuf> = std::fs::read_dir(dir)
         .map_err(|e| IngestError::io(dir, e))?
         .filter_map(|e| e.ok().map(|e| e.path()))
         .filter(|p| p.extension().is_some_and(|x| x == "toml"))
         .collect();
     files.sort();
-    files.iter().map(|f| Compound::load(f)).collect()
+    Ok(files)
 }
 
 /// WLF constants of every `*.toml` compound file in `dir`, by compound id

@@ -642,6 +642,9 @@ mod tests {
         assert_eq!(padded([0.0, 10.0].into_iter(), false), (-0.5, 10.5));
         assert_eq!(padded([3.0].into_iter(), false), (2.5, 3.5));
         let (lo, hi) = padded([3.0].into_iter(), true);
-        assert!((lo + 0.15).abs() < 1e-15 && (hi - 3.15).abs() < 1e-15, "{lo} {hi}");
+        assert!(
+            (lo + 0.15).abs() < 1e-15 && (hi - 3.15).abs() < 1e-15,
+            "{lo} {hi}"
+        );
     }
 }

@@ -219,10 +219,14 @@ impl Inputs {
             Default::default()
         };
         let mut compounds: Vec<crate::ingest::compound::Compound> = Vec::new();
+        // Each compound file on its own: a damaged one costs only its curve.
         for d in optional(compound_dirs(dir), &mut unread).unwrap_or_default() {
-            let read = crate::ingest::compound::read_compounds(&d).map_err(input(d.clone()));
-            for c in optional(read, &mut unread).unwrap_or_default() {
-                if !compounds.iter().any(|k| k.id == c.id) {
+            let files = crate::ingest::compound::compound_files(&d).map_err(input(d.clone()));
+            for f in optional(files, &mut unread).unwrap_or_default() {
+                let read = crate::ingest::compound::Compound::load(&f).map_err(input(f.clone()));
+                if let Some(c) = optional(read, &mut unread)
+                    && !compounds.iter().any(|k| k.id == c.id)
+                {
                     compounds.push(c);
                 }
             }
