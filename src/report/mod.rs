@@ -282,7 +282,6 @@ td,th{border:1px solid #ddd;padding:2px 6px;text-align:left}th{background:#f4f4f
 td.n{text-align:right;font-variant-numeric:tabular-nums}a.csv{font-size:.85em}\
 p.missing{color:#a33}@media print{a.csv{display:none}}";
 
-/// The whole page.
 /// A section that could not be drawn says so in its place (and in
 /// `not_drawn`), so one figure's failure costs that section, not the page.
 fn drawn(title: &str, s: Result<Section, ReportError>, not_drawn: &mut Vec<String>) -> Section {
@@ -344,10 +343,7 @@ outputs. Figures mirror the paper's; definitions in docs/report.md and docs/kpis
         page += "<p class=\"missing\">These inputs could not be read and are left out; \
 the sections that need them say their input is missing:</p>\n<ul>";
         for e in &inputs.unread {
-            page += &format!(
-                "<li class=\"missing\">{}</li>",
-                html::escape(&e.to_string())
-            );
+            page += &format!("<li>{}</li>", html::escape(&e.to_string()));
         }
         page += "</ul>\n";
     }
