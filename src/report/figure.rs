@@ -459,6 +459,15 @@ pub(crate) fn heatmap(
             axes.title
         )));
     }
+    if cells.len() + 1 != x_edges.len() || cells.iter().any(|c| c.len() + 1 != y_edges.len()) {
+        return Err(ReportError::Figure(format!(
+            "{}: {} columns of cells for {} x edges, or a column not of {} cells",
+            axes.title,
+            cells.len(),
+            x_edges.len(),
+            y_edges.len().saturating_sub(1)
+        )));
+    }
     let max = cells.iter().flatten().copied().fold(0.0f64, f64::max);
     let (x0, x1) = (x_edges[0], x_edges[x_edges.len() - 1]);
     let (y0, y1) = (y_edges[0], y_edges[y_edges.len() - 1]);
@@ -638,6 +647,14 @@ mod tests {
             }];
             assert!(scatter(&axes, &points, &[], false).is_ok());
         }
+        // A heat map whose edges are not increasing or do not match its
+        // cells is an error, not a hang or an index out of bounds.
+        let cells = vec![vec![1.0; 2]; 2];
+        assert!(heatmap(&axes, &[0.0, 1.0, 2.0], &[0.0, 1.0, 2.0], &cells).is_ok());
+        assert!(heatmap(&axes, &[0.0, 1.0, 1.0], &[0.0, 1.0, 2.0], &cells).is_err());
+        assert!(heatmap(&axes, &[0.0, f64::INFINITY, 2.0], &[0.0, 1.0, 2.0], &cells).is_err());
+        assert!(heatmap(&axes, &[0.0, 1.0], &[0.0, 1.0, 2.0], &cells).is_err());
+        assert!(heatmap(&axes, &[0.0, 1.0, 2.0], &[0.0, 1.0], &cells).is_err());
         // An ordinary range: 5 % wider each way, by hand; one value: ±0.5.
         assert_eq!(padded([0.0, 10.0].into_iter(), false), (-0.5, 10.5));
         assert_eq!(padded([3.0].into_iter(), false), (2.5, 3.5));
