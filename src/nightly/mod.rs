@@ -264,12 +264,7 @@ fn read_manifest(dataset: &Path) -> Result<Option<DatasetManifest>, NightlyError
             path.display()
         ))
     };
-    let head: serde_json::Value = serde_json::from_slice(&text).map_err(|e| invalid(&e))?;
-    let text = String::from_utf8_lossy(&text);
-    if let Some(why) = crate::ingest::checksum::json_mismatch(&text, &head, "tirewear process") {
-        return Err(invalid(&why));
-    }
-    let m: DatasetManifest = serde_json::from_value(head).map_err(|e| invalid(&e))?;
+    let m: DatasetManifest = parse_sealed(&text).map_err(|why| invalid(&why))?;
     if m.format_version != DATASET_FORMAT_VERSION {
         return Err(NightlyError::Invalid(format!(
             "{}: format_version {} (this build reads {DATASET_FORMAT_VERSION})",
@@ -771,14 +766,18 @@ fn read_sealed<T: serde::de::DeserializeOwned>(path: &Path) -> Result<Option<T>,
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
         Err(e) => return Err(e.to_string()),
     };
-    let head: serde_json::Value = serde_json::from_slice(&text).map_err(|e| e.to_string())?;
-    let text = String::from_utf8_lossy(&text);
+    parse_sealed(&text).map(Some)
+}
+
+/// The value a file `sealed` wrote, its checksum checked; the error says
+/// what is wrong (not JSON, the checksum, a field).
+fn parse_sealed<T: serde::de::DeserializeOwned>(text: &[u8]) -> Result<T, String> {
+    let head: serde_json::Value = serde_json::from_slice(text).map_err(|e| e.to_string())?;
+    let text = String::from_utf8_lossy(text);
     if let Some(why) = crate::ingest::checksum::json_mismatch(&text, &head, "tirewear process") {
         return Err(why);
     }
-    serde_json::from_value(head)
-        .map(Some)
-        .map_err(|e| e.to_string())
+    serde_json::from_value(head).map_err(|e| e.to_string())
 }
 
 /// Processes `runs` and stages their parts (and each touched track's road
