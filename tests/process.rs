@@ -657,6 +657,20 @@ fn exit_codes_of_the_binary() {
         .output()
         .unwrap();
     assert_eq!(out.status.code(), Some(2), "a bad --shard is a usage error");
+    for bad in [
+        &["--keep-results", "0", "--then", "gap"][..],
+        &["--keep-results", "2"],
+    ] {
+        let out = std::process::Command::new(exe)
+            .arg("process")
+            .args(bad)
+            .arg("--out")
+            .arg(&dataset)
+            .arg(&archive)
+            .output()
+            .unwrap();
+        assert_eq!(out.status.code(), Some(2), "{bad:?} is a usage error");
+    }
 }
 
 /// The files directly under `dir/sub/*/` (the dated folders `--then`
@@ -684,7 +698,7 @@ fn a_failed_then_step_stops_neither_the_commit_nor_the_others() {
     let process = |archive: &Path, dataset: &Path| {
         let out = std::process::Command::new(exe)
             .args(["--quiet", "--log", "error", "process", "--engine", "cpu"])
-            .args(["--then", "fit,gap,report", "--out"])
+            .args(["--then", "fit,gap,report", "--keep-results", "1", "--out"])
             .arg(dataset)
             .arg(archive)
             .output()
@@ -699,8 +713,17 @@ fn a_failed_then_step_stops_neither_the_commit_nor_the_others() {
     let archive = dir.path().join("tiny");
     let dataset = dir.path().join("tiny-dataset");
     tiny(&archive, 19);
+    // An earlier night's results, which a failed step does not prune.
+    let earlier = |dataset: &Path, sub: &str, stamp: &str| {
+        let d = dataset.join(sub).join(stamp);
+        std::fs::create_dir_all(&d).unwrap();
+        std::fs::write(d.join("earlier.json"), "{}").unwrap();
+    };
+    earlier(&dataset, "gap", "2020-01-01T0000Z");
+    earlier(&dataset, "models", "2020-01-01T0000Z");
     let (code, out, err) = process(&archive, &dataset);
     assert_eq!(code, Some(3), "{out}\n{err}");
+    assert!(!out.contains("--keep-results"), "nothing pruned: {out}");
     assert_eq!(
         processed_rows(&dataset),
         extracted(&archive, dir.path()),
@@ -710,6 +733,7 @@ fn a_failed_then_step_stops_neither_the_commit_nor_the_others() {
     assert!(out.contains("Physical model not fitted"), "{out}");
     let written = dated_files(&dataset, "models");
     assert!(written.contains(&"pca.json".to_string()), "{written:?}");
+    assert!(written.contains(&"earlier.json".to_string()), "{written:?}");
     for (method, file) in [
         ("Ffnn", "ffnn.json"),
         ("Pca", "pca.json"),
@@ -723,7 +747,7 @@ fn a_failed_then_step_stops_neither_the_commit_nor_the_others() {
         );
     }
     assert!(err.contains("--then gap failed"), "{err}");
-    assert!(dated_files(&dataset, "gap").is_empty());
+    assert_eq!(dated_files(&dataset, "gap"), ["earlier.json"]);
     assert!(err.contains("--then report skipped: gap failed"), "{err}");
     assert!(!dataset.join("report").exists());
     assert!(
@@ -749,11 +773,18 @@ fn a_failed_then_step_stops_neither_the_commit_nor_the_others() {
     common::simulate_demo(&archive);
     std::fs::create_dir_all(&dataset).unwrap();
     std::fs::write(dataset.join("models"), "not a folder").unwrap();
+    earlier(&dataset, "gap", "2020-01-01T0000Z");
+    earlier(&dataset, "gap", "2020-01-02T0000Z");
     let (code, out, err) = process(&archive, &dataset);
     assert_eq!(code, Some(3), "{out}\n{err}");
     assert!(dataset.join("dataset.json").exists());
     assert!(err.contains("--then fit failed: creating"), "{err}");
+    // The gap succeeded: tonight's folder is the one kept.
     assert_eq!(dated_files(&dataset, "gap"), ["gap.json", "gap.md"]);
+    assert!(
+        out.contains("--keep-results 1: removed") && out.contains("2020-01-02T0000Z"),
+        "{out}"
+    );
     assert!(err.contains("--then report skipped: fit failed"), "{err}");
     assert!(!dataset.join("report").exists());
 }

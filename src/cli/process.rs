@@ -55,6 +55,13 @@ pub(crate) struct ProcessArgs {
     /// STAMP being the UTC time (YYYY-MM-DDTHHMMZ).
     #[arg(long, value_delimiter = ',', value_enum)]
     then: Vec<Then>,
+    /// Keep only the N newest dated folders of each `--then` step
+    /// (DATASET/models/, gap/, report/): after a step succeeds, its older
+    /// dated folders are removed. A step that failed removes nothing, so
+    /// the last good result stays. Default: keep every folder.
+    #[arg(long, value_name = "N", requires = "then",
+          value_parser = clap::value_parser!(u32).range(1..))]
+    keep_results: Option<u32>,
 }
 
 /// A step `--then` runs after a commit that changed the dataset.
@@ -198,7 +205,7 @@ pub(crate) fn run(a: ProcessArgs, progress: bool) -> Result<Outcome> {
         Ok(s) => {
             print_summary(&s);
             let then_failed = if s.committed && !a.then.is_empty() {
-                then_steps(&opts, &a.then)
+                then_steps(&opts, &a.then, a.keep_results)
             } else {
                 Vec::new()
             };
@@ -238,12 +245,22 @@ pub(crate) fn run(a: ProcessArgs, progress: bool) -> Result<Outcome> {
 /// Each step runs whatever became of the others (`gap` does not need
 /// `fit`), except `report`: it shows the newest models and gap, so after a
 /// failed `fit` or `gap` it would show an older night's next to this
-/// dataset, and is skipped. Returns the steps that failed or were skipped.
-fn then_steps(opts: &ProcessOptions, steps: &[Then]) -> Vec<String> {
+/// dataset, and is skipped. A step that succeeded keeps only the
+/// `keep` newest dated folders of its kind. Returns the steps that failed
+/// or were skipped.
+fn then_steps(opts: &ProcessOptions, steps: &[Then], keep: Option<u32>) -> Vec<String> {
     let kpis = opts.dataset.join("kpis.parquet");
     let stamp = utc_stamp(std::time::SystemTime::now());
     let mut failed: Vec<&str> = Vec::new();
     let tell = |name: &str, e: &anyhow::Error| eprintln!("Error: --then {name} failed: {e:?}");
+    // A step's older results: their removal failing is named as a step.
+    let prune = |sub: &str, label: &'static str, failed: &mut Vec<&str>| {
+        if let Some(keep) = keep
+            && !prune_results(&opts.dataset.join(sub), keep)
+        {
+            failed.push(label);
+        }
+    };
     if steps.contains(&Then::Fit) {
         println!();
         match super::fit::run_fit(
@@ -254,7 +271,7 @@ fn then_steps(opts: &ProcessOptions, steps: &[Then]) -> Vec<String> {
         ) {
             // Some methods fitted: the report shows those (from this fit only).
             Ok(not_fitted) if !not_fitted.is_empty() => failed.push("fit (some methods)"),
-            Ok(_) => {}
+            Ok(_) => prune("models", "pruning models", &mut failed),
             Err(e) => {
                 tell("fit", &e);
                 failed.push("fit");
@@ -263,9 +280,12 @@ fn then_steps(opts: &ProcessOptions, steps: &[Then]) -> Vec<String> {
     }
     if steps.contains(&Then::Gap) {
         println!();
-        if let Err(e) = then_gap(opts, &kpis, &stamp) {
-            tell("gap", &e);
-            failed.push("gap");
+        match then_gap(opts, &kpis, &stamp) {
+            Ok(()) => prune("gap", "pruning gap", &mut failed),
+            Err(e) => {
+                tell("gap", &e);
+                failed.push("gap");
+            }
         }
     }
     if steps.contains(&Then::Report) {
@@ -278,7 +298,7 @@ fn then_steps(opts: &ProcessOptions, steps: &[Then]) -> Vec<String> {
         if stale.is_empty() {
             let dir = opts.dataset.join("report").join(&stamp);
             match super::report::run_report(&opts.dataset, &dir.join("report.html"), &[]) {
-                Ok(true) => {}
+                Ok(true) => prune("report", "pruning report", &mut failed),
                 Ok(false) => failed.push("report (some inputs left out)"),
                 Err(e) => {
                     tell("report", &e);
@@ -295,6 +315,26 @@ fn then_steps(opts: &ProcessOptions, steps: &[Then]) -> Vec<String> {
         }
     }
     failed.into_iter().map(String::from).collect()
+}
+
+/// Removes all but the `keep` newest dated folders of `dir`, saying which;
+/// false (and the error on stderr) when that failed.
+fn prune_results(dir: &std::path::Path, keep: u32) -> bool {
+    match tirewear::nightly::retention::prune_dated(dir, keep as usize) {
+        Ok(removed) => {
+            for r in removed {
+                println!("--keep-results {keep}: removed {}", r.display());
+            }
+            true
+        }
+        Err(e) => {
+            eprintln!(
+                "Error: --keep-results: pruning {} failed: {e}",
+                dir.display()
+            );
+            false
+        }
+    }
 }
 
 /// The gap diagnosis of the committed dataset, with the compounds' WLF

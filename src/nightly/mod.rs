@@ -21,6 +21,7 @@ mod error;
 mod keys;
 mod lock;
 pub mod remote;
+pub mod retention;
 
 pub use error::NightlyError;
 

@@ -1,0 +1,126 @@
+//! How many dated result folders (`DATASET/models/STAMP/`, `gap/STAMP/`,
+//! `report/STAMP/`, written by `process --then`) a dataset keeps.
+//!
+//! Only folders named like a stamp (`YYYY-MM-DDTHHMMZ`) are counted and
+//! removed; anything else a user put there is left alone. A folder is first
+//! renamed to a hidden name, then removed, so a kill halfway leaves nothing
+//! that looks like a result; the next prune removes such leftovers.
+
+use std::path::{Path, PathBuf};
+
+/// The prefix of a folder being removed.
+const REMOVING: &str = ".removing-";
+
+/// Whether `name` is a `YYYY-MM-DDTHHMMZ` stamp; these sort in time order.
+pub fn is_stamp(name: &str) -> bool {
+    let b = name.as_bytes();
+    let digits = |r: std::ops::Range<usize>| b[r].iter().all(u8::is_ascii_digit);
+    b.len() == 16
+        && digits(0..4)
+        && b[4] == b'-'
+        && digits(5..7)
+        && b[7] == b'-'
+        && digits(8..10)
+        && b[10] == b'T'
+        && digits(11..15)
+        && b[15] == b'Z'
+}
+
+/// Removes all but the `keep` newest stamp-named folders of `dir` (and the
+/// leftovers of an earlier prune). Returns the folders removed. A missing
+/// `dir` has nothing to prune.
+pub fn prune_dated(dir: &Path, keep: usize) -> std::io::Result<Vec<PathBuf>> {
+    let entries = match std::fs::read_dir(dir) {
+        Ok(e) => e,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(Vec::new()),
+        Err(e) => return Err(e),
+    };
+    let mut stamps = Vec::new();
+    let mut leftovers = Vec::new();
+    for entry in entries {
+        let entry = entry?;
+        if !entry.file_type()?.is_dir() {
+            continue;
+        }
+        let name = entry.file_name().to_string_lossy().into_owned();
+        if is_stamp(&name) {
+            stamps.push(name);
+        } else if name.starts_with(REMOVING) {
+            leftovers.push(entry.path());
+        }
+    }
+    stamps.sort_unstable();
+    let old = stamps.len().saturating_sub(keep);
+    let mut removed = Vec::new();
+    for name in &stamps[..old] {
+        let from = dir.join(name);
+        let hidden = dir.join(format!("{REMOVING}{name}"));
+        std::fs::rename(&from, &hidden)?;
+        std::fs::remove_dir_all(&hidden)?;
+        removed.push(from);
+    }
+    for path in leftovers {
+        std::fs::remove_dir_all(&path)?;
+    }
+    Ok(removed)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn stamps_by_hand() {
+        assert!(is_stamp("2026-11-30T2130Z"));
+        assert!(!is_stamp("2026-11-30T2130"));
+        assert!(!is_stamp("2026-11-30 2130Z"));
+        assert!(!is_stamp("2026-1a-30T2130Z"));
+        assert!(!is_stamp("baseline"));
+        assert!(!is_stamp(""));
+    }
+
+    #[test]
+    fn keeps_the_newest_stamps_and_everything_else() {
+        let dir = tempfile::tempdir().unwrap();
+        let d = dir.path();
+        for name in [
+            "2026-11-28T0230Z",
+            "2026-11-30T0230Z",
+            "2025-12-31T2359Z",
+            "2026-11-29T0230Z",
+            "baseline",
+            ".removing-2026-01-01T0000Z",
+        ] {
+            std::fs::create_dir_all(d.join(name).join("sub")).unwrap();
+            std::fs::write(d.join(name).join("sub/file"), name).unwrap();
+        }
+        // A plain file named like a stamp is not a result folder.
+        std::fs::write(d.join("2020-01-01T0000Z"), "x").unwrap();
+        let mut removed = prune_dated(d, 2).unwrap();
+        removed.sort();
+        assert_eq!(
+            removed,
+            [d.join("2025-12-31T2359Z"), d.join("2026-11-28T0230Z")]
+        );
+        let mut left: Vec<String> = std::fs::read_dir(d)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        left.sort();
+        assert_eq!(
+            left,
+            [
+                "2020-01-01T0000Z",
+                "2026-11-29T0230Z",
+                "2026-11-30T0230Z",
+                "baseline"
+            ]
+        );
+        // Keeping more than there are removes nothing; a missing folder is empty.
+        assert!(prune_dated(d, 5).unwrap().is_empty());
+        assert!(prune_dated(&d.join("absent"), 0).unwrap().is_empty());
+        // Keeping none removes every dated folder.
+        assert_eq!(prune_dated(d, 0).unwrap().len(), 2);
+        assert!(d.join("baseline/sub/file").exists());
+    }
+}
