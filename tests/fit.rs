@@ -232,6 +232,27 @@ fn changed_bytes_of_a_model_file_are_refused(
     let text = std::fs::read_to_string(dir.join("physical.json")).unwrap();
     std::fs::write(&damaged, text.replace('\n', "\r\n")).unwrap();
     assert_eq!(&SavedModel::load(&damaged).unwrap(), &models["physical"]);
+    // A file of format version 1 (written before an undefined adjusted R²
+    // could be null) reads as the same model; a newer version is refused
+    // with both numbers named.
+    for version in [1, 3] {
+        let mut v: serde_json::Value = serde_json::from_str(&text).unwrap();
+        v["version"] = version.into();
+        v.as_object_mut().unwrap().remove("data_crc32");
+        std::fs::write(&damaged, serde_json::to_string_pretty(&v).unwrap()).unwrap();
+        match SavedModel::load(&damaged) {
+            Ok(mut m) if version == 1 => {
+                m.version = models["physical"].version;
+                assert_eq!(&m, &models["physical"]);
+            }
+            Err(e) if version == 3 => assert!(
+                e.to_string()
+                    .contains("version Some(3), this tirewear reads versions 1 to 2"),
+                "{e}"
+            ),
+            other => panic!("version {version}: {other:?}"),
+        }
+    }
     // A coefficient's digit changed by hand: refused by the checksum, then
     // read once the field is deleted.
     let at = text.find("\"coef\"").unwrap();

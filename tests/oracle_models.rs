@@ -102,7 +102,7 @@ fn ols_matches_statsmodels() {
     close("R²", f.train.r2, g["r2"].as_f64().unwrap(), 1e-10);
     close(
         "adjusted R²",
-        f.train.r2_adj,
+        f.train.r2_adj.unwrap(),
         g["r2_adj"].as_f64().unwrap(),
         1e-10,
     );

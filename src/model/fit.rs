@@ -292,6 +292,11 @@ fn method_title(m: &SavedModel) -> &'static str {
 }
 
 /// The performance table of a model, like the paper's tables 8, 9 and 11.
+/// An adjusted R² for a table: four decimals, or "–" where undefined.
+fn r2_adj_cell(r2_adj: Option<f64>) -> String {
+    r2_adj.map_or_else(|| "–".to_string(), |v| format!("{v:.4}"))
+}
+
 pub fn render_table(m: &SavedModel) -> String {
     let mut s = String::new();
     let _ = writeln!(s, "{} — inputs: {}", method_title(m), m.features.len());
@@ -304,8 +309,13 @@ pub fn render_table(m: &SavedModel) -> String {
         let x = &i.metrics;
         let _ = writeln!(
             s,
-            "  {:<20} {:>5} {:>8.4} {:>8.4} {:>9.4} {:>9.4}",
-            i.label, x.n, x.r2, x.r2_adj, x.rmse, x.mae
+            "  {:<20} {:>5} {:>8.4} {:>8} {:>9.4} {:>9.4}",
+            i.label,
+            x.n,
+            x.r2,
+            r2_adj_cell(x.r2_adj),
+            x.rmse,
+            x.mae
         );
     }
     match &m.model {
@@ -390,11 +400,11 @@ pub fn render_comparison(models: &[SavedModel]) -> String {
             let x = &i.metrics;
             let _ = writeln!(
                 s,
-                "  {:<42} {:>5} {:>8.4} {:>8.4} {:>9.4}",
+                "  {:<42} {:>5} {:>8.4} {:>8} {:>9.4}",
                 label.trim(),
                 x.n,
                 x.r2,
-                x.r2_adj,
+                r2_adj_cell(x.r2_adj),
                 x.rmse
             );
         }

@@ -12,7 +12,9 @@ pub struct Metrics {
     pub r2: f64,
     /// Adjusted R² in the usual form with an intercept, 1 − (n−1)/(n−k−1)·(1−R²)
     /// (statsmodels, MATLAB fitlm). The paper's eq. 12 divides by n−k instead.
-    pub r2_adj: f64,
+    /// `None` (null in a model file) when n ≤ k + 1, where it is undefined:
+    /// a few testing tires do not sink a model with many inputs.
+    pub r2_adj: Option<f64>,
     /// √(SSE/n) (eq. 13).
     pub rmse: f64,
     pub mae: f64,
@@ -40,10 +42,10 @@ pub fn metrics(observed: &[f64], predicted: &[f64], k: usize) -> Result<Metrics,
     if predicted.len() != n {
         return Err(ModelError::LengthMismatch("metrics".into()));
     }
-    if n < k + 2 {
+    if n < 2 {
         return Err(ModelError::TooFewObservations {
-            what: format!("adjusted R² of a model with {k} inputs and an intercept"),
-            needed: k + 1,
+            what: "R² (a spread of the observed wear)".into(),
+            needed: 2,
             got: n,
         });
     }
@@ -77,7 +79,8 @@ pub fn metrics(observed: &[f64], predicted: &[f64], k: usize) -> Result<Metrics,
         n,
         k,
         r2,
-        r2_adj: 1.0 - (n as f64 - 1.0) / (n as f64 - k as f64 - 1.0) * (1.0 - r2),
+        r2_adj: (n > k + 1)
+            .then(|| 1.0 - (n as f64 - 1.0) / (n as f64 - k as f64 - 1.0) * (1.0 - r2)),
         rmse: (sse / n as f64).sqrt(),
         mae,
     })
@@ -93,11 +96,21 @@ mod tests {
         // adj (k = 1) = 1 - 4/3·0.2 = 0.733..., RMSE = √0.4, MAE = 0.4.
         let m = metrics(&[1.0, 2.0, 3.0, 4.0, 5.0], &[1.0, 1.0, 3.0, 5.0, 5.0], 1).unwrap();
         assert!((m.r2 - 0.8).abs() < 1e-12);
-        assert!((m.r2_adj - (1.0 - 4.0 / 3.0 * 0.2)).abs() < 1e-12);
+        assert!((m.r2_adj.unwrap() - (1.0 - 4.0 / 3.0 * 0.2)).abs() < 1e-12);
         assert!((m.rmse - 0.4f64.sqrt()).abs() < 1e-12);
         assert!((m.mae - 0.4).abs() < 1e-12);
         assert!(metrics(&[1.0, 1.0, 1.0], &[1.0, 1.0, 1.0], 0).is_err());
-        assert!(metrics(&[1.0, 2.0], &[1.0, 2.0], 1).is_err());
+        assert!(metrics(&[1.0], &[1.0], 0).is_err());
+        // n = k + 1 and n = k + 2 - 1 rows short: R² by hand, adjusted R²
+        // undefined. y = (1, 2, 3), p = (1, 3, 3): SSE = 1, SST = 2, R² = 0.5.
+        for k in [2, 5] {
+            let m = metrics(&[1.0, 2.0, 3.0], &[1.0, 3.0, 3.0], k).unwrap();
+            assert!((m.r2 - 0.5).abs() < 1e-12);
+            assert_eq!(m.r2_adj, None, "k = {k}");
+        }
+        // k = 1: 1 − 2/1·0.5 = 0.
+        let m = metrics(&[1.0, 2.0, 3.0], &[1.0, 3.0, 3.0], 1).unwrap();
+        assert!(m.r2_adj.unwrap().abs() < 1e-12);
     }
 
     #[test]

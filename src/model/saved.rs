@@ -13,7 +13,7 @@ use crate::kpi::{KpiRow, table::unit};
 use std::path::Path;
 
 pub(crate) const MODEL_FORMAT: &str = "tirewear-model";
-pub(crate) const MODEL_VERSION: u32 = 1;
+pub(crate) const MODEL_VERSION: u32 = 2;
 
 /// A column with its unit.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -152,10 +152,10 @@ impl SavedModel {
             )));
         }
         match head["version"].as_u64() {
-            Some(v) if v as u32 == MODEL_VERSION => {}
+            Some(v) if (1..=u64::from(MODEL_VERSION)).contains(&v) => {}
             v => {
                 return Err(file(format!(
-                    "model format version {v:?}, this tirewear reads version {MODEL_VERSION}"
+                    "model format version {v:?}, this tirewear reads versions 1 to {MODEL_VERSION}"
                 )));
             }
         }
