@@ -690,7 +690,8 @@ fn dated_files(dir: &Path, sub: &str) -> Vec<String> {
 
 /// `--then fit,gap,report`: a step that fails stops neither the commit nor
 /// the other steps; the report is skipped rather than shown beside an older
-/// night's models or gap; exit 3 names what was not done.
+/// night's models or gap; exit 3 names what was not done; the next night
+/// runs what was not done, though nothing changed.
 #[test]
 fn a_failed_then_step_stops_neither_the_commit_nor_the_others() {
     let dir = tempfile::tempdir().unwrap();
@@ -790,4 +791,29 @@ fn a_failed_then_step_stops_neither_the_commit_nor_the_others() {
     );
     assert!(err.contains("--then report skipped: fit failed"), "{err}");
     assert!(!dataset.join("report").exists());
+
+    // The next night, nothing changed: the steps the first did not finish
+    // on this dataset run now, the gap is not diagnosed again.
+    std::fs::remove_file(dataset.join("models")).unwrap();
+    let (code, out, err) = process(&archive, &dataset);
+    assert_eq!(code, Some(0), "{out}\n{err}");
+    assert!(out.contains("nothing to commit"), "{out}");
+    assert!(out.contains("--then: gap already done on dataset"), "{out}");
+    assert!(
+        out.contains("--then: fit, report not done on dataset") && out.contains("running now"),
+        "{out}"
+    );
+    assert_eq!(
+        dated_files(&dataset, "models"),
+        ["ffnn.json", "pca.json", "physical.json"]
+    );
+    assert_eq!(dated_files(&dataset, "report"), ["report.html"]);
+    // And the night after: nothing left to do.
+    let (code, out, err) = process(&archive, &dataset);
+    assert_eq!(code, Some(0), "{out}\n{err}");
+    assert!(
+        out.contains("--then: fit, gap, report already done on dataset"),
+        "{out}"
+    );
+    assert!(!out.contains("running now"), "{out}");
 }

@@ -3,6 +3,7 @@
 use anyhow::Result;
 use std::path::PathBuf;
 use tirewear::nightly::remote::{Location, S3Settings, Session};
+use tirewear::nightly::steps::StepsDone;
 use tirewear::nightly::{Mode, NightlyError, ProcessOptions, ProcessSummary};
 
 #[derive(clap::Args)]
@@ -52,7 +53,9 @@ pub(crate) struct ProcessArgs {
     /// (`fit`: DATASET/models/STAMP/) and rerun the gap diagnosis (`gap`:
     /// DATASET/gap/STAMP/) and write the HTML report (`report`:
     /// DATASET/report/STAMP/report.html, from the newest models and gap),
-    /// STAMP being the UTC time (YYYY-MM-DDTHHMMZ).
+    /// STAMP being the UTC time (YYYY-MM-DDTHHMMZ). A step an earlier night
+    /// did not finish on the committed dataset (it failed, or the night was
+    /// stopped) runs even when nothing changed (DATASET/then.json).
     #[arg(long, value_delimiter = ',', value_enum)]
     then: Vec<Then>,
     /// Keep only the N newest dated folders of each `--then` step
@@ -204,10 +207,10 @@ pub(crate) fn run(a: ProcessArgs, progress: bool) -> Result<Outcome> {
     match tirewear::nightly::process(&opts) {
         Ok(s) => {
             print_summary(&s);
-            let then_failed = if s.committed && !a.then.is_empty() {
-                then_steps(&opts, &a.then, a.keep_results)
-            } else {
+            let then_failed = if a.then.is_empty() || opts.dry_run {
                 Vec::new()
+            } else {
+                run_then(&opts, &s, &a.then, a.keep_results)
             };
             if !opts.dry_run
                 && let Some(r) = session.publish()?
@@ -241,6 +244,74 @@ pub(crate) fn run(a: ProcessArgs, progress: bool) -> Result<Outcome> {
     }
 }
 
+impl Then {
+    fn name(self) -> &'static str {
+        match self {
+            Then::Fit => "fit",
+            Then::Gap => "gap",
+            Then::Report => "report",
+        }
+    }
+}
+
+/// The `--then` steps this night owes the committed dataset: all of them
+/// after a commit, else those an earlier night did not finish on it (a
+/// step failed, or the night was stopped after its commit;
+/// `DATASET/then.json`). Returns the steps that failed or were skipped.
+fn run_then(
+    opts: &ProcessOptions,
+    s: &ProcessSummary,
+    asked: &[Then],
+    keep: Option<u32>,
+) -> Vec<String> {
+    // A shard commits nothing; a dataset never committed has nothing to fit.
+    if matches!(opts.mode, Mode::Shard { .. }) || !opts.dataset.join("dataset.json").exists() {
+        return Vec::new();
+    }
+    let mut record = if s.committed {
+        let fresh = StepsDone {
+            dataset_id: s.dataset_id.clone(),
+            done: Vec::new(),
+        };
+        // Written at once: a night stopped before its first step must not
+        // leave an older record that says the steps were done.
+        if let Err(e) = fresh.write(&opts.dataset) {
+            eprintln!("Warning: --then: {e}");
+        }
+        fresh
+    } else {
+        let (record, warning) = StepsDone::read(&opts.dataset, &s.dataset_id);
+        if let Some(w) = warning {
+            eprintln!("Warning: {w}");
+        }
+        record
+    };
+    let names = |steps: &[Then]| {
+        steps
+            .iter()
+            .map(|t| t.name())
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    let (done, pending): (Vec<Then>, Vec<Then>) =
+        asked.iter().partition(|t| record.is_done(t.name()));
+    if !done.is_empty() {
+        println!(
+            "--then: {} already done on dataset {}",
+            names(&done),
+            s.dataset_id
+        );
+    }
+    if !s.committed && !pending.is_empty() {
+        println!(
+            "--then: {} not done on dataset {} by an earlier night (a step failed or was stopped): running now",
+            names(&pending),
+            s.dataset_id
+        );
+    }
+    then_steps(opts, &pending, keep, &mut record)
+}
+
 /// Runs the `--then` steps on the committed dataset, into dated folders.
 /// Each step runs whatever became of the others (`gap` does not need
 /// `fit`), except `report`: it shows the newest models and gap, so after a
@@ -248,11 +319,26 @@ pub(crate) fn run(a: ProcessArgs, progress: bool) -> Result<Outcome> {
 /// dataset, and is skipped. A step that succeeded keeps only the
 /// `keep` newest dated folders of its kind. Returns the steps that failed
 /// or were skipped.
-fn then_steps(opts: &ProcessOptions, steps: &[Then], keep: Option<u32>) -> Vec<String> {
+fn then_steps(
+    opts: &ProcessOptions,
+    steps: &[Then],
+    keep: Option<u32>,
+    record: &mut StepsDone,
+) -> Vec<String> {
+    if steps.is_empty() {
+        return Vec::new();
+    }
     let kpis = opts.dataset.join("kpis.parquet");
     let stamp = utc_stamp(std::time::SystemTime::now());
     let mut failed: Vec<&str> = Vec::new();
     let tell = |name: &str, e: &anyhow::Error| eprintln!("Error: --then {name} failed: {e:?}");
+    // A step done: recorded, so that a later night does not run it again
+    // on the same dataset; a record that cannot be written only costs that.
+    let mut done = |step: Then| {
+        if let Err(e) = record.mark_done(&opts.dataset, step.name()) {
+            eprintln!("Warning: --then: {e}");
+        }
+    };
     // A step's older results: their removal failing is named as a step.
     let prune = |sub: &str, label: &'static str, failed: &mut Vec<&str>| {
         if let Some(keep) = keep
@@ -271,7 +357,10 @@ fn then_steps(opts: &ProcessOptions, steps: &[Then], keep: Option<u32>) -> Vec<S
         ) {
             // Some methods fitted: the report shows those (from this fit only).
             Ok(not_fitted) if !not_fitted.is_empty() => failed.push("fit (some methods)"),
-            Ok(_) => prune("models", "pruning models", &mut failed),
+            Ok(_) => {
+                done(Then::Fit);
+                prune("models", "pruning models", &mut failed);
+            }
             Err(e) => {
                 tell("fit", &e);
                 failed.push("fit");
@@ -281,7 +370,10 @@ fn then_steps(opts: &ProcessOptions, steps: &[Then], keep: Option<u32>) -> Vec<S
     if steps.contains(&Then::Gap) {
         println!();
         match then_gap(opts, &kpis, &stamp) {
-            Ok(()) => prune("gap", "pruning gap", &mut failed),
+            Ok(()) => {
+                done(Then::Gap);
+                prune("gap", "pruning gap", &mut failed);
+            }
             Err(e) => {
                 tell("gap", &e);
                 failed.push("gap");
@@ -298,7 +390,10 @@ fn then_steps(opts: &ProcessOptions, steps: &[Then], keep: Option<u32>) -> Vec<S
         if stale.is_empty() {
             let dir = opts.dataset.join("report").join(&stamp);
             match super::report::run_report(&opts.dataset, &dir.join("report.html"), &[]) {
-                Ok(true) => prune("report", "pruning report", &mut failed),
+                Ok(true) => {
+                    done(Then::Report);
+                    prune("report", "pruning report", &mut failed);
+                }
                 Ok(false) => failed.push("report (some inputs left out)"),
                 Err(e) => {
                     tell("report", &e);
