@@ -67,7 +67,8 @@ pub(crate) struct ProcessArgs {
     keep_results: Option<u32>,
 }
 
-/// A step `--then` runs after a commit that changed the dataset.
+/// A step `--then` runs after a commit that changed the dataset (or that
+/// an earlier night did not finish on the committed dataset).
 #[derive(Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub(crate) enum Then {
     Fit,
