@@ -707,6 +707,16 @@ fn a_failed_then_step_stops_neither_the_commit_nor_the_others() {
         let text = |b: &[u8]| String::from_utf8_lossy(b).into_owned();
         (out.status.code(), text(&out.stdout), text(&out.stderr))
     };
+    let dry_run = |archive: &Path, dataset: &Path| {
+        let out = std::process::Command::new(exe)
+            .args(["--quiet", "--log", "error", "process", "--dry-run"])
+            .args(["--then", "fit,gap,report", "--out"])
+            .arg(dataset)
+            .arg(archive)
+            .output()
+            .unwrap();
+        String::from_utf8_lossy(&out.stdout).into_owned()
+    };
 
     // The tiny season (4 runs, 16 tires on two events): the physical
     // model's design is singular and the gap diagnosis needs more than 20
@@ -793,8 +803,14 @@ fn a_failed_then_step_stops_neither_the_commit_nor_the_others() {
     assert!(!dataset.join("report").exists());
 
     // The next night, nothing changed: the steps the first did not finish
-    // on this dataset run now, the gap is not diagnosed again.
+    // on this dataset run now, the gap is not diagnosed again (a dry run
+    // says so first).
     std::fs::remove_file(dataset.join("models")).unwrap();
+    let dry_out = dry_run(&archive, &dataset);
+    assert!(
+        dry_out.contains("--then: would run fit, report (not done on dataset"),
+        "{dry_out}"
+    );
     let (code, out, err) = process(&archive, &dataset);
     assert_eq!(code, Some(0), "{out}\n{err}");
     assert!(out.contains("nothing to commit"), "{out}");
@@ -816,4 +832,6 @@ fn a_failed_then_step_stops_neither_the_commit_nor_the_others() {
         "{out}"
     );
     assert!(!out.contains("running now"), "{out}");
+    let dry_out = dry_run(&archive, &dataset);
+    assert!(dry_out.contains("--then: nothing to run"), "{dry_out}");
 }

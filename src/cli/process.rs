@@ -208,7 +208,10 @@ pub(crate) fn run(a: ProcessArgs, progress: bool) -> Result<Outcome> {
     match tirewear::nightly::process(&opts) {
         Ok(s) => {
             print_summary(&s);
-            let then_failed = if a.then.is_empty() || opts.dry_run {
+            let then_failed = if a.then.is_empty() {
+                Vec::new()
+            } else if opts.dry_run {
+                dry_run_then(&opts, &s, &a.then);
                 Vec::new()
             } else {
                 run_then(&opts, &s, &a.then, a.keep_results)
@@ -255,6 +258,47 @@ impl Then {
     }
 }
 
+/// The asked steps' names, joined.
+fn names(steps: &[Then]) -> String {
+    steps
+        .iter()
+        .map(|t| t.name())
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+/// What `--then` would run after a dry run's plan: every step when runs
+/// would be processed or removed, else those not done on the dataset.
+fn dry_run_then(opts: &ProcessOptions, s: &ProcessSummary, asked: &[Then]) {
+    if matches!(opts.mode, Mode::Shard { .. }) {
+        return;
+    }
+    if !s.runs_processed.is_empty() || s.removed > 0 {
+        println!("--then: would run {} after the commit", names(asked));
+        return;
+    }
+    let (record, warning) = StepsDone::read(&opts.dataset, &s.dataset_id);
+    if let Some(w) = warning {
+        eprintln!("Warning: {w}");
+    }
+    let pending: Vec<Then> = asked
+        .iter()
+        .copied()
+        .filter(|t| !record.is_done(t.name()))
+        .collect();
+    if s.dataset_id.is_empty() {
+        println!("--then: nothing to run (no dataset committed)");
+    } else if pending.is_empty() {
+        println!("--then: nothing to run (no change; every step done on the dataset)");
+    } else {
+        println!(
+            "--then: would run {} (not done on dataset {})",
+            names(&pending),
+            s.dataset_id
+        );
+    }
+}
+
 /// The `--then` steps this night owes the committed dataset: all of them
 /// after a commit, else those an earlier night did not finish on it (a
 /// step failed, or the night was stopped after its commit;
@@ -286,13 +330,6 @@ fn run_then(
             eprintln!("Warning: {w}");
         }
         record
-    };
-    let names = |steps: &[Then]| {
-        steps
-            .iter()
-            .map(|t| t.name())
-            .collect::<Vec<_>>()
-            .join(", ")
     };
     let (done, pending): (Vec<Then>, Vec<Then>) =
         asked.iter().partition(|t| record.is_done(t.name()));

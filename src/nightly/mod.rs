@@ -174,6 +174,8 @@ pub struct ProcessSummary {
     /// The runs that would be processed (dry run) or were.
     pub runs_processed: Vec<String>,
     pub committed: bool,
+    /// The committed dataset's id after this invocation (a dry run: as
+    /// committed before it; empty for a shard).
     pub dataset_id: String,
     pub rows: usize,
     pub seconds: f64,
@@ -585,6 +587,7 @@ pub fn process(opts: &ProcessOptions) -> Result<ProcessSummary, NightlyError> {
     if opts.dry_run {
         summary.seconds = start.elapsed().as_secs_f64();
         summary.hashed_bytes = files.bytes_hashed;
+        summary.dataset_id = old.dataset_id.clone();
         return Ok(summary);
     }
 
