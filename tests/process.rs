@@ -835,3 +835,72 @@ fn a_failed_then_step_stops_neither_the_commit_nor_the_others() {
     let dry_out = dry_run(&archive, &dataset);
     assert!(dry_out.contains("--then: nothing to run"), "{dry_out}");
 }
+
+/// A night stopped during its `--then` steps (SIGKILL once its commit is
+/// done): the next night, with nothing changed, runs every step and tidies
+/// what a stopped night leaves in a dated folder of its own.
+#[cfg(unix)]
+#[test]
+fn a_night_stopped_during_its_steps_is_finished_by_the_next() {
+    let dir = tempfile::tempdir().unwrap();
+    let archive = dir.path().join("demo");
+    let dataset = dir.path().join("dataset");
+    common::simulate_demo(&archive);
+    let exe = env!("CARGO_BIN_EXE_tirewear");
+    let cmd = || {
+        let mut c = std::process::Command::new(exe);
+        c.args(["--quiet", "--log", "error", "process", "--engine", "cpu"])
+            .args(["--then", "fit,gap,report", "--keep-results", "1", "--out"])
+            .arg(&dataset)
+            .arg(&archive);
+        c
+    };
+    let mut child = cmd()
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    // then.json is written once the commit is done, before the first step.
+    let record = dataset.join("then.json");
+    let t0 = std::time::Instant::now();
+    while !record.exists() {
+        assert!(
+            child.try_wait().unwrap().is_none(),
+            "ended before its commit"
+        );
+        assert!(t0.elapsed().as_secs() < 600, "no commit in 10 min");
+        std::thread::sleep(std::time::Duration::from_millis(2));
+    }
+    child.kill().unwrap();
+    assert!(!child.wait().unwrap().success(), "the steps ended first");
+    assert!(dataset.join("dataset.json").exists());
+    // What a kill inside a write leaves: a dead writer's temporary file
+    // (pid 0 is never a user process) in a folder no later night writes to.
+    let stopped = dataset.join("models/2020-01-01T0000Z");
+    std::fs::create_dir_all(&stopped).unwrap();
+    std::fs::write(stopped.join(".tirewear-0-abc.tmp"), "half").unwrap();
+
+    let out = cmd().output().unwrap();
+    let (text, err) = (
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr),
+    );
+    assert_eq!(out.status.code(), Some(0), "{text}\n{err}");
+    assert!(text.contains("nothing to commit"), "{text}");
+    assert!(
+        text.contains("--then: fit, gap, report not done on dataset")
+            && text.contains("running now"),
+        "{text}"
+    );
+    assert!(
+        text.contains(&format!("removed {}", stopped.display())),
+        "{text}"
+    );
+    assert!(!stopped.exists());
+    assert_eq!(
+        dated_files(&dataset, "models"),
+        ["ffnn.json", "pca.json", "physical.json"]
+    );
+    assert_eq!(dated_files(&dataset, "gap"), ["gap.json", "gap.md"]);
+    assert_eq!(dated_files(&dataset, "report"), ["report.html"]);
+}

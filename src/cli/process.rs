@@ -366,6 +366,17 @@ fn then_steps(
     if steps.is_empty() {
         return Vec::new();
     }
+    // What a night stopped during its steps left in its own folders.
+    for sub in ["models", "gap", "report"] {
+        match tirewear::nightly::retention::tidy_dated(&opts.dataset.join(sub)) {
+            Ok(removed) => {
+                for r in removed {
+                    println!("--then: removed {} (left by a stopped night)", r.display());
+                }
+            }
+            Err(e) => eprintln!("Warning: --then: tidying {sub}/: {e}"),
+        }
+    }
     let kpis = opts.dataset.join("kpis.parquet");
     let stamp = utc_stamp(std::time::SystemTime::now());
     let mut failed: Vec<&str> = Vec::new();

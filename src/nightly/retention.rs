@@ -65,6 +65,40 @@ pub fn prune_dated(dir: &Path, keep: usize) -> std::io::Result<Vec<PathBuf>> {
     Ok(removed)
 }
 
+/// Finishes what a killed writer left in the stamp-named folders of `dir`
+/// (a night stopped during its `--then` steps writes into its own folder,
+/// which no later writer visits): an interrupted commit's journal
+/// (`*.journal`) is completed, dead writers' temporary files removed, and
+/// a folder left empty removed. Returns the folders removed.
+pub fn tidy_dated(dir: &Path) -> std::io::Result<Vec<PathBuf>> {
+    let entries = match std::fs::read_dir(dir) {
+        Ok(e) => e,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(Vec::new()),
+        Err(e) => return Err(e),
+    };
+    let mut removed = Vec::new();
+    for entry in entries {
+        let entry = entry?;
+        let name = entry.file_name().to_string_lossy().into_owned();
+        if !is_stamp(&name) || !entry.file_type()?.is_dir() {
+            continue;
+        }
+        let folder = entry.path();
+        for file in std::fs::read_dir(&folder)? {
+            let file = file?.path();
+            if file.extension().is_some_and(|e| e == "journal") {
+                crate::atomic::recover(&file)?;
+            }
+        }
+        crate::atomic::remove_orphans(&folder)?;
+        if std::fs::read_dir(&folder)?.next().is_none() {
+            std::fs::remove_dir(&folder)?;
+            removed.push(folder);
+        }
+    }
+    Ok(removed)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -122,5 +156,43 @@ mod tests {
         // Keeping none removes every dated folder.
         assert_eq!(prune_dated(d, 0).unwrap().len(), 2);
         assert!(d.join("baseline/sub/file").exists());
+    }
+
+    /// What a killed `fit` leaves: a dead writer's temporary file (pid 0 is
+    /// never a user process) and a journal naming a finished temporary file.
+    #[test]
+    fn a_killed_nights_folders_are_finished_or_removed() {
+        let dir = tempfile::tempdir().unwrap();
+        let d = dir.path();
+        let only_temp = d.join("2026-11-28T0230Z");
+        std::fs::create_dir_all(&only_temp).unwrap();
+        std::fs::write(only_temp.join(".tirewear-0-abc.tmp"), "half").unwrap();
+        let journaled = d.join("2026-11-29T0230Z");
+        std::fs::create_dir_all(&journaled).unwrap();
+        let tmp = journaled.join(".tirewear-0-def.tmp");
+        std::fs::write(&tmp, "whole").unwrap();
+        let pairs = vec![(tmp.clone(), journaled.join("pca.json"))];
+        std::fs::write(
+            journaled.join(".models.journal"),
+            serde_json::to_vec(&pairs).unwrap(),
+        )
+        .unwrap();
+        // Not a stamp: left alone.
+        let other = d.join("mine");
+        std::fs::create_dir_all(&other).unwrap();
+        std::fs::write(other.join(".tirewear-0-x.tmp"), "x").unwrap();
+        assert_eq!(tidy_dated(d).unwrap(), [only_temp.clone()]);
+        assert!(!only_temp.exists());
+        let left: Vec<String> = std::fs::read_dir(&journaled)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        assert_eq!(left, ["pca.json"]);
+        assert_eq!(
+            std::fs::read_to_string(journaled.join("pca.json")).unwrap(),
+            "whole"
+        );
+        assert!(other.join(".tirewear-0-x.tmp").exists());
+        assert!(tidy_dated(&d.join("absent")).unwrap().is_empty());
     }
 }
