@@ -181,7 +181,7 @@ mod tests {
         let other = d.join("mine");
         std::fs::create_dir_all(&other).unwrap();
         std::fs::write(other.join(".tirewear-0-x.tmp"), "x").unwrap();
-        assert_eq!(tidy_dated(d).unwrap(), [only_temp.clone()]);
+        assert_eq!(tidy_dated(d).unwrap(), std::slice::from_ref(&only_temp));
         assert!(!only_temp.exists());
         let left: Vec<String> = std::fs::read_dir(&journaled)
             .unwrap()
