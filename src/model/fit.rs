@@ -291,12 +291,12 @@ fn method_title(m: &SavedModel) -> &'static str {
     }
 }
 
-/// The performance table of a model, like the paper's tables 8, 9 and 11.
 /// An adjusted R² for a table: four decimals, or "–" where undefined.
 fn r2_adj_cell(r2_adj: Option<f64>) -> String {
     r2_adj.map_or_else(|| "–".to_string(), |v| format!("{v:.4}"))
 }
 
+/// The performance table of a model, like the paper's tables 8, 9 and 11.
 pub fn render_table(m: &SavedModel) -> String {
     let mut s = String::new();
     let _ = writeln!(s, "{} — inputs: {}", method_title(m), m.features.len());

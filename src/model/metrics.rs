@@ -101,8 +101,9 @@ mod tests {
         assert!((m.mae - 0.4).abs() < 1e-12);
         assert!(metrics(&[1.0, 1.0, 1.0], &[1.0, 1.0, 1.0], 0).is_err());
         assert!(metrics(&[1.0], &[1.0], 0).is_err());
-        // n = k + 1 and n = k + 2 - 1 rows short: R² by hand, adjusted R²
-        // undefined. y = (1, 2, 3), p = (1, 3, 3): SSE = 1, SST = 2, R² = 0.5.
+        // n ≤ k + 1 (k = 2: n = k + 1; k = 5: fewer rows than inputs): R²
+        // by hand, adjusted R² undefined. y = (1, 2, 3), p = (1, 3, 3):
+        // SSE = 1, SST = 2, R² = 0.5.
         for k in [2, 5] {
             let m = metrics(&[1.0, 2.0, 3.0], &[1.0, 3.0, 3.0], k).unwrap();
             assert!((m.r2 - 0.5).abs() < 1e-12);
