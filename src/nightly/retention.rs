@@ -1,5 +1,6 @@
 //! How many dated result folders (`DATASET/models/STAMP/`, `gap/STAMP/`,
-//! `report/STAMP/`, written by `process --then`) a dataset keeps.
+//! `report/STAMP/`, written by `process --then`) a dataset keeps, and what
+//! becomes of one a stopped night left unfinished.
 //!
 //! Only folders named like a stamp (`YYYY-MM-DDTHHMMZ`) are counted and
 //! removed; anything else a user put there is left alone. A folder is first
