@@ -838,7 +838,8 @@ fn a_failed_then_step_stops_neither_the_commit_nor_the_others() {
 
 /// A night stopped during its `--then` steps (SIGKILL once its commit is
 /// done): the next night, with nothing changed, runs every step and tidies
-/// what a stopped night leaves in a dated folder of its own.
+/// what a stopped night leaves in a dated folder of its own. While the
+/// steps run, the dataset stays locked.
 #[cfg(unix)]
 #[test]
 fn a_night_stopped_during_its_steps_is_finished_by_the_next() {
@@ -871,6 +872,16 @@ fn a_night_stopped_during_its_steps_is_finished_by_the_next() {
         assert!(t0.elapsed().as_secs() < 600, "no commit in 10 min");
         std::thread::sleep(std::time::Duration::from_millis(2));
     }
+    // The lock is held through the steps: a second writer is refused.
+    let second = std::process::Command::new(exe)
+        .args([
+            "--quiet", "--log", "error", "process", "--engine", "cpu", "--out",
+        ])
+        .arg(&dataset)
+        .arg(&archive)
+        .output()
+        .unwrap();
+    assert_eq!(second.status.code(), Some(4), "a writer beside the steps");
     child.kill().unwrap();
     assert!(!child.wait().unwrap().success(), "the steps ended first");
     assert!(dataset.join("dataset.json").exists());

@@ -205,8 +205,10 @@ pub(crate) fn run(a: ProcessArgs, progress: bool) -> Result<Outcome> {
         progress,
         allow_external_paths: a.allow_external_paths,
     };
-    match tirewear::nightly::process(&opts) {
-        Ok(s) => {
+    // The lock is held through the `--then` steps and the publish: no other
+    // writer commits, tidies or prunes beside them.
+    match tirewear::nightly::process_locked(&opts) {
+        Ok((s, _lock)) => {
             print_summary(&s);
             let then_failed = if a.then.is_empty() {
                 Vec::new()

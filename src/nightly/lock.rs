@@ -11,9 +11,9 @@ use std::fs::{File, OpenOptions, TryLockError};
 use std::io::{Read, Seek, Write};
 use std::path::Path;
 
-/// Held until dropped.
+/// The lock of a dataset, held until dropped.
 #[derive(Debug)]
-pub(crate) struct DatasetLock {
+pub struct DatasetLock {
     _file: File,
 }
 

@@ -25,6 +25,7 @@ pub mod retention;
 pub mod steps;
 
 pub use error::NightlyError;
+pub use lock::DatasetLock;
 
 use crate::atomic::OutputSet;
 use crate::engine::{CpuEngine, ReduceEngine};
@@ -390,10 +391,18 @@ fn remove_orphans_everywhere(dir: &Path) -> Result<(), NightlyError> {
 
 /// Brings `opts.dataset` up to date with `opts.archives`.
 pub fn process(opts: &ProcessOptions) -> Result<ProcessSummary, NightlyError> {
+    process_locked(opts).map(|(summary, _lock)| summary)
+}
+
+/// [`process`], returning the dataset's lock still held (none for a dry
+/// run): what follows the commit (`process --then`) runs with no other
+/// writer beside it, until the lock is dropped.
+pub fn process_locked(
+    opts: &ProcessOptions,
+) -> Result<(ProcessSummary, Option<DatasetLock>), NightlyError> {
     opts.check()?;
-    let start = Instant::now();
     let dataset = &opts.dataset;
-    let _lock = if opts.dry_run {
+    let lock = if opts.dry_run {
         None
     } else {
         std::fs::create_dir_all(dataset.join("staging")).map_err(NightlyError::io(dataset))?;
@@ -402,6 +411,13 @@ pub fn process(opts: &ProcessOptions) -> Result<ProcessSummary, NightlyError> {
             !matches!(opts.mode, Mode::Shard { .. }),
         )?)
     };
+    Ok((process_under_lock(opts)?, lock))
+}
+
+/// [`process`]'s work, the lock taken.
+fn process_under_lock(opts: &ProcessOptions) -> Result<ProcessSummary, NightlyError> {
+    let start = Instant::now();
+    let dataset = &opts.dataset;
     if !opts.dry_run && !matches!(opts.mode, Mode::Shard { .. }) {
         // Finish a commit a kill interrupted, and sweep dead writers' files.
         crate::atomic::recover(&dataset.join(".commit.json")).map_err(NightlyError::io(dataset))?;
