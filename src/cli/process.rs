@@ -269,6 +269,21 @@ fn names(steps: &[Then]) -> String {
         .join(", ")
 }
 
+/// The steps `then.json` records as done on `dataset_id` (a damaged
+/// record named on stderr, and none done).
+fn recorded(opts: &ProcessOptions, dataset_id: &str) -> StepsDone {
+    let (record, warning) = StepsDone::read(&opts.dataset, dataset_id);
+    if let Some(w) = warning {
+        eprintln!("Warning: {w}");
+    }
+    record
+}
+
+/// The asked steps the record lists as done, and the others.
+fn split_done(record: &StepsDone, asked: &[Then]) -> (Vec<Then>, Vec<Then>) {
+    asked.iter().partition(|t| record.is_done(t.name()))
+}
+
 /// What `--then` would run after a dry run's plan: every step when runs
 /// would be processed or removed, else those not done on the dataset.
 fn dry_run_then(opts: &ProcessOptions, s: &ProcessSummary, asked: &[Then]) {
@@ -279,15 +294,7 @@ fn dry_run_then(opts: &ProcessOptions, s: &ProcessSummary, asked: &[Then]) {
         println!("--then: would run {} after the commit", names(asked));
         return;
     }
-    let (record, warning) = StepsDone::read(&opts.dataset, &s.dataset_id);
-    if let Some(w) = warning {
-        eprintln!("Warning: {w}");
-    }
-    let pending: Vec<Then> = asked
-        .iter()
-        .copied()
-        .filter(|t| !record.is_done(t.name()))
-        .collect();
+    let (_, pending) = split_done(&recorded(opts, &s.dataset_id), asked);
     if s.dataset_id.is_empty() {
         println!("--then: nothing to run (no dataset committed)");
     } else if pending.is_empty() {
@@ -327,14 +334,9 @@ fn run_then(
         }
         fresh
     } else {
-        let (record, warning) = StepsDone::read(&opts.dataset, &s.dataset_id);
-        if let Some(w) = warning {
-            eprintln!("Warning: {w}");
-        }
-        record
+        recorded(opts, &s.dataset_id)
     };
-    let (done, pending): (Vec<Then>, Vec<Then>) =
-        asked.iter().partition(|t| record.is_done(t.name()));
+    let (done, pending) = split_done(&record, asked);
     if !done.is_empty() {
         println!(
             "--then: {} already done on dataset {}",

@@ -31,25 +31,13 @@ pub fn is_stamp(name: &str) -> bool {
 /// leftovers of an earlier prune). Returns the folders removed. A missing
 /// `dir` has nothing to prune.
 pub fn prune_dated(dir: &Path, keep: usize) -> std::io::Result<Vec<PathBuf>> {
-    let entries = match std::fs::read_dir(dir) {
-        Ok(e) => e,
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(Vec::new()),
-        Err(e) => return Err(e),
-    };
-    let mut stamps = Vec::new();
-    let mut leftovers = Vec::new();
-    for entry in entries {
-        let entry = entry?;
-        if !entry.file_type()?.is_dir() {
-            continue;
-        }
-        let name = entry.file_name().to_string_lossy().into_owned();
-        if is_stamp(&name) {
-            stamps.push(name);
-        } else if name.starts_with(REMOVING) {
-            leftovers.push(entry.path());
-        }
-    }
+    let folders = folders(dir)?;
+    let (mut stamps, others): (Vec<String>, Vec<String>) =
+        folders.into_iter().partition(|n| is_stamp(n));
+    let leftovers = others
+        .into_iter()
+        .filter(|n| n.starts_with(REMOVING))
+        .map(|n| dir.join(n));
     stamps.sort_unstable();
     let old = stamps.len().saturating_sub(keep);
     let mut removed = Vec::new();
@@ -72,19 +60,9 @@ pub fn prune_dated(dir: &Path, keep: usize) -> std::io::Result<Vec<PathBuf>> {
 /// (`*.journal`) is completed, dead writers' temporary files removed, and
 /// a folder left empty removed. Returns the folders removed.
 pub fn tidy_dated(dir: &Path) -> std::io::Result<Vec<PathBuf>> {
-    let entries = match std::fs::read_dir(dir) {
-        Ok(e) => e,
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(Vec::new()),
-        Err(e) => return Err(e),
-    };
     let mut removed = Vec::new();
-    for entry in entries {
-        let entry = entry?;
-        let name = entry.file_name().to_string_lossy().into_owned();
-        if !is_stamp(&name) || !entry.file_type()?.is_dir() {
-            continue;
-        }
-        let folder = entry.path();
+    for name in folders(dir)?.into_iter().filter(|n| is_stamp(n)) {
+        let folder = dir.join(name);
         for file in std::fs::read_dir(&folder)? {
             let file = file?.path();
             if file.extension().is_some_and(|e| e == "journal") {
@@ -98,6 +76,23 @@ pub fn tidy_dated(dir: &Path) -> std::io::Result<Vec<PathBuf>> {
         }
     }
     Ok(removed)
+}
+
+/// The names of the folders in `dir` (none when `dir` is missing).
+fn folders(dir: &Path) -> std::io::Result<Vec<String>> {
+    let entries = match std::fs::read_dir(dir) {
+        Ok(e) => e,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(Vec::new()),
+        Err(e) => return Err(e),
+    };
+    let mut names = Vec::new();
+    for entry in entries {
+        let entry = entry?;
+        if entry.file_type()?.is_dir() {
+            names.push(entry.file_name().to_string_lossy().into_owned());
+        }
+    }
+    Ok(names)
 }
 
 #[cfg(test)]
