@@ -673,6 +673,17 @@ fn exit_codes_of_the_binary() {
     }
 }
 
+/// The names of the folders under `dir/sub`, in name order.
+fn stamp_folders(dir: &Path, sub: &str) -> Vec<String> {
+    let mut names: Vec<String> = std::fs::read_dir(dir.join(sub))
+        .unwrap()
+        .flatten()
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .collect();
+    names.sort();
+    names
+}
+
 /// The files directly under `dir/sub/*/` (the dated folders `--then`
 /// writes), by name.
 fn dated_files(dir: &Path, sub: &str) -> Vec<String> {
@@ -768,6 +779,14 @@ fn a_failed_then_step_stops_neither_the_commit_nor_the_others() {
         out.contains("--then: not done: fit (some methods), gap, report (skipped)"),
         "{out}"
     );
+    // The next night, seconds later: `fit` runs again, into a folder of
+    // its own (the same minute's folder, before stamps had seconds).
+    let tonight = stamp_folders(&dataset, "models");
+    let (code, out, err) = process(&archive, &dataset);
+    assert_eq!(code, Some(3), "{out}\n{err}");
+    let next = stamp_folders(&dataset, "models");
+    assert_eq!(next.len(), 3, "{tonight:?} then {next:?}");
+    assert!(tonight.iter().all(|s| next.contains(s)), "{next:?}");
     // `fit` alone: the same two models, exit 3.
     let fit = std::process::Command::new(exe)
         .args(["--quiet", "--log", "error", "fit"])

@@ -53,9 +53,11 @@ pub(crate) struct ProcessArgs {
     /// (`fit`: DATASET/models/STAMP/) and rerun the gap diagnosis (`gap`:
     /// DATASET/gap/STAMP/) and write the HTML report (`report`:
     /// DATASET/report/STAMP/report.html, from the newest models and gap),
-    /// STAMP being the UTC time (YYYY-MM-DDTHHMMZ). A step an earlier night
-    /// did not finish on the committed dataset (it failed, or the night was
-    /// stopped) runs even when nothing changed (DATASET/then.json).
+    /// STAMP being the UTC time (YYYY-MM-DDTHHMMSSZ; a second later when an
+    /// earlier night used it, so each night's folders are its own). A step
+    /// an earlier night did not finish on the committed dataset (it failed,
+    /// or the night was stopped) runs even when nothing changed
+    /// (DATASET/then.json).
     #[arg(long, value_delimiter = ',', value_enum)]
     then: Vec<Then>,
     /// Keep only the N newest dated folders of each `--then` step
@@ -382,7 +384,12 @@ fn then_steps(
         }
     }
     let kpis = opts.dataset.join("kpis.parquet");
-    let stamp = utc_stamp(std::time::SystemTime::now());
+    // The night's own folders: a stamp an earlier night used moves on.
+    let stamp = tirewear::nightly::stamp::fresh(
+        &opts.dataset,
+        &["models", "gap", "report"],
+        std::time::SystemTime::now(),
+    );
     let mut failed: Vec<&str> = Vec::new();
     let tell = |name: &str, e: &anyhow::Error| eprintln!("Error: --then {name} failed: {e:?}");
     // A step done: recorded, so that a later night does not run it again
@@ -508,42 +515,8 @@ fn then_gap(opts: &ProcessOptions, kpis: &std::path::Path, stamp: &str) -> Resul
     )
 }
 
-/// `YYYY-MM-DDTHHMMZ` of a time (UTC), for dated output folders.
-fn utc_stamp(t: std::time::SystemTime) -> String {
-    let secs = t
-        .duration_since(std::time::UNIX_EPOCH)
-        .map_or(0, |d| d.as_secs()) as i64;
-    let (days, rem) = (secs.div_euclid(86_400), secs.rem_euclid(86_400));
-    // Days to a civil date (H. Hinnant's algorithm, proleptic Gregorian).
-    let z = days + 719_468;
-    let era = z.div_euclid(146_097);
-    let doe = z - era * 146_097;
-    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
-    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
-    let mp = (5 * doy + 2) / 153;
-    let day = doy - (153 * mp + 2) / 5 + 1;
-    let month = if mp < 10 { mp + 3 } else { mp - 9 };
-    let year = yoe + era * 400 + i64::from(month <= 2);
-    format!(
-        "{year:04}-{month:02}-{day:02}T{:02}{:02}Z",
-        rem / 3600,
-        rem % 3600 / 60
-    )
-}
-
 #[cfg(test)]
 mod tests {
-    #[test]
-    fn utc_stamps_by_hand() {
-        let at =
-            |s: u64| super::utc_stamp(std::time::UNIX_EPOCH + std::time::Duration::from_secs(s));
-        assert_eq!(at(0), "1970-01-01T0000Z");
-        // `date -u -d @951782400` = 2000-02-29 00:00 (a leap day of a century year).
-        assert_eq!(at(951_782_400), "2000-02-29T0000Z");
-        // `date -u -d @1795437000` = 2026-11-23 12:30.
-        assert_eq!(at(1_795_437_000), "2026-11-23T1230Z");
-    }
-
     #[test]
     fn shard_arguments() {
         assert_eq!(super::parse_shard("1/4"), Ok((0, 4)));

@@ -22,6 +22,7 @@ mod keys;
 mod lock;
 pub mod remote;
 pub mod retention;
+pub mod stamp;
 pub mod steps;
 
 pub use error::NightlyError;

@@ -2,30 +2,16 @@
 //! `report/STAMP/`, written by `process --then`) a dataset keeps, and what
 //! becomes of one a stopped night left unfinished.
 //!
-//! Only folders named like a stamp (`YYYY-MM-DDTHHMMZ`) are counted and
+//! Only folders named like a stamp ([`super::stamp`]) are counted and
 //! removed; anything else a user put there is left alone. A folder is first
 //! renamed to a hidden name, then removed, so a kill halfway leaves nothing
 //! that looks like a result; the next prune removes such leftovers.
 
+use super::stamp::{is_stamp, time_order};
 use std::path::{Path, PathBuf};
 
 /// The prefix of a folder being removed.
 const REMOVING: &str = ".removing-";
-
-/// Whether `name` is a `YYYY-MM-DDTHHMMZ` stamp; these sort in time order.
-pub fn is_stamp(name: &str) -> bool {
-    let b = name.as_bytes();
-    let digits = |r: std::ops::Range<usize>| b[r].iter().all(u8::is_ascii_digit);
-    b.len() == 16
-        && digits(0..4)
-        && b[4] == b'-'
-        && digits(5..7)
-        && b[7] == b'-'
-        && digits(8..10)
-        && b[10] == b'T'
-        && digits(11..15)
-        && b[15] == b'Z'
-}
 
 /// Removes all but the `keep` newest stamp-named folders of `dir` (and the
 /// leftovers of an earlier prune). Returns the folders removed. A missing
@@ -38,7 +24,7 @@ pub fn prune_dated(dir: &Path, keep: usize) -> std::io::Result<Vec<PathBuf>> {
         .into_iter()
         .filter(|n| n.starts_with(REMOVING))
         .map(|n| dir.join(n));
-    stamps.sort_unstable();
+    stamps.sort_unstable_by_key(|n| time_order(n));
     let old = stamps.len().saturating_sub(keep);
     let mut removed = Vec::new();
     for name in &stamps[..old] {
@@ -100,16 +86,6 @@ mod tests {
     use super::*;
 
     #[test]
-    fn stamps_by_hand() {
-        assert!(is_stamp("2026-11-30T2130Z"));
-        assert!(!is_stamp("2026-11-30T2130"));
-        assert!(!is_stamp("2026-11-30 2130Z"));
-        assert!(!is_stamp("2026-1a-30T2130Z"));
-        assert!(!is_stamp("baseline"));
-        assert!(!is_stamp(""));
-    }
-
-    #[test]
     fn keeps_the_newest_stamps_and_everything_else() {
         let dir = tempfile::tempdir().unwrap();
         let d = dir.path();
@@ -118,6 +94,9 @@ mod tests {
             "2026-11-30T0230Z",
             "2025-12-31T2359Z",
             "2026-11-29T0230Z",
+            // Seconds after the minute stamp above, though a plain
+            // string order puts it first.
+            "2026-11-29T023015Z",
             "baseline",
             ".removing-2026-01-01T0000Z",
         ] {
@@ -130,7 +109,11 @@ mod tests {
         removed.sort();
         assert_eq!(
             removed,
-            [d.join("2025-12-31T2359Z"), d.join("2026-11-28T0230Z")]
+            [
+                d.join("2025-12-31T2359Z"),
+                d.join("2026-11-28T0230Z"),
+                d.join("2026-11-29T0230Z")
+            ]
         );
         let mut left: Vec<String> = std::fs::read_dir(d)
             .unwrap()
@@ -141,7 +124,7 @@ mod tests {
             left,
             [
                 "2020-01-01T0000Z",
-                "2026-11-29T0230Z",
+                "2026-11-29T023015Z",
                 "2026-11-30T0230Z",
                 "baseline"
             ]

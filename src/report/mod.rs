@@ -132,10 +132,12 @@ fn optional<T>(r: Result<T, ReportError>, unread: &mut Vec<ReportError>) -> Opti
 /// The folder under `dir/sub` whose files the report shows: `dir/sub`
 /// itself when it holds any of `names` (a season folder after `fit`/`gap`),
 /// else the newest dated subfolder that does (`tirewear process --then
-/// fit,gap` writes `models/2026-11-24T0230Z/…`; the names sort by time).
-/// One folder for all the names, so that the models shown come from one
-/// fit: a method that failed last night is missing, not an older night's.
+/// fit,gap` writes `models/2026-11-24T023000Z/…`; other subfolders are
+/// not results and are passed over). One folder for all the names, so that
+/// the models shown come from one fit: a method that failed last night is
+/// missing, not an older night's.
 fn newest(dir: &Path, sub: &str, names: &[&str]) -> PathBuf {
+    use crate::nightly::stamp::{is_stamp, time_order};
     let holds = |d: &Path| names.iter().any(|n| d.join(n).exists());
     let direct = dir.join(sub);
     if holds(&direct) {
@@ -144,10 +146,10 @@ fn newest(dir: &Path, sub: &str, names: &[&str]) -> PathBuf {
     let dated = std::fs::read_dir(&direct)
         .into_iter()
         .flatten()
-        .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| holds(p))
-        .max();
-    dated.unwrap_or(direct)
+        .filter_map(|e| e.ok()?.file_name().into_string().ok())
+        .filter(|n| is_stamp(n) && holds(&direct.join(n)))
+        .max_by_key(|n| time_order(n));
+    dated.map_or(direct.clone(), |n| direct.join(n))
 }
 
 /// The compound folders of a season folder, or of the archives a `process`
@@ -420,6 +422,17 @@ mod tests {
         assert_eq!(
             newest(d, "models", &both),
             d.join("models/2026-11-26T0230Z")
+        );
+        // Seconds stamps order in time with the older minute ones (a plain
+        // string order puts this one before the minute it follows), and a
+        // folder not named like a stamp is not a result.
+        for name in ["2026-11-26T023001Z", "zz-kept-by-hand"] {
+            std::fs::create_dir_all(d.join("models").join(name)).unwrap();
+            std::fs::write(d.join("models").join(name).join("pca.json"), "{}").unwrap();
+        }
+        assert_eq!(
+            newest(d, "models", &both),
+            d.join("models/2026-11-26T023001Z")
         );
         std::fs::write(d.join("models/pca.json"), "{}").unwrap();
         assert_eq!(newest(d, "models", &both), d.join("models"));
