@@ -23,6 +23,56 @@ use std::sync::Arc;
 /// Variables a user expression may read besides the KPI columns.
 pub(crate) const BIN_VARIABLES: [&str; 4] = ["t_surface", "t_inner", "sliding_speed", "theta"];
 
+/// The functions an expression may call: evalexpr's numeric built-ins.
+/// Its string, tuple, bit and random functions have no meaning over an
+/// energy map, and two of them panic on some arguments (`str::substring`
+/// inside a multi-byte character, `shl` past 63 bits with overflow checks).
+pub(crate) const FUNCTIONS: [&str; 32] = [
+    "if",
+    "min",
+    "max",
+    "floor",
+    "round",
+    "ceil",
+    "math::abs",
+    "math::sqrt",
+    "math::cbrt",
+    "math::hypot",
+    "math::exp",
+    "math::exp2",
+    "math::ln",
+    "math::log",
+    "math::log2",
+    "math::log10",
+    "math::pow",
+    "math::sin",
+    "math::cos",
+    "math::tan",
+    "math::asin",
+    "math::acos",
+    "math::atan",
+    "math::atan2",
+    "math::sinh",
+    "math::cosh",
+    "math::tanh",
+    "math::asinh",
+    "math::acosh",
+    "math::atanh",
+    "math::is_nan",
+    "math::is_finite",
+];
+
+/// The longest expression read (bytes). evalexpr parses and evaluates
+/// by recursion, so an expression nested some ten thousand deep overflows
+/// a thread's stack, which aborts the process; this bound, and the depth
+/// below, keep far from that.
+const MAX_EXPRESSION_BYTES: usize = 4096;
+
+/// The deepest expression tree read (nested brackets, functions and
+/// operators: a sum of n terms is n + 1 deep). Some 8000 were evaluated on a
+/// 2 MiB thread in the release build; the debug build's frames are larger.
+const MAX_DEPTH: usize = 256;
+
 #[derive(Debug, serde::Deserialize)]
 #[serde(deny_unknown_fields)]
 struct EffectsFile {
@@ -113,8 +163,29 @@ impl UserEffect {
         expression: &str,
         adds_wear: bool,
     ) -> Result<UserEffect, String> {
+        if expression.len() > MAX_EXPRESSION_BYTES {
+            return Err(format!(
+                "the expression is {} bytes long, more than the {MAX_EXPRESSION_BYTES} read",
+                expression.len()
+            ));
+        }
         let node = evalexpr::build_operator_tree::<DefaultNumericTypes>(expression)
             .map_err(|e| format!("cannot parse '{expression}': {e}"))?;
+        let depth = tree_depth(&node);
+        if depth > MAX_DEPTH {
+            return Err(format!(
+                "cannot parse '{expression}': nested {depth} deep, more than the {MAX_DEPTH} read"
+            ));
+        }
+        if let Some(f) = node
+            .iter_function_identifiers()
+            .find(|f| !FUNCTIONS.contains(f))
+        {
+            return Err(format!(
+                "cannot parse '{expression}': unknown function '{f}' (the numeric ones: {})",
+                FUNCTIONS.join(", ")
+            ));
+        }
         let mut variables: Vec<String> = node
             .iter_variable_identifiers()
             .map(str::to_string)
@@ -224,6 +295,17 @@ impl UserEffect {
     }
 }
 
+/// The depth of an expression tree, walked without recursion.
+fn tree_depth(node: &Node<DefaultNumericTypes>) -> usize {
+    let mut deepest = 0;
+    let mut todo = vec![(node, 1)];
+    while let Some((n, depth)) = todo.pop() {
+        deepest = deepest.max(depth);
+        todo.extend(n.children().iter().map(|c| (c, depth + 1)));
+    }
+    deepest
+}
+
 /// Reads `effects.toml` into candidates; errors name the file and the effect.
 pub fn load(path: &Path) -> Result<Vec<Candidate>, GapError> {
     let file = path.display().to_string();
@@ -245,7 +327,13 @@ pub fn load(path: &Path) -> Result<Vec<Candidate>, GapError> {
                 effect: format!("effect {} ('{}')", k + 1, e.name),
                 message,
             };
-            let user = UserEffect::compile(&e.name, &e.expression, e.adds_wear).map_err(err)?;
+            // The net under the checks: a panic in the expression library
+            // while trying the expression fails this file, not the night.
+            let user = crate::guard::catch_panic(|| {
+                UserEffect::compile(&e.name, &e.expression, e.adds_wear)
+            })
+            .unwrap_or_else(|msg| Err(format!("internal error ({msg}); please report it")))
+            .map_err(err)?;
             let user = match e.energy.as_deref() {
                 None | Some("total") => user,
                 Some("lateral") => user.on_lateral_energy().map_err(err)?,
@@ -456,5 +544,200 @@ mod tests {
             ),
             0.0
         );
+    }
+
+    #[test]
+    fn expressions_that_would_panic_or_overflow_the_stack_are_refused() {
+        let err = |e: &str| UserEffect::compile("x", e, true).unwrap_err();
+        // evalexpr's `str::substring` panics inside a multi-byte character,
+        // `shl` past 63 bits with overflow checks.
+        let e = err("t_surface * len(str::substring(\"é\", 0, 1))");
+        assert!(e.contains("unknown function 'len'"), "{e}");
+        let e = err("t_surface * shl(1, 100)");
+        assert!(
+            e.contains("unknown function 'shl'") && e.contains("math::sqrt"),
+            "{e}"
+        );
+        // Nested deep enough to overflow a thread's stack (the process
+        // aborted at some 30 000 brackets): refused by length, or by depth
+        // when within the length.
+        let nest = |n: usize| format!("{}t_surface > theta{}", "(".repeat(n), ")".repeat(n));
+        let e = err(&nest(100_000));
+        assert!(e.contains("200017 bytes long"), "{e}");
+        let e = err(&nest(1500));
+        assert!(e.contains("deep, more than the 256 read"), "{e}");
+        let e = err(&format!("{}t_surface", "-".repeat(4000)));
+        assert!(e.contains("deep"), "{e}");
+        // Nested as a person would write it: the same term as without.
+        let r = KpiRow::default();
+        let bare = UserEffect::compile("x", &nest(0), true).unwrap();
+        let nested = UserEffect::compile("x", &nest(20), true).unwrap();
+        let sqrt = UserEffect::compile("x", "math::sqrt(t_surface) > theta", true).unwrap();
+        for theta in [70.0, 90.0] {
+            let want = bare.feature(&r, Some(&map()), theta);
+            assert_eq!(nested.feature(&r, Some(&map()), theta), want);
+            assert_eq!(sqrt.feature(&r, Some(&map()), theta.sqrt()), want);
+        }
+        // A sum of 255 terms is 256 deep: read, and evaluated on this
+        // test's thread (2 MiB of stack) to 255 times one term.
+        let one = UserEffect::compile("x", "t_surface", true).unwrap();
+        let sum = vec!["t_surface"; 255].join(" + ");
+        let many = UserEffect::compile("x", &sum, true).unwrap();
+        let (got, want) = (
+            many.feature(&r, Some(&map()), f64::NAN),
+            255.0 * one.feature(&r, Some(&map()), f64::NAN),
+        );
+        assert!((got - want).abs() < 1e-12 * want, "{got} vs {want}");
+        let e = err(&format!("{sum} + t_surface"));
+        assert!(e.contains("nested 257 deep"), "{e}");
+    }
+
+    /// A random expression over the names, literals, operators and
+    /// functions a user might write, evalexpr's whole built-in list
+    /// included, nested up to `depth`.
+    fn random_expression(rng: &mut rand_chacha::ChaCha8Rng, depth: u32) -> String {
+        use rand::prelude::*;
+        const NAMES: [&str; 7] = [
+            "t_surface",
+            "t_inner",
+            "theta",
+            "sliding_speed",
+            "friction_energy_j",
+            "pressure_avg_pa",
+            "tread",
+        ];
+        const LITERALS: [&str; 16] = [
+            "0",
+            "1",
+            "-1",
+            "63",
+            "64",
+            "100",
+            "9223372036854775807",
+            "-9223372036854775807",
+            "1e308",
+            "-1e-308",
+            "0.5",
+            "true",
+            "\"é\"",
+            "\"日本\"",
+            "\"\"",
+            "()",
+        ];
+        const OPERATORS: [&str; 15] = [
+            "+", "-", "*", "/", "%", "^", "==", "!=", "<", ">", "<=", ">=", "&&", "||", ",",
+        ];
+        const BUILT_IN: [&str; 22] = [
+            "len",
+            "typeof",
+            "contains",
+            "contains_any",
+            "str::substring",
+            "str::from",
+            "str::trim",
+            "str::to_lowercase",
+            "str::to_uppercase",
+            "str::regex_matches",
+            "str::regex_replace",
+            "bitand",
+            "bitor",
+            "bitxor",
+            "bitnot",
+            "shl",
+            "shr",
+            "random",
+            "math::is_infinite",
+            "math::is_normal",
+            "no_such_function",
+            "math::",
+        ];
+        let kind = if depth == 0 {
+            0
+        } else {
+            rng.random_range(0..7)
+        };
+        match kind {
+            0 if rng.random_bool(0.5) => NAMES.choose(rng).unwrap().to_string(),
+            0 => LITERALS.choose(rng).unwrap().to_string(),
+            1 => format!("-{}", random_expression(rng, depth - 1)),
+            2 => format!("!{}", random_expression(rng, depth - 1)),
+            3 | 4 => {
+                let a = random_expression(rng, depth - 1);
+                let op = OPERATORS.choose(rng).unwrap();
+                format!("{a} {op} {}", random_expression(rng, depth - 1))
+            }
+            5 => format!("({})", random_expression(rng, depth - 1)),
+            _ => {
+                let f = if rng.random_bool(0.5) {
+                    BUILT_IN.choose(rng).unwrap()
+                } else {
+                    FUNCTIONS.choose(rng).unwrap()
+                };
+                // Arguments of the types the functions take, often enough
+                // to reach their bodies: strings, small integers, anything.
+                let args: Vec<String> = (0..rng.random_range(0..4))
+                    .map(|_| match rng.random_range(0..4) {
+                        0 => ["\"é\"", "\"日本\"", "\"ab\""]
+                            .choose(rng)
+                            .unwrap()
+                            .to_string(),
+                        1 => rng.random_range(0..7).to_string(),
+                        _ => random_expression(rng, depth - 1),
+                    })
+                    .collect();
+                format!("{f}({})", args.join(", "))
+            }
+        }
+    }
+
+    /// 20 000 random expressions (and as many cut short at a random byte):
+    /// each is refused with a message or gives a term (a number or NaN) at
+    /// every θ; none panics. Before the function list and the depth bound,
+    /// `str::substring` inside "é" panicked here.
+    #[test]
+    fn random_expressions_are_refused_or_evaluated_never_panic() {
+        use rand::prelude::*;
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(14);
+        let r = KpiRow {
+            friction_energy_j: 3.5e6,
+            pressure_avg_pa: 2e5,
+            ..Default::default()
+        };
+        let m = map();
+        let (mut compiled, mut panics) = (0, Vec::new());
+        for _ in 0..20_000 {
+            let depth = rng.random_range(1..6);
+            let full = random_expression(&mut rng, depth);
+            let cut = rng.random_range(0..=full.len());
+            let short: String = full
+                .char_indices()
+                .take_while(|&(i, _)| i < cut)
+                .map(|(_, c)| c)
+                .collect();
+            for e in [full.clone(), short] {
+                let outcome = crate::guard::catch_panic(|| {
+                    let Ok(user) = UserEffect::compile("x", &e, false) else {
+                        return false;
+                    };
+                    for theta in [f64::NAN, -1.0, 80.0, 1e308] {
+                        let _ = user.feature(&r, Some(&m), theta);
+                    }
+                    true
+                });
+                match outcome {
+                    Ok(ok) => compiled += usize::from(ok),
+                    Err(msg) => panics.push(format!("{e:?}: {msg}")),
+                }
+            }
+        }
+        eprintln!("{compiled} of 40 000 read and evaluated, the rest refused");
+        assert!(
+            panics.is_empty(),
+            "{} panics: {:#?}",
+            panics.len(),
+            &panics[..panics.len().min(5)]
+        );
+        // The generator reaches the evaluation, not only the refusals.
+        assert!(compiled > 2000, "{compiled} of 40 000 compiled");
     }
 }
