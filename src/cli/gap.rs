@@ -58,7 +58,8 @@ pub(crate) struct GapStatsArgs {
     /// side by side in docs/gap.md.
     #[arg(long, value_enum, default_value = "bh")]
     multiple_testing: MultipleTestingArg,
-    /// Permutations of each candidate's significance test.
+    /// Permutations of each candidate's significance test: at least
+    /// 1/fdr - 1, at most 20000.
     #[arg(long, default_value_t = 1999)]
     permutations: usize,
     /// Seed of the permutations (the same seed gives the same p-values).
@@ -180,8 +181,8 @@ pub(crate) enum GapAction {
         /// whose terms' wear correlates >= 0.8 with the planted wear. Beside
         /// each season's shrinkage, the planted wear itself as the term,
         /// sized with the law on the training events: the best a term of
-        /// the right shape could reach.
-        #[arg(long, default_value_t = 0)]
+        /// the right shape could reach. At most 100000.
+        #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u64).range(0..=100_000))]
         random: u64,
         /// First seed of the generated effects (docs/gap.md keeps the seeds
         /// the development looked at apart from the held-out ones).
@@ -358,7 +359,7 @@ pub(crate) fn run(a: GapArgs, progress: bool) -> Result<()> {
             magnitudes,
             seeds,
             clean_seeds,
-            random: (random_from..random_from + random).collect(),
+            random: (random_from..random_seeds_end(random_from, random)?).collect(),
             preset: preset.into(),
             scale,
             tracks,
@@ -399,4 +400,32 @@ pub(crate) fn run(a: GapArgs, progress: bool) -> Result<()> {
 pub(crate) enum MultipleTestingArg {
     Bh,
     MaxT,
+}
+
+/// The end of `--random`'s seeds, RANDOM_FROM + RANDOM: an error where it
+/// passes the largest seed (the sum wrapped to an empty range, or panicked
+/// with overflow checks).
+fn random_seeds_end(from: u64, count: u64) -> Result<u64> {
+    from.checked_add(count).ok_or_else(|| {
+        anyhow::anyhow!(
+            "--random-from {from} with --random {count} passes the largest seed ({})",
+            u64::MAX
+        )
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn random_seeds_end_by_hand() {
+        assert_eq!(super::random_seeds_end(1, 20).unwrap(), 21);
+        assert_eq!(super::random_seeds_end(u64::MAX - 2, 2).unwrap(), u64::MAX);
+        let e = super::random_seeds_end(u64::MAX, 2)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("--random-from 18446744073709551615 with --random 2"),
+            "{e}"
+        );
+    }
 }

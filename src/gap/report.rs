@@ -386,11 +386,19 @@ impl Default for GapSettings {
     }
 }
 
+/// The most permutations a diagnosis draws (`--permutations`), ten times
+/// the default: p-values to 5e-5. Each permutation holds an index and a
+/// permuted residual per tire (28 MB per thousand at the season preset's
+/// 1 728 tires), four times as many again where p-values at the floor are
+/// refined (2.8 GB in all there at this bound), and the time grows with them.
+pub const MAX_PERMUTATIONS: usize = 20_000;
+
 impl GapSettings {
     /// Refuses settings no diagnosis can honour: an error rate outside
     /// (0, 1] (`--fdr 2` once reported every candidate significant, NaN
     /// none), or so few permutations that no p-value can reach it (the
-    /// smallest is 1/(permutations + 1)).
+    /// smallest is 1/(permutations + 1)), or more than [`MAX_PERMUTATIONS`]
+    /// (`--permutations 18446744073709551615` was a capacity-overflow panic).
     pub fn check(&self) -> Result<(), ModelError> {
         if !(self.fdr > 0.0 && self.fdr <= 1.0) {
             return Err(ModelError::Setting {
@@ -405,6 +413,14 @@ impl GapSettings {
                 name: "permutations",
                 value: n.to_string(),
                 expected: "at least 1/fdr - 1 (19 at 0.05), or no p-value can reach the rate",
+            });
+        }
+        if n > MAX_PERMUTATIONS {
+            return Err(ModelError::Setting {
+                name: "permutations",
+                value: n.to_string(),
+                expected: "at most 20000 (p-values to 5e-5; memory and time grow with \
+                           them: docs/gap.md)",
             });
         }
         Ok(())
@@ -930,6 +946,8 @@ mod tests {
             (f64::NAN, 1999, "fdr"),
             (0.05, 0, "permutations"),
             (0.05, 18, "permutations"),
+            (0.05, MAX_PERMUTATIONS + 1, "permutations"),
+            (0.05, usize::MAX, "permutations"),
         ] {
             let e = with(fdr, n).check().unwrap_err().to_string();
             assert!(e.starts_with(&format!("setting {name} = ")), "{e}");
@@ -937,6 +955,7 @@ mod tests {
         // 1/(19 + 1) = 0.05 exactly; a rate of 1 takes any permutations.
         assert!(with(0.05, 19).check().is_ok());
         assert!(with(1.0, 1).check().is_ok());
+        assert!(with(0.05, MAX_PERMUTATIONS).check().is_ok());
         // The diagnosis refuses them before it reads a row.
         let e = diagnose(&[], &BTreeMap::new(), &Baseline::Physics, &with(2.0, 1999));
         assert!(matches!(e, Err(ModelError::Setting { name: "fdr", .. })));
