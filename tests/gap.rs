@@ -880,6 +880,81 @@ fn validate_refuses_a_bad_hypotheses_file_before_simulating() {
     assert!(!dir.path().join("out").exists());
 }
 
+/// Values a user can type that once panicked, aborted or silently did
+/// nothing are refused before anything is read or simulated, with the
+/// value named: a hypothesis nested past the stack (an abort), a string
+/// function that panics inside "é", 2^64 - 1 permutations (a capacity
+/// overflow), 2^64 - 1 generated seasons, a seed range past the largest.
+#[test]
+fn values_that_once_panicked_or_aborted_are_refused_by_name() {
+    let dir = tempfile::tempdir().unwrap();
+    let deep = dir.path().join("deep.toml");
+    let nest = 30_000;
+    std::fs::write(
+        &deep,
+        format!(
+            "[[effect]]\nname = \"deep\"\nexpression = \"{}t_surface{}\"\n",
+            "(".repeat(nest),
+            ")".repeat(nest)
+        ),
+    )
+    .unwrap();
+    let utf = dir.path().join("utf.toml");
+    std::fs::write(
+        &utf,
+        "[[effect]]\nname = \"utf\"\nexpression = \"t_surface * len(str::substring(\\\"é\\\", 0, 1))\"\n",
+    )
+    .unwrap();
+    let out = dir.path().join("out");
+    let (deep, utf, out) = (
+        deep.to_str().unwrap(),
+        utf.to_str().unwrap(),
+        out.to_str().unwrap(),
+    );
+    let max = u64::MAX.to_string();
+    let kpis = dir.path().join("none.parquet");
+    let kpis = kpis.to_str().unwrap();
+    for (args, code, said) in [
+        (vec!["gap", kpis, "--effects", deep], 1, "60009 bytes long"),
+        (
+            vec!["gap", kpis, "--effects", utf],
+            1,
+            "unknown function 'len'",
+        ),
+        (
+            vec!["gap", kpis, "--permutations", &max],
+            1,
+            "at most 20000",
+        ),
+        (
+            vec!["gap", "validate", "--permutations", &max],
+            1,
+            "at most 20000",
+        ),
+        (
+            vec!["gap", "validate", "--random", &max, "--random-from", "0"],
+            2,
+            "is not in 0..=100000",
+        ),
+        (
+            vec!["gap", "validate", "--random", "2", "--random-from", &max],
+            1,
+            "passes the largest seed",
+        ),
+    ] {
+        let run = std::process::Command::new(env!("CARGO_BIN_EXE_tirewear"))
+            .arg("--quiet")
+            .args(&args)
+            .args(["--out", out])
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&run.stderr);
+        assert_eq!(run.status.code(), Some(code), "{args:?}: {err}");
+        assert!(err.contains(said), "{args:?}: {err}");
+    }
+    assert!(!dir.path().join("out").exists());
+}
+
 /// `gap validate --hypotheses FILE` scores the user's hypotheses in every
 /// season and reports how each fared: on the demo season with blistering
 /// planted (seed 3, magnitude 1) a hypothesis restating it (energy with the
