@@ -337,6 +337,82 @@ fn a_failed_run_is_reported_and_the_rest_committed() {
     assert_eq!((s.processed, s.unchanged, s.failed.len()), (1, 3, 1));
 }
 
+/// A part that cannot be written (a full disk; here a file-size limit,
+/// which makes writes past 8 KiB fail with EFBIG) ends the night with an
+/// error naming it, before any commit. The run is not reported or recorded
+/// as failed (its inputs are fine: before, it was, and a run whose inputs
+/// had changed was dropped from the commit); the committed dataset is left
+/// as it was; the next night, with room, commits the change.
+#[cfg(all(target_os = "linux", target_env = "gnu"))]
+#[test]
+fn a_part_that_cannot_be_written_fails_the_night_not_the_run() {
+    use std::os::unix::process::CommandExt;
+    let dir = tempfile::tempdir().unwrap();
+    let archive = dir.path().join("season");
+    let dataset = dir.path().join("dataset");
+    tiny(&archive, 23);
+    run(&archive, &dataset);
+    let committed = |d: &Path| {
+        let mut t = tree(d);
+        t.retain(|p, _| !p.starts_with("staging") && !p.ends_with("summary.json"));
+        t
+    };
+    let before = committed(&dataset);
+    // One run's wear reading changed: that run is processed again.
+    let season = tirewear::ingest::manifest::Season::open(&archive).unwrap();
+    let wear = season.path(&season.manifest.wear_readings[0]);
+    let mut readings = tirewear::ingest::wear::read_wear_csv(&wear).unwrap();
+    readings[0].depth_mm -= 0.25;
+    tirewear::ingest::wear::write_wear_csv(&wear, &readings).unwrap();
+    let mut night = std::process::Command::new(env!("CARGO_BIN_EXE_tirewear"));
+    night
+        .args([
+            "--quiet", "--log", "error", "process", "--engine", "cpu", "--out",
+        ])
+        .arg(&dataset)
+        .arg(&archive);
+    // SAFETY: between fork and exec only async-signal-safe calls
+    // (signal, setrlimit); ignoring SIGXFSZ makes an oversized write fail
+    // with EFBIG instead of killing the process.
+    unsafe {
+        night.pre_exec(|| {
+            libc::signal(libc::SIGXFSZ, libc::SIG_IGN);
+            let limit = libc::rlimit {
+                rlim_cur: 8192,
+                rlim_max: 8192,
+            };
+            if libc::setrlimit(libc::RLIMIT_FSIZE, &limit) != 0 {
+                return Err(std::io::Error::last_os_error());
+            }
+            Ok(())
+        });
+    }
+    let out = night.output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("staging") && err.contains("os error 27"),
+        "the part and the OS's error named: {err}"
+    );
+    assert!(!err.contains("failed:"), "{err}");
+    let records: Vec<_> = std::fs::read_dir(dataset.join("staging"))
+        .unwrap()
+        .flatten()
+        .filter(|e| e.file_name().to_string_lossy().ends_with(".failed.json"))
+        .collect();
+    assert!(records.is_empty(), "no failure recorded: {records:?}");
+    assert_eq!(committed(&dataset), before, "the last commit stands");
+    // The next night, with room: the change is committed.
+    let s = run(&archive, &dataset);
+    assert!(s.committed && s.failed.is_empty(), "{:?}", s.failed);
+    assert_eq!(s.processed, 1);
+    assert_eq!(
+        processed_rows(&dataset),
+        extracted(&archive, dir.path()),
+        "the dataset is the plain extraction's"
+    );
+}
+
 /// SIGKILL at random moments, then a run to the end: the dataset is the
 /// uninterrupted run's, byte for byte, with no temporary file left.
 #[cfg(unix)]

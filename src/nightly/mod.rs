@@ -804,7 +804,11 @@ fn parse_sealed<T: serde::de::DeserializeOwned>(text: &[u8]) -> Result<T, String
 
 /// Processes `runs` and stages their parts (and each touched track's road
 /// part); returns the runs whose parts are staged. A run that fails is
-/// recorded in the summary and staged as a failure for `--commit`.
+/// recorded in the summary and staged as a failure for `--commit`. A part
+/// that cannot be written (a full disk) is no fault of the run's inputs:
+/// it ends the night with an error after the other runs are staged, before
+/// any commit, so the run is neither dropped from the dataset nor reported
+/// as failed; the parts staged are reused by the next night.
 fn stage_runs<'a>(
     opts: &ProcessOptions,
     seasons: &[Season],
@@ -816,6 +820,8 @@ fn stage_runs<'a>(
     let dataset = &opts.dataset;
     let pb = crate::progress::bar(opts.progress, runs.len() as u64, "processing runs");
     let mut done = Vec::new();
+    // The first part that could not be written, which ends the night.
+    let mut unwritten: Option<NightlyError> = None;
     for (si, season) in seasons.iter().enumerate() {
         let mine: Vec<&Planned> = runs.iter().copied().filter(|p| p.season == si).collect();
         if mine.is_empty() {
@@ -873,7 +879,11 @@ fn stage_runs<'a>(
             summary.telemetry_bytes += staged.telemetry_bytes;
             match staged.result {
                 Ok(()) => done.push(p),
-                Err(reason) => {
+                Err(RunFault::Write(e)) => {
+                    tracing::error!("run {}: {e}", p.run.id);
+                    unwritten.get_or_insert(e);
+                }
+                Err(RunFault::Input(reason)) => {
                     tracing::warn!("run {} failed: {reason}", p.run.id);
                     let f = Failed {
                         run: p.run.id.clone(),
@@ -888,14 +898,29 @@ fn stage_runs<'a>(
                 }
             }
         }
+        // The other seasons' parts would meet the same full disk.
+        if unwritten.is_some() {
+            break;
+        }
     }
     pb.finish_and_clear();
-    Ok(done)
+    match unwritten {
+        Some(e) => Err(e),
+        None => Ok(done),
+    }
+}
+
+/// Why a run was not staged.
+enum RunFault {
+    /// Its inputs could not be read or processed: the run failed.
+    Input(String),
+    /// Its processed parts could not be written: the night fails.
+    Write(NightlyError),
 }
 
 /// One run's outcome: staged, or why not.
 struct StagedRun {
-    result: Result<(), String>,
+    result: Result<(), RunFault>,
     warnings: Vec<String>,
     telemetry_bytes: u64,
 }
@@ -909,7 +934,7 @@ fn stage_one(dataset: &Path, p: &Planned, out: Result<RunOutput, String>) -> Sta
             result: write_run_parts(dataset, &p.key, &p.run.id, o),
         },
         Err(reason) => StagedRun {
-            result: Err(reason),
+            result: Err(RunFault::Input(reason)),
             warnings: vec![],
             telemetry_bytes: 0,
         },
@@ -918,7 +943,7 @@ fn stage_one(dataset: &Path, p: &Planned, out: Result<RunOutput, String>) -> Sta
 
 /// Stages a run's three parts; the KPI part last, since it marks the run
 /// staged only once all three exist.
-fn write_run_parts(dataset: &Path, key: &str, run: &str, o: RunOutput) -> Result<(), String> {
+fn write_run_parts(dataset: &Path, key: &str, run: &str, o: RunOutput) -> Result<(), RunFault> {
     let mut energy = Vec::with_capacity(o.maps.len());
     let mut conditions = Vec::with_capacity(o.maps.len());
     for (w, e, c) in o.maps {
@@ -936,7 +961,7 @@ fn write_run_parts(dataset: &Path, key: &str, run: &str, o: RunOutput) -> Result
     for (kind, batch) in batches {
         let path = staged_part(dataset, kind, key);
         crate::atomic::write_file(&path, |f| write_batch_to(f, &batch))
-            .map_err(|e| format!("{}: {e}", path.display()))?;
+            .map_err(|e| RunFault::Write(NightlyError::io(&path)(e)))?;
     }
     Ok(())
 }
