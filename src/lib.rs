@@ -6,6 +6,7 @@
 
 pub mod atomic;
 pub mod bench;
+mod calendar;
 pub mod engine;
 pub mod gap;
 pub mod gpu;

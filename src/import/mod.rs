@@ -82,12 +82,10 @@ fn days_from_civil(date: &str) -> Option<i64> {
         .split('-')
         .map(|x| x.parse().ok())
         .collect::<Option<_>>()?;
-    let (y, m, d) = (p[0] - i64::from(p[1] <= 2), p[1], p[2]);
-    let era = y.div_euclid(400);
-    let yoe = y - era * 400;
-    let doy = (153 * (m + if m > 2 { -3 } else { 9 }) + 2) / 5 + d - 1;
-    let doe = yoe * 365 + yoe / 4 - yoe / 100 + doy;
-    Some(era * 146_097 + doe - 719_468)
+    let [y, m, d] = p[..] else {
+        return None;
+    };
+    Some(crate::calendar::days_from_civil(y, m, d))
 }
 
 /// Reads one log and writes its run into the archive's manifest copy
