@@ -924,12 +924,12 @@ fn values_that_once_panicked_or_aborted_are_refused_by_name() {
         (
             vec!["gap", kpis, "--permutations", &max],
             1,
-            "at most 20000",
+            "at most 10000",
         ),
         (
             vec!["gap", "validate", "--permutations", &max],
             1,
-            "at most 20000",
+            "at most 10000",
         ),
         (
             vec!["gap", "validate", "--random", &max, "--random-from", "0"],

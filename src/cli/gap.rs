@@ -59,7 +59,7 @@ pub(crate) struct GapStatsArgs {
     #[arg(long, value_enum, default_value = "bh")]
     multiple_testing: MultipleTestingArg,
     /// Permutations of each candidate's significance test: at least
-    /// 1/fdr - 1, at most 20000.
+    /// 1/fdr - 1, at most 10000.
     #[arg(long, default_value_t = 1999)]
     permutations: usize,
     /// Seed of the permutations (the same seed gives the same p-values).

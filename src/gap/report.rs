@@ -386,12 +386,13 @@ impl Default for GapSettings {
     }
 }
 
-/// The most permutations a diagnosis draws (`--permutations`), ten times
-/// the default: p-values to 5e-5. Each permutation holds an index and a
-/// permuted residual per tire (28 MB per thousand at the season preset's
-/// 1 728 tires), four times as many again where p-values at the floor are
-/// refined (2.8 GB in all there at this bound), and the time grows with them.
-pub const MAX_PERMUTATIONS: usize = 20_000;
+/// The most permutations a diagnosis draws (`--permutations`), five times
+/// the default: p-values to 1e-4. Each permutation holds an index and a
+/// permuted residual per tire, for the runs exchanged and again for the
+/// sides (55 MB per thousand at the season preset's 1 728 tires), four
+/// times as many again where p-values at the floor are refined (some
+/// 2.8 GB there at this bound), and the time grows with them.
+pub const MAX_PERMUTATIONS: usize = 10_000;
 
 impl GapSettings {
     /// Refuses settings no diagnosis can honour: an error rate outside
@@ -419,7 +420,7 @@ impl GapSettings {
             return Err(ModelError::Setting {
                 name: "permutations",
                 value: n.to_string(),
-                expected: "at most 20000 (p-values to 5e-5; memory and time grow with \
+                expected: "at most 10000 (p-values to 1e-4; memory and time grow with \
                            them: docs/gap.md)",
             });
         }
