@@ -22,7 +22,10 @@ pub enum IngestError {
         path: PathBuf,
         source: parquet::errors::ParquetError,
     },
-    #[error("{path}: MCAP: {source}")]
+    /// The mcap crate's message with its cause: its I/O errors' text
+    /// ("I/O error from writing, or reading a compression stream") does
+    /// not say what the system reported (a full disk, a failing read).
+    #[error("{path}: MCAP: {}", with_cause(source))]
     Mcap {
         path: PathBuf,
         source: mcap::McapError,
@@ -34,6 +37,15 @@ pub enum IngestError {
         record: String,
         what: String,
     },
+}
+
+/// An error's text followed by its cause's, where the text leaves it out.
+fn with_cause(e: &dyn std::error::Error) -> String {
+    let text = e.to_string();
+    match e.source().map(|c| c.to_string()) {
+        Some(cause) if !text.contains(&cause) => format!("{text}: {cause}"),
+        _ => text,
+    }
 }
 
 impl IngestError {
@@ -58,3 +70,31 @@ impl IngestError {
 }
 
 pub type Result<T> = std::result::Result<T, IngestError>;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn an_mcap_io_error_says_what_the_system_reported() {
+        let full = std::io::Error::from_raw_os_error(28); // ENOSPC
+        let e = IngestError::Mcap {
+            path: PathBuf::from("t/r.mcap"),
+            source: mcap::McapError::from(full),
+        };
+        let text = e.to_string();
+        assert!(
+            text.starts_with("t/r.mcap: MCAP: ") && text.ends_with("(os error 28)"),
+            "{text}"
+        );
+        // A message that holds its cause already is not repeated.
+        let e = IngestError::Mcap {
+            path: PathBuf::from("t/r.mcap"),
+            source: mcap::McapError::BadMagic,
+        };
+        assert_eq!(
+            e.to_string(),
+            format!("t/r.mcap: MCAP: {}", mcap::McapError::BadMagic)
+        );
+    }
+}
