@@ -373,7 +373,7 @@ fn then_steps(
         return Vec::new();
     }
     // What a night stopped during its steps left in its own folders.
-    for sub in ["models", "gap", "report"] {
+    for sub in tirewear::nightly::stamp::RESULT_FOLDERS {
         match tirewear::nightly::retention::tidy_dated(&opts.dataset.join(sub)) {
             Ok(removed) => {
                 for r in removed {
@@ -387,7 +387,7 @@ fn then_steps(
     // The night's own folders: a stamp an earlier night used moves on.
     let stamp = tirewear::nightly::stamp::fresh(
         &opts.dataset,
-        &["models", "gap", "report"],
+        &tirewear::nightly::stamp::RESULT_FOLDERS,
         std::time::SystemTime::now(),
     );
     let mut failed: Vec<&str> = Vec::new();

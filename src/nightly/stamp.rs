@@ -11,6 +11,9 @@
 use std::path::Path;
 use std::time::{Duration, SystemTime, UNIX_EPOCH};
 
+/// The folders under a dataset that hold the `--then` steps' dated results.
+pub const RESULT_FOLDERS: [&str; 3] = ["models", "gap", "report"];
+
 /// `YYYY-MM-DDTHHMMSSZ` of a time (UTC).
 pub fn utc_stamp(t: SystemTime) -> String {
     let secs = t.duration_since(UNIX_EPOCH).map_or(0, |d| d.as_secs()) as i64;
