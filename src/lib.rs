@@ -14,6 +14,7 @@ mod guard;
 pub mod import;
 pub mod ingest;
 pub mod kpi;
+pub mod memory;
 pub mod model;
 pub mod nightly;
 mod progress;

@@ -337,6 +337,49 @@ fn a_failed_run_is_reported_and_the_rest_committed() {
     assert_eq!((s.processed, s.unchanged, s.failed.len()), (1, 3, 1));
 }
 
+/// A run that alone needs more memory than the budget fails by name (its
+/// file, its need, the budget and the flag to raise it) instead of the
+/// night being killed; the others commit, and the next night, with the
+/// budget found from the machine, processes it and equals an extraction.
+#[test]
+fn a_run_above_the_memory_budget_fails_by_name_and_the_rest_commit() {
+    use tirewear::memory::MemoryLimit;
+    let dir = tempfile::tempdir().unwrap();
+    let archive = dir.path().join("season");
+    let dataset = dir.path().join("dataset");
+    tiny(&archive, 16);
+    let season = tirewear::ingest::manifest::Season::open(&archive).unwrap();
+    let needs: Vec<u64> = season
+        .manifest
+        .runs
+        .iter()
+        .map(|r| tirewear::kpi::run_memory_need(&season.path(&r.telemetry)).unwrap())
+        .collect();
+    let largest = needs.iter().max().unwrap();
+    let big = &season.manifest.runs[needs.iter().position(|n| n == largest).unwrap()];
+    assert_eq!(
+        needs.iter().filter(|n| *n == largest).count(),
+        1,
+        "{needs:?}"
+    );
+    let s = process(&ProcessOptions {
+        memory_limit: MemoryLimit::Bytes(largest - 1),
+        ..ProcessOptions::new(vec![archive.clone()], &dataset)
+    })
+    .unwrap();
+    assert_eq!(s.failed.len(), 1, "{:?}", s.failed);
+    assert_eq!(s.failed[0].run, big.id);
+    let why = &s.failed[0].reason;
+    for part in [big.telemetry.as_str(), "of memory", "--memory-limit"] {
+        assert!(why.contains(part), "{why}");
+    }
+    assert!(s.committed);
+    assert_eq!(processed_rows(&dataset).len(), 4 * (needs.len() - 1));
+    let s = run(&archive, &dataset);
+    assert_eq!((s.processed, s.failed.len()), (1, 0), "{:?}", s.failed);
+    assert_eq!(processed_rows(&dataset), extracted(&archive, dir.path()));
+}
+
 /// A part that cannot be written (a full disk; here a file-size limit,
 /// which makes writes past 8 KiB fail with EFBIG) ends the night with an
 /// error naming it, before any commit. The run is not reported or recorded

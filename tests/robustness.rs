@@ -1445,3 +1445,81 @@ fn damaged_report_inputs_never_panic_or_sink_the_page() {
     assert!(failures.is_empty(), "{}", failures.join("\n"));
     assert!(left_out >= tried / 5, "{left_out} of {tried}");
 }
+
+/// Heap of a whole `extract` of `season`, runs one at a time (a budget of
+/// the largest run's need admits no second run beside it), and that need.
+fn extract_peak(season: &Path, out: &Path) -> (usize, u64) {
+    use tirewear::kpi::{ExtractOptions, extract, run_memory_need};
+    let m = tirewear::ingest::manifest::Season::open(season).unwrap();
+    let need = m
+        .manifest
+        .runs
+        .iter()
+        .map(|r| run_memory_need(&m.path(&r.telemetry)).unwrap())
+        .max()
+        .unwrap();
+    let base = LIVE.load(Ordering::Relaxed);
+    PEAK.store(base, Ordering::Relaxed);
+    let s = extract(&ExtractOptions {
+        memory_limit: tirewear::memory::MemoryLimit::Bytes(need),
+        ..ExtractOptions::new(season, out)
+    })
+    .unwrap();
+    let peak = PEAK.load(Ordering::Relaxed).saturating_sub(base);
+    assert!(s.skipped.is_empty(), "{:?}", s.skipped);
+    (peak, need)
+}
+
+/// `run_memory_need` against the heap measured by this binary's counting
+/// allocator: a season's extraction at 1000 Hz (block form) and at 250 Hz
+/// (per-sample form), runs one at a time, takes no more heap above the
+/// same season's at 5 Hz (every run tiny: what the extraction needs
+/// beside its runs) than its largest run's estimated need; and the
+/// estimate is not wasteful for blocks, the densest form (within 1.5× of
+/// what the run took).
+#[test]
+fn a_runs_memory_need_bounds_its_peak_heap() {
+    use tirewear::ingest::telemetry::Encoding;
+    let _one = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    let dir = tempfile::tempdir().unwrap();
+    let season = |name: &str, encoding, rate_hz| {
+        let out = dir.path().join(name);
+        tirewear::sim::simulate(&tirewear::sim::SimOptions {
+            preset: tirewear::sim::Preset::Tiny,
+            scale: 1.0,
+            tracks: None,
+            seed: 3,
+            effects: vec![],
+            generated: None,
+            scatter: tirewear::sim::WearScatter::NONE,
+            encoding,
+            rate_hz: Some(rate_hz),
+            out: out.clone(),
+            sensor_noise: true,
+            logger_export: None,
+            progress: false,
+        })
+        .unwrap();
+        let (peak, need) = extract_peak(&out, &out.join("kpis.parquet"));
+        eprintln!("{name}: peak heap {peak} B, largest run's need {need} B");
+        (peak as u64, need)
+    };
+    let (base, _) = season("base", Encoding::Block, 5.0);
+    for (name, encoding, rate, wasteful) in [
+        ("block", Encoding::Block, 1000.0, true),
+        ("sample", Encoding::Sample, 250.0, false),
+    ] {
+        let (peak, need) = season(name, encoding, rate);
+        let run_peak = peak.saturating_sub(base);
+        assert!(
+            run_peak <= need,
+            "{name}: a run took {run_peak} B of heap, more than its estimated need {need} B"
+        );
+        if wasteful {
+            assert!(
+                need as f64 <= 1.5 * run_peak as f64,
+                "{name}: the estimated need {need} B is over 1.5x the {run_peak} B a run took"
+            );
+        }
+    }
+}

@@ -62,6 +62,7 @@ pub(crate) fn run(a: DemoArgs, progress: bool) -> Result<()> {
         progress,
         allow_external_paths: false,
         pipeline: true,
+        memory_limit: tirewear::memory::MemoryLimit::Auto,
     })?;
     println!();
     run_fit(

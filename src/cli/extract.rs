@@ -25,6 +25,14 @@ pub(crate) struct ExtractArgs {
     /// tirewear read arbitrary files.
     #[arg(long)]
     allow_external_paths: bool,
+    /// How much memory the runs decoded at once may need together:
+    /// `auto` (three quarters of the memory available at start: the
+    /// system's MemAvailable or the control group's limit, whichever is
+    /// smaller) or a size such as 8G or 512M. Runs start while their
+    /// estimated needs fit; a run that alone needs more is skipped, naming
+    /// its file (docs/reliability.md, "Memory").
+    #[arg(long, value_name = "SIZE", default_value = "auto", value_parser = super::parse_memory_limit)]
+    memory_limit: tirewear::memory::MemoryLimit,
 }
 
 /// `--engine` of `extract`: the library's `kpi::Engine`.
@@ -110,5 +118,6 @@ pub(crate) fn run(a: ExtractArgs, progress: bool) -> Result<tirewear::kpi::Extra
         progress,
         allow_external_paths: a.allow_external_paths,
         pipeline: true,
+        memory_limit: a.memory_limit,
     })
 }

@@ -19,6 +19,11 @@ pub(crate) mod simulate;
 /// `--jobs 100000` once spent minutes creating threads.
 pub(crate) const MAX_JOBS: usize = 1024;
 
+/// `--memory-limit SIZE`: `auto` or a size (`tirewear::memory::MemoryLimit`).
+pub(crate) fn parse_memory_limit(s: &str) -> Result<tirewear::memory::MemoryLimit, String> {
+    s.parse()
+}
+
 /// `--jobs N`: 1 to [`MAX_JOBS`] worker threads.
 pub(crate) fn parse_jobs(s: &str) -> Result<usize, String> {
     match s.parse::<usize>() {

@@ -49,6 +49,15 @@ pub(crate) struct ProcessArgs {
     /// Accept manifest paths outside the archive folders (see `extract`).
     #[arg(long)]
     allow_external_paths: bool,
+    /// How much memory the runs decoded at once may need together:
+    /// `auto` (three quarters of the memory available at start: the
+    /// system's MemAvailable or the control group's limit, whichever is
+    /// smaller) or a size such as 8G or 512M. Runs start while their
+    /// estimated needs fit; a run that alone needs more fails, naming its
+    /// file, and is tried again the next night (docs/reliability.md,
+    /// "Memory").
+    #[arg(long, value_name = "SIZE", default_value = "auto", value_parser = super::parse_memory_limit)]
+    memory_limit: tirewear::memory::MemoryLimit,
     /// After a commit that changed the dataset, also refit the models
     /// (`fit`: DATASET/models/STAMP/) and rerun the gap diagnosis (`gap`:
     /// DATASET/gap/STAMP/) and write the HTML report (`report`:
@@ -206,6 +215,7 @@ pub(crate) fn run(a: ProcessArgs, progress: bool) -> Result<Outcome> {
         force: a.force,
         progress,
         allow_external_paths: a.allow_external_paths,
+        memory_limit: a.memory_limit,
     };
     // The lock is held through the `--then` steps and the publish: no other
     // writer commits, tidies or prunes beside them.

@@ -725,6 +725,105 @@ fn le_u32(b: &[u8], at: usize) -> Option<u32> {
     Some(u32::from_le_bytes(b.get(at..at + 4)?.try_into().ok()?))
 }
 
+/// What a run's MCAP file holds, read from its records' headers alone
+/// (nothing decompressed or decoded), to estimate the memory reading it
+/// takes ([`crate::kpi::run_memory_need`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) struct MessageVolume {
+    /// Bytes of its messages once decompressed: the summary's chunk indexes'
+    /// uncompressed sizes, or, for a file without them, a walk of the data
+    /// section's records (a chunk's declared uncompressed size, any other
+    /// record's length). Each chunk counts at most the record-length limit
+    /// the reader enforces; where a record runs past the file, the rest of
+    /// the file counts.
+    pub bytes: u64,
+    /// Its number of messages (the summary's statistics), where every
+    /// schema is a per-sample one (`TireSample`, `VehicleSample`): each such
+    /// message is one sample, whatever its size.
+    pub per_sample_messages: Option<u64>,
+}
+
+pub(crate) fn message_volume(path: &Path) -> Result<MessageVolume> {
+    let file = File::open(path).map_err(|e| IngestError::io(path, e))?;
+    // SAFETY: as in `read_indexed`.
+    let map = unsafe { memmap2::Mmap::map(&file) }.map_err(|e| IngestError::io(path, e))?;
+    let bytes: &[u8] = &map;
+    Ok(summary_volume(bytes).unwrap_or_else(|| MessageVolume {
+        bytes: walked_uncompressed_bytes(bytes),
+        per_sample_messages: None,
+    }))
+}
+
+/// [`MessageVolume`] from the summary section; `None` without a footer, a
+/// summary or a chunk index.
+fn summary_volume(bytes: &[u8]) -> Option<MessageVolume> {
+    const OP_SCHEMA: u8 = 0x03;
+    const OP_CHUNK_INDEX: u8 = 0x08;
+    const OP_STATISTICS: u8 = 0x0B;
+    let footer = bytes.len().checked_sub(MAGIC_LEN + FOOTER_LEN)?;
+    if bytes[footer] != OP_FOOTER {
+        return None;
+    }
+    let mut at = usize::try_from(le_u64(bytes, footer + 9)?).ok()?;
+    if at == 0 || at > footer {
+        return None;
+    }
+    let (mut total, mut chunks) = (0u64, 0usize);
+    let (mut messages, mut all_per_sample) = (None, true);
+    while at < footer {
+        let len = usize::try_from(le_u64(bytes, at + 1)?).ok()?;
+        let body = at.checked_add(9)?;
+        let end = body.checked_add(len).filter(|&e| e <= footer)?;
+        match bytes[at] {
+            // The uncompressed size is the record's last field.
+            OP_CHUNK_INDEX if len >= 8 => {
+                total += le_u64(bytes, end - 8)?.min(RECORD_LENGTH_LIMIT as u64);
+                chunks += 1;
+            }
+            // The message count is the record's first field.
+            OP_STATISTICS => messages = le_u64(bytes, body).filter(|_| len >= 8),
+            // Its id (u16), then its name (u32-prefixed).
+            OP_SCHEMA => {
+                let n = le_u32(bytes, body + 2)? as usize;
+                let name = bytes.get(body + 6..(body + 6).checked_add(n)?.min(end))?;
+                all_per_sample &= name.ends_with(b"Sample");
+            }
+            _ => {}
+        }
+        at = end;
+    }
+    (chunks > 0).then_some(MessageVolume {
+        bytes: total,
+        per_sample_messages: messages.filter(|_| all_per_sample),
+    })
+}
+
+/// The data section walked record by record from the start magic.
+fn walked_uncompressed_bytes(bytes: &[u8]) -> u64 {
+    let mut at = MAGIC_LEN;
+    let mut total = 0u64;
+    while let Some(len) = le_u64(bytes, at + 1) {
+        let Some(end) = (at as u64 + 9)
+            .checked_add(len)
+            .filter(|&e| e <= bytes.len() as u64)
+        else {
+            break;
+        };
+        match bytes[at] {
+            OP_DATA_END => return total,
+            // Start and end times, then the uncompressed size.
+            OP_CHUNK => {
+                total += le_u64(bytes, at + 9 + 16)
+                    .unwrap_or(len)
+                    .min(RECORD_LENGTH_LIMIT as u64)
+            }
+            _ => total += len,
+        }
+        at = end as usize;
+    }
+    total + bytes.len().saturating_sub(at) as u64
+}
+
 /// Checks the summary-section and data-section CRCs the writer stored (a
 /// stored 0 means "not computed" and is skipped). Damage there would
 /// otherwise pass unseen: the indexed path reads neither section whole.
@@ -1332,6 +1431,47 @@ mod tests {
             (Ok(a), Ok(b)) => bits(a) == bits(b),
             (Err(_), Err(_)) => true,
             _ => false,
+        }
+    }
+
+    /// The volume read from the records' headers against the mcap crate's
+    /// summary and message stream, on every fixture (tirewear's and
+    /// Python's writers), from the summary and by the walk of a copy cut
+    /// before its summary.
+    #[test]
+    fn message_volume_agrees_with_the_mcap_crate() {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures");
+        for name in ["tiny-block", "tiny-sample", "python-block", "python-sample"] {
+            let bytes = std::fs::read(dir.join(format!("{name}.mcap"))).unwrap();
+            let summary = mcap::Summary::read(&bytes).unwrap().unwrap();
+            let uncompressed: u64 = summary
+                .chunk_indexes
+                .iter()
+                .map(|c| c.uncompressed_size)
+                .sum();
+            let messages = mcap::MessageStream::new(&bytes).unwrap().count() as u64;
+            let v = summary_volume(&bytes).unwrap();
+            assert_eq!(v.bytes, uncompressed, "{name}");
+            let per_sample = name.ends_with("sample");
+            assert_eq!(
+                v.per_sample_messages,
+                per_sample.then_some(messages),
+                "{name}"
+            );
+
+            // Without a summary (the data section, DataEnd, nothing after):
+            // the chunks' sizes plus the records between them.
+            let data_end = data_section_end(Path::new(name), &bytes).unwrap();
+            let cut = &bytes[..data_end + DATA_END_LEN];
+            assert_eq!(summary_volume(cut), None, "{name}");
+            let compressed: u64 = summary.chunk_indexes.iter().map(|c| c.chunk_length).sum();
+            let between = data_end as u64 - MAGIC_LEN as u64 - compressed;
+            let walked = walked_uncompressed_bytes(cut);
+            assert!(
+                (uncompressed..=uncompressed + between).contains(&walked),
+                "{name}: {walked} outside {uncompressed}..={}",
+                uncompressed + between
+            );
         }
     }
 

@@ -29,12 +29,13 @@ use crate::ingest::manifest::{Run, Season};
 use crate::ingest::road::{Profile, read_profile_csv, read_profiles_parquet_each};
 use crate::ingest::telemetry::read_telemetry;
 use crate::ingest::wear::{WearReading, check_against_manifest, read_wear_csv};
+use crate::memory::{Admission, MemoryBudget, MemoryLimit};
 use arrow_array::{Float64Array, RecordBatch, StringArray, UInt32Array};
 use arrow_schema::{DataType, Field, Schema};
 use rayon::prelude::*;
 use std::collections::{BTreeMap, HashMap};
 use std::path::{Path, PathBuf};
-use std::sync::Arc;
+use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
 /// Which engine reduces the telemetry and roughness.
@@ -62,6 +63,9 @@ pub struct ExtractOptions {
     /// default); false decodes and reduces each run in turn, the route
     /// `tirewear bench` compares with.
     pub pipeline: bool,
+    /// How much memory the runs decoded at once may need together
+    /// (`crate::memory`).
+    pub memory_limit: MemoryLimit,
 }
 
 impl ExtractOptions {
@@ -77,6 +81,7 @@ impl ExtractOptions {
             progress: false,
             allow_external_paths: false,
             pipeline: true,
+            memory_limit: MemoryLimit::Auto,
         }
     }
 }
@@ -265,11 +270,8 @@ pub(crate) struct PreparedRun {
 /// that cannot make rows (its wear readings contradict the manifest, its
 /// compound file is unusable) is refused before its telemetry is read.
 fn prepare_run(ctx: &RunContext, run: &Run) -> Result<PreparedRun, String> {
-    if let Some(p) = ctx.wear_problems.get(&run.id) {
-        return Err(p.clone());
-    }
-    if let Some(Err(e)) = ctx.compounds.get(&run.compound) {
-        return Err(format!("compound {}: {e}", run.compound));
+    if let Some(why) = refused_before_read(ctx, run) {
+        return Err(why);
     }
     let path = ctx.season.path(&run.telemetry);
     let t0 = Instant::now();
@@ -324,6 +326,70 @@ fn prepare_run(ctx: &RunContext, run: &Run) -> Result<PreparedRun, String> {
     })
 }
 
+/// Why a run cannot make rows whatever its telemetry holds: its wear
+/// readings contradict the manifest, or its compound file is unusable.
+fn refused_before_read(ctx: &RunContext, run: &Run) -> Option<String> {
+    if let Some(p) = ctx.wear_problems.get(&run.id) {
+        return Some(p.clone());
+    }
+    if let Some(Err(e)) = ctx.compounds.get(&run.compound) {
+        return Some(format!("compound {}: {e}", run.compound));
+    }
+    None
+}
+
+/// Heap bytes a run in block form needs per byte of its decompressed
+/// messages, while [`prepare_run`] holds both the decoded columns (a wheel
+/// sample's 11 floats and its time: 52 bytes for the 44 it takes in a
+/// block) and the engine's batch (80 bytes a wheel sample), then the
+/// reductions. Measured by `tests/robustness.rs`
+/// (`a_runs_memory_need_bounds_its_peak_heap`): 2.8 of heap, some 3.1
+/// resident; a block cannot hold a sample in fewer bytes.
+const HEAP_PER_MESSAGE_BYTE: f64 = 3.5;
+
+/// Heap a run in per-sample form needs per message (one sample of one
+/// topic, which may take only a few bytes in the file): a wheel sample's
+/// decoded 52 bytes and batched 80, and room for the lateral acceleration
+/// (a vehicle message needs 28). Measured: 104 a message on average.
+const HEAP_PER_SAMPLE_MESSAGE: u64 = 144;
+
+/// Heap a run needs whatever its length: the reductions' histograms and
+/// tables, the decoders' buffers (a whole 5 Hz extraction takes 2.6 MB).
+const HEAP_PER_RUN: u64 = 8 << 20;
+
+/// The memory a run needs to be decoded and reduced, estimated from its
+/// telemetry's headers before it is read; or why it cannot be admitted.
+/// A run refused on other grounds, or whose file cannot be opened, needs
+/// nothing (reading it fails at once, with the reason).
+fn memory_need(ctx: &RunContext, run: &Run) -> Result<u64, String> {
+    if refused_before_read(ctx, run).is_some() {
+        return Ok(0);
+    }
+    let path = ctx.season.path(&run.telemetry);
+    let Ok(need) = run_memory_need(&path) else {
+        return Ok(0);
+    };
+    match ctx.memory.refuses(need) {
+        Some(why) => Err(format!("{}: {why}", path.display())),
+        None => Ok(need),
+    }
+}
+
+/// The heap, in bytes, that extracting the run whose telemetry is `path`
+/// needs, estimated from the MCAP file's record headers without reading
+/// its messages: [`HEAP_PER_RUN`] plus [`HEAP_PER_MESSAGE_BYTE`] per byte
+/// of its decompressed messages, or [`HEAP_PER_SAMPLE_MESSAGE`] per message
+/// of a per-sample file. `extract` and `process` admit runs by it;
+/// a scheduler can size a machine or a job by it too.
+pub fn run_memory_need(path: &Path) -> Result<u64, IngestError> {
+    let volume = crate::ingest::telemetry::message_volume(path)?;
+    let messages = match volume.per_sample_messages {
+        Some(n) => n.saturating_mul(HEAP_PER_SAMPLE_MESSAGE),
+        None => (volume.bytes as f64 * HEAP_PER_MESSAGE_BYTE) as u64,
+    };
+    Ok(HEAP_PER_RUN.saturating_add(messages))
+}
+
 /// What every run's rows are built from, apart from its own telemetry.
 pub(crate) struct RunContext<'a> {
     pub season: &'a Season,
@@ -333,6 +399,8 @@ pub(crate) struct RunContext<'a> {
     pub wear: &'a BTreeMap<(String, Wheel), (f64, f64)>,
     /// Runs whose wear readings contradict the manifest, and how.
     pub wear_problems: &'a HashMap<String, String>,
+    /// How much memory the runs in flight may need together.
+    pub memory: &'a MemoryBudget,
 }
 
 /// Reduces a prepared run on `engine`.
@@ -565,6 +633,11 @@ const PIPELINE_DEPTH: usize = 2;
 /// clean while one more thread feeds the engine: the GPU reduces one run
 /// while the next is decoded, instead of the decoding thread waiting for
 /// the device (`tirewear bench` measures both routes).
+///
+/// Runs start in order, each once its memory need fits beside those in
+/// flight ([`crate::memory::Admission`]; a run is in flight from its start
+/// until `done` has its outputs); a run that alone needs more than the
+/// budget is skipped, saying so.
 pub(crate) fn extract_runs<T: Send>(
     ctx: &RunContext,
     runs: &[&Run],
@@ -572,34 +645,69 @@ pub(crate) fn extract_runs<T: Send>(
     pipelined: bool,
     done: impl Fn(usize, Result<RunOutput, String>) -> T + Sync,
 ) -> Vec<T> {
+    let needs: Vec<Result<u64, String>> = runs.par_iter().map(|r| memory_need(ctx, r)).collect();
+    let admission = Admission::new(ctx.memory);
+    let (admission, done) = (&admission, &done);
     if !pipelined {
-        return runs
-            .par_iter()
-            .enumerate()
-            .map(|(i, run)| {
-                let out = guarded(|| reduce_run(ctx, run, prepare_run(ctx, run)?, engine));
-                done(i, out)
-            })
+        let out: Vec<Mutex<Option<T>>> = runs.iter().map(|_| Mutex::new(None)).collect();
+        let put = |i: usize, t: T| *out[i].lock().unwrap_or_else(|p| p.into_inner()) = Some(t);
+        rayon::in_place_scope(|s| {
+            for (i, (run, need)) in runs.iter().zip(&needs).enumerate() {
+                let need = match need {
+                    Ok(need) => *need,
+                    Err(why) => {
+                        put(i, done(i, Err(why.clone())));
+                        continue;
+                    }
+                };
+                admission.admit(need);
+                let put = &put;
+                s.spawn(move |_| {
+                    let r = guarded(|| reduce_run(ctx, run, prepare_run(ctx, run)?, engine));
+                    let t = done(i, r);
+                    admission.release(need);
+                    put(i, t);
+                });
+            }
+        });
+        return out
+            .into_iter()
+            .map(|m| m.into_inner().unwrap_or_else(|p| p.into_inner()))
+            .map(|t| t.expect("every run done once"))
             .collect();
     }
     let (tx, rx) =
         std::sync::mpsc::sync_channel::<(usize, Result<PreparedRun, String>)>(PIPELINE_DEPTH);
-    std::thread::scope(|s| {
-        let reducer = s.spawn(|| {
+    std::thread::scope(|scope| {
+        let needs = &needs;
+        let reducer = scope.spawn(move || {
             let mut out: Vec<Option<T>> = (0..runs.len()).map(|_| None).collect();
             for (i, prepared) in rx {
                 let r = prepared.and_then(|p| guarded(|| reduce_run(ctx, runs[i], p, engine)));
                 out[i] = Some(done(i, r));
+                admission.release(*needs[i].as_ref().unwrap_or(&0));
             }
             out
         });
-        runs.par_iter()
-            .enumerate()
-            .for_each_with(tx, |tx, (i, run)| {
+        rayon::in_place_scope(|s| {
+            for (i, (run, need)) in runs.iter().zip(needs).enumerate() {
                 // A send fails only when the reducer has stopped (its own
                 // panic, resumed below); the run is then lost with it.
-                let _ = tx.send((i, guarded(|| prepare_run(ctx, run))));
-            });
+                let need = match need {
+                    Ok(need) => *need,
+                    Err(why) => {
+                        let _ = tx.send((i, Err(why.clone())));
+                        continue;
+                    }
+                };
+                admission.admit(need);
+                let tx = tx.clone();
+                s.spawn(move |_| {
+                    let _ = tx.send((i, guarded(|| prepare_run(ctx, run))));
+                });
+            }
+        });
+        drop(tx);
         reducer
             .join()
             .unwrap_or_else(|p| std::panic::resume_unwind(p))
@@ -665,12 +773,19 @@ pub fn extract(opts: &ExtractOptions) -> Result<ExtractSummary, IngestError> {
     let (roads, curves) = road_kpis(&season, None, &mut warnings, reducer)?;
 
     let pb = crate::progress::bar(opts.progress, m.runs.len() as u64, "extracting runs");
+    let memory = MemoryBudget::resolve(opts.memory_limit);
+    tracing::debug!(
+        "memory budget: {:?} bytes ({})",
+        memory.bytes,
+        memory.origin
+    );
     let ctx = RunContext {
         season: &season,
         compounds: &compounds,
         roads: &roads,
         wear: &wear,
         wear_problems: &wear_problems,
+        memory: &memory,
     };
     let runs: Vec<&Run> = m.runs.iter().collect();
     let pipelined = reducer_gpu.is_some() && opts.pipeline;

@@ -12,7 +12,7 @@ pub mod telemetry;
 pub mod viscoelastic;
 pub mod wear;
 
-pub use extract::{Engine, ExtractOptions, ExtractSummary, extract};
+pub use extract::{Engine, ExtractOptions, ExtractSummary, extract, run_memory_need};
 pub use table::KpiRow;
 
 /// A tire in a run, (run, wheel): the key of every per-tire table (KPI

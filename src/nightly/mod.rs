@@ -74,6 +74,9 @@ pub struct ProcessOptions {
     pub force: bool,
     pub progress: bool,
     pub allow_external_paths: bool,
+    /// How much memory the runs decoded at once may need together
+    /// (`crate::memory`).
+    pub memory_limit: crate::memory::MemoryLimit,
 }
 
 impl ProcessOptions {
@@ -88,6 +91,7 @@ impl ProcessOptions {
             force: false,
             progress: false,
             allow_external_paths: false,
+            memory_limit: crate::memory::MemoryLimit::Auto,
         }
     }
 
@@ -820,6 +824,12 @@ fn stage_runs<'a>(
     let dataset = &opts.dataset;
     let pb = crate::progress::bar(opts.progress, runs.len() as u64, "processing runs");
     let mut done = Vec::new();
+    let memory = crate::memory::MemoryBudget::resolve(opts.memory_limit);
+    tracing::debug!(
+        "memory budget: {:?} bytes ({})",
+        memory.bytes,
+        memory.origin
+    );
     // The first part that could not be written, which ends the night.
     let mut unwritten: Option<NightlyError> = None;
     for (si, season) in seasons.iter().enumerate() {
@@ -864,6 +874,7 @@ fn stage_runs<'a>(
             roads: &roads,
             wear: &inp.wear,
             wear_problems: &inp.wear_problems,
+            memory: &memory,
         };
         let plain: Vec<&Run> = mine.iter().map(|p| &p.run).collect();
         // The GPU reduces one run while the next are decoded (`extract_runs`).
