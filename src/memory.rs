@@ -214,11 +214,13 @@ impl Admission {
                 .is_none_or(|b| in_flight.saturating_add(need) <= b)
     }
 
-    /// Waits until `need` fits beside what is in flight, then counts it.
+    /// Waits until `need` fits beside what is in flight, then counts it
+    /// until the returned guard is dropped (also when a panic unwinds
+    /// past it, so that a failed run cannot leave the others waiting).
     /// On a rayon worker (a caller inside a pool) the wait runs the pool's
     /// pending work instead of blocking, so that the runs in flight, which
     /// may be queued behind the caller, can finish.
-    pub(crate) fn admit(&self, need: u64) {
+    pub(crate) fn admit(&self, need: u64) -> Held<'_> {
         let mut g = self.in_flight.lock().unwrap_or_else(|p| p.into_inner());
         while !self.fits(*g, need) {
             if rayon::current_thread_index().is_some() {
@@ -232,13 +234,28 @@ impl Admission {
             }
         }
         *g += need;
+        Held {
+            admission: self,
+            need,
+        }
     }
 
-    /// Gives back what [`Self::admit`] counted for a run.
-    pub(crate) fn release(&self, need: u64) {
+    fn release(&self, need: u64) {
         let mut g = self.in_flight.lock().unwrap_or_else(|p| p.into_inner());
         *g = g.saturating_sub(need);
         self.freed.notify_all();
+    }
+}
+
+/// A run's admitted need, given back when dropped.
+pub(crate) struct Held<'a> {
+    admission: &'a Admission,
+    need: u64,
+}
+
+impl Drop for Held<'_> {
+    fn drop(&mut self) {
+        self.admission.release(self.need);
     }
 }
 
@@ -330,14 +347,14 @@ mod tests {
         /// Each job admitted as `extract_runs` admits a run, then spawned.
         fn spawn_all(self, s: &rayon::Scope<'a>) {
             for &need in self.needs {
-                self.admission.admit(need);
+                let held = self.admission.admit(need);
                 s.spawn(move |_| {
+                    let _held = held;
                     let held = self.now.fetch_add(need, Ordering::SeqCst) + need;
                     self.peak.fetch_max(held, Ordering::SeqCst);
                     std::thread::sleep(std::time::Duration::from_micros(200));
                     self.now.fetch_sub(need, Ordering::SeqCst);
                     self.ran.fetch_add(1, Ordering::SeqCst);
-                    self.admission.release(need);
                 });
             }
         }
@@ -373,6 +390,35 @@ mod tests {
         }
         assert_eq!(ran.load(Ordering::SeqCst), needs.len() as u64);
         assert!(peak.load(Ordering::SeqCst) <= 100 << 20);
+    }
+
+    /// A job that panics gives its need back as it unwinds: the jobs
+    /// after it, each needing the whole budget, are still admitted, and
+    /// the panic reaches the caller instead of the dispatch waiting on.
+    #[test]
+    fn a_panicking_run_gives_its_need_back() {
+        let budget = MemoryBudget::resolve(MemoryLimit::Bytes(8 << 20));
+        let admission = Admission::new(&budget);
+        let ran = AtomicU64::new(0);
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(2)
+            .build()
+            .unwrap();
+        let caught = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+            pool.in_place_scope(|s| {
+                for k in 0..6 {
+                    let held = admission.admit(8 << 20);
+                    let ran = &ran;
+                    s.spawn(move |_| {
+                        let _held = held;
+                        assert_ne!(k, 1, "run {k} fails");
+                        ran.fetch_add(1, Ordering::SeqCst);
+                    });
+                }
+            })
+        }));
+        assert!(caught.is_err());
+        assert_eq!(ran.load(Ordering::SeqCst), 5);
     }
 
     #[test]

@@ -29,7 +29,7 @@ use crate::ingest::manifest::{Run, Season};
 use crate::ingest::road::{Profile, read_profile_csv, read_profiles_parquet_each};
 use crate::ingest::telemetry::read_telemetry;
 use crate::ingest::wear::{WearReading, check_against_manifest, read_wear_csv};
-use crate::memory::{Admission, MemoryBudget, MemoryLimit};
+use crate::memory::{Admission, Held, MemoryBudget, MemoryLimit};
 use arrow_array::{Float64Array, RecordBatch, StringArray, UInt32Array};
 use arrow_schema::{DataType, Field, Schema};
 use rayon::prelude::*;
@@ -660,12 +660,12 @@ pub(crate) fn extract_runs<T: Send>(
                         continue;
                     }
                 };
-                admission.admit(need);
+                let held = admission.admit(need);
                 let put = &put;
                 s.spawn(move |_| {
                     let r = guarded(|| reduce_run(ctx, run, prepare_run(ctx, run)?, engine));
                     let t = done(i, r);
-                    admission.release(need);
+                    drop(held);
                     put(i, t);
                 });
             }
@@ -676,34 +676,35 @@ pub(crate) fn extract_runs<T: Send>(
             .map(|t| t.expect("every run done once"))
             .collect();
     }
-    let (tx, rx) =
-        std::sync::mpsc::sync_channel::<(usize, Result<PreparedRun, String>)>(PIPELINE_DEPTH);
+    // Each prepared run travels with its admitted need, given back once
+    // the reducer has handed its outputs on (or dropped with the channel).
+    type Prepared<'a> = (usize, Result<PreparedRun, String>, Option<Held<'a>>);
+    let (tx, rx) = std::sync::mpsc::sync_channel::<Prepared>(PIPELINE_DEPTH);
     std::thread::scope(|scope| {
-        let needs = &needs;
         let reducer = scope.spawn(move || {
             let mut out: Vec<Option<T>> = (0..runs.len()).map(|_| None).collect();
-            for (i, prepared) in rx {
+            for (i, prepared, held) in rx {
                 let r = prepared.and_then(|p| guarded(|| reduce_run(ctx, runs[i], p, engine)));
                 out[i] = Some(done(i, r));
-                admission.release(*needs[i].as_ref().unwrap_or(&0));
+                drop(held);
             }
             out
         });
         rayon::in_place_scope(|s| {
-            for (i, (run, need)) in runs.iter().zip(needs).enumerate() {
+            for (i, (run, need)) in runs.iter().zip(&needs).enumerate() {
                 // A send fails only when the reducer has stopped (its own
                 // panic, resumed below); the run is then lost with it.
                 let need = match need {
                     Ok(need) => *need,
                     Err(why) => {
-                        let _ = tx.send((i, Err(why.clone())));
+                        let _ = tx.send((i, Err(why.clone()), None));
                         continue;
                     }
                 };
-                admission.admit(need);
+                let held = admission.admit(need);
                 let tx = tx.clone();
                 s.spawn(move |_| {
-                    let _ = tx.send((i, guarded(|| prepare_run(ctx, run))));
+                    let _ = tx.send((i, guarded(|| prepare_run(ctx, run)), Some(held)));
                 });
             }
         });
