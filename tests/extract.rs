@@ -213,6 +213,63 @@ fn a_damaged_run_fails_alone() {
     }
 }
 
+/// A run that alone needs more memory than `--memory-limit` is skipped by
+/// name (exit 3) and the others extracted as without a limit; the same on
+/// the GPU engine's pipelined route.
+#[test]
+fn a_run_above_the_memory_limit_is_skipped_alone() {
+    let dir = tempfile::tempdir().unwrap();
+    sim(dir.path(), Preset::Tiny, 20.0);
+    let season = Season::open(dir.path()).unwrap();
+    let needs: Vec<u64> = season
+        .manifest
+        .runs
+        .iter()
+        .map(|r| tirewear::kpi::run_memory_need(&season.path(&r.telemetry)).unwrap())
+        .collect();
+    let largest = *needs.iter().max().unwrap();
+    let victim = &season.manifest.runs[needs.iter().position(|&n| n == largest).unwrap()];
+    let free = extract(&opts(dir.path(), &dir.path().join("free"))).unwrap();
+    let unlimited = read_parquet(&dir.path().join("free/kpis.parquet")).unwrap();
+    assert!(free.skipped.is_empty());
+
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_tirewear"))
+        .args(["--quiet", "--log", "error", "extract", "--engine", "cpu"])
+        .arg(dir.path())
+        .arg("--out")
+        .arg(dir.path().join("k.parquet"))
+        .args(["--memory-limit", &(largest - 1).to_string()])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(3));
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        text.contains(&format!("skipped run {}", victim.id)),
+        "{text}"
+    );
+    assert!(
+        text.contains(&victim.telemetry) && text.contains("of memory"),
+        "{text}"
+    );
+    assert!(!text.contains("NaN"), "{text}");
+    let limited = read_parquet(&dir.path().join("k.parquet")).unwrap();
+    let kept: Vec<&KpiRow> = unlimited.iter().filter(|r| r.run != victim.id).collect();
+    assert_eq!(limited.len(), kept.len());
+    for (a, b) in limited.iter().zip(&kept) {
+        assert_eq!(format!("{a:?}"), format!("{b:?}"));
+    }
+    if tirewear::engine::gpu_for_tests("a_run_above_the_memory_limit_is_skipped_alone").is_some() {
+        let g = extract(&ExtractOptions {
+            engine: Engine::Gpu,
+            memory_limit: tirewear::memory::MemoryLimit::Bytes(largest - 1),
+            ..opts(dir.path(), &dir.path().join("gpu"))
+        })
+        .unwrap();
+        assert_eq!((g.rows, g.skipped.len()), (kept.len(), 1));
+        assert_eq!(g.skipped[0].run, victim.id);
+    }
+}
+
 #[test]
 fn a_bad_energy_map_record_is_named() {
     use arrow_array::{ArrayRef, Float64Array, RecordBatch, StringArray, UInt32Array};

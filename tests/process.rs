@@ -779,6 +779,9 @@ fn exit_codes_of_the_binary() {
     for bad in [
         &["--keep-results", "0", "--then", "gap"][..],
         &["--keep-results", "2"],
+        &["--memory-limit", "0"],
+        &["--memory-limit", "8X"],
+        &["--memory-limit", "-1G"],
     ] {
         let out = std::process::Command::new(exe)
             .arg("process")

@@ -70,15 +70,18 @@ pub(crate) fn run_extract(
     );
     let threads = rayon::current_num_threads() as f64;
     let run_time = s.decode_seconds + s.reduce_seconds;
-    println!(
-        "telemetry: {:.2} M samples/s, {:.0} MB/s of MCAP ({:.0} MB/s per core); {:.0} % of run time decoding, {:.0} % cleaning, {:.0} % reducing",
-        s.samples_per_second() / 1e6,
-        s.telemetry_bytes as f64 / 1e6 / s.seconds,
-        s.telemetry_bytes as f64 / 1e6 / s.seconds / threads,
-        100.0 * s.decode_seconds / run_time,
-        100.0 * s.prepare_seconds / run_time,
-        100.0 * (s.reduce_seconds - s.prepare_seconds) / run_time
-    );
+    // With every run skipped there is no telemetry rate to give.
+    if s.telemetry_samples > 0 && run_time > 0.0 {
+        println!(
+            "telemetry: {:.2} M samples/s, {:.0} MB/s of MCAP ({:.0} MB/s per core); {:.0} % of run time decoding, {:.0} % cleaning, {:.0} % reducing",
+            s.samples_per_second() / 1e6,
+            s.telemetry_bytes as f64 / 1e6 / s.seconds,
+            s.telemetry_bytes as f64 / 1e6 / s.seconds / threads,
+            100.0 * s.decode_seconds / run_time,
+            100.0 * s.prepare_seconds / run_time,
+            100.0 * (s.reduce_seconds - s.prepare_seconds) / run_time
+        );
+    }
     println!("engine device: {}", s.device);
     if let Some(t) = s.gpu_timings {
         println!(
