@@ -9,6 +9,8 @@ use tirewear::kpi::table::read_parquet;
 use tirewear::kpi::{Engine, ExtractOptions, KpiRow, extract};
 use tirewear::sim::{Preset, SimOptions, simulate};
 
+mod common;
+
 fn sim(out: &Path, preset: Preset, rate: f64) {
     simulate(&SimOptions {
         preset,
@@ -221,14 +223,8 @@ fn a_run_above_the_memory_limit_is_skipped_alone() {
     let dir = tempfile::tempdir().unwrap();
     sim(dir.path(), Preset::Tiny, 20.0);
     let season = Season::open(dir.path()).unwrap();
-    let needs: Vec<u64> = season
-        .manifest
-        .runs
-        .iter()
-        .map(|r| tirewear::kpi::run_memory_need(&season.path(&r.telemetry)).unwrap())
-        .collect();
-    let largest = *needs.iter().max().unwrap();
-    let victim = &season.manifest.runs[needs.iter().position(|&n| n == largest).unwrap()];
+    let (victim, largest, next) = common::hungriest_run(&season);
+    assert!(next < largest);
     let free = extract(&opts(dir.path(), &dir.path().join("free"))).unwrap();
     let unlimited = read_parquet(&dir.path().join("free/kpis.parquet")).unwrap();
     assert!(free.skipped.is_empty());

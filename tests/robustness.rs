@@ -1449,15 +1449,9 @@ fn damaged_report_inputs_never_panic_or_sink_the_page() {
 /// Heap of a whole `extract` of `season`, runs one at a time (a budget of
 /// the largest run's need admits no second run beside it), and that need.
 fn extract_peak(season: &Path, out: &Path) -> (usize, u64) {
-    use tirewear::kpi::{ExtractOptions, extract, run_memory_need};
-    let m = tirewear::ingest::manifest::Season::open(season).unwrap();
-    let need = m
-        .manifest
-        .runs
-        .iter()
-        .map(|r| run_memory_need(&m.path(&r.telemetry)).unwrap())
-        .max()
-        .unwrap();
+    use tirewear::kpi::{ExtractOptions, extract};
+    let (_, need, _) =
+        common::hungriest_run(&tirewear::ingest::manifest::Season::open(season).unwrap());
     let base = LIVE.load(Ordering::Relaxed);
     PEAK.store(base, Ordering::Relaxed);
     let s = extract(&ExtractOptions {

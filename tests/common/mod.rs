@@ -58,6 +58,27 @@ pub fn demo_kpis(dir: &Path) -> Vec<KpiRow> {
     tirewear::kpi::table::read_parquet(&dir.join("kpis.parquet")).unwrap()
 }
 
+/// The run of `season` that needs the most memory to extract
+/// (`run_memory_need`), its need, and the largest need of the others.
+pub fn hungriest_run(
+    season: &tirewear::ingest::manifest::Season,
+) -> (tirewear::ingest::manifest::Run, u64, u64) {
+    let mut needs: Vec<(u64, &tirewear::ingest::manifest::Run)> = season
+        .manifest
+        .runs
+        .iter()
+        .map(|r| {
+            (
+                tirewear::kpi::run_memory_need(&season.path(&r.telemetry)).unwrap(),
+                r,
+            )
+        })
+        .collect();
+    needs.sort_by_key(|(n, _)| std::cmp::Reverse(*n));
+    let (need, run) = needs[0];
+    (run.clone(), need, needs.get(1).map_or(0, |n| n.0))
+}
+
 /// Copies a folder recursively.
 pub fn copy_dir(from: &Path, to: &Path) {
     std::fs::create_dir_all(to).unwrap();
