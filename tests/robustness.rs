@@ -1478,22 +1478,14 @@ fn a_runs_memory_need_bounds_its_peak_heap() {
     let dir = tempfile::tempdir().unwrap();
     let season = |name: &str, encoding, rate_hz| {
         let out = dir.path().join(name);
-        tirewear::sim::simulate(&tirewear::sim::SimOptions {
-            preset: tirewear::sim::Preset::Tiny,
-            scale: 1.0,
-            tracks: None,
-            seed: 3,
-            effects: vec![],
-            generated: None,
-            scatter: tirewear::sim::WearScatter::NONE,
+        common::simulate_encoded(
+            tirewear::sim::Preset::Tiny,
+            3,
+            rate_hz,
             encoding,
-            rate_hz: Some(rate_hz),
-            out: out.clone(),
-            sensor_noise: true,
-            logger_export: None,
-            progress: false,
-        })
-        .unwrap();
+            None,
+            &out,
+        );
         let (peak, need) = extract_peak(&out, &out.join("kpis.parquet"));
         eprintln!("{name}: peak heap {peak} B, largest run's need {need} B");
         (peak as u64, need)

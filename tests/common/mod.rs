@@ -13,6 +13,25 @@ pub fn simulate_preset(
     logger_export: Option<tirewear::sim::logger::LoggerFormat>,
     dir: &Path,
 ) {
+    simulate_encoded(
+        preset,
+        seed,
+        rate_hz,
+        tirewear::ingest::telemetry::Encoding::Block,
+        logger_export,
+        dir,
+    );
+}
+
+/// [`simulate_preset`] with its telemetry in `encoding`.
+pub fn simulate_encoded(
+    preset: tirewear::sim::Preset,
+    seed: u64,
+    rate_hz: f64,
+    encoding: tirewear::ingest::telemetry::Encoding,
+    logger_export: Option<tirewear::sim::logger::LoggerFormat>,
+    dir: &Path,
+) {
     tirewear::sim::simulate(&tirewear::sim::SimOptions {
         preset,
         scale: 1.0,
@@ -21,7 +40,7 @@ pub fn simulate_preset(
         effects: vec![],
         generated: None,
         scatter: tirewear::sim::WearScatter::NONE,
-        encoding: tirewear::ingest::telemetry::Encoding::Block,
+        encoding,
         rate_hz: Some(rate_hz),
         out: dir.to_path_buf(),
         sensor_noise: true,
