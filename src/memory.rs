@@ -1,6 +1,6 @@
 //! The memory a batch of runs may hold at once (docs/reliability.md,
 //! "Memory"). A run's decoded telemetry grows with its length: at 1 kHz an
-//! hour-long stint needs some 3 GB, so a many-core machine decoding one
+//! hour-long stint needs some 2 GB, so a many-core machine decoding one
 //! such run per core, or a small one decoding a six-hour log, would be
 //! killed by the kernel (or abort on a failed allocation) and lose every
 //! run of the night. Runs are admitted while their estimated needs fit the
@@ -23,8 +23,8 @@ impl FromStr for MemoryLimit {
     type Err = String;
 
     /// `auto`, or a size: a number with an optional unit `K`, `M`, `G` or
-    /// `T` (powers of 1024), with or without a trailing `B` or `iB`:
-    /// `8G`, `512MiB`, `1.5GB`, `2000000000`.
+    /// `T` (powers of 1024, either case), with or without a trailing `B` or
+    /// `iB`: `8G`, `8g`, `512MiB`, `1.5GB`, `2000000000`.
     fn from_str(s: &str) -> Result<Self, String> {
         let t = s.trim();
         if t.eq_ignore_ascii_case("auto") {
@@ -35,9 +35,10 @@ impl FromStr for MemoryLimit {
             .unwrap_or(t.len());
         let (number, unit) = t.split_at(split);
         let unit = unit.trim();
-        let scale: f64 = match unit.trim_end_matches("iB").trim_end_matches('B') {
+        let upper = unit.to_ascii_uppercase();
+        let scale: f64 = match upper.trim_end_matches("IB").trim_end_matches('B') {
             "" => 1.0,
-            "k" | "K" => 1024.0,
+            "K" => 1024.0,
             "M" => 1024f64.powi(2),
             "G" => 1024f64.powi(3),
             "T" => 1024f64.powi(4),
@@ -277,6 +278,8 @@ mod tests {
         assert_eq!(b("1.5G"), 3 << 29);
         assert_eq!(b("2000000000"), 2_000_000_000);
         assert_eq!(b("1T"), 1 << 40);
+        assert_eq!(b("8g"), 8 << 30);
+        assert_eq!(b("2048kb"), 2 << 20);
         assert_eq!("auto".parse::<MemoryLimit>(), Ok(MemoryLimit::Auto));
         for bad in [
             "", "G", "8X", "-1G", "nan", "1e3G", "0", "1023K", "2E", "1.2.3G",
