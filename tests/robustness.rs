@@ -212,6 +212,11 @@ fn mutated_mcap_files_are_refused_by_name_or_read_identically() {
             if peak > MEMORY_BOUND {
                 failures.push(format!("{tag}: {peak} bytes of heap"));
             }
+            // The memory need, read from the records' headers by hand
+            // before the reader sees the file, must not panic either.
+            if std::panic::catch_unwind(|| tirewear::kpi::run_memory_need(&path)).is_err() {
+                failures.push(format!("{tag}: the memory need panicked"));
+            }
             match r {
                 Err(_) => failures.push(format!("{tag}: panicked")),
                 Ok(Err(e)) => {
