@@ -645,7 +645,12 @@ pub(crate) fn extract_runs<T: Send>(
     pipelined: bool,
     done: impl Fn(usize, Result<RunOutput, String>) -> T + Sync,
 ) -> Vec<T> {
-    let needs: Vec<Result<u64, String>> = runs.par_iter().map(|r| memory_need(ctx, r)).collect();
+    // A panic in the estimate (a bug) costs the run its estimate only: its
+    // read then meets the same bytes under the run's own net.
+    let needs: Vec<Result<u64, String>> = runs
+        .par_iter()
+        .map(|r| crate::guard::catch_panic(|| memory_need(ctx, r)).unwrap_or(Ok(0)))
+        .collect();
     let admission = Admission::new(ctx.memory);
     let (admission, done) = (&admission, &done);
     if !pipelined {
