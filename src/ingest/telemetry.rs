@@ -743,6 +743,8 @@ pub(crate) struct MessageVolume {
     pub per_sample_messages: Option<u64>,
 }
 
+/// The [`MessageVolume`] of the MCAP file at `path`: from its summary, or
+/// by walking its data section where the summary has no chunk index.
 pub(crate) fn message_volume(path: &Path) -> Result<MessageVolume> {
     let file = File::open(path).map_err(|e| IngestError::io(path, e))?;
     // SAFETY: as in `read_indexed`.
@@ -769,7 +771,9 @@ fn summary_volume(bytes: &[u8]) -> Option<MessageVolume> {
         return None;
     }
     let (mut total, mut chunks) = (0u64, 0usize);
-    let (mut messages, mut all_per_sample) = (None, true);
+    // The summary need not list the schemas: with none seen, nothing is
+    // known of the messages' form.
+    let (mut messages, mut schemas, mut all_per_sample) = (None, 0usize, true);
     while at < footer {
         let len = usize::try_from(le_u64(bytes, at + 1)?).ok()?;
         let body = at.checked_add(9)?;
@@ -787,6 +791,7 @@ fn summary_volume(bytes: &[u8]) -> Option<MessageVolume> {
                 let n = le_u32(bytes, body + 2)? as usize;
                 let name = bytes.get(body + 6..(body + 6).checked_add(n)?.min(end))?;
                 all_per_sample &= name.ends_with(b"Sample");
+                schemas += 1;
             }
             _ => {}
         }
@@ -794,7 +799,7 @@ fn summary_volume(bytes: &[u8]) -> Option<MessageVolume> {
     }
     (chunks > 0).then_some(MessageVolume {
         bytes: total,
-        per_sample_messages: messages.filter(|_| all_per_sample),
+        per_sample_messages: messages.filter(|_| all_per_sample && schemas > 0),
     })
 }
 
@@ -1456,6 +1461,23 @@ mod tests {
             assert_eq!(
                 v.per_sample_messages,
                 per_sample.then_some(messages),
+                "{name}"
+            );
+            // A summary that lists no schema (the spec allows it) says
+            // nothing of the messages' form: their bytes count instead.
+            let mut unlisted = bytes.clone();
+            let footer = bytes.len() - MAGIC_LEN - FOOTER_LEN;
+            let mut at = le_u64(&bytes, footer + 9).unwrap() as usize;
+            while at < footer {
+                if unlisted[at] == 0x03 {
+                    unlisted[at] = 0x7F;
+                }
+                at += 9 + le_u64(&bytes, at + 1).unwrap() as usize;
+            }
+            let u = summary_volume(&unlisted).unwrap();
+            assert_eq!(
+                (u.bytes, u.per_sample_messages),
+                (uncompressed, None),
                 "{name}"
             );
 
