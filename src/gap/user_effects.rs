@@ -158,6 +158,19 @@ impl Context for Vars<'_> {
     }
 }
 
+/// An expression as quoted in a message: whole up to 120 characters,
+/// otherwise its first 80 and last 20 (a refused expression may be 4096
+/// bytes of brackets).
+fn abridged(expression: &str) -> String {
+    let chars = expression.chars().count();
+    if chars <= 120 {
+        return expression.to_string();
+    }
+    let head: String = expression.chars().take(80).collect();
+    let tail: String = expression.chars().skip(chars - 20).collect();
+    format!("{head}…{tail}")
+}
+
 impl UserEffect {
     /// Compiles one expression, checking every variable it reads.
     pub(crate) fn compile(
@@ -172,11 +185,12 @@ impl UserEffect {
             ));
         }
         let node = evalexpr::build_operator_tree::<DefaultNumericTypes>(expression)
-            .map_err(|e| format!("cannot parse '{expression}': {e}"))?;
+            .map_err(|e| format!("cannot parse '{}': {e}", abridged(expression)))?;
         let depth = tree_depth(&node);
         if depth > MAX_DEPTH {
             return Err(format!(
-                "cannot parse '{expression}': nested {depth} deep, more than the {MAX_DEPTH} read"
+                "cannot parse '{}': nested {depth} deep, more than the {MAX_DEPTH} read",
+                abridged(expression)
             ));
         }
         if let Some(f) = node
@@ -184,7 +198,8 @@ impl UserEffect {
             .find(|f| !FUNCTIONS.contains(f))
         {
             return Err(format!(
-                "cannot parse '{expression}': unknown function '{f}' (the numeric ones: {})",
+                "cannot parse '{}': unknown function '{f}' (the numeric ones: {})",
+                abridged(expression),
                 FUNCTIONS.join(", ")
             ));
         }
@@ -219,10 +234,11 @@ impl UserEffect {
             Ok(Value::Float(_) | Value::Int(_) | Value::Boolean(_)) => {}
             Ok(other) => {
                 return Err(format!(
-                    "cannot parse '{expression}': gives {other:?}, not a number"
+                    "cannot parse '{}': gives {other:?}, not a number",
+                    abridged(expression)
                 ));
             }
-            Err(e) => return Err(format!("cannot parse '{expression}': {e}")),
+            Err(e) => return Err(format!("cannot parse '{}': {e}", abridged(expression))),
         }
         Ok(UserEffect {
             name: name.to_string(),
@@ -568,6 +584,8 @@ mod tests {
         assert!(e.contains("200017 bytes long"), "{e}");
         let e = err(&nest(1500));
         assert!(e.contains("deep, more than the 256 read"), "{e}");
+        // Quoted abridged, not its 3017 bytes whole.
+        assert!(e.len() < 300 && e.contains("((…))"), "{e}");
         let e = err(&format!("{}t_surface", "-".repeat(4000)));
         assert!(e.contains("deep"), "{e}");
         // Nested as a person would write it: the same term as without.
