@@ -138,7 +138,10 @@ pub(crate) fn align(
         if !(out.rate_hz.is_finite() && out.rate_hz > 0.0 && out.rate_hz <= MAX_RATE_HZ * 1.001) {
             return Err(bad(
                 0,
-                format!("sample rate {:.3} Hz is outside (0, 1000]", out.rate_hz),
+                format!(
+                    "sample rate {} Hz is outside (0, 1000]",
+                    super::shown(out.rate_hz)
+                ),
             ));
         }
         out.t0_s = t[0];
@@ -187,7 +190,7 @@ pub(crate) fn align(
             return Err(ImportError::log(
                 path,
                 "channels",
-                format!("sample rate {rate} Hz is outside (0, 1000]"),
+                format!("sample rate {} Hz is outside (0, 1000]", super::shown(rate)),
             ));
         }
         let duration = mapped

@@ -134,7 +134,10 @@ impl CarDescription {
             if v.is_finite() && v >= lo && v <= hi {
                 Ok(())
             } else {
-                Err(format!("{name} = {v} is outside [{lo}, {hi}]"))
+                Err(format!(
+                    "{name} = {} is outside [{lo}, {hi}]",
+                    super::shown(v)
+                ))
             }
         };
         if self.id.trim().is_empty() {

@@ -25,6 +25,16 @@ use estimate::{EventConditions, LateralMethod};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
+/// A number as a message quotes it: plainly, or in exponent form where
+/// plain digits would run long (`1e308` as such, not 309 digits).
+pub(crate) fn shown(x: f64) -> String {
+    if x.is_finite() && x != 0.0 && !(1e-4..1e9).contains(&x.abs()) {
+        format!("{x:e}")
+    } else {
+        format!("{x}")
+    }
+}
+
 /// Where an imported run goes when the manifest does not have it yet.
 #[derive(Debug, Clone, Default)]
 pub struct NewRun {
@@ -429,5 +439,17 @@ mod tests {
         assert_eq!(days_from_civil("1970-01-01"), Some(0));
         assert_eq!(days_from_civil("2000-03-01"), Some(11_017));
         assert_eq!(days_from_civil("2026-03-02"), Some(20_514));
+    }
+
+    #[test]
+    fn long_numbers_are_quoted_in_exponent_form() {
+        assert_eq!(shown(1e308), "1e308");
+        assert_eq!(shown(-3e12), "-3e12");
+        assert_eq!(shown(2.5e-7), "2.5e-7");
+        assert_eq!(shown(1200.5), "1200.5");
+        assert_eq!(shown(0.001), "0.001");
+        assert_eq!(shown(0.0), "0");
+        assert_eq!(shown(f64::NAN), "NaN");
+        assert_eq!(shown(f64::INFINITY), "inf");
     }
 }
