@@ -108,7 +108,7 @@ impl MemoryBudget {
 }
 
 /// A size for people: `3.2 GiB`, `512.0 MiB`.
-pub(crate) fn human(bytes: u64) -> String {
+pub fn human(bytes: u64) -> String {
     const UNITS: [&str; 5] = ["B", "KiB", "MiB", "GiB", "TiB"];
     let mut v = bytes as f64;
     let mut u = 0;

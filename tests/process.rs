@@ -177,6 +177,11 @@ fn dry_run_writes_nothing_and_force_reprocesses() {
     let s = process(&opts).unwrap();
     assert_eq!(s.runs_processed.len(), 4);
     assert!(!dataset.exists(), "a dry run creates nothing");
+    // It names the run that needs the most memory, to size a job by.
+    let season = tirewear::ingest::manifest::Season::open(&archive).unwrap();
+    let (big, need, _) = common::hungriest_run(&season);
+    let largest = s.largest_memory_need.unwrap();
+    assert_eq!((largest.run, largest.bytes), (big.id, need));
     run(&archive, &dataset);
     let before = tree(&dataset);
     opts.dry_run = false;

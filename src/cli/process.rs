@@ -127,6 +127,15 @@ fn print_summary(s: &ProcessSummary) {
         for r in &s.runs_processed {
             println!("would process run {r}");
         }
+        if let Some(n) = &s.largest_memory_need {
+            println!(
+                "the largest of them, {}, needs about {} of memory ({} bytes); \
+                 --memory-limit or a job's memory must hold at least that",
+                n.run,
+                tirewear::memory::human(n.bytes),
+                n.bytes
+            );
+        }
         return;
     }
     println!(

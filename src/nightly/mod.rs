@@ -162,6 +162,13 @@ pub struct Failed {
     pub reason: String,
 }
 
+/// A run's estimated memory need, in bytes.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct MemoryNeed {
+    pub run: String,
+    pub bytes: u64,
+}
+
 /// What one invocation did (stdout and `DATASET/summary.json`).
 #[derive(Debug, Clone, Serialize, Deserialize, Default)]
 pub struct ProcessSummary {
@@ -179,6 +186,10 @@ pub struct ProcessSummary {
     pub failed: Vec<Failed>,
     /// The runs that would be processed (dry run) or were.
     pub runs_processed: Vec<String>,
+    /// Dry run: the run to process that needs the most memory, and how
+    /// much (`kpi::run_memory_need`), to size a machine or a job by.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub largest_memory_need: Option<MemoryNeed>,
     pub committed: bool,
     /// The committed dataset's id after this invocation (a dry run: as
     /// committed before it; empty for a shard).
@@ -606,6 +617,17 @@ fn process_under_lock(opts: &ProcessOptions) -> Result<ProcessSummary, NightlyEr
         to_process.len()
     );
     if opts.dry_run {
+        summary.largest_memory_need = to_process
+            .iter()
+            .filter_map(|p| {
+                let path = seasons[p.season].path(&p.run.telemetry);
+                let bytes = crate::kpi::run_memory_need(&path).ok()?;
+                Some(MemoryNeed {
+                    run: p.run.id.clone(),
+                    bytes,
+                })
+            })
+            .max_by_key(|n| n.bytes);
         summary.seconds = start.elapsed().as_secs_f64();
         summary.hashed_bytes = files.bytes_hashed;
         summary.dataset_id = old.dataset_id.clone();
