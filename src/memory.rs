@@ -74,6 +74,16 @@ pub struct MemoryBudget {
 impl MemoryBudget {
     /// The budget `limit` asks for on this machine.
     pub fn resolve(limit: MemoryLimit) -> Self {
+        let budget = Self::of(limit);
+        tracing::debug!(
+            "memory budget: {:?} bytes ({})",
+            budget.bytes,
+            budget.origin
+        );
+        budget
+    }
+
+    fn of(limit: MemoryLimit) -> Self {
         match limit {
             MemoryLimit::Bytes(b) => MemoryBudget {
                 bytes: Some(b),

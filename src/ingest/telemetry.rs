@@ -775,10 +775,9 @@ fn summary_volume(bytes: &[u8]) -> Option<MessageVolume> {
     // known of the messages' form.
     let (mut messages, mut schemas, mut all_per_sample) = (None, 0usize, true);
     while at < footer {
-        let len = usize::try_from(le_u64(bytes, at + 1)?).ok()?;
-        let body = at.checked_add(9)?;
-        let end = body.checked_add(len).filter(|&e| e <= footer)?;
-        match bytes[at] {
+        let (op, body, end) = record_at(bytes, at, footer)?;
+        let len = end - body;
+        match op {
             // The uncompressed size is the record's last field.
             OP_CHUNK_INDEX if len >= 8 => {
                 total += le_u64(bytes, end - 8)?.min(RECORD_LENGTH_LIMIT as u64);
@@ -807,26 +806,31 @@ fn summary_volume(bytes: &[u8]) -> Option<MessageVolume> {
 fn walked_uncompressed_bytes(bytes: &[u8]) -> u64 {
     let mut at = MAGIC_LEN;
     let mut total = 0u64;
-    while let Some(len) = le_u64(bytes, at + 1) {
-        let Some(end) = (at as u64 + 9)
-            .checked_add(len)
-            .filter(|&e| e <= bytes.len() as u64)
-        else {
-            break;
-        };
-        match bytes[at] {
+    while let Some((op, body, end)) = record_at(bytes, at, bytes.len()) {
+        let len = (end - body) as u64;
+        match op {
             OP_DATA_END => return total,
             // Start and end times, then the uncompressed size.
             OP_CHUNK => {
-                total += le_u64(bytes, at + 9 + 16)
+                total += le_u64(bytes, body + 16)
                     .unwrap_or(len)
                     .min(RECORD_LENGTH_LIMIT as u64)
             }
             _ => total += len,
         }
-        at = end as usize;
+        at = end;
     }
     total + bytes.len().saturating_sub(at) as u64
+}
+
+/// The record starting at `at`: its opcode, where its body starts and
+/// where it ends; `None` where its length field is missing or runs past
+/// `limit`.
+fn record_at(bytes: &[u8], at: usize, limit: usize) -> Option<(u8, usize, usize)> {
+    let len = usize::try_from(le_u64(bytes, at.checked_add(1)?)?).ok()?;
+    let body = at.checked_add(9)?;
+    let end = body.checked_add(len).filter(|&e| e <= limit)?;
+    Some((bytes[at], body, end))
 }
 
 /// Checks the summary-section and data-section CRCs the writer stored (a

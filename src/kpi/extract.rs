@@ -780,11 +780,6 @@ pub fn extract(opts: &ExtractOptions) -> Result<ExtractSummary, IngestError> {
 
     let pb = crate::progress::bar(opts.progress, m.runs.len() as u64, "extracting runs");
     let memory = MemoryBudget::resolve(opts.memory_limit);
-    tracing::debug!(
-        "memory budget: {:?} bytes ({})",
-        memory.bytes,
-        memory.origin
-    );
     let ctx = RunContext {
         season: &season,
         compounds: &compounds,

@@ -847,11 +847,6 @@ fn stage_runs<'a>(
     let pb = crate::progress::bar(opts.progress, runs.len() as u64, "processing runs");
     let mut done = Vec::new();
     let memory = crate::memory::MemoryBudget::resolve(opts.memory_limit);
-    tracing::debug!(
-        "memory budget: {:?} bytes ({})",
-        memory.bytes,
-        memory.origin
-    );
     // The first part that could not be written, which ends the night.
     let mut unwritten: Option<NightlyError> = None;
     for (si, season) in seasons.iter().enumerate() {
