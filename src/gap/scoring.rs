@@ -341,15 +341,57 @@ fn unit_permutations(
 /// index for index, with each unit's rows at slots 2k and 2k + 1 (a left
 /// and a right wheel of one axle, [`crate::Wheel::index`]) then swapped
 /// with probability ½, so a slot keeps its axle but not its side.
+///
+/// Collected for the tests; the diagnosis draws them from a
+/// [`PermutationStream`] as it fills the permuted residuals.
+#[cfg(test)]
 struct Permutations {
     runs: Vec<Vec<usize>>,
     sides: Option<Vec<Vec<usize>>>,
 }
 
+#[cfg(test)]
 impl Permutations {
     /// `count` permutations from `seed` (the `sides` drawn from the same
     /// stream, so `runs` differ between the two settings; each is uniform).
     fn draw(keys: &[Exchange], count: usize, seed: u64, exchange: Exchangeable) -> Permutations {
+        let mut stream = PermutationStream::new(keys, seed, exchange);
+        let mut runs = Vec::with_capacity(count);
+        let mut sides = Vec::with_capacity(if stream.swapping { count } else { 0 });
+        for _ in 0..count {
+            let (perm, swapped) = stream.next_pair();
+            runs.push(perm);
+            sides.extend(swapped);
+        }
+        Permutations {
+            sides: stream.swapping.then_some(sides),
+            runs,
+        }
+    }
+
+    fn len(&self) -> usize {
+        self.runs.len()
+    }
+}
+
+/// [`Permutations`] drawn one at a time from their seeded stream, so that
+/// the permuted residuals are built without every permutation's row
+/// indices held at once: 8 bytes per row and permutation, as much as the
+/// residuals themselves (docs/gap.md, "Memory").
+struct PermutationStream {
+    classes: Vec<UnitClass>,
+    rng: rand_chacha::ChaCha8Rng,
+    rows: usize,
+    swapping: bool,
+}
+
+/// A class of units that exchange with one another: the positions in its
+/// slots of each left/right pair (empty unless the sides swap), and each
+/// unit's rows.
+type UnitClass = (Vec<(usize, usize)>, Vec<Vec<usize>>);
+
+impl PermutationStream {
+    fn new(keys: &[Exchange], seed: u64, exchange: Exchangeable) -> PermutationStream {
         use std::collections::BTreeMap;
         let mut units: BTreeMap<(usize, usize), Vec<(usize, usize)>> = BTreeMap::new();
         for (i, k) in keys.iter().enumerate() {
@@ -368,7 +410,7 @@ impl Permutations {
         let swapping = exchange == Exchangeable::RunsAndSides;
         // Each class's left/right pairs, as positions in its slots: the
         // same for every unit of the class and every permutation.
-        let classes: Vec<_> = classes
+        let classes = classes
             .into_iter()
             .map(|((_, slots), class)| {
                 let pairs = if swapping {
@@ -379,46 +421,45 @@ impl Permutations {
                 (pairs, class)
             })
             .collect();
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
-        let mut runs = Vec::with_capacity(count);
-        let mut sides = Vec::with_capacity(if swapping { count } else { 0 });
-        for _ in 0..count {
-            let mut perm: Vec<usize> = (0..keys.len()).collect();
-            // The rows whose sides swap, applied to a copy once the runs
-            // are placed (each pair lies in one unit, so the order of the
-            // swaps does not matter; the draws are in the same order).
-            let mut swaps = Vec::new();
-            for (pairs, class) in &classes {
-                let mut order: Vec<usize> = (0..class.len()).collect();
-                order.shuffle(&mut rng);
-                for (to, &from) in class.iter().zip(&order) {
-                    for (&t, &f) in to.iter().zip(&class[from]) {
-                        perm[t] = f;
-                    }
-                    for &(i, j) in pairs {
-                        if rand::Rng::random_bool(&mut rng, 0.5) {
-                            swaps.push((to[i], to[j]));
-                        }
-                    }
-                }
-            }
-            if swapping {
-                let mut swapped = perm.clone();
-                for (a, b) in swaps {
-                    swapped.swap(a, b);
-                }
-                sides.push(swapped);
-            }
-            runs.push(perm);
-        }
-        Permutations {
-            runs,
-            sides: swapping.then_some(sides),
+        PermutationStream {
+            classes,
+            rng: rand_chacha::ChaCha8Rng::seed_from_u64(seed),
+            rows: keys.len(),
+            swapping,
         }
     }
 
-    fn len(&self) -> usize {
-        self.runs.len()
+    /// The next permutation of the runs, and with its sides swapped where
+    /// drawn.
+    fn next_pair(&mut self) -> (Vec<usize>, Option<Vec<usize>>) {
+        let rng = &mut self.rng;
+        let mut perm: Vec<usize> = (0..self.rows).collect();
+        // The rows whose sides swap, applied to a copy once the runs
+        // are placed (each pair lies in one unit, so the order of the
+        // swaps does not matter; the draws are in the same order).
+        let mut swaps = Vec::new();
+        for (pairs, class) in &self.classes {
+            let mut order: Vec<usize> = (0..class.len()).collect();
+            order.shuffle(rng);
+            for (to, &from) in class.iter().zip(&order) {
+                for (&t, &f) in to.iter().zip(&class[from]) {
+                    perm[t] = f;
+                }
+                for &(i, j) in pairs {
+                    if rand::Rng::random_bool(rng, 0.5) {
+                        swaps.push((to[i], to[j]));
+                    }
+                }
+            }
+        }
+        let swapped = self.swapping.then(|| {
+            let mut swapped = perm.clone();
+            for (a, b) in swaps {
+                swapped.swap(a, b);
+            }
+            swapped
+        });
+        (perm, swapped)
     }
 }
 
@@ -570,16 +611,40 @@ struct PermutedNull {
 
 impl PermutedNull {
     /// From the null's residuals `e0` and orthonormal basis `q`.
+    #[cfg(test)]
     fn new(e0: &[f64], q: &[Vec<f64>], perms: &[Vec<usize>]) -> PermutedNull {
-        let e = Mat::from_fn(perms.len(), e0.len(), |p, i| e0[perms[p][i]]);
-        let sse0 = perms
-            .par_iter()
-            .map(|perm| {
+        let mut null = PermutedNull::zeros(perms.len(), e0.len());
+        null.fill(0, e0, q, perms);
+        null
+    }
+
+    /// Room for `count` permutations of `rows` residuals.
+    fn zeros(count: usize, rows: usize) -> PermutedNull {
+        PermutedNull {
+            e: Mat::zeros(count, rows),
+            sse0: vec![0.0; count],
+        }
+    }
+
+    /// Rows `start..start + perms.len()`: `e0` permuted by each of
+    /// `perms`, and their SSE under the basis `q`.
+    fn fill(&mut self, start: usize, e0: &[f64], q: &[Vec<f64>], perms: &[Vec<usize>]) {
+        for (i, column) in self.e.col_iter_mut().enumerate() {
+            let column = &mut column
+                .try_as_col_major_mut()
+                .expect("an owned matrix's columns are contiguous")
+                .as_slice_mut()[start..start + perms.len()];
+            for (slot, perm) in column.iter_mut().zip(perms) {
+                *slot = e0[perm[i]];
+            }
+        }
+        self.sse0[start..start + perms.len()]
+            .par_iter_mut()
+            .zip(perms)
+            .for_each(|(sse0, perm)| {
                 let ep: Vec<f64> = perm.iter().map(|&src| e0[src]).collect();
-                dot(&ep, &ep) - q.iter().map(|u| dot(u, &ep).powi(2)).sum::<f64>()
-            })
-            .collect();
-        PermutedNull { e, sse0 }
+                *sse0 = dot(&ep, &ep) - q.iter().map(|u| dot(u, &ep).powi(2)).sum::<f64>();
+            });
     }
 
     /// [`max_f`] of every permuted residual vector against the projected
@@ -628,12 +693,45 @@ struct PermutedNulls {
     sides: Option<PermutedNull>,
 }
 
+/// How many permutations [`PermutedNulls::drawn`] holds as row indices at
+/// once (a block's indices: 128 × 8 bytes a row, 12 MB at 11 520 rows).
+const DRAW_BLOCK: usize = 128;
+
 impl PermutedNulls {
+    #[cfg(test)]
     fn new(e0: &[f64], q: &[Vec<f64>], perms: &Permutations) -> PermutedNulls {
         PermutedNulls {
             runs: PermutedNull::new(e0, q, &perms.runs),
             sides: perms.sides.as_ref().map(|s| PermutedNull::new(e0, q, s)),
         }
+    }
+
+    /// The next `count` permutations of `stream` applied to the null's
+    /// residuals `e0` (orthonormal basis `q`), drawn a block at a time:
+    /// the same matrices as [`PermutedNulls::new`] on the same
+    /// permutations collected (tested), without holding them.
+    fn drawn(
+        e0: &[f64],
+        q: &[Vec<f64>],
+        stream: &mut PermutationStream,
+        count: usize,
+    ) -> PermutedNulls {
+        let n = e0.len();
+        let mut runs = PermutedNull::zeros(count, n);
+        let mut sides = stream.swapping.then(|| PermutedNull::zeros(count, n));
+        let mut start = 0;
+        while start < count {
+            let block = DRAW_BLOCK.min(count - start);
+            let (by_runs, by_sides): (Vec<Vec<usize>>, Vec<Option<Vec<usize>>>) =
+                (0..block).map(|_| stream.next_pair()).unzip();
+            runs.fill(start, e0, q, &by_runs);
+            if let Some(sides) = &mut sides {
+                let by_sides: Vec<Vec<usize>> = by_sides.into_iter().flatten().collect();
+                sides.fill(start, e0, q, &by_sides);
+            }
+            start += block;
+        }
+        PermutedNulls { runs, sides }
     }
 
     /// Each permutation's [`max_f`] over the terms `ft` (squared norms
@@ -1088,13 +1186,8 @@ pub(crate) fn rank(
     };
     let across = Null::new(rows, &base, y, &groups, None, None);
     let severities = Severities::new(rows, y, &base, &problem.track_level, &prediction);
-    let perms = Permutations::draw(
-        &run_exchange(rows),
-        settings.permutations,
-        settings.seed,
-        settings.exchange,
-    );
-    let permuted = PermutedNulls::new(&within.e0, &within.q, &perms);
+    let mut stream = PermutationStream::new(&run_exchange(rows), settings.seed, settings.exchange);
+    let permuted = PermutedNulls::drawn(&within.e0, &within.q, &mut stream, settings.permutations);
 
     let scored: Vec<(Score, Option<NullDraws>, Option<AtTheFloor>)> = library
         .par_iter()
@@ -1223,7 +1316,7 @@ pub(crate) fn rank(
             } else {
                 let d = draws.as_ref().expect("within-track draws");
                 let exceed = d.stats.iter().filter(|&&f| f >= observed).count();
-                let p_within = (1 + exceed) as f64 / (1 + perms.len()) as f64;
+                let p_within = (1 + exceed) as f64 / (1 + settings.permutations) as f64;
                 if exceed == 0 && !family {
                     floor = Some(AtTheFloor {
                         ft: ft.clone(),
@@ -1260,11 +1353,13 @@ pub(crate) fn rank(
             Some((score, draws, floor))
         })
         .collect();
+    // The refinement draws its own.
+    drop(permuted);
     let mut scores = match settings.multiple_testing {
         MultipleTesting::MaxStatistic => split_between_families(
             adjust(
                 scored.into_iter().map(|(s, d, _)| (s, d)).collect(),
-                perms.len(),
+                settings.permutations,
             ),
             |s| s.feature.track_level(),
         ),
@@ -1339,22 +1434,38 @@ impl FloorRefinement<'_> {
         todo.truncate(FLOOR_REFINED_MOST);
         let first = self.settings.permutations;
         let more = (FLOOR_REFINEMENT - 1) * (first + 1);
-        let perms = Permutations::draw(
+        // Drawn and tested in rounds of the first test's size, so that
+        // the refinement holds no more permuted residuals than it did.
+        let mut stream = PermutationStream::new(
             &run_exchange(self.rows),
-            more,
             self.settings.seed ^ 0x0066_6c6f_6f72,
             self.settings.exchange,
         );
-        let permuted = PermutedNulls::new(self.e0, self.q, &perms);
+        let mut exceed = vec![0usize; todo.len()];
+        let mut left = more;
+        while left > 0 {
+            let round = left.min(first + 1);
+            let permuted = PermutedNulls::drawn(self.e0, self.q, &mut stream, round);
+            let counts: Vec<usize> = todo
+                .par_iter()
+                .map(|&i| {
+                    let f = floors[i].as_ref().expect("at the floor");
+                    permuted
+                        .max_f(&f.ft, &f.nf, f.positive, &f.on_one_car)
+                        .iter()
+                        .filter(|&&s| s >= f.observed)
+                        .count()
+                })
+                .collect();
+            for (total, count) in exceed.iter_mut().zip(counts) {
+                *total += count;
+            }
+            left -= round;
+        }
         let refined: Vec<(usize, f64)> = todo
-            .par_iter()
-            .map(|&i| {
-                let f = floors[i].as_ref().expect("at the floor");
-                let exceed = permuted
-                    .max_f(&f.ft, &f.nf, f.positive, &f.on_one_car)
-                    .iter()
-                    .filter(|&&s| s >= f.observed)
-                    .count();
+            .iter()
+            .zip(exceed)
+            .map(|(&i, exceed)| {
                 let p_within = (1 + exceed) as f64 / (1 + first + more) as f64;
                 (i, combined(p_within, scores[i].p_between))
             })
@@ -2296,6 +2407,69 @@ mod tests {
             assert!((0..n).all(|i| s[i] == r[i] || s[i] == r[i ^ 1]));
         }
         assert!(perms.runs.iter().zip(sides).any(|(r, s)| r != s));
+    }
+
+    #[test]
+    fn permuted_residuals_drawn_in_blocks_and_rounds_equal_the_collected_permutations() {
+        // The diagnosis fills the permuted residuals a block of
+        // DRAW_BLOCK permutations at a time, and the floor's refinement in
+        // rounds from one stream: 2·DRAW_BLOCK + 45 permutations drawn as
+        // DRAW_BLOCK + 7 and then the rest must give the rows that
+        // collecting them all and permuting by each gives, bit for bit.
+        use rand::Rng;
+        use rand_distr::StandardNormal;
+        let n = LAYOUT_ROWS;
+        let (cells, whole_runs) = layout();
+        let refs: Vec<&[f64]> = cells.iter().map(|c| c.as_slice()).collect();
+        let all: Vec<usize> = (0..n).collect();
+        let q = orthonormal_basis(&refs, &all);
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(17);
+        let mut e: Vec<f64> = (0..n).map(|_| rng.sample(StandardNormal)).collect();
+        project_out(&q, &mut e);
+        let count = 2 * DRAW_BLOCK + 45;
+        let first = DRAW_BLOCK + 7;
+        for exchange in [Exchangeable::Runs, Exchangeable::RunsAndSides] {
+            let perms = Permutations::draw(&whole_runs, count, 23, exchange);
+            let mut stream = PermutationStream::new(&whole_runs, 23, exchange);
+            let rounds = [
+                PermutedNulls::drawn(&e, &q, &mut stream, first),
+                PermutedNulls::drawn(&e, &q, &mut stream, count - first),
+            ];
+            let mut sets = vec![(
+                &perms.runs,
+                rounds.iter().map(|r| &r.runs).collect::<Vec<_>>(),
+            )];
+            if let Some(sides) = &perms.sides {
+                let drawn: Vec<&PermutedNull> = rounds
+                    .iter()
+                    .map(|r| r.sides.as_ref().expect("sides drawn"))
+                    .collect();
+                sets.push((sides, drawn));
+            } else {
+                assert!(rounds.iter().all(|r| r.sides.is_none()));
+            }
+            for (collected, drawn) in sets {
+                let mut p = 0;
+                for null in drawn {
+                    assert_eq!(null.e.ncols(), n);
+                    for row in 0..null.e.nrows() {
+                        let ep: Vec<f64> = collected[p].iter().map(|&i| e[i]).collect();
+                        for (i, &x) in ep.iter().enumerate() {
+                            assert_eq!(
+                                null.e[(row, i)].to_bits(),
+                                x.to_bits(),
+                                "{exchange:?} {p} {i}"
+                            );
+                        }
+                        let sse0 =
+                            dot(&ep, &ep) - q.iter().map(|u| dot(u, &ep).powi(2)).sum::<f64>();
+                        assert_eq!(null.sse0[row].to_bits(), sse0.to_bits(), "{exchange:?} {p}");
+                        p += 1;
+                    }
+                }
+                assert_eq!(p, count);
+            }
+        }
     }
 
     #[test]
