@@ -90,7 +90,17 @@ pub(crate) fn seal_arrow<W: Write + Send>(
 
 /// Why a file's data does not match the checksum its footer records, or
 /// `None` when it matches or the footer records none.
+#[cfg(test)]
 pub(crate) fn mismatch(path: &Path, metadata: &ParquetMetaData) -> Option<String> {
+    mismatch_in(path, None, metadata)
+}
+
+/// [`mismatch`] of the file `path`, read again unless `data` holds it.
+pub(crate) fn mismatch_in(
+    path: &Path,
+    data: Option<&[u8]>,
+    metadata: &ParquetMetaData,
+) -> Option<String> {
     let recorded = metadata
         .file_metadata()
         .key_value_metadata()?
@@ -103,7 +113,14 @@ pub(crate) fn mismatch(path: &Path, metadata: &ParquetMetaData) -> Option<String
             "footer key {CHECKSUM_KEY} is {recorded:?}, not \"<bytes> <8 hex digits>\""
         ));
     };
-    match crc_of_prefix(path, bytes) {
+    let found = match data {
+        Some(data) => Ok(usize::try_from(bytes)
+            .ok()
+            .and_then(|n| data.get(..n))
+            .map(crc32fast::hash)),
+        None => crc_of_prefix(path, bytes),
+    };
+    match found {
         Ok(Some(found)) if found == crc => None,
         Ok(Some(found)) => Some(format!(
             "bytes 0..{bytes} have CRC-32 {found:08x} where the footer recorded {crc:08x}: \
@@ -220,24 +237,105 @@ pub(crate) fn json_mismatch(text: &str, head: &serde_json::Value, writer: &str) 
     })
 }
 
+/// Files up to this size are read whole before they are parsed
+/// ([`ParquetSource`]).
+const IN_MEMORY_MAX: u64 = 64 << 20;
+
+/// A Parquet file's bytes for the reader: in memory when the file is at
+/// most [`IN_MEMORY_MAX`], else the open file.
+///
+/// The Parquet reader's `File` source clones the descriptor and seeks for
+/// each column chunk it reads, and asks the file's size each time: some
+/// 190 system calls for one run's KPI part, which a night of 4 320 runs
+/// read and checksummed at its commit in 7 s (docs/nightly.md, "Many
+/// runs"). Read whole, a file costs one read, and its checksum is taken
+/// over the same bytes.
+pub(crate) enum ParquetSource {
+    Memory(bytes::Bytes),
+    File(std::fs::File),
+}
+
+impl ParquetSource {
+    /// `path`'s bytes, or the open file when it is larger than
+    /// [`IN_MEMORY_MAX`].
+    pub(crate) fn open(path: &Path) -> std::io::Result<ParquetSource> {
+        let mut file = std::fs::File::open(path)?;
+        let len = file.metadata()?.len();
+        if len > IN_MEMORY_MAX {
+            return Ok(ParquetSource::File(file));
+        }
+        let mut data = Vec::with_capacity(len as usize);
+        file.read_to_end(&mut data)?;
+        Ok(ParquetSource::Memory(data.into()))
+    }
+}
+
+impl parquet::file::reader::Length for ParquetSource {
+    fn len(&self) -> u64 {
+        match self {
+            ParquetSource::Memory(data) => data.len() as u64,
+            ParquetSource::File(file) => file.len(),
+        }
+    }
+}
+
+impl parquet::file::reader::ChunkReader for ParquetSource {
+    type T = SourceRead;
+
+    fn get_read(&self, start: u64) -> parquet::errors::Result<SourceRead> {
+        Ok(match self {
+            ParquetSource::Memory(data) => SourceRead::Memory(data.get_read(start)?),
+            ParquetSource::File(file) => SourceRead::File(file.get_read(start)?),
+        })
+    }
+
+    fn get_bytes(&self, start: u64, length: usize) -> parquet::errors::Result<bytes::Bytes> {
+        match self {
+            ParquetSource::Memory(data) => data.get_bytes(start, length),
+            ParquetSource::File(file) => file.get_bytes(start, length),
+        }
+    }
+}
+
+/// A reader from a [`ParquetSource`].
+pub(crate) enum SourceRead {
+    Memory(bytes::buf::Reader<bytes::Bytes>),
+    File(std::io::BufReader<std::fs::File>),
+}
+
+impl Read for SourceRead {
+    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        match self {
+            SourceRead::Memory(r) => r.read(buf),
+            SourceRead::File(r) => r.read(buf),
+        }
+    }
+}
+
 /// A Parquet file opened for reading, its footer read and its byte ranges
 /// checked against the file (any file) and its data against the footer's
 /// checksum (tirewear's files); every error names the file.
 pub(crate) fn open_parquet(
     path: &Path,
-) -> crate::ingest::Result<ParquetRecordBatchReaderBuilder<std::fs::File>> {
+) -> crate::ingest::Result<ParquetRecordBatchReaderBuilder<ParquetSource>> {
     use crate::ingest::IngestError;
-    let file = std::fs::File::open(path).map_err(|e| IngestError::io(path, e))?;
-    let file_len = file.metadata().map_err(|e| IngestError::io(path, e))?.len();
-    let builder =
-        ParquetRecordBatchReaderBuilder::try_new(file).map_err(|source| IngestError::Parquet {
+    use parquet::file::reader::Length;
+    let source = ParquetSource::open(path).map_err(|e| IngestError::io(path, e))?;
+    let file_len = source.len();
+    let data = match &source {
+        ParquetSource::Memory(data) => Some(data.clone()),
+        ParquetSource::File(_) => None,
+    };
+    let builder = ParquetRecordBatchReaderBuilder::try_new(source).map_err(|source| {
+        IngestError::Parquet {
             path: path.to_path_buf(),
             source,
-        })?;
+        }
+    })?;
     if let Some(why) = layout_fault(builder.metadata(), file_len) {
         return Err(IngestError::invalid(path, "footer", why));
     }
-    match mismatch(path, builder.metadata()) {
+    match mismatch_in(path, data.as_deref(), builder.metadata()) {
         None => Ok(builder),
         Some(why) => Err(IngestError::invalid(path, "data checksum", why)),
     }
@@ -277,6 +375,7 @@ mod tests {
         };
         let meta = footer(&path);
         assert_eq!(mismatch(&path, &meta), None);
+        assert_eq!(mismatch_in(&path, Some(&clean), &meta), None);
         let value = meta
             .file_metadata()
             .key_value_metadata()
@@ -290,14 +389,15 @@ mod tests {
             std::fs::write(&path, &bytes).unwrap();
             let why = mismatch(&path, &meta).unwrap_or_else(|| panic!("byte {at}"));
             assert!(why.contains("damaged after it was written"), "{why}");
+            // The bytes in memory (`open_parquet`'s route) say the same.
+            assert_eq!(mismatch_in(&path, Some(&bytes), &meta), Some(why));
         }
         // Cut inside the data: the file holds fewer bytes than recorded.
-        std::fs::write(&path, &clean[..covered as usize - 1]).unwrap();
-        assert!(
-            mismatch(&path, &meta)
-                .unwrap()
-                .contains("more than the file holds")
-        );
+        let cut = &clean[..covered as usize - 1];
+        std::fs::write(&path, cut).unwrap();
+        let why = mismatch(&path, &meta).unwrap();
+        assert!(why.contains("more than the file holds"), "{why}");
+        assert_eq!(mismatch_in(&path, Some(cut), &meta), Some(why));
         // A footer without the key (another writer): nothing to check.
         let mut plain = Vec::new();
         let mut w = parquet::arrow::ArrowWriter::try_new(&mut plain, batch.schema(), None).unwrap();
@@ -306,6 +406,54 @@ mod tests {
         let other = dir.path().join("other.parquet");
         std::fs::write(&other, plain).unwrap();
         assert_eq!(mismatch(&other, &footer(&other)), None);
+    }
+
+    #[test]
+    fn a_file_read_whole_or_through_its_descriptor_reads_the_same() {
+        // `open_parquet` reads files up to IN_MEMORY_MAX whole; larger ones
+        // through the Parquet reader's `File` source. Both sources must
+        // give the same batches of the same file.
+        use arrow_array::{Float64Array, RecordBatch, StringArray};
+        use std::sync::Arc;
+        let n = 5_000;
+        let batch = RecordBatch::try_from_iter([
+            (
+                "run",
+                Arc::new(StringArray::from_iter_values(
+                    (0..n).map(|i| format!("r{}", i / 7)),
+                )) as _,
+            ),
+            (
+                "energy_j",
+                Arc::new(Float64Array::from_iter_values(
+                    (0..n).map(|i| i as f64 * 0.5),
+                )) as _,
+            ),
+        ])
+        .unwrap();
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("t.parquet");
+        let mut bytes = Vec::new();
+        crate::kpi::table::write_part_to(&mut bytes, &batch).unwrap();
+        std::fs::write(&path, &bytes).unwrap();
+        let opened = open_parquet(&path).unwrap();
+        let in_memory: Vec<RecordBatch> = opened.build().unwrap().map(|b| b.unwrap()).collect();
+        let file = ParquetSource::File(std::fs::File::open(&path).unwrap());
+        let through_file: Vec<RecordBatch> = ParquetRecordBatchReaderBuilder::try_new(file)
+            .unwrap()
+            .build()
+            .unwrap()
+            .map(|b| b.unwrap())
+            .collect();
+        // (The footer's key-value metadata comes back as the schema's.)
+        assert_eq!(in_memory, through_file);
+        let read =
+            arrow_select::concat::concat_batches(&in_memory[0].schema(), &in_memory).unwrap();
+        assert_eq!(read.columns(), batch.columns());
+        assert!(matches!(
+            ParquetSource::open(&path).unwrap(),
+            ParquetSource::Memory(data) if data.as_ref() == bytes.as_slice()
+        ));
     }
 
     #[test]

@@ -247,8 +247,39 @@ pub(crate) fn write_batch_to(
         file,
         batch,
         parquet::file::properties::DEFAULT_MAX_ROW_GROUP_ROW_COUNT,
+        Codec::Zstd,
     )
     .map_err(std::io::Error::other)
+}
+
+/// Writes a night's part of one run (`process`'s staging) as LZ4 Parquet.
+///
+/// The Parquet crate makes a zstd compressor and decompressor for every
+/// column chunk it writes or reads (`ZSTD_createCCtx`, `ZSTD_createDCtx`:
+/// 21 % of a night of 4 320 runs, whose parts hold one to a few thousand
+/// rows in some 200 columns). LZ4 has no context to make; the parts take
+/// some 10 % more disk (docs/nightly.md, "Many runs").
+pub(crate) fn write_part_to(
+    file: impl std::io::Write + Send,
+    batch: &RecordBatch,
+) -> std::io::Result<()> {
+    write_row_groups(
+        file,
+        batch,
+        parquet::file::properties::DEFAULT_MAX_ROW_GROUP_ROW_COUNT,
+        Codec::Lz4,
+    )
+    .map_err(std::io::Error::other)
+}
+
+/// The compression of a Parquet file tirewear writes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Codec {
+    /// The tables users keep and move: KPI and side tables, a dataset's
+    /// committed tables.
+    Zstd,
+    /// A night's parts, each written once and read at each commit.
+    Lz4,
 }
 
 /// How tirewear's Parquet files are written: zstd, row groups of
@@ -260,9 +291,14 @@ pub(crate) fn write_batch_to(
 fn writer_properties(
     schema: &arrow_schema::Schema,
     rows_per_group: usize,
+    codec: Codec,
 ) -> parquet::file::properties::WriterProperties {
+    let compression = match codec {
+        Codec::Zstd => parquet::basic::Compression::ZSTD(Default::default()),
+        Codec::Lz4 => parquet::basic::Compression::LZ4_RAW,
+    };
     let mut props = parquet::file::properties::WriterProperties::builder()
-        .set_compression(parquet::basic::Compression::ZSTD(Default::default()))
+        .set_compression(compression)
         .set_max_row_group_row_count(Some(rows_per_group));
     for f in schema.fields() {
         if f.data_type() == &DataType::Float64 {
@@ -281,10 +317,11 @@ fn write_row_groups(
     file: impl std::io::Write + Send,
     batch: &RecordBatch,
     rows_per_group: usize,
+    codec: Codec,
 ) -> parquet::errors::Result<()> {
     use parquet::arrow::arrow_writer::{ArrowColumnChunk, compute_leaves};
     use rayon::prelude::*;
-    let props = writer_properties(&batch.schema(), rows_per_group);
+    let props = writer_properties(&batch.schema(), rows_per_group, codec);
     let sink = crate::ingest::checksum::CrcWriter::new(file);
     let w = parquet::arrow::ArrowWriter::try_new(sink, batch.schema(), Some(props))?;
     let (mut file_writer, columns) = w.into_serialized_writer()?;
@@ -551,9 +588,9 @@ mod tests {
 
     /// `ArrowWriter` itself, the route `write_row_groups` replaces, sealed
     /// with the data checksum as the road profiles' writer seals it.
-    fn arrow_writer_bytes(batch: &RecordBatch, rows_per_group: usize) -> Vec<u8> {
+    fn arrow_writer_bytes(batch: &RecordBatch, rows_per_group: usize, codec: Codec) -> Vec<u8> {
         use crate::ingest::checksum::{CrcWriter, seal_arrow};
-        let props = writer_properties(&batch.schema(), rows_per_group);
+        let props = writer_properties(&batch.schema(), rows_per_group, codec);
         let mut out = Vec::new();
         let sink = CrcWriter::new(&mut out);
         let mut w =
@@ -596,15 +633,17 @@ mod tests {
         )
         .unwrap();
         // One row group, several with a short last one, and an empty table.
-        for (rows, per_group) in [(n, 1 << 20), (n, 1_000), (0, 1_000)] {
-            let part = batch.slice(0, rows);
-            let mut ours = Vec::new();
-            write_row_groups(&mut ours, &part, per_group).unwrap();
-            assert_eq!(
-                ours,
-                arrow_writer_bytes(&part, per_group),
-                "{rows} rows, {per_group} a group"
-            );
+        for codec in [Codec::Zstd, Codec::Lz4] {
+            for (rows, per_group) in [(n, 1 << 20), (n, 1_000), (0, 1_000)] {
+                let part = batch.slice(0, rows);
+                let mut ours = Vec::new();
+                write_row_groups(&mut ours, &part, per_group, codec).unwrap();
+                assert_eq!(
+                    ours,
+                    arrow_writer_bytes(&part, per_group, codec),
+                    "{codec:?}: {rows} rows, {per_group} a group"
+                );
+            }
         }
     }
 

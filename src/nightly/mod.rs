@@ -37,7 +37,7 @@ use crate::kpi::extract::{
     RunContext, RunOutput, SeasonInputs, energy_maps_batch, extract_runs, open_engine,
     road_curves_batch, road_kpis, season_inputs,
 };
-use crate::kpi::table::{kpi_batch, with_extraction_id, write_batch_to};
+use crate::kpi::table::{kpi_batch, with_extraction_id, write_batch_to, write_part_to};
 use arrow_array::RecordBatch;
 use keys::{FileHashes, FileStamp};
 use rayon::prelude::*;
@@ -345,20 +345,26 @@ fn parts_intact(dataset: &Path, e: &RunEntry, warnings: &mut Vec<String>) -> boo
 
 /// What is wrong with a committed part, if anything (see [`parts_intact`]).
 fn part_damage(path: &Path, rows: Option<usize>) -> Option<String> {
-    let file = match std::fs::File::open(path) {
+    use crate::ingest::checksum::ParquetSource;
+    use parquet::file::reader::Length;
+    let source = match ParquetSource::open(path) {
         Ok(f) => f,
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Some("missing".into()),
         Err(e) => return Some(format!("cannot be opened: {e}")),
     };
-    let meta = match parquet::file::metadata::ParquetMetaDataReader::new().parse_and_finish(&file) {
+    let meta = match parquet::file::metadata::ParquetMetaDataReader::new().parse_and_finish(&source)
+    {
         Ok(m) => m,
         Err(e) => return Some(format!("damaged (not a readable Parquet file: {e})")),
     };
-    let file_len = file.metadata().map_or(0, |m| m.len());
-    if let Some(why) = crate::ingest::checksum::layout_fault(&meta, file_len) {
+    if let Some(why) = crate::ingest::checksum::layout_fault(&meta, source.len()) {
         return Some(format!("damaged (footer: {why})"));
     }
-    if let Some(why) = crate::ingest::checksum::mismatch(path, &meta) {
+    let data = match &source {
+        ParquetSource::Memory(data) => Some(data.as_ref()),
+        ParquetSource::File(_) => None,
+    };
+    if let Some(why) = crate::ingest::checksum::mismatch_in(path, data, &meta) {
         return Some(format!("damaged (data checksum: {why})"));
     }
     let found = meta.file_metadata().num_rows();
@@ -882,7 +888,7 @@ fn stage_runs<'a>(
                 .cloned()
                 .collect();
             let batch = road_curves_batch(&own);
-            crate::atomic::write_file(&path, |f| write_batch_to(f, &batch))
+            crate::atomic::write_file(&path, |f| write_part_to(f, &batch))
                 .map_err(NightlyError::io(&path))?;
         }
         let ctx = RunContext {
@@ -988,7 +994,7 @@ fn write_run_parts(dataset: &Path, key: &str, run: &str, o: RunOutput) -> Result
     ];
     for (kind, batch) in batches {
         let path = staged_part(dataset, kind, key);
-        crate::atomic::write_file(&path, |f| write_batch_to(f, &batch))
+        crate::atomic::write_file(&path, |f| write_part_to(f, &batch))
             .map_err(|e| RunFault::Write(NightlyError::io(&path)(e)))?;
     }
     Ok(())
@@ -1272,7 +1278,7 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("part.parquet");
         let mut bytes = Vec::new();
-        crate::kpi::table::write_batch_to(&mut bytes, &batch).unwrap();
+        crate::kpi::table::write_part_to(&mut bytes, &batch).unwrap();
         std::fs::write(&path, &bytes).unwrap();
         assert_eq!(read_batches(&path).unwrap(), [batch]);
         bytes[40] ^= 0x10;
