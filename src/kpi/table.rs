@@ -245,7 +245,27 @@ pub(crate) fn write_batch_to(
 ) -> std::io::Result<()> {
     write_row_groups(
         file,
-        batch,
+        &batch.schema(),
+        std::slice::from_ref(batch),
+        parquet::file::properties::DEFAULT_MAX_ROW_GROUP_ROW_COUNT,
+        Codec::Zstd,
+    )
+    .map_err(std::io::Error::other)
+}
+
+/// [`write_batch_to`] of the rows of `batches` one after the other, under
+/// `schema` (their columns' types; its metadata is the file's): the same
+/// file as their concatenation gives, without that copy of the whole
+/// table (a night's commit of thousands of runs' parts; tested).
+pub(crate) fn write_batches_to(
+    file: impl std::io::Write + Send,
+    schema: &arrow_schema::SchemaRef,
+    batches: &[RecordBatch],
+) -> std::io::Result<()> {
+    write_row_groups(
+        file,
+        schema,
+        batches,
         parquet::file::properties::DEFAULT_MAX_ROW_GROUP_ROW_COUNT,
         Codec::Zstd,
     )
@@ -265,7 +285,8 @@ pub(crate) fn write_part_to(
 ) -> std::io::Result<()> {
     write_row_groups(
         file,
-        batch,
+        &batch.schema(),
+        std::slice::from_ref(batch),
         parquet::file::properties::DEFAULT_MAX_ROW_GROUP_ROW_COUNT,
         Codec::Lz4,
     )
@@ -315,19 +336,21 @@ fn writer_properties(
 /// scale) is otherwise encoded on one thread after every run is done.
 fn write_row_groups(
     file: impl std::io::Write + Send,
-    batch: &RecordBatch,
+    schema: &arrow_schema::SchemaRef,
+    batches: &[RecordBatch],
     rows_per_group: usize,
     codec: Codec,
 ) -> parquet::errors::Result<()> {
     use parquet::arrow::arrow_writer::{ArrowColumnChunk, compute_leaves};
     use rayon::prelude::*;
-    let props = writer_properties(&batch.schema(), rows_per_group, codec);
+    let props = writer_properties(schema, rows_per_group, codec);
     let sink = crate::ingest::checksum::CrcWriter::new(file);
-    let w = parquet::arrow::ArrowWriter::try_new(sink, batch.schema(), Some(props))?;
+    let w = parquet::arrow::ArrowWriter::try_new(sink, schema.clone(), Some(props))?;
     let (mut file_writer, columns) = w.into_serialized_writer()?;
-    let (rows, schema) = (batch.num_rows(), batch.schema());
+    let rows: usize = batches.iter().map(|b| b.num_rows()).sum();
+    let mut at = (0, 0);
     for (group, start) in (0..rows).step_by(rows_per_group.max(1)).enumerate() {
-        let part = batch.slice(start, rows_per_group.min(rows - start));
+        let part = next_rows(schema, batches, &mut at, rows_per_group.min(rows - start))?;
         let mut leaves = Vec::new();
         for (field, column) in schema.fields().iter().zip(part.columns()) {
             leaves.extend(compute_leaves(field, column)?);
@@ -357,6 +380,37 @@ fn write_row_groups(
     crate::ingest::checksum::seal(&mut file_writer)?;
     file_writer.close()?;
     Ok(())
+}
+
+/// The next `count` rows of `batches` from `at` (batch, row), which it
+/// moves past them: a slice of one batch, or the slices of several
+/// concatenated under `schema`.
+fn next_rows(
+    schema: &arrow_schema::SchemaRef,
+    batches: &[RecordBatch],
+    at: &mut (usize, usize),
+    count: usize,
+) -> parquet::errors::Result<RecordBatch> {
+    let mut pieces = Vec::new();
+    let mut left = count;
+    while left > 0 {
+        let Some(batch) = batches.get(at.0) else {
+            break;
+        };
+        let n = (batch.num_rows() - at.1).min(left);
+        if n > 0 {
+            pieces.push(batch.slice(at.1, n));
+        }
+        at.1 += n;
+        left -= n;
+        if at.1 == batch.num_rows() {
+            *at = (at.0 + 1, 0);
+        }
+    }
+    match pieces.len() {
+        1 => Ok(pieces.pop().expect("one piece")),
+        _ => Ok(arrow_select::concat::concat_batches(schema, &pieces)?),
+    }
 }
 
 /// Writes a record batch to a zstd Parquet file, atomically.
@@ -637,13 +691,38 @@ mod tests {
             for (rows, per_group) in [(n, 1 << 20), (n, 1_000), (0, 1_000)] {
                 let part = batch.slice(0, rows);
                 let mut ours = Vec::new();
-                write_row_groups(&mut ours, &part, per_group, codec).unwrap();
+                write_row_groups(&mut ours, &part.schema(), &[part.clone()], per_group, codec)
+                    .unwrap();
                 assert_eq!(
                     ours,
                     arrow_writer_bytes(&part, per_group, codec),
                     "{codec:?}: {rows} rows, {per_group} a group"
                 );
             }
+        }
+        // The rows given as several batches (a commit's parts: of 1, 0,
+        // 999, 1 001 … rows, so that row groups start inside batches and
+        // span several) write the file their concatenation writes, under
+        // the schema given (with its metadata), whatever the batches'.
+        let sizes = [1, 0, 999, 1_001, 7, 0, 492];
+        let mut batches = Vec::new();
+        let mut start = 0;
+        for size in sizes {
+            let cut = batch.slice(start, size);
+            let bare = Arc::new(Schema::new(cut.schema().fields().clone()));
+            batches.push(RecordBatch::try_new(bare, cut.columns().to_vec()).unwrap());
+            start += size;
+        }
+        let whole = batch.slice(0, start);
+        for per_group in [1 << 20, 1_000, 333] {
+            let mut ours = Vec::new();
+            write_row_groups(&mut ours, &batch.schema(), &batches, per_group, Codec::Zstd).unwrap();
+            assert_eq!(
+                ours,
+                arrow_writer_bytes(&whole, per_group, Codec::Zstd),
+                "{per_group} a group, from {} batches",
+                batches.len()
+            );
         }
     }
 

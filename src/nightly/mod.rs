@@ -37,7 +37,7 @@ use crate::kpi::extract::{
     RunContext, RunOutput, SeasonInputs, energy_maps_batch, extract_runs, open_engine,
     road_curves_batch, road_kpis, season_inputs,
 };
-use crate::kpi::table::{kpi_batch, with_extraction_id, write_batch_to, write_part_to};
+use crate::kpi::table::{kpi_batch, with_extraction_id, write_batches_to, write_part_to};
 use arrow_array::RecordBatch;
 use keys::{FileHashes, FileStamp};
 use rayon::prelude::*;
@@ -1070,7 +1070,7 @@ fn consolidate(
     sources: &[Source],
     previous: Option<&RecordBatch>,
     dataset_id: &str,
-) -> Result<(RecordBatch, Vec<usize>), NightlyError> {
+) -> Result<(arrow_schema::SchemaRef, Vec<RecordBatch>, Vec<usize>), NightlyError> {
     let schema = empty_schema(kind);
     let read = sources
         .par_iter()
@@ -1097,9 +1097,10 @@ fn consolidate(
             batches.push(b);
         }
     }
-    let all = arrow_select::concat::concat_batches(&schema, &batches)
-        .map_err(|e| NightlyError::Invalid(format!("consolidating {kind}: {e}")))?;
-    Ok((with_extraction_id(all, dataset_id), rows))
+    // The table's schema with the dataset id; the batches are written in
+    // turn under it, not concatenated first (a copy of the whole table).
+    let schema = with_extraction_id(RecordBatch::new_empty(schema), dataset_id).schema();
+    Ok((schema, batches, rows))
 }
 
 /// The consolidated table of a kind.
@@ -1183,15 +1184,15 @@ fn commit(
         .map(|(i, (kind, parts))| {
             let t = Instant::now();
             let prev = previous.get(i).and_then(|p| p.as_ref()).map(|(b, _)| b);
-            let (batch, rows) = consolidate(kind, parts, prev, &id)?;
+            let (schema, batches, rows) = consolidate(kind, parts, prev, &id)?;
             let read_s = t.elapsed().as_secs_f64();
             let mut bytes = Vec::new();
-            write_batch_to(&mut bytes, &batch)
+            write_batches_to(&mut bytes, &schema, &batches)
                 .map_err(|e| NightlyError::Invalid(format!("encoding {kind}: {e}")))?;
             tracing::debug!(
                 "{kind}: {} sources read in {read_s:.2} s, {} rows encoded in {:.2} s",
                 parts.len(),
-                batch.num_rows(),
+                rows.iter().sum::<usize>(),
                 t.elapsed().as_secs_f64() - read_s
             );
             Ok((*kind, bytes, rows))
