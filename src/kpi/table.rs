@@ -691,8 +691,14 @@ mod tests {
             for (rows, per_group) in [(n, 1 << 20), (n, 1_000), (0, 1_000)] {
                 let part = batch.slice(0, rows);
                 let mut ours = Vec::new();
-                write_row_groups(&mut ours, &part.schema(), &[part.clone()], per_group, codec)
-                    .unwrap();
+                write_row_groups(
+                    &mut ours,
+                    &part.schema(),
+                    std::slice::from_ref(&part),
+                    per_group,
+                    codec,
+                )
+                .unwrap();
                 assert_eq!(
                     ours,
                     arrow_writer_bytes(&part, per_group, codec),
