@@ -246,10 +246,9 @@ const IN_MEMORY_MAX: u64 = 64 << 20;
 ///
 /// The Parquet reader's `File` source clones the descriptor and seeks for
 /// each column chunk it reads, and asks the file's size each time: some
-/// 190 system calls for one run's KPI part, which a night of 4 320 runs
-/// read and checksummed at its commit in 7 s (docs/nightly.md, "Many
-/// runs"). Read whole, a file costs one read, and its checksum is taken
-/// over the same bytes.
+/// 190 system calls for one run's three parts, which a night's commit
+/// makes for every run (docs/nightly.md, "Many runs"). Read whole, a file
+/// costs one read, and its checksum is taken over the same bytes.
 pub(crate) enum ParquetSource {
     Memory(bytes::Bytes),
     File(std::fs::File),

@@ -243,14 +243,12 @@ pub(crate) fn write_batch_to(
     file: impl std::io::Write + Send,
     batch: &RecordBatch,
 ) -> std::io::Result<()> {
-    write_row_groups(
+    write_with(
         file,
         &batch.schema(),
         std::slice::from_ref(batch),
-        parquet::file::properties::DEFAULT_MAX_ROW_GROUP_ROW_COUNT,
         Codec::Zstd,
     )
-    .map_err(std::io::Error::other)
 }
 
 /// [`write_batch_to`] of the rows of `batches` one after the other, under
@@ -262,33 +260,41 @@ pub(crate) fn write_batches_to(
     schema: &arrow_schema::SchemaRef,
     batches: &[RecordBatch],
 ) -> std::io::Result<()> {
-    write_row_groups(
-        file,
-        schema,
-        batches,
-        parquet::file::properties::DEFAULT_MAX_ROW_GROUP_ROW_COUNT,
-        Codec::Zstd,
-    )
-    .map_err(std::io::Error::other)
+    write_with(file, schema, batches, Codec::Zstd)
 }
 
 /// Writes a night's part of one run (`process`'s staging) as LZ4 Parquet.
 ///
 /// The Parquet crate makes a zstd compressor and decompressor for every
 /// column chunk it writes or reads (`ZSTD_createCCtx`, `ZSTD_createDCtx`:
-/// 21 % of a night of 4 320 runs, whose parts hold one to a few thousand
-/// rows in some 200 columns). LZ4 has no context to make; the parts take
-/// some 10 % more disk (docs/nightly.md, "Many runs").
+/// 21 % of a night of 4 320 short runs, whose parts hold a few to a few
+/// thousand rows, the KPI part in 53 columns). LZ4 has no context to make;
+/// the dataset takes some 5 % more disk (docs/nightly.md, "Many runs").
 pub(crate) fn write_part_to(
     file: impl std::io::Write + Send,
     batch: &RecordBatch,
 ) -> std::io::Result<()> {
-    write_row_groups(
+    write_with(
         file,
         &batch.schema(),
         std::slice::from_ref(batch),
-        parquet::file::properties::DEFAULT_MAX_ROW_GROUP_ROW_COUNT,
         Codec::Lz4,
+    )
+}
+
+/// [`write_row_groups`] in row groups of the Parquet crate's default size.
+fn write_with(
+    file: impl std::io::Write + Send,
+    schema: &arrow_schema::SchemaRef,
+    batches: &[RecordBatch],
+    codec: Codec,
+) -> std::io::Result<()> {
+    write_row_groups(
+        file,
+        schema,
+        batches,
+        parquet::file::properties::DEFAULT_MAX_ROW_GROUP_ROW_COUNT,
+        codec,
     )
     .map_err(std::io::Error::other)
 }
