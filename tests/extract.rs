@@ -218,6 +218,51 @@ fn a_damaged_run_fails_alone() {
 /// A run that alone needs more memory than `--memory-limit` is skipped by
 /// name (exit 3) and the others extracted as without a limit; the same on
 /// the GPU engine's pipelined route.
+/// A telemetry file that is a FIFO: opening it waits for a writer, so
+/// before 2026-12-01 the extraction hung there (in the run's memory
+/// estimate). Now the run is skipped, naming the file, and the rest are
+/// extracted (on a timer: a hang fails the test instead of CI).
+#[cfg(unix)]
+#[test]
+fn a_telemetry_file_that_is_a_fifo_is_skipped_not_waited_on() {
+    let dir = tempfile::tempdir().unwrap();
+    sim(dir.path(), Preset::Tiny, 5.0);
+    let season = Season::open(dir.path()).unwrap();
+    let victim = &season.manifest.runs[0];
+    let mcap = dir.path().join(&victim.telemetry);
+    std::fs::remove_file(&mcap).unwrap();
+    let made = std::process::Command::new("mkfifo").arg(&mcap).status();
+    assert!(made.is_ok_and(|s| s.success()), "mkfifo");
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_tirewear"))
+        .args(["--quiet", "--log", "error", "extract", "--engine", "cpu"])
+        .arg(dir.path())
+        .arg("--out")
+        .arg(dir.path().join("k.parquet"))
+        .stdout(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let start = std::time::Instant::now();
+    let status = loop {
+        if let Some(status) = child.try_wait().unwrap() {
+            break status;
+        }
+        if start.elapsed() > std::time::Duration::from_secs(120) {
+            child.kill().unwrap();
+            panic!("extract still waiting on the FIFO after 120 s");
+        }
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    };
+    let mut text = String::new();
+    std::io::Read::read_to_string(&mut child.stdout.take().unwrap(), &mut text).unwrap();
+    assert_eq!(status.code(), Some(3), "{text}");
+    assert!(
+        text.contains(&format!("skipped run {}", victim.id)) && text.contains("not a regular file"),
+        "{text}"
+    );
+    let rows = read_parquet(&dir.path().join("k.parquet")).unwrap();
+    assert_eq!(rows.len(), 4 * (season.manifest.runs.len() - 1));
+}
+
 #[test]
 fn a_run_above_the_memory_limit_is_skipped_alone() {
     let dir = tempfile::tempdir().unwrap();

@@ -256,15 +256,19 @@ pub(crate) enum ParquetSource {
 
 impl ParquetSource {
     /// `path`'s bytes, or the open file when it is larger than
-    /// [`IN_MEMORY_MAX`].
-    pub(crate) fn open(path: &Path) -> std::io::Result<ParquetSource> {
-        let mut file = std::fs::File::open(path)?;
-        let len = file.metadata()?.len();
-        if len > IN_MEMORY_MAX {
+    /// [`IN_MEMORY_MAX`]; an error for what is not a regular file
+    /// (`/dev/zero` has no end, a FIFO's open waits for a writer).
+    pub(crate) fn open(path: &Path) -> crate::ingest::Result<ParquetSource> {
+        let (file, meta) = crate::ingest::open_regular(path)?;
+        if meta.len() > IN_MEMORY_MAX {
             return Ok(ParquetSource::File(file));
         }
-        let mut data = Vec::with_capacity(len as usize);
-        file.read_to_end(&mut data)?;
+        // At most the size just read: a file still being written is not
+        // followed past it.
+        let mut data = Vec::with_capacity(meta.len() as usize);
+        file.take(meta.len())
+            .read_to_end(&mut data)
+            .map_err(|e| crate::ingest::IngestError::io(path, e))?;
         Ok(ParquetSource::Memory(data.into()))
     }
 }
@@ -319,7 +323,7 @@ pub(crate) fn open_parquet(
 ) -> crate::ingest::Result<ParquetRecordBatchReaderBuilder<ParquetSource>> {
     use crate::ingest::IngestError;
     use parquet::file::reader::Length;
-    let source = ParquetSource::open(path).map_err(|e| IngestError::io(path, e))?;
+    let source = ParquetSource::open(path)?;
     let file_len = source.len();
     let data = match &source {
         ParquetSource::Memory(data) => Some(data.clone()),
@@ -453,6 +457,21 @@ mod tests {
             ParquetSource::open(&path).unwrap(),
             ParquetSource::Memory(data) if data.as_ref() == bytes.as_slice()
         ));
+        // Neither a device (`/dev/zero` has no end) nor a FIFO (whose open
+        // waits for a writer: this test would hang) is opened.
+        #[cfg(unix)]
+        {
+            let fifo = dir.path().join("fifo.parquet");
+            let made = std::process::Command::new("mkfifo").arg(&fifo).status();
+            assert!(made.is_ok_and(|s| s.success()), "mkfifo");
+            for path in [Path::new("/dev/zero"), fifo.as_path(), dir.path()] {
+                let e = open_parquet(path).err().expect("refused").to_string();
+                assert!(
+                    e.contains(&path.display().to_string()) && e.contains("not a regular file"),
+                    "{e}"
+                );
+            }
+        }
     }
 
     #[test]

@@ -27,15 +27,7 @@ const MAX_TOML_BYTES: u64 = 64 << 20;
 /// buffered, and the reader stops at `limit` should the file grow meanwhile.
 pub(crate) fn open_bounded(path: &Path, limit: u64) -> Result<std::io::Take<std::fs::File>> {
     use std::io::Read;
-    let file = std::fs::File::open(path).map_err(|e| IngestError::io(path, e))?;
-    let meta = file.metadata().map_err(|e| IngestError::io(path, e))?;
-    if !meta.is_file() {
-        return Err(IngestError::invalid(
-            path,
-            "file",
-            "is not a regular file (a device, FIFO or folder)",
-        ));
-    }
+    let (file, meta) = open_regular(path)?;
     if meta.len() > limit {
         return Err(IngestError::invalid(
             path,
@@ -44,6 +36,32 @@ pub(crate) fn open_bounded(path: &Path, limit: u64) -> Result<std::io::Take<std:
         ));
     }
     Ok(file.take(limit))
+}
+
+/// Opens a regular file for reading, with its metadata. The path's
+/// metadata is read before it is opened: opening a FIFO waits for a
+/// writer, so `season.toml` or a KPI table given as a FIFO hung the
+/// command before its check (2026-12-01); a device or folder is refused
+/// the same way.
+pub(crate) fn open_regular(path: &Path) -> Result<(std::fs::File, std::fs::Metadata)> {
+    let not_regular = || {
+        IngestError::invalid(
+            path,
+            "file",
+            "is not a regular file (a device, FIFO or folder)",
+        )
+    };
+    let stated = std::fs::metadata(path).map_err(|e| IngestError::io(path, e))?;
+    if !stated.is_file() {
+        return Err(not_regular());
+    }
+    let file = std::fs::File::open(path).map_err(|e| IngestError::io(path, e))?;
+    // The file opened: the path may have been replaced since.
+    let meta = file.metadata().map_err(|e| IngestError::io(path, e))?;
+    if !meta.is_file() {
+        return Err(not_regular());
+    }
+    Ok((file, meta))
 }
 
 /// Reads a TOML file into `T`, naming the file in any error.

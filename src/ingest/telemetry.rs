@@ -746,7 +746,7 @@ pub(crate) struct MessageVolume {
 /// The [`MessageVolume`] of the MCAP file at `path`: from its summary, or
 /// by walking its data section where the summary has no chunk index.
 pub(crate) fn message_volume(path: &Path) -> Result<MessageVolume> {
-    let file = File::open(path).map_err(|e| IngestError::io(path, e))?;
+    let (file, _) = crate::ingest::open_regular(path)?;
     // SAFETY: as in `read_indexed`.
     let map = unsafe { memmap2::Mmap::map(&file) }.map_err(|e| IngestError::io(path, e))?;
     let bytes: &[u8] = &map;
@@ -1048,7 +1048,7 @@ fn chunk_records<'a>(
 /// parsing — and returns the uncompressed bytes. `tirewear bench` times it
 /// against [`read_telemetry`] over the same files.
 pub(crate) fn decompress_only(path: &Path) -> Result<u64> {
-    let file = File::open(path).map_err(|e| IngestError::io(path, e))?;
+    let (file, _) = crate::ingest::open_regular(path)?;
     // SAFETY: as in `read_indexed`.
     let map = unsafe { memmap2::Mmap::map(&file) }.map_err(|e| IngestError::io(path, e))?;
     let bytes: &[u8] = &map;
@@ -1078,7 +1078,7 @@ pub(crate) fn decompress_only(path: &Path) -> Result<u64> {
 /// The file's and every chunk's CRCs are checked (where the writer stored them).
 fn read_indexed(path: &Path) -> Result<Option<RunTelemetry>> {
     use rayon::prelude::*;
-    let file = File::open(path).map_err(|e| IngestError::io(path, e))?;
+    let (file, _) = crate::ingest::open_regular(path)?;
     // SAFETY: the map is read-only and the file is not modified while we read it;
     // a concurrent writer could only make us read wrong bytes, which decode as errors.
     let map = unsafe { memmap2::Mmap::map(&file) }.map_err(|e| IngestError::io(path, e))?;
@@ -1329,7 +1329,7 @@ fn check_strings(path: &Path, op: u8, at: usize, body: &[u8]) -> Result<()> {
 /// string lengths where it has none); the summary is not read at all, so a
 /// damaged one cannot derail the reader.
 pub fn read_telemetry_linear(path: &Path) -> Result<RunTelemetry> {
-    let file = File::open(path).map_err(|e| IngestError::io(path, e))?;
+    let (file, _) = crate::ingest::open_regular(path)?;
     // SAFETY: as in `read_indexed`.
     let map = unsafe { memmap2::Mmap::map(&file) }.map_err(|e| IngestError::io(path, e))?;
     let bytes: &[u8] = &map;

@@ -170,7 +170,7 @@ pub fn unit(column: &str) -> &'static str {
 /// Column names of a KPI Parquet file with their `unit` metadata (None when
 /// the file does not state one, e.g. a table written by another tool).
 pub fn read_units(path: &Path) -> Result<Vec<(String, Option<String>)>, IngestError> {
-    let file = std::fs::File::open(path).map_err(|e| IngestError::io(path, e))?;
+    let (file, _) = crate::ingest::open_regular(path)?;
     let builder = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file)
         .map_err(|e| parquet_err(path, e))?;
     Ok(builder
@@ -214,7 +214,7 @@ pub(crate) fn with_extraction_id(batch: RecordBatch, extraction_id: &str) -> Rec
 /// The extraction id a Parquet file was written with (None for files from
 /// before ids, or from another tool).
 pub fn read_extraction_id(path: &Path) -> Result<Option<String>, IngestError> {
-    let file = std::fs::File::open(path).map_err(|e| IngestError::io(path, e))?;
+    let (file, _) = crate::ingest::open_regular(path)?;
     let builder = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file)
         .map_err(|e| parquet_err(path, e))?;
     Ok(builder.schema().metadata().get(EXTRACTION_ID_KEY).cloned())

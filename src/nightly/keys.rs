@@ -43,6 +43,13 @@ impl FileHashes {
             return Ok(s.blake3.clone());
         }
         let meta = std::fs::metadata(path).map_err(NightlyError::io(path))?;
+        if !meta.is_file() {
+            // A FIFO's open waits for a writer; a device has no end to hash.
+            return Err(NightlyError::Invalid(format!(
+                "{}: is not a regular file (a device, FIFO or folder)",
+                path.display()
+            )));
+        }
         let mtime_ns = meta
             .modified()
             .ok()

@@ -349,7 +349,9 @@ fn part_damage(path: &Path, rows: Option<usize>) -> Option<String> {
     use parquet::file::reader::Length;
     let source = match ParquetSource::open(path) {
         Ok(f) => f,
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Some("missing".into()),
+        Err(IngestError::Io { source, .. }) if source.kind() == std::io::ErrorKind::NotFound => {
+            return Some("missing".into());
+        }
         Err(e) => return Some(format!("cannot be opened: {e}")),
     };
     let meta = match parquet::file::metadata::ParquetMetaDataReader::new().parse_and_finish(&source)
