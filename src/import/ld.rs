@@ -165,6 +165,13 @@ pub(crate) fn read_ldx(path: &Path) -> Result<Option<Ldx>, ImportError> {
     let Ok(meta) = std::fs::metadata(path) else {
         return Ok(None);
     };
+    if !meta.is_file() {
+        return Err(ImportError::log(
+            path,
+            "file",
+            "is not a regular file (a device, FIFO or folder)",
+        ));
+    }
     if meta.len() > MAX_LDX_BYTES {
         return Err(ImportError::log(
             path,

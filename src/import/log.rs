@@ -67,9 +67,16 @@ const MAX_LOG_BYTES: u64 = 8 << 30;
 /// `.csv`; a CSV whose first cell is `Format` and second `MoTeC CSV File` is
 /// a MoTeC export).
 pub fn read_log(path: &Path) -> Result<RawLog, ImportError> {
-    let len = std::fs::metadata(path)
-        .map_err(|e| ImportError::io(path, e))?
-        .len();
+    let meta = std::fs::metadata(path).map_err(|e| ImportError::io(path, e))?;
+    if !meta.is_file() {
+        // A FIFO's open waits for a writer; a device has no end.
+        return Err(ImportError::log(
+            path,
+            "file",
+            "is not a regular file (a device, FIFO or folder)",
+        ));
+    }
+    let len = meta.len();
     if len > MAX_LOG_BYTES {
         return Err(ImportError::log(
             path,
@@ -399,6 +406,31 @@ pub(crate) fn read_parquet(path: &Path) -> Result<RawLog, ImportError> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A log or sidecar that is a FIFO (whose open waits for a writer), a
+    /// device or a folder is refused by name, not opened.
+    #[cfg(unix)]
+    #[test]
+    fn a_log_that_is_no_regular_file_is_refused_not_opened() {
+        let dir = tempfile::tempdir().unwrap();
+        let fifo = dir.path().join("X.ld");
+        let made = std::process::Command::new("mkfifo").arg(&fifo).status();
+        assert!(made.is_ok_and(|s| s.success()), "mkfifo");
+        let folder = dir.path().join("Y.csv");
+        std::fs::create_dir(&folder).unwrap();
+        for path in [fifo.as_path(), Path::new("/dev/zero"), folder.as_path()] {
+            let e = read_log(path).err().expect("refused").to_string();
+            assert!(
+                e.contains(&path.display().to_string()) && e.contains("not a regular file"),
+                "{e}"
+            );
+        }
+        let sidecar = dir.path().join("X.ldx");
+        let made = std::process::Command::new("mkfifo").arg(&sidecar).status();
+        assert!(made.is_ok_and(|s| s.success()), "mkfifo");
+        let e = super::super::ld::read_ldx(&sidecar).err().expect("refused");
+        assert!(e.to_string().contains("not a regular file"), "{e}");
+    }
 
     #[test]
     fn dates_and_times_by_hand() {
