@@ -419,7 +419,7 @@ mod tests {
         let folder = dir.path().join("Y.csv");
         std::fs::create_dir(&folder).unwrap();
         for path in [fifo.as_path(), Path::new("/dev/zero"), folder.as_path()] {
-            let e = read_log(path).err().expect("refused").to_string();
+            let e = read_log(path).expect_err("refused").to_string();
             assert!(
                 e.contains(&path.display().to_string()) && e.contains("not a regular file"),
                 "{e}"
@@ -428,7 +428,7 @@ mod tests {
         let sidecar = dir.path().join("X.ldx");
         let made = std::process::Command::new("mkfifo").arg(&sidecar).status();
         assert!(made.is_ok_and(|s| s.success()), "mkfifo");
-        let e = super::super::ld::read_ldx(&sidecar).err().expect("refused");
+        let e = super::super::ld::read_ldx(&sidecar).expect_err("refused");
         assert!(e.to_string().contains("not a regular file"), "{e}");
     }
 
