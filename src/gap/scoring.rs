@@ -377,7 +377,7 @@ impl Permutations {
 /// [`Permutations`] drawn one at a time from their seeded stream, so that
 /// the permuted residuals are built without every permutation's row
 /// indices held at once: 8 bytes per row and permutation, as much as the
-/// residuals themselves (docs/gap.md, "Memory").
+/// residuals themselves (docs/gap.md, "Memory, by season size").
 struct PermutationStream {
     classes: Vec<UnitClass>,
     rng: rand_chacha::ChaCha8Rng,
