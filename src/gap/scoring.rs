@@ -2364,6 +2364,25 @@ mod tests {
         assert!(rate(2) >= 0.9, "every car, sides swapped: {reject:?}");
     }
 
+    /// [`layout`]'s whole-run exchange, the orthonormal basis of its cells,
+    /// and standard normal residuals drawn from `rng` with the basis
+    /// projected out.
+    fn layout_residuals(
+        rng: &mut rand_chacha::ChaCha8Rng,
+    ) -> (Vec<Exchange>, Vec<Vec<f64>>, Vec<f64>) {
+        use rand::Rng;
+        use rand_distr::StandardNormal;
+        let (cells, whole_runs) = layout();
+        let refs: Vec<&[f64]> = cells.iter().map(|c| c.as_slice()).collect();
+        let all: Vec<usize> = (0..LAYOUT_ROWS).collect();
+        let q = orthonormal_basis(&refs, &all);
+        let mut e: Vec<f64> = (0..LAYOUT_ROWS)
+            .map(|_| rng.sample(StandardNormal))
+            .collect();
+        project_out(&q, &mut e);
+        (whole_runs, q, e)
+    }
+
     #[test]
     fn a_term_s_permuted_statistic_is_the_larger_of_its_two_parts() {
         // A candidate with one car's scope and one spanning every car: each
@@ -2372,13 +2391,8 @@ mod tests {
         use rand::Rng;
         use rand_distr::StandardNormal;
         let n = LAYOUT_ROWS;
-        let (cells, whole_runs) = layout();
-        let refs: Vec<&[f64]> = cells.iter().map(|c| c.as_slice()).collect();
-        let all: Vec<usize> = (0..n).collect();
-        let q = orthonormal_basis(&refs, &all);
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
-        let mut e: Vec<f64> = (0..n).map(|_| rng.sample(StandardNormal)).collect();
-        project_out(&q, &mut e);
+        let (whole_runs, q, e) = layout_residuals(&mut rng);
         let columns: Vec<Vec<f64>> = (0..2)
             .map(|_| (0..n).map(|_| rng.sample(StandardNormal)).collect())
             .collect();
@@ -2416,16 +2430,9 @@ mod tests {
         // rounds from one stream: 2·DRAW_BLOCK + 45 permutations drawn as
         // DRAW_BLOCK + 7 and then the rest must give the rows that
         // collecting them all and permuting by each gives, bit for bit.
-        use rand::Rng;
-        use rand_distr::StandardNormal;
         let n = LAYOUT_ROWS;
-        let (cells, whole_runs) = layout();
-        let refs: Vec<&[f64]> = cells.iter().map(|c| c.as_slice()).collect();
-        let all: Vec<usize> = (0..n).collect();
-        let q = orthonormal_basis(&refs, &all);
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(17);
-        let mut e: Vec<f64> = (0..n).map(|_| rng.sample(StandardNormal)).collect();
-        project_out(&q, &mut e);
+        let (whole_runs, q, e) = layout_residuals(&mut rng);
         let count = 2 * DRAW_BLOCK + 45;
         let first = DRAW_BLOCK + 7;
         for exchange in [Exchangeable::Runs, Exchangeable::RunsAndSides] {

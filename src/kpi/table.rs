@@ -243,12 +243,7 @@ pub(crate) fn write_batch_to(
     file: impl std::io::Write + Send,
     batch: &RecordBatch,
 ) -> std::io::Result<()> {
-    write_with(
-        file,
-        &batch.schema(),
-        std::slice::from_ref(batch),
-        Codec::Zstd,
-    )
+    write_batches_to(file, &batch.schema(), std::slice::from_ref(batch))
 }
 
 /// [`write_batch_to`] of the rows of `batches` one after the other, under
