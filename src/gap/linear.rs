@@ -142,6 +142,16 @@ impl Cholesky {
 /// rows, O(n·p), instead of a new fit, O(n·p²): with the tracks' scale
 /// columns p is about 20, and these fits were two thirds of a diagnosis.
 pub(crate) struct BaseFit {
+    fit: FactoredFit,
+    /// The rows of the fit, in order, with `y` on each.
+    rows: Vec<(usize, f64)>,
+    /// The base columns on those rows.
+    columns: BaseColumns,
+}
+
+/// A base fit's normal equations, factored: what the fit with one more
+/// column needs besides that column's products with the rows.
+struct FactoredFit {
     gram: Cholesky,
     /// Coefficients of the base fit.
     k0: Vec<f64>,
@@ -149,25 +159,64 @@ pub(crate) struct BaseFit {
     sse0: f64,
     /// The largest squared column norm (the scale of `Cholesky`'s tests).
     scale: f64,
-    /// The rows of the fit, in order, with `y` on each.
-    rows: Vec<(usize, f64)>,
-    /// The base columns on those rows.
-    columns: BaseColumns,
 }
 
-impl BaseFit {
-    pub fn new(cols: &[&[f64]], y: &[f64], idx: &[usize]) -> BaseFit {
+impl FactoredFit {
+    fn new(cols: &[&[f64]], y: &[f64], idx: &[usize]) -> FactoredFit {
         let (g, b) = normal_equations(cols, y, idx);
         let p = cols.len();
         let scale = (0..p).map(|a| g[a * p + a]).fold(0.0, f64::max);
         let gram = Cholesky::new(&g, p);
         let k0 = gram.solve(&b);
         let sse0 = idx.iter().map(|&i| residual(cols, &k0, y, i).powi(2)).sum();
-        BaseFit {
+        FactoredFit {
             gram,
             k0,
             sse0,
             scale,
+        }
+    }
+
+    /// Whether a column of squared norm `xx` gets a coefficient (`lstsq`
+    /// pins it to 0 at most 1e-14 of the largest column's).
+    fn takes(&self, xx: f64) -> bool {
+        xx > 1e-14 * self.scale.max(xx)
+    }
+
+    /// The fit with a column x given by its products over the fit's rows,
+    /// x·x, x·y and Xᵀx (`xb`): its coefficient c and the sum of squared
+    /// residuals, β = G⁻¹Xᵀx left in `beta` ([`BaseFit::with_column_in`]
+    /// has the algebra).
+    fn with_products(
+        &self,
+        xx: f64,
+        xy: f64,
+        xb: &[f64],
+        beta: &mut Vec<f64>,
+    ) -> Option<(f64, f64)> {
+        if !self.takes(xx) {
+            return None;
+        }
+        self.gram.solve_into(xb, beta);
+        let perp = (xx - dot(xb, beta)).max(0.0);
+        // x⊥·r₀ = x·r₀ (r₀ ⟂ the base) = x·y − (Xᵀx)·k₀.
+        let xr = xy - dot(xb, &self.k0);
+        let c = xr / perp.max(1e-12 * xx);
+        Some((c, self.sse0 - 2.0 * c * xr + c * c * perp))
+    }
+
+    /// The coefficients with the term (last, `c`), from its β: k₀ − c·β, then c.
+    fn coefficients(&self, beta: &[f64], c: f64) -> Vec<f64> {
+        let mut k: Vec<f64> = self.k0.iter().zip(beta).map(|(k, b)| k - c * b).collect();
+        k.push(c);
+        k
+    }
+}
+
+impl BaseFit {
+    pub fn new(cols: &[&[f64]], y: &[f64], idx: &[usize]) -> BaseFit {
+        BaseFit {
+            fit: FactoredFit::new(cols, y, idx),
             rows: idx.iter().map(|&i| (i, y[i])).collect(),
             columns: BaseColumns::new(cols, idx),
         }
@@ -175,7 +224,7 @@ impl BaseFit {
 
     /// Coefficients of the base fit.
     pub(crate) fn k0(&self) -> &[f64] {
-        &self.k0
+        &self.fit.k0
     }
 
     /// [`BaseFit::with_column_in`] with the coefficients: the tests'
@@ -184,13 +233,13 @@ impl BaseFit {
     pub(crate) fn with_column(&self, x: &[f64]) -> Option<(Vec<f64>, f64)> {
         let mut scratch = Scratch::default();
         let (c, sse) = self.with_column_in(x, &mut scratch)?;
-        Some((self.coefficients(&scratch.beta, c), sse))
+        Some((self.fit.coefficients(&scratch.beta, c), sse))
     }
 
     /// The fit of `y` on the base columns and `x` (the term last) over the
     /// fit's rows, as [`lstsq`] on all the columns gives it: the term's
     /// coefficient c and the sum of squared residuals, with β = G⁻¹Xᵀx left
-    /// in `scratch.beta` for [`BaseFit::coefficients`]; None when `lstsq`
+    /// in `scratch.beta` for the coefficients (k₀ − c·β); None when `lstsq`
     /// would pin `x`'s coefficient to 0 (its squared norm at most 1e-14 of
     /// the largest column's). By the partitioned normal equations:
     /// x⊥ = x − Xβ, c = x⊥·r₀ / |x⊥|² (|x⊥|² floored at 1e-12·|x|²,
@@ -206,24 +255,185 @@ impl BaseFit {
             beta,
         } = scratch;
         let (xx, xy) = nonzero_rows(&self.rows, x, nonzero, ys);
-        if xx <= 1e-14 * self.scale.max(xx) {
+        if !self.fit.takes(xx) {
             return None;
         }
         self.columns.cross_products_into(x, nonzero, xb);
-        self.gram.solve_into(xb, beta);
-        let perp = (xx - dot(xb, beta)).max(0.0);
-        // x⊥·r₀ = x·r₀ (r₀ ⟂ the base) = x·y − (Xᵀx)·k₀.
-        let xr = xy - dot(xb, &self.k0);
-        let c = xr / perp.max(1e-12 * xx);
-        Some((c, self.sse0 - 2.0 * c * xr + c * c * perp))
+        self.fit.with_products(xx, xy, xb, beta)
+    }
+}
+
+/// The best of the columns offered to a fit in turn (each threshold of a
+/// candidate): the smallest SSE, the first of equal ones, the coefficient
+/// positive where `positive_only`.
+#[derive(Default)]
+pub(crate) struct BestColumn {
+    /// (column, its coefficient, SSE).
+    best: Option<(usize, f64, f64)>,
+    /// The best one's β = G⁻¹Xᵀx.
+    beta: Vec<f64>,
+}
+
+impl BestColumn {
+    /// Offers column `t`'s fit (`c`, `sse`, β in `beta`); where it is the
+    /// best so far, its β is kept (swapped with `beta`'s buffer).
+    pub(crate) fn offer(
+        &mut self,
+        t: usize,
+        fit: Option<(f64, f64)>,
+        beta: &mut Vec<f64>,
+        positive_only: bool,
+    ) {
+        let Some((c, sse)) = fit else {
+            return;
+        };
+        if positive_only && c <= 0.0 {
+            return;
+        }
+        if self.best.is_none_or(|b| sse < b.2) {
+            self.best = Some((t, c, sse));
+            std::mem::swap(&mut self.beta, beta);
+        }
     }
 
-    /// The coefficients with the term (last, `c`), from the β that
-    /// [`BaseFit::with_column_in`] left: k₀ − c·β, then c.
-    pub(crate) fn coefficients(&self, beta: &[f64], c: f64) -> Vec<f64> {
-        let mut k: Vec<f64> = self.k0.iter().zip(beta).map(|(k, b)| k - c * b).collect();
-        k.push(c);
-        k
+    /// The best column and the coefficients of its fit (the term last).
+    fn chosen(self, fit: &FactoredFit) -> Option<(usize, Vec<f64>)> {
+        self.best
+            .map(|(t, c, _)| (t, fit.coefficients(&self.beta, c)))
+    }
+
+    /// [`BestColumn::chosen`] for a [`BaseFit`].
+    pub(crate) fn chosen_in(self, fit: &BaseFit) -> Option<(usize, Vec<f64>)> {
+        self.chosen(&fit.fit)
+    }
+}
+
+/// The base fits that each leave one group of rows out (the
+/// cross-validation folds), scanned together for an added column. One pass
+/// over the rows gives each group's products with x (x·x, x·y and every
+/// column's), and a fold's products are the sums of the other groups'.
+/// A fit per fold, each passing over its own rows, cost F passes for F
+/// folds: with a season's twelve tracks that was a third of a diagnosis,
+/// and it grew faster than the rows (docs/gap.md, "Time, by season
+/// size"). The sums are taken in another order than a pass over the
+/// fold's rows, so they agree with [`BaseFit::with_column_in`] to
+/// rounding, not bit for bit (tested).
+pub(crate) struct LeaveGroupOut {
+    /// The groups' rows, in order (a partition of the rows).
+    groups: Vec<Vec<usize>>,
+    y: Vec<f64>,
+    /// Each column's entries that are not 0, group by group in row order:
+    /// column u's on group g at `ranges[u · groups + g]`.
+    entries: Vec<(usize, f64)>,
+    ranges: Vec<std::ops::Range<usize>>,
+    /// Each fold (group g left out): its fit on the other groups' rows and
+    /// the columns it takes, in its order, as indices of the columns given.
+    folds: Vec<(FactoredFit, Vec<usize>)>,
+}
+
+impl LeaveGroupOut {
+    /// The folds of `groups` (a partition of the rows of `columns` and `y`),
+    /// the fold leaving group g out fitted on the columns `takes[g]`.
+    pub(crate) fn new(
+        columns: &[&[f64]],
+        y: &[f64],
+        groups: &[Vec<usize>],
+        takes: &[Vec<usize>],
+    ) -> LeaveGroupOut {
+        let n = y.len();
+        let mut entries = Vec::new();
+        let mut ranges = Vec::with_capacity(columns.len() * groups.len());
+        for c in columns {
+            for g in groups {
+                let start = entries.len();
+                entries.extend(g.iter().map(|&i| (i, c[i])).filter(|&(_, v)| v != 0.0));
+                ranges.push(start..entries.len());
+            }
+        }
+        let folds = groups
+            .iter()
+            .zip(takes)
+            .map(|(test, takes)| {
+                let mut out = vec![false; n];
+                test.iter().for_each(|&i| out[i] = true);
+                let train: Vec<usize> = (0..n).filter(|&i| !out[i]).collect();
+                let cols: Vec<&[f64]> = takes.iter().map(|&u| columns[u]).collect();
+                (FactoredFit::new(&cols, y, &train), takes.clone())
+            })
+            .collect();
+        LeaveGroupOut {
+            groups: groups.to_vec(),
+            y: y.to_vec(),
+            entries,
+            ranges,
+            folds,
+        }
+    }
+
+    /// The columns the fold leaving group `g` out takes.
+    pub(crate) fn takes(&self, g: usize) -> &[usize] {
+        &self.folds[g].1
+    }
+
+    /// The base coefficients of the fold leaving group `g` out.
+    pub(crate) fn k0(&self, g: usize) -> &[f64] {
+        &self.folds[g].0.k0
+    }
+
+    /// For each fold, the best of the columns `x` ([`BestColumn`]) and the
+    /// coefficients of its fit (term last): what [`BaseFit::with_column_in`]
+    /// on each fold's own fit would choose, to rounding.
+    pub(crate) fn best_columns(
+        &self,
+        x: &[Vec<f64>],
+        positive_only: bool,
+    ) -> Vec<Option<(usize, Vec<f64>)>> {
+        let ng = self.groups.len();
+        let nu = self.ranges.len() / ng.max(1);
+        // Per group: x·x, x·y, then each column's product with x.
+        let mut by_group = vec![0.0; ng * (2 + nu)];
+        let mut best: Vec<BestColumn> = (0..ng).map(|_| BestColumn::default()).collect();
+        let (mut xb, mut beta) = (Vec::new(), Vec::new());
+        for (t, xt) in x.iter().enumerate() {
+            for (g, rows) in self.groups.iter().enumerate() {
+                let (mut xx, mut xy) = (0.0, 0.0);
+                for &i in rows {
+                    xx += xt[i] * xt[i];
+                    xy += xt[i] * self.y[i];
+                }
+                by_group[g * (2 + nu)] = xx;
+                by_group[g * (2 + nu) + 1] = xy;
+            }
+            for u in 0..nu {
+                for g in 0..ng {
+                    let range = self.ranges[u * ng + g].clone();
+                    let p: f64 = self.entries[range].iter().map(|&(i, v)| xt[i] * v).sum();
+                    by_group[g * (2 + nu) + 2 + u] = p;
+                }
+            }
+            // A fold's product k: the sum over the other groups.
+            let others = |left_out: usize, k: usize| -> f64 {
+                (0..ng)
+                    .filter(|&g| g != left_out)
+                    .map(|g| by_group[g * (2 + nu) + k])
+                    .sum()
+            };
+            for (g, ((fit, takes), best)) in self.folds.iter().zip(&mut best).enumerate() {
+                let (xx, xy) = (others(g, 0), others(g, 1));
+                let chosen = if fit.takes(xx) {
+                    xb.clear();
+                    xb.extend(takes.iter().map(|&u| others(g, 2 + u)));
+                    fit.with_products(xx, xy, &xb, &mut beta)
+                } else {
+                    None
+                };
+                best.offer(t, chosen, &mut beta, positive_only);
+            }
+        }
+        best.into_iter()
+            .zip(&self.folds)
+            .map(|(b, (fit, _))| b.chosen(fit))
+            .collect()
     }
 }
 
@@ -705,7 +915,7 @@ mod tests {
                 let (k, sse) = fit.with_column(&term).unwrap();
                 let (c, sse_in) = fit.with_column_in(&term, &mut scratch).unwrap();
                 assert_eq!(sse.to_bits(), sse_in.to_bits());
-                assert_eq!(bits(&k), bits(&fit.coefficients(&scratch.beta, c)));
+                assert_eq!(bits(&k), bits(&fit.fit.coefficients(&scratch.beta, c)));
             }
         }
     }
@@ -754,5 +964,112 @@ mod tests {
         assert_eq!(lstsq(&[&a, &b, &tiny], &y, &idx)[2], 0.0);
         let outside: Vec<f64> = (0..30).map(|i| if i >= 25 { 1.0 } else { 0.0 }).collect();
         assert!(fit.with_column(&outside).is_none());
+    }
+
+    #[test]
+    fn folds_scanned_together_choose_as_each_folds_own_fit() {
+        // Six groups of 40 rows, scattered; dense columns and cell-like
+        // ones (0 off one group), each fold taking its own subset of them.
+        // Each fold's choice among the thresholds, and its coefficients,
+        // against each fold's own BaseFit scanned with `best_threshold`'s
+        // rule and against lstsq on the fold's columns and the chosen
+        // term. The thresholds include a column 0 on every row, one 0 off
+        // one group (so 0 on that fold's rows: no fit there), and ones
+        // whose coefficient is negative, which `positive_only` refuses.
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand::rngs::StdRng::seed_from_u64(11);
+        let (n, ng) = (240, 6);
+        let group_of: Vec<usize> = (0..n).map(|i| (i * 7) % ng).collect();
+        let groups: Vec<Vec<usize>> = (0..ng)
+            .map(|g| (0..n).filter(|&i| group_of[i] == g).collect())
+            .collect();
+        let mut cols: Vec<Vec<f64>> = (0..3)
+            .map(|_| (0..n).map(|_| rng.random_range(0.5..2.0)).collect())
+            .collect();
+        for g in 0..ng {
+            let b: Vec<f64> = (0..n)
+                .map(|i| {
+                    if group_of[i] == g {
+                        rng.random_range(0.8..1.2)
+                    } else {
+                        0.0
+                    }
+                })
+                .collect();
+            cols.push(b);
+        }
+        let y: Vec<f64> = (0..n)
+            .map(|i| cols[0][i] + 0.5 * cols[1][i] + rng.random_range(-0.3..0.3))
+            .collect();
+        // Fold g takes the dense columns and every other group's cell but
+        // the first of them (as the track cells do).
+        let takes: Vec<Vec<usize>> = (0..ng)
+            .map(|g| {
+                let cells = (0..ng).filter(|&h| h != g).skip(1).map(|h| 3 + h);
+                (0..3).chain(cells).collect()
+            })
+            .collect();
+        let refs: Vec<&[f64]> = cols.iter().map(|c| c.as_slice()).collect();
+        let folds = LeaveGroupOut::new(&refs, &y, &groups, &takes);
+        let mut x: Vec<Vec<f64>> = (0..5)
+            .map(|t| {
+                (0..n)
+                    .map(|i| {
+                        let v: f64 = rng.random_range(0.0..1.0);
+                        if v < 0.2 * t as f64 {
+                            0.0
+                        } else {
+                            v * cols[2][i]
+                        }
+                    })
+                    .collect()
+            })
+            .collect();
+        x.push(vec![0.0; n]);
+        x.push(
+            (0..n)
+                .map(|i| if group_of[i] == 2 { 1.0 } else { 0.0 })
+                .collect(),
+        );
+        x.push(y.iter().map(|v| -v).collect());
+        for positive_only in [false, true] {
+            let together = folds.best_columns(&x, positive_only);
+            for (g, chosen) in together.iter().enumerate() {
+                let train: Vec<usize> = (0..n).filter(|&i| group_of[i] != g).collect();
+                let own: Vec<&[f64]> = takes[g].iter().map(|&u| refs[u]).collect();
+                let fit = BaseFit::new(&own, &y, &train);
+                let (mut best, mut scratch) = (BestColumn::default(), Scratch::default());
+                for (t, xt) in x.iter().enumerate() {
+                    let c = fit.with_column_in(xt, &mut scratch);
+                    best.offer(t, c, &mut scratch.beta, positive_only);
+                }
+                let (t, k) = chosen.as_ref().expect("a threshold fits");
+                let (t_own, k_own) = best.chosen_in(&fit).unwrap();
+                assert_eq!(*t, t_own, "fold {g}");
+                assert_ne!(*t, 5, "the zero column is never chosen");
+                assert!(
+                    !(g == 2 && *t == 6),
+                    "a column 0 on the fold's rows has no fit"
+                );
+                let mut with: Vec<&[f64]> = own.clone();
+                with.push(&x[*t]);
+                let want = lstsq(&with, &y, &train);
+                for ((a, b), w) in k.iter().zip(&k_own).zip(&want) {
+                    assert!(
+                        (a - b).abs() < 1e-10 * (1.0 + b.abs()),
+                        "fold {g}: {k:?} vs {k_own:?}"
+                    );
+                    assert!(
+                        (a - w).abs() < 1e-8 * (1.0 + w.abs()),
+                        "fold {g}: {k:?} vs lstsq {want:?}"
+                    );
+                }
+                if positive_only {
+                    assert!(k[k.len() - 1] > 0.0);
+                } else {
+                    assert_eq!(*t, 7, "−y fits y exactly");
+                }
+            }
+        }
     }
 }

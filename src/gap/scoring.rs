@@ -34,8 +34,8 @@ use super::candidates::{
     Candidate, Feature, Group, KpiScale, LawRow, band_admissible, candidate_feature, kpi_scale,
 };
 use super::linear::{
-    BaseFit, Scratch, dot, dots, lstsq, orthonormal_basis, project_out_each, residual,
-    residual_with, weighted,
+    BaseFit, BestColumn, LeaveGroupOut, Scratch, dot, dots, lstsq, orthonormal_basis,
+    project_out_each, residual, residual_with, weighted,
 };
 use super::stats::{VarianceComponents, benjamini_hochberg, levels};
 use super::track_test::Severities;
@@ -291,22 +291,12 @@ fn folds(rows: &[&KpiRow]) -> Vec<Vec<usize>> {
 /// index and coefficients (term last); None when no threshold gives an
 /// admissible coefficient.
 fn best_threshold(fit: &BaseFit, x: &[Vec<f64>], positive_only: bool) -> Option<(usize, Vec<f64>)> {
-    // (threshold, term's coefficient, SSE); the best one's β in `best_beta`.
-    let mut best: Option<(usize, f64, f64)> = None;
-    let (mut scratch, mut best_beta) = (Scratch::default(), Vec::new());
+    let (mut best, mut scratch) = (BestColumn::default(), Scratch::default());
     for (t, xt) in x.iter().enumerate() {
-        let Some((c, sse)) = fit.with_column_in(xt, &mut scratch) else {
-            continue;
-        };
-        if positive_only && c <= 0.0 {
-            continue;
-        }
-        if best.is_none_or(|b| sse < b.2) {
-            best = Some((t, c, sse));
-            std::mem::swap(&mut best_beta, &mut scratch.beta);
-        }
+        let chosen = fit.with_column_in(xt, &mut scratch);
+        best.offer(t, chosen, &mut scratch.beta, positive_only);
     }
-    best.map(|(t, c, _)| (t, fit.coefficients(&best_beta, c)))
+    best.chosen_in(fit)
 }
 
 /// Where a row sits for the permutation test: rows of one `unit` move
@@ -920,31 +910,48 @@ pub(super) fn track_cells<'r>(
     b: &[f64],
     idx: &[usize],
 ) -> (Vec<(Axle, &'r str)>, Vec<Vec<f64>>) {
+    let kept = kept_cells(rows, idx);
+    let out = kept
+        .iter()
+        .map(|&cell| cell_column(rows, b, cell))
+        .collect();
+    (kept, out)
+}
+
+/// The (axle, track) cells of the rows `idx`, sorted: all of them, or
+/// those [`track_cells`] keeps (`but_first`: each axle's first left out).
+fn cells<'r>(rows: &[&'r KpiRow], idx: &[usize], but_first: bool) -> Vec<(Axle, &'r str)> {
     let mut cells: Vec<(Axle, &str)> = idx
         .iter()
         .map(|&i| (rows[i].axle, rows[i].track.as_str()))
         .collect();
     cells.sort();
     cells.dedup();
-    let mut kept = Vec::new();
-    let mut out = Vec::new();
-    for (k, (axle, track)) in cells.iter().enumerate() {
-        if k > 0 && cells[k - 1].0 == *axle {
-            kept.push((*axle, *track));
-            out.push(
-                (0..rows.len())
-                    .map(|i| {
-                        if rows[i].track == *track && rows[i].axle == *axle {
-                            b[i]
-                        } else {
-                            0.0
-                        }
-                    })
-                    .collect(),
-            );
-        }
+    if !but_first {
+        return cells;
     }
-    (kept, out)
+    (0..cells.len())
+        .filter(|&k| k > 0 && cells[k - 1].0 == cells[k].0)
+        .map(|k| cells[k])
+        .collect()
+}
+
+/// The cells [`track_cells`] gives columns to.
+fn kept_cells<'r>(rows: &[&'r KpiRow], idx: &[usize]) -> Vec<(Axle, &'r str)> {
+    cells(rows, idx, true)
+}
+
+/// The scale column of one (axle, track) cell: b on its rows, 0 elsewhere.
+fn cell_column(rows: &[&KpiRow], b: &[f64], (axle, track): (Axle, &str)) -> Vec<f64> {
+    (0..rows.len())
+        .map(|i| {
+            if rows[i].track == track && rows[i].axle == axle {
+                b[i]
+            } else {
+                0.0
+            }
+        })
+        .collect()
 }
 
 /// The base columns that are not constant within tracks (`track_level[j]`
@@ -958,17 +965,13 @@ pub(super) fn varying_within_tracks(base: &[Vec<f64>], track_level: &[bool]) -> 
         .collect()
 }
 
-/// One cross-validation fold of a null model: its columns and their fit
-/// on the training rows (which the fit keeps).
-struct Fold {
-    cols: Vec<Vec<f64>>,
-    fit: BaseFit,
-}
-
-/// A null model: its columns and fit per fold and its fit on all rows, on
-/// its own scale (`y` and every column through `whitening` when it has one).
+/// A null model: its fits leaving each cross-validation group out, on
+/// `columns` (the base columns, then with track scales every track cell's),
+/// and its fit on all rows, on its own scale (`y` and every column through
+/// `whitening` when it has one).
 struct Null {
-    folds: Vec<Fold>,
+    columns: Vec<Vec<f64>>,
+    folds: LeaveGroupOut,
     fit: BaseFit,
     q: Vec<Vec<f64>>,
     e0: Vec<f64>,
@@ -991,34 +994,56 @@ impl Null {
             Some(w) => w.apply(v),
             None => v.to_vec(),
         };
-        let with_tracks = |idx: &[usize]| -> Vec<Vec<f64>> {
-            let mut c = base.to_vec();
-            if let Some(b) = track_scale {
-                c.extend(track_cells(rows, b, idx).1);
-            }
-            c.iter().map(|v| on_scale(v)).collect()
+        // A fold takes the base and the cells `track_cells` keeps on its
+        // training rows: the held-out track's are 0 there, and where it
+        // was an axle's first, the next track's cell is left out instead.
+        let every_cell = match track_scale {
+            Some(_) => cells(rows, &all, false),
+            None => Vec::new(),
         };
+        let takes = |idx: &[usize]| -> Vec<usize> {
+            let kept = match track_scale {
+                Some(_) => kept_cells(rows, idx),
+                None => Vec::new(),
+            };
+            let cell = |c| {
+                base.len()
+                    + every_cell
+                        .iter()
+                        .position(|e| *e == c)
+                        .expect("a cell of the rows")
+            };
+            (0..base.len()).chain(kept.into_iter().map(cell)).collect()
+        };
+        let columns: Vec<Vec<f64>> = match track_scale {
+            Some(b) => base
+                .iter()
+                .cloned()
+                .chain(every_cell.iter().map(|&c| cell_column(rows, b, c)))
+                .map(|v| on_scale(&v))
+                .collect(),
+            None => base.iter().map(|v| on_scale(v)).collect(),
+        };
+        let refs: Vec<&[f64]> = columns.iter().map(|c| c.as_slice()).collect();
         let y = on_scale(y);
         let y = y.as_slice();
-        let folds = groups
+        let fold_takes: Vec<Vec<usize>> = groups
             .iter()
             .map(|test| {
                 let train: Vec<usize> = all.iter().copied().filter(|i| !test.contains(i)).collect();
-                let cols = with_tracks(&train);
-                let refs: Vec<&[f64]> = cols.iter().map(|c| c.as_slice()).collect();
-                let fit = BaseFit::new(&refs, y, &train);
-                Fold { cols, fit }
+                takes(&train)
             })
             .collect();
-        let cols = with_tracks(&all);
-        let refs: Vec<&[f64]> = cols.iter().map(|c| c.as_slice()).collect();
-        let q = orthonormal_basis(&refs, &all);
-        let fit = BaseFit::new(&refs, y, &all);
+        let folds = LeaveGroupOut::new(&refs, y, groups, &fold_takes);
+        let full: Vec<&[f64]> = takes(&all).into_iter().map(|u| refs[u]).collect();
+        let q = orthonormal_basis(&full, &all);
+        let fit = BaseFit::new(&full, y, &all);
         let e0 = all
             .iter()
-            .map(|&i| residual(&refs, fit.k0(), y, i))
+            .map(|&i| residual(&full, fit.k0(), y, i))
             .collect();
         Null {
+            columns,
             folds,
             fit,
             q,
@@ -1054,10 +1079,15 @@ fn cv_gain(
     let x = &null.columns(x);
     let y = null.y.as_slice();
     let mut by_fold = Vec::with_capacity(groups.len());
-    for (test, fold) in groups.iter().zip(&null.folds) {
-        let base: Vec<&[f64]> = fold.cols.iter().map(|c| c.as_slice()).collect();
-        let fit = best_threshold(&fold.fit, x, positive);
-        let k0 = fold.fit.k0();
+    let best = null.folds.best_columns(x, positive);
+    for (g, (test, fit)) in groups.iter().zip(best).enumerate() {
+        let base: Vec<&[f64]> = null
+            .folds
+            .takes(g)
+            .iter()
+            .map(|&u| null.columns[u].as_slice())
+            .collect();
+        let k0 = null.folds.k0(g);
         let (r0, r1): (Vec<f64>, Vec<f64>) = test
             .iter()
             .map(|&i| {
@@ -1204,24 +1234,42 @@ pub(crate) fn rank(
                 .iter()
                 .map(|sc| sc.band_energy(rows, problem.maps))
                 .collect();
-            let x: Vec<Vec<f64>> = scopes
+            let columns: Vec<(&Candidate, f64)> = scopes
                 .iter()
-                .zip(&bands)
-                .flat_map(|(sc, b)| c.thresholds.iter().map(move |&t| (sc, b, t)))
-                .map(|(sc, b, t)| {
-                    if let (Some(e), Feature::BandEnergy { condition, .. }) = (b, sc.feature)
-                        && !band_admissible(e, condition, t)
-                    {
-                        return vec![0.0; n];
+                .flat_map(|sc| c.thresholds.iter().map(move |&t| (sc, t)))
+                .collect();
+            let admissible: Vec<bool> = columns
+                .iter()
+                .zip(
+                    bands
+                        .iter()
+                        .flat_map(|b| std::iter::repeat_n(b, n_thresholds)),
+                )
+                .map(|(&(sc, t), b)| match (b, sc.feature) {
+                    (Some(e), Feature::BandEnergy { condition, .. }) => {
+                        band_admissible(e, condition, t)
                     }
-                    (0..n)
-                        .map(|i| {
-                            let law = problem.law[i];
-                            w[i] * candidate_feature(sc, rows[i], problem.maps[i], t, scale, law)
-                        })
-                        .collect()
+                    _ => true,
                 })
                 .collect();
+            // Row by row, every column: a row's maps (30 kB) are read
+            // from the cache for all but its first column. Column by
+            // column, a season's maps passed through memory once a
+            // column: on 17 280 tire-runs that was a fifth of the
+            // candidates' scoring, three times what it is now
+            // (docs/gap.md, "Time, by season size").
+            let mut x = vec![vec![0.0; n]; columns.len()];
+            for i in 0..n {
+                let law = problem.law[i];
+                for ((xj, &(sc, t)), _) in x
+                    .iter_mut()
+                    .zip(&columns)
+                    .zip(&admissible)
+                    .filter(|(_, a)| **a)
+                {
+                    xj[i] = w[i] * candidate_feature(sc, rows[i], problem.maps[i], t, scale, law);
+                }
+            }
             if x.iter().flatten().any(|v| !v.is_finite()) {
                 return None;
             }
