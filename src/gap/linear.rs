@@ -14,6 +14,12 @@ pub(crate) fn lstsq(cols: &[&[f64]], y: &[f64], idx: &[usize]) -> Vec<f64> {
 /// right-hand sides (every threshold and scope of a candidate, say).
 pub(crate) struct Solver {
     gram: Cholesky,
+    /// The columns on the rows, for Xᵀy ([`BaseColumns`]: the tracks'
+    /// scale columns are 0 off their track, and a dense pass over them
+    /// for every threshold of every candidate's between-track test was a
+    /// sixth of a diagnosis).
+    columns: BaseColumns,
+    rows: Vec<usize>,
 }
 
 impl Solver {
@@ -22,15 +28,23 @@ impl Solver {
         let (g, _) = normal_equations(cols, &zeros, idx);
         Solver {
             gram: Cholesky::new(&g, cols.len()),
+            columns: BaseColumns::new(cols, idx),
+            rows: idx.to_vec(),
         }
     }
 
-    /// The coefficients of `y` on the columns (what [`lstsq`] gives).
-    pub fn coefficients(&self, cols: &[&[f64]], y: &[f64], idx: &[usize]) -> Vec<f64> {
-        let b: Vec<f64> = cols
+    /// The coefficients of `y` on the columns over the rows (what
+    /// [`lstsq`] gives). Xᵀy is summed over the rows where y is not 0, in
+    /// row order: the plain sums' bits, but for the sign of a zero (tested).
+    pub fn coefficients(&self, y: &[f64]) -> Vec<f64> {
+        let nonzero: Vec<(usize, f64)> = self
+            .rows
             .iter()
-            .map(|c| idx.iter().map(|&i| c[i] * y[i]).sum())
+            .map(|&i| (i, y[i]))
+            .filter(|&(_, v)| v != 0.0)
             .collect();
+        let mut b = Vec::new();
+        self.columns.cross_products_into(y, &nonzero, &mut b);
         self.gram.solve(&b)
     }
 }
@@ -724,9 +738,9 @@ mod tests {
         assert!((k[0] - 2.0).abs() < 1e-10 && k[1] == 0.0 && (k[2] + 3.0).abs() < 1e-10);
         // Factored once, the same coefficients for any right-hand side.
         let solver = Solver::new(&[&a, &z, &b], &idx);
-        assert_eq!(solver.coefficients(&[&a, &z, &b], &y, &idx), k);
+        assert_eq!(solver.coefficients(&y), k);
         assert_eq!(
-            solver.coefficients(&[&a, &z, &b], &b, &idx)[2],
+            solver.coefficients(&b)[2],
             lstsq(&[&a, &z, &b], &b, &idx)[2]
         );
         let q = orthonormal_basis(&[&a, &b, &a], &idx);

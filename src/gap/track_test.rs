@@ -74,10 +74,8 @@ pub(crate) struct Severities<'a> {
     /// Front less rear, rear less front: a one-axle term's between-track
     /// part ([`Severities::p_between`]).
     contrasts: [Option<Design>; 2],
-    /// Stage 1's columns: the base columns that vary within tracks, then the
-    /// (track, axle) scales.
-    stage1: Vec<Vec<f64>>,
-    /// How many of `stage1` are base columns.
+    /// How many of stage 1's columns (the base columns that vary within
+    /// tracks, then the (track, axle) scales) are base columns.
     n_within: usize,
     /// Stage 1 factored once: a within-track candidate's own track scales
     /// ([`Severities::p_between`]) are one solve each.
@@ -204,7 +202,7 @@ impl<'a> Severities<'a> {
             .collect();
         let refs: Vec<&[f64]> = stage1.iter().map(|c| c.as_slice()).collect();
         let solver = Solver::new(&refs, &all);
-        let k = solver.coefficients(&refs, y, &all);
+        let k = solver.coefficients(y);
         let mut s = Severities {
             tracks,
             designs: [None, None, None],
@@ -213,7 +211,6 @@ impl<'a> Severities<'a> {
             solver,
             cell_of_row,
             axle_of_row: rows.iter().map(|r| r.axle).collect(),
-            stage1: Vec::new(),
         };
         let means = TrackMeans::new(&s, base, track_level);
         for axle in [None, Some(Axle::Front), Some(Axle::Rear)] {
@@ -245,7 +242,6 @@ impl<'a> Severities<'a> {
             let severity = s.track_contrast(&k[n_within..], axle, &kept);
             s.contrasts[slot(Some(axle)) - 1] = Design::new(kept, severity, &covariates);
         }
-        s.stage1 = stage1;
         s
     }
 
@@ -347,14 +343,12 @@ impl<'a> Severities<'a> {
         draws: usize,
         seed: u64,
     ) -> f64 {
-        let refs: Vec<&[f64]> = self.stage1.iter().map(|c| c.as_slice()).collect();
-        let all: Vec<usize> = (0..self.axle_of_row.len()).collect();
         let mut values: [Vec<Vec<f64>>; 3] = Default::default();
         for (axle, x) in columns {
             let Some(d) = self.design_between(*axle) else {
                 continue;
             };
-            let k = self.solver.coefficients(&refs, x, &all);
+            let k = self.solver.coefficients(x);
             let v = match axle {
                 None => self.track_means(&k[self.n_within..], None, &d.kept),
                 Some(a) => self.track_contrast(&k[self.n_within..], *a, &d.kept),
@@ -562,9 +556,7 @@ mod tests {
         let sev = Severities::new(&refs, &y, &[vec![1.0; n]], &[false], &vec![1.0; n]);
         let contrast = sev.p_between(&[(Some(Axle::Rear), &x)], true, draws, seed);
         // The same term's track values on the rears' severities alone.
-        let stage1: Vec<&[f64]> = sev.stage1.iter().map(|c| c.as_slice()).collect();
-        let all: Vec<usize> = (0..n).collect();
-        let k = sev.solver.coefficients(&stage1, &x, &all);
+        let k = sev.solver.coefficients(&x);
         let d = sev.designs[slot(Some(Axle::Rear))]
             .as_ref()
             .expect("8 tracks");
@@ -619,10 +611,8 @@ mod tests {
             })
             .collect();
         // The scales themselves: v_t − v_0 on both axles, on each axle.
-        let stage1: Vec<&[f64]> = s.stage1.iter().map(|c| c.as_slice()).collect();
-        let all: Vec<usize> = (0..n).collect();
         for (column, &th) in columns.iter().zip(&road.thresholds) {
-            let k = s.solver.coefficients(&stage1, column, &all);
+            let k = s.solver.coefficients(column);
             let v: Vec<f64> = s
                 .tracks
                 .rows
