@@ -136,6 +136,8 @@ impl GapStatsArgs {
                 WornThroughArg::Impute => tirewear::gap::report::WornThrough::Impute,
                 WornThroughArg::Tobit => tirewear::gap::report::WornThrough::Tobit,
             },
+            // `gap` sets it; `gap validate`'s bar is over its seasons.
+            progress: false,
         };
         // Before a season is read or simulated.
         settings.check()?;
@@ -392,6 +394,7 @@ pub(crate) fn run(a: GapArgs, progress: bool) -> Result<()> {
             kpis.display()
         );
     }
+    settings.progress = progress;
     run_gap(&kpis, &baseline, &settings, &out)
 }
 

@@ -524,6 +524,7 @@ fn then_gap(opts: &ProcessOptions, kpis: &std::path::Path, stamp: &str) -> Resul
     }
     let settings = tirewear::gap::report::GapSettings {
         wlf,
+        progress: opts.progress,
         ..Default::default()
     };
     super::gap::run_gap(

@@ -330,6 +330,11 @@ pub struct GapSettings {
     pub user_effects: Vec<Candidate>,
     /// What becomes of the tires whose tread wore through.
     pub worn_through: WornThrough,
+    /// A progress bar over each round's candidates (the command line's,
+    /// on a terminal): a diagnosis of a season of thousands of tire-runs
+    /// takes minutes (docs/gap.md, "Time, by season size").
+    #[serde(skip)]
+    pub progress: bool,
 }
 
 /// What the diagnosis does with the tires whose tread wore through: their
@@ -382,6 +387,7 @@ impl Default for GapSettings {
             wlf: BTreeMap::new(),
             user_effects: Vec::new(),
             worn_through: WornThrough::default(),
+            progress: false,
         }
     }
 }
@@ -834,7 +840,10 @@ fn forward_selection(
     let mut round = 0;
     while steps.len() <= settings.max_terms && round < 2 * settings.max_terms + 2 {
         round += 1;
-        let ranked = rank(&sel.problem(), &lib, &settings.scoring, fdr);
+        let what = format!("round {round}: scoring candidates");
+        let bar = crate::progress::bar(settings.progress, lib.len() as u64, &what);
+        let ranked = rank(&sel.problem(), &lib, &settings.scoring, fdr, &bar);
+        bar.finish_and_clear();
         for c in ranked.iter().take(8) {
             tracing::trace!(
                 round,

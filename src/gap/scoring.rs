@@ -1175,6 +1175,7 @@ pub(crate) fn rank(
     library: &[Candidate],
     settings: &ScoringSettings,
     fdr: f64,
+    progress: &indicatif::ProgressBar,
 ) -> Vec<Score> {
     let rows = problem.rows;
     let n = rows.len();
@@ -1221,6 +1222,7 @@ pub(crate) fn rank(
 
     let scored: Vec<(Score, Option<NullDraws>, Option<AtTheFloor>)> = library
         .par_iter()
+        .inspect(|_| progress.inc(1))
         .filter_map(|c| {
             let scale = kpi_scale(c, rows);
             // Every scope's every threshold: column s·T + t. The scan and
@@ -1761,7 +1763,11 @@ mod tests {
             seed: 1,
             ..Default::default()
         };
-        rank(&problem, lib, &settings, fdr)
+        let bar = indicatif::ProgressBar::hidden();
+        let scores = rank(&problem, lib, &settings, fdr, &bar);
+        // Every candidate moves the bar, those left out unscored too.
+        assert_eq!(bar.position(), lib.len() as u64);
+        scores
     }
 
     #[test]
