@@ -315,6 +315,96 @@ impl Read for SourceRead {
     }
 }
 
+/// Every Parquet file starts and ends with these four bytes.
+const PARQUET_MAGIC: &[u8; 4] = b"PAR1";
+
+/// Bytes of a file's start [`not_parquet`] reads to say what it is.
+const HEAD_BYTES: u64 = 512;
+
+/// Why `source` cannot be a Parquet file, from its first and last bytes,
+/// in words a user can act on; None where it may be one (or cannot be
+/// read: the Parquet reader then names the fault). Of a CSV file, an MCAP
+/// file or a file cut short, the Parquet reader says only "Corrupt footer".
+pub(crate) fn not_parquet<R: parquet::file::reader::ChunkReader>(source: &R) -> Option<String> {
+    let len = source.len();
+    let head = source.get_bytes(0, len.min(HEAD_BYTES) as usize).ok()?;
+    let tail = match len.checked_sub(4) {
+        Some(at) => source.get_bytes(at, 4).ok()?,
+        None => bytes::Bytes::new(),
+    };
+    why_not_parquet(&head, &tail, len)
+}
+
+/// [`not_parquet`] on the bytes read: the file's first (up to
+/// [`HEAD_BYTES`]) and last four, and its length.
+fn why_not_parquet(head: &[u8], tail: &[u8], len: u64) -> Option<String> {
+    // The smallest Parquet file: the magic, a footer length, the magic.
+    const SMALLEST: u64 = 12;
+    let starts = head.starts_with(PARQUET_MAGIC);
+    if starts && tail == PARQUET_MAGIC && len >= SMALLEST {
+        return None;
+    }
+    if starts {
+        return Some(format!(
+            "starts as a Parquet file (`PAR1`) but has no footer (it does not end with \
+             `PAR1`; {len} bytes): cut short, or still being written"
+        ));
+    }
+    if len == 0 {
+        return Some("is empty (0 bytes), not a Parquet file".to_string());
+    }
+    Some(format!(
+        "is not a Parquet file (one starts and ends with `PAR1`): {}",
+        what_it_is(head)
+    ))
+}
+
+/// What a file's first bytes show it to be, for [`why_not_parquet`].
+fn what_it_is(head: &[u8]) -> String {
+    const KNOWN: [(&[u8], &str); 6] = [
+        (b"\x89MCAP", "an MCAP file"),
+        (&[0x28, 0xb5, 0x2f, 0xfd], "zstd-compressed data"),
+        (&[0x1f, 0x8b], "gzip-compressed data"),
+        (b"PK\x03\x04", "a ZIP archive (an .xlsx workbook is one)"),
+        (b"ARROW1", "an Arrow IPC file"),
+        (b"ORC", "an ORC file"),
+    ];
+    if let Some((_, name)) = KNOWN.iter().find(|(magic, _)| head.starts_with(magic)) {
+        return format!("it is {name}");
+    }
+    if let Some(line) = first_line_of_text(head) {
+        return format!("it is text, beginning `{line}`");
+    }
+    let bytes: Vec<String> = head.iter().take(4).map(|b| format!("{b:02x}")).collect();
+    format!("it starts with the bytes {}", bytes.join(" "))
+}
+
+/// The first line (at most 60 characters) where `head` is text: UTF-8,
+/// perhaps cut inside a character at its end, with no control characters
+/// but tabs and line ends.
+fn first_line_of_text(head: &[u8]) -> Option<String> {
+    const SHOWN: usize = 60;
+    let text = match std::str::from_utf8(head) {
+        Ok(text) => text,
+        Err(e) if e.error_len().is_none() => std::str::from_utf8(&head[..e.valid_up_to()]).ok()?,
+        Err(_) => return None,
+    };
+    let text = text.strip_prefix('\u{feff}').unwrap_or(text);
+    if text
+        .chars()
+        .any(|c| c.is_control() && !matches!(c, '\t' | '\n' | '\r'))
+    {
+        return None;
+    }
+    let line = text.lines().next().unwrap_or_default();
+    let shown: String = line.chars().take(SHOWN).collect();
+    Some(if shown.len() < line.len() {
+        format!("{shown}…")
+    } else {
+        shown
+    })
+}
+
 /// A Parquet file opened for reading, its footer read and its byte ranges
 /// checked against the file (any file) and its data against the footer's
 /// checksum (tirewear's files); every error names the file.
@@ -324,6 +414,9 @@ pub(crate) fn open_parquet(
     use crate::ingest::IngestError;
     use parquet::file::reader::Length;
     let source = ParquetSource::open(path)?;
+    if let Some(why) = not_parquet(&source) {
+        return Err(IngestError::invalid(path, "file", why));
+    }
     let file_len = source.len();
     let data = match &source {
         ParquetSource::Memory(data) => Some(data.clone()),
@@ -470,6 +563,65 @@ mod tests {
                     e.contains(&path.display().to_string()) && e.contains("not a regular file"),
                     "{e}"
                 );
+            }
+        }
+    }
+
+    /// What a file that is not Parquet is said to be, case by case by hand;
+    /// a written table passes, and cut anywhere it is refused.
+    #[test]
+    fn files_that_are_not_parquet_are_named_for_what_they_are() {
+        let say = |bytes: &[u8]| not_parquet(&bytes::Bytes::copy_from_slice(bytes));
+        let csv = b"event,track,car\nE01,valle-rossa,car1\n";
+        assert_eq!(
+            say(csv).unwrap(),
+            "is not a Parquet file (one starts and ends with `PAR1`): \
+             it is text, beginning `event,track,car`"
+        );
+        // A byte-order mark is skipped; a long line is cut at 60 characters
+        // (these are two bytes each: the cut counts characters).
+        let long = format!("\u{feff}{}", "é".repeat(300));
+        let said = say(long.as_bytes()).unwrap();
+        assert!(
+            said.ends_with(&format!("beginning `{}…`", "é".repeat(60))),
+            "{said}"
+        );
+        // 512 bytes of text cut inside a character are still text.
+        let cut_char = &"é".repeat(300).into_bytes()[..HEAD_BYTES as usize - 1];
+        assert!(say(cut_char).unwrap().contains("it is text"));
+        assert!(
+            say(b"\x89MCAP0\r\n....")
+                .unwrap()
+                .ends_with("it is an MCAP file")
+        );
+        assert!(
+            say(&[0x28, 0xb5, 0x2f, 0xfd, 0, 1])
+                .unwrap()
+                .ends_with("zstd-compressed data")
+        );
+        assert!(say(b"PK\x03\x04rest").unwrap().contains("ZIP archive"));
+        assert!(
+            say(&[0x10, 0x00, 0xff, 0x7f, 0x01])
+                .unwrap()
+                .ends_with("it starts with the bytes 10 00 ff 7f")
+        );
+        assert_eq!(say(b"").unwrap(), "is empty (0 bytes), not a Parquet file");
+        // PAR1 at both ends but shorter than the smallest Parquet file.
+        assert!(say(b"PAR1PAR1").unwrap().contains("has no footer"));
+
+        let values = arrow_array::Float64Array::from_iter_values((0..40).map(f64::from));
+        let batch = arrow_array::RecordBatch::try_from_iter([(
+            "energy_j",
+            std::sync::Arc::new(values) as arrow_array::ArrayRef,
+        )])
+        .unwrap();
+        let mut table = Vec::new();
+        crate::kpi::table::write_batch_to(&mut table, &batch).unwrap();
+        assert_eq!(say(&table), None);
+        for cut in 1..table.len() {
+            let said = say(&table[..cut]).expect("a cut table is refused");
+            if cut >= 4 {
+                assert!(said.contains("cut short") && said.contains(&format!("{cut} bytes")));
             }
         }
     }

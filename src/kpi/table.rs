@@ -171,6 +171,9 @@ pub fn unit(column: &str) -> &'static str {
 /// the file does not state one, e.g. a table written by another tool).
 pub fn read_units(path: &Path) -> Result<Vec<(String, Option<String>)>, IngestError> {
     let (file, _) = crate::ingest::open_regular(path)?;
+    if let Some(why) = crate::ingest::checksum::not_parquet(&file) {
+        return Err(not_a_kpi_database(path, why));
+    }
     let builder = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file)
         .map_err(|e| parquet_err(path, e))?;
     Ok(builder
@@ -215,6 +218,9 @@ pub(crate) fn with_extraction_id(batch: RecordBatch, extraction_id: &str) -> Rec
 /// before ids, or from another tool).
 pub fn read_extraction_id(path: &Path) -> Result<Option<String>, IngestError> {
     let (file, _) = crate::ingest::open_regular(path)?;
+    if let Some(why) = crate::ingest::checksum::not_parquet(&file) {
+        return Err(IngestError::invalid(path, "file", why));
+    }
     let builder = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file)
         .map_err(|e| parquet_err(path, e))?;
     Ok(builder.schema().metadata().get(EXTRACTION_ID_KEY).cloned())
@@ -555,6 +561,23 @@ pub fn side_table_path(kpis: &Path, suffix: &str) -> std::path::PathBuf {
     kpis.with_file_name(format!("{stem}.{suffix}"))
 }
 
+/// The error for a KPI database that is not a Parquet file (`why`), with
+/// the Parquet file beside it where there is one: the CSV copy `extract`
+/// writes is a natural first try.
+fn not_a_kpi_database(path: &Path, why: String) -> IngestError {
+    let parquet = path.with_extension("parquet");
+    let hint = if parquet != path && parquet.is_file() {
+        format!(
+            "; the KPI database is the Parquet file beside it (`extract` writes a CSV \
+             copy for reading by eye): did you mean {}?",
+            parquet.display()
+        )
+    } else {
+        String::new()
+    };
+    IngestError::invalid(path, "file", format!("{why}{hint}"))
+}
+
 /// Reads a KPI Parquet file back (for `fit`, `predict`, `gap` and tests).
 /// Nulls, cells of the wrong type and columns in other units are errors
 /// naming the column (and row).
@@ -573,6 +596,12 @@ pub fn read_parquet(path: &Path) -> Result<Vec<KpiRow>, IngestError> {
             "file",
             format!("is a folder, not a KPI database (the Parquet file `extract` writes){hint}"),
         ));
+    }
+    if let Some(why) = crate::ingest::open_regular(path)
+        .ok()
+        .and_then(|(file, _)| crate::ingest::checksum::not_parquet(&file))
+    {
+        return Err(not_a_kpi_database(path, why));
     }
     let builder = crate::ingest::checksum::open_parquet(path)?;
     check_units(path, builder.schema())?;
@@ -819,6 +848,40 @@ mod tests {
         write_batch(&old, &full.project(&keep).unwrap()).unwrap();
         let err = read_parquet(&old).unwrap_err().to_string();
         assert!(err.contains("missing column 'hurst'"), "{err}");
+    }
+
+    /// The CSV copy handed in for the KPI database is refused, for what it
+    /// is, pointing to the Parquet file beside it: by the reader of rows, of
+    /// units and of the extraction id. Without a Parquet file beside it
+    /// there is no pointer.
+    #[test]
+    fn the_csv_copy_is_refused_naming_the_parquet_file_beside_it() {
+        let rows = vec![KpiRow::default(); 2];
+        let dir = tempfile::tempdir().unwrap();
+        let (parquet, csv) = (dir.path().join("kpis.parquet"), dir.path().join("kpis.csv"));
+        write_parquet(&parquet, &rows).unwrap();
+        write_csv(&csv, &rows).unwrap();
+        let pointer = format!("did you mean {}?", parquet.display());
+        for err in [
+            read_parquet(&csv).unwrap_err(),
+            read_units(&csv).unwrap_err(),
+        ] {
+            let err = err.to_string();
+            assert!(err.starts_with(&format!("{}: file: is not a Parquet file", csv.display())));
+            assert!(
+                err.contains("it is text, beginning `event,track,car,run,"),
+                "{err}"
+            );
+            assert!(err.ends_with(&pointer), "{err}");
+        }
+        let err = read_extraction_id(&csv).unwrap_err().to_string();
+        assert!(err.contains("is not a Parquet file"), "{err}");
+        std::fs::remove_file(&parquet).unwrap();
+        let err = read_parquet(&csv).unwrap_err().to_string();
+        assert!(
+            err.contains("it is text") && !err.contains("did you mean"),
+            "{err}"
+        );
     }
 
     #[test]
