@@ -324,13 +324,14 @@ fn tree_depth(node: &Node<DefaultNumericTypes>) -> usize {
     deepest
 }
 
+/// Largest `effects.toml` read: each expression is at most
+/// [`MAX_EXPRESSION_BYTES`], and far fewer hypotheses than this fit a run.
+const MAX_EFFECTS_BYTES: u64 = 16 << 20;
+
 /// Reads `effects.toml` into candidates; errors name the file and the effect.
 pub fn load(path: &Path) -> Result<Vec<Candidate>, GapError> {
     let file = path.display().to_string();
-    let text = std::fs::read_to_string(path).map_err(|e| GapError::Io {
-        path: file.clone(),
-        source: e,
-    })?;
+    let text = crate::ingest::read_text(path, MAX_EFFECTS_BYTES)?;
     let parsed: EffectsFile = toml::from_str(&text).map_err(|e| GapError::EffectsFile {
         file: file.clone(),
         message: e.to_string(),

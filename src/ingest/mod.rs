@@ -64,13 +64,35 @@ pub(crate) fn open_regular(path: &Path) -> Result<(std::fs::File, std::fs::Metad
     Ok((file, meta))
 }
 
-/// Reads a TOML file into `T`, naming the file in any error.
-pub(crate) fn read_toml<T: serde::de::DeserializeOwned>(path: &Path) -> Result<T> {
+/// Largest JSON file read whole (a model, a bench file, an extraction's or
+/// a diagnosis's report): far above the largest season's `gap.json`.
+pub(crate) const MAX_JSON_BYTES: u64 = 1 << 30;
+
+/// A regular text file of at most `limit` bytes, read whole: a FIFO (whose
+/// open waits for a writer), a device (`/dev/zero` has no end) or a larger
+/// file is an error naming it.
+pub(crate) fn read_text(path: &Path, limit: u64) -> Result<String> {
     use std::io::Read;
     let mut text = String::new();
-    open_bounded(path, MAX_TOML_BYTES)?
+    open_bounded(path, limit)?
         .read_to_string(&mut text)
         .map_err(|e| IngestError::io(path, e))?;
+    Ok(text)
+}
+
+/// [`read_text`]'s error without its leading path, for an error type of
+/// its own that names the file once.
+pub(crate) fn unnamed(path: &Path, e: &IngestError) -> String {
+    let message = e.to_string();
+    let named = format!("{}: ", path.display());
+    message
+        .strip_prefix(&named)
+        .map_or(message.clone(), str::to_string)
+}
+
+/// Reads a TOML file into `T`, naming the file in any error.
+pub(crate) fn read_toml<T: serde::de::DeserializeOwned>(path: &Path) -> Result<T> {
+    let text = read_text(path, MAX_TOML_BYTES)?;
     toml::from_str(&text).map_err(|e| IngestError::Toml {
         path: path.to_path_buf(),
         source: Box::new(e),

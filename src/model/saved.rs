@@ -139,9 +139,11 @@ impl SavedModel {
             path: path.display().to_string(),
             what,
         };
-        let text = std::fs::read_to_string(path).map_err(|e| ModelError::Io {
-            path: path.display().to_string(),
-            message: e.to_string(),
+        let text = crate::ingest::read_text(path, crate::ingest::MAX_JSON_BYTES).map_err(|e| {
+            ModelError::Io {
+                path: path.display().to_string(),
+                message: crate::ingest::unnamed(path, &e),
+            }
         })?;
         let head: serde_json::Value =
             serde_json::from_str(&text).map_err(|e| file(format!("not JSON: {e}")))?;
@@ -354,5 +356,32 @@ mod tests {
                 .to_string()
                 .contains("not JSON")
         );
+    }
+
+    /// A model, an `effects.toml` or a report's JSON given as a device or
+    /// a FIFO is refused before it is read: `/dev/zero` was read until the
+    /// memory ran out, and a FIFO's open waited for a writer (`predict`,
+    /// `gap --effects`, `gap --baseline`, `report --bench` hung).
+    #[cfg(unix)]
+    #[test]
+    fn a_model_or_hypotheses_file_that_is_no_regular_file_is_refused_unread() {
+        let dir = tempfile::tempdir().unwrap();
+        let fifo = dir.path().join("model.json");
+        let made = std::process::Command::new("mkfifo").arg(&fifo).status();
+        assert!(made.is_ok_and(|s| s.success()), "mkfifo");
+        for path in [std::path::Path::new("/dev/zero"), fifo.as_path()] {
+            let e = SavedModel::load(path).unwrap_err().to_string();
+            assert_eq!(
+                e,
+                format!(
+                    "{}: file: is not a regular file (a device, FIFO or folder)",
+                    path.display()
+                )
+            );
+            let e = crate::gap::user_effects::load(path)
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains("is not a regular file"), "{e}");
+        }
     }
 }

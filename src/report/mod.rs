@@ -105,14 +105,12 @@ fn read_json(path: &Path) -> Result<Option<serde_json::Value>, ReportError> {
     if !path.exists() {
         return Ok(None);
     }
-    let text = std::fs::read_to_string(path).map_err(|source| ReportError::Io {
-        path: path.into(),
-        source,
-    })?;
     let input = |message: String| ReportError::Input {
         path: path.into(),
         message,
     };
+    let text = crate::ingest::read_text(path, crate::ingest::MAX_JSON_BYTES)
+        .map_err(|e| input(crate::ingest::unnamed(path, &e)))?;
     let head = serde_json::from_str(&text).map_err(|e| input(format!("not valid JSON: {e}")))?;
     match crate::ingest::checksum::json_mismatch(&text, &head, "tirewear") {
         Some(why) => Err(input(why)),
