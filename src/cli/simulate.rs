@@ -11,7 +11,7 @@ pub(crate) struct SimulateArgs {
     /// Season preset.
     #[arg(long, value_enum, default_value = "demo")]
     preset: PresetArg,
-    /// Multiplies the number of events of the `season` preset (toward full-season archives).
+    /// Multiplies the number of events of the `season` preset (toward full-season archives); the other presets warn that it is not used.
     #[arg(long, default_value_t = 1.0)]
     scale: f64,
     /// Number of tracks, in place of the preset's (at most 64). The first
@@ -140,8 +140,27 @@ pub(crate) fn run_simulation(opts: &SimOptions) -> Result<sim::SimSummary> {
     Ok(s)
 }
 
+/// The warning for a `--scale` the preset does not use (only `season`
+/// scales its events): `--preset demo --scale 4` wrote the demo silently.
+fn unused_scale(preset: PresetArg, scale: f64) -> Option<String> {
+    let name = match preset {
+        PresetArg::Season => return None,
+        PresetArg::Tiny => "tiny",
+        PresetArg::Demo => "demo",
+    };
+    (scale != 1.0).then(|| {
+        format!(
+            "--scale {scale} is not used: it multiplies the events of the `season` preset only, \
+             and the `{name}` preset has a fixed calendar (--tracks changes its tracks)"
+        )
+    })
+}
+
 /// Runs `tirewear simulate`.
 pub(crate) fn run(a: SimulateArgs, progress: bool) -> Result<()> {
+    if let Some(warning) = unused_scale(a.preset, a.scale) {
+        tracing::warn!("{warning}");
+    }
     let opts = SimOptions {
         preset: a.preset.into(),
         scale: a.scale,
@@ -194,5 +213,26 @@ impl From<WearScatterArg> for tirewear::sim::WearScatter {
             WearScatterArg::None => Self::NONE,
             WearScatterArg::Realistic => Self::REALISTIC,
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_scale_the_preset_does_not_use_is_warned_of() {
+        assert_eq!(unused_scale(PresetArg::Season, 4.0), None);
+        assert_eq!(unused_scale(PresetArg::Demo, 1.0), None);
+        let w = unused_scale(PresetArg::Tiny, 1e9).unwrap();
+        assert!(
+            w.starts_with("--scale 1000000000 is not used") && w.contains("`tiny`"),
+            "{w}"
+        );
+        assert!(
+            unused_scale(PresetArg::Demo, 0.5)
+                .unwrap()
+                .contains("`demo`")
+        );
     }
 }
