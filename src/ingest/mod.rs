@@ -80,9 +80,9 @@ pub(crate) fn read_text(path: &Path, limit: u64) -> Result<String> {
     Ok(text)
 }
 
-/// [`read_text`]'s error without its leading path, for an error type of
-/// its own that names the file once.
-pub(crate) fn unnamed(path: &Path, e: &IngestError) -> String {
+/// A reader's error without its leading path, for an error type of its
+/// own that names the file once.
+pub(crate) fn unnamed(path: &Path, e: impl std::fmt::Display) -> String {
     let message = e.to_string();
     let named = format!("{}: ", path.display());
     message

@@ -597,13 +597,13 @@ pub fn read_parquet(path: &Path) -> Result<Vec<KpiRow>, IngestError> {
             format!("is a folder, not a KPI database (the Parquet file `extract` writes){hint}"),
         ));
     }
-    if let Some(why) = crate::ingest::open_regular(path)
-        .ok()
-        .and_then(|(file, _)| crate::ingest::checksum::not_parquet(&file))
-    {
-        return Err(not_a_kpi_database(path, why));
-    }
-    let builder = crate::ingest::checksum::open_parquet(path)?;
+    let builder = crate::ingest::checksum::open_parquet(path).map_err(|e| match e {
+        // `open_parquet`'s refusal of a file that is not Parquet.
+        IngestError::Invalid { record, what, .. } if record == "file" && what.contains("PAR1") => {
+            not_a_kpi_database(path, what)
+        }
+        e => e,
+    })?;
     check_units(path, builder.schema())?;
     let reader = builder.build().map_err(|e| parquet_err(path, e))?;
     let mut rows = Vec::new();

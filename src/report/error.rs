@@ -19,13 +19,9 @@ impl ReportError {
     /// An input file's error, named once: the readers' own errors already
     /// begin with the file, which `Input` prints first.
     pub(crate) fn input(path: &std::path::Path, e: impl std::fmt::Display) -> ReportError {
-        let message = e.to_string();
-        let named = format!("{}: ", path.display());
         ReportError::Input {
             path: path.to_path_buf(),
-            message: message
-                .strip_prefix(&named)
-                .map_or(message.clone(), str::to_string),
+            message: crate::ingest::unnamed(path, e),
         }
     }
 }

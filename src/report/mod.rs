@@ -110,7 +110,7 @@ fn read_json(path: &Path) -> Result<Option<serde_json::Value>, ReportError> {
         message,
     };
     let text = crate::ingest::read_text(path, crate::ingest::MAX_JSON_BYTES)
-        .map_err(|e| input(crate::ingest::unnamed(path, &e)))?;
+        .map_err(|e| ReportError::input(path, e))?;
     let head = serde_json::from_str(&text).map_err(|e| input(format!("not valid JSON: {e}")))?;
     match crate::ingest::checksum::json_mismatch(&text, &head, "tirewear") {
         Some(why) => Err(input(why)),
