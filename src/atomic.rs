@@ -14,7 +14,7 @@ use std::io::{self, BufWriter, Write};
 use std::path::{Path, PathBuf};
 
 /// The folder a path lies in ("." for a bare file name).
-fn folder_of(path: &Path) -> &Path {
+pub(crate) fn folder_of(path: &Path) -> &Path {
     match path.parent() {
         Some(p) if !p.as_os_str().is_empty() => p,
         _ => Path::new("."),
@@ -61,6 +61,86 @@ impl AtomicFile {
         self.tmp.persist(&self.dest).map_err(|e| e.error)?;
         Ok(())
     }
+}
+
+/// An output that cannot go where it was asked to, found before any work:
+/// its destination is a folder, is named for two outputs, or is one of the
+/// command's inputs (the rename would replace what is being read).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Clash {
+    pub dest: PathBuf,
+    pub reason: String,
+}
+
+impl std::fmt::Display for Clash {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{}: {}", self.dest.display(), self.reason)
+    }
+}
+
+impl std::error::Error for Clash {}
+
+/// The directory entry a rename onto `path` replaces: the folder resolved
+/// (symbolic links, `.`, `..`), the last name kept as it is, since a rename
+/// replaces a link itself rather than what it points at.
+pub(crate) fn entry_of(path: &Path) -> PathBuf {
+    let folder = folder_of(path);
+    let folder = std::fs::canonicalize(folder)
+        .or_else(|_| std::path::absolute(folder))
+        .unwrap_or_else(|_| folder.to_path_buf());
+    match path.file_name() {
+        Some(name) => folder.join(name),
+        None => std::fs::canonicalize(path).unwrap_or_else(|_| path.to_path_buf()),
+    }
+}
+
+/// Checks that the outputs (what each is, where it goes) can be written
+/// without harm: none is an existing folder, no two share a destination,
+/// none replaces an input (what it is, its path; a link counts for both
+/// itself and the file it points at). Hard links need no check: the rename
+/// gives the destination a new file and leaves the input's untouched.
+pub fn check_destinations(
+    outputs: &[(&str, &Path)],
+    inputs: &[(String, PathBuf)],
+) -> Result<(), Clash> {
+    let clash = |dest: &Path, reason: String| Clash {
+        dest: dest.to_path_buf(),
+        reason,
+    };
+    let mut read = std::collections::HashMap::new();
+    for (what, path) in inputs {
+        read.entry(entry_of(path)).or_insert(what);
+        if let Ok(target) = std::fs::canonicalize(path) {
+            read.entry(target).or_insert(what);
+        }
+    }
+    let mut written: std::collections::HashMap<PathBuf, &str> = std::collections::HashMap::new();
+    for &(what, dest) in outputs {
+        let is_folder = std::fs::symlink_metadata(dest).is_ok_and(|m| m.is_dir());
+        if is_folder {
+            return Err(clash(
+                dest,
+                format!("is a folder; the {what} is written to a file: give a file's path"),
+            ));
+        }
+        let entry = entry_of(dest);
+        if let Some(input) = read.get(&entry) {
+            return Err(clash(
+                dest,
+                format!(
+                    "is an input of this command ({input}): the {what} would replace it; \
+                     give another path"
+                ),
+            ));
+        }
+        if let Some(first) = written.insert(entry, what) {
+            return Err(clash(
+                dest,
+                format!("is named for both the {first} and the {what}: give them different paths"),
+            ));
+        }
+    }
+    Ok(())
 }
 
 /// Writes a whole file atomically through a buffered writer.
@@ -138,6 +218,7 @@ impl OutputSet {
         dest: &Path,
         body: impl FnOnce(&mut File) -> io::Result<()>,
     ) -> io::Result<()> {
+        self.check_new(dest)?;
         let mut f = AtomicFile::create(dest)?;
         body(f.file())?;
         f.file().sync_all()?;
@@ -152,6 +233,23 @@ impl OutputSet {
         self.moves.push((from.to_path_buf(), dest.to_path_buf()));
     }
 
+    /// Refuses a destination already in the set: its second file would
+    /// silently replace the first at commit.
+    fn check_new(&self, dest: &Path) -> io::Result<()> {
+        let entry = entry_of(dest);
+        let dests = self.moves.iter().map(|(_, d)| d);
+        if dests
+            .chain(self.files.iter().map(|(_, d)| d))
+            .any(|d| entry_of(d) == entry)
+        {
+            return Err(io::Error::new(
+                io::ErrorKind::InvalidInput,
+                format!("{}: named twice in one set of outputs", dest.display()),
+            ));
+        }
+        Ok(())
+    }
+
     /// Renames every file into place: the journal first, so a kill at any
     /// moment leaves either the old set (no journal) or a journal that the
     /// next writer completes.
@@ -162,6 +260,19 @@ impl OutputSet {
             .cloned()
             .chain(self.files.iter().map(|(t, d)| (t.to_path_buf(), d.clone())))
             .collect();
+        // A folder in a file's place would fail its rename halfway through
+        // the set: refused before the journal, nothing is replaced.
+        for (_, dest) in &pairs {
+            if std::fs::symlink_metadata(dest).is_ok_and(|m| m.is_dir()) {
+                return Err(io::Error::new(
+                    io::ErrorKind::IsADirectory,
+                    format!(
+                        "{}: is a folder, not a file; nothing was replaced",
+                        dest.display()
+                    ),
+                ));
+            }
+        }
         let text = serde_json::to_vec(&pairs).map_err(io::Error::other)?;
         write_bytes(&self.journal, &text)?;
         for (from, dest) in &self.moves {
@@ -331,5 +442,96 @@ mod tests {
             assert_eq!(remove_orphans(dir.path()).unwrap(), 1);
             assert!(!dead.exists() && live.exists() && other.exists());
         }
+    }
+
+    /// Each way an output can go wrong, each named with its file; spellings
+    /// of one entry (`./a`, a folder reached through a link) are one entry.
+    #[test]
+    fn destinations_that_are_folders_twice_named_or_inputs_are_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let d = dir.path();
+        std::fs::create_dir(d.join("sub")).unwrap();
+        std::fs::write(d.join("season.toml"), b"input").unwrap();
+        let inputs = [("the season manifest".to_string(), d.join("season.toml"))];
+        let ok = [
+            ("KPI table", &*d.join("k.parquet")),
+            ("CSV copy", &*d.join("k.csv")),
+        ];
+        assert_eq!(check_destinations(&ok, &inputs), Ok(()));
+
+        let folder = check_destinations(&[("KPI table", &*d.join("sub"))], &inputs).unwrap_err();
+        assert_eq!(folder.dest, d.join("sub"));
+        assert!(folder.reason.starts_with("is a folder"), "{folder}");
+
+        let twice = [
+            ("KPI table", &*d.join("k.parquet")),
+            ("CSV copy", &*d.join("sub/../k.parquet")),
+        ];
+        let e = check_destinations(&twice, &inputs).unwrap_err();
+        assert_eq!(e.dest, d.join("sub/../k.parquet"));
+        assert!(
+            e.reason.contains("both the KPI table and the CSV copy"),
+            "{e}"
+        );
+
+        let e =
+            check_destinations(&[("KPI table", &*d.join("./season.toml"))], &inputs).unwrap_err();
+        assert!(
+            e.reason
+                .contains("input of this command (the season manifest)"),
+            "{e}"
+        );
+
+        #[cfg(unix)]
+        {
+            // The input read through a link, the output named by its target
+            // or through a linked folder: the input would be replaced.
+            std::os::unix::fs::symlink(d, d.join("via")).unwrap();
+            std::os::unix::fs::symlink(d.join("season.toml"), d.join("link.toml")).unwrap();
+            let linked = [("the season manifest".to_string(), d.join("link.toml"))];
+            assert!(
+                check_destinations(&[("KPI table", &*d.join("season.toml"))], &linked).is_err()
+            );
+            assert!(
+                check_destinations(&[("KPI table", &*d.join("via/season.toml"))], &inputs).is_err()
+            );
+            // A hard link is another entry: the rename leaves the input alone.
+            std::fs::hard_link(d.join("season.toml"), d.join("hard.toml")).unwrap();
+            assert_eq!(
+                check_destinations(&[("KPI table", &*d.join("hard.toml"))], &inputs),
+                Ok(())
+            );
+            write_bytes(&d.join("hard.toml"), b"output").unwrap();
+            assert_eq!(std::fs::read(d.join("season.toml")).unwrap(), b"input");
+        }
+    }
+
+    /// The set itself refuses a destination named twice, and a folder in a
+    /// file's place before its journal: nothing replaced, no journal left.
+    #[test]
+    fn a_set_refuses_a_twice_named_file_and_a_folder_before_any_rename() {
+        let dir = tempfile::tempdir().unwrap();
+        let d = dir.path();
+        let journal = d.join(".set.commit.json");
+        let mut set = OutputSet::new(&journal).unwrap();
+        set.add(&d.join("a"), |f| f.write_all(b"one")).unwrap();
+        let e = set
+            .add(&d.join("./a"), |f| f.write_all(b"two"))
+            .unwrap_err();
+        assert!(e.to_string().contains("named twice"), "{e}");
+        drop(set);
+
+        std::fs::write(d.join("a"), b"old a").unwrap();
+        std::fs::create_dir(d.join("b")).unwrap();
+        let mut set = OutputSet::new(&journal).unwrap();
+        set.add(&d.join("a"), |f| f.write_all(b"new a")).unwrap();
+        set.add(&d.join("b"), |f| f.write_all(b"new b")).unwrap();
+        let e = set.commit().unwrap_err();
+        assert_eq!(e.kind(), io::ErrorKind::IsADirectory);
+        assert!(e.to_string().contains("is a folder"), "{e}");
+        assert_eq!(std::fs::read(d.join("a")).unwrap(), b"old a");
+        assert!(!journal.exists());
+        // The two we made, and no temporary file.
+        assert_eq!(std::fs::read_dir(d).unwrap().count(), 2);
     }
 }

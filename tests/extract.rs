@@ -705,3 +705,59 @@ fn bench_decode_lines_measure_a_given_season() {
         "{x:?}"
     );
 }
+
+/// Outputs that would replace the season's own files, or each other, or
+/// that name a folder are refused before any run is read, naming the file
+/// and both roles; the archive is left byte for byte as it was
+/// (`--out DIR/season.toml` once replaced the manifest with the KPI table).
+#[test]
+fn outputs_over_the_inputs_or_each_other_are_refused_before_the_work() {
+    let dir = tempfile::tempdir().unwrap();
+    let season = dir.path().join("season");
+    sim(&season, Preset::Tiny, 5.0);
+    let man = season.join("season.toml");
+    let before = std::fs::read(&man).unwrap();
+    let tel = Season::open(&season).unwrap().manifest.runs[0]
+        .telemetry
+        .clone();
+    let refused = |out: &Path, csv: Option<&Path>| {
+        let o = ExtractOptions {
+            csv: csv.map(Path::to_path_buf),
+            engine: Engine::Cpu,
+            ..ExtractOptions::new(&season, out)
+        };
+        extract(&o).unwrap_err().to_string()
+    };
+    let e = refused(&man, None);
+    assert!(
+        e.contains("season.toml") && e.contains("the season manifest") && e.contains("KPI table"),
+        "{e}"
+    );
+    let e = refused(&season.join(&tel), None);
+    assert!(e.contains("telemetry of run"), "{e}");
+    let e = refused(&season.join("wear/readings.csv"), None);
+    assert!(e.contains("wear readings"), "{e}");
+    let k = dir.path().join("k.parquet");
+    let e = refused(&k, Some(&k));
+    assert!(e.contains("both the KPI table and the CSV copy"), "{e}");
+    let e = refused(&k, Some(&dir.path().join("k.road.parquet")));
+    assert!(
+        e.contains("both the road side table and the CSV copy"),
+        "{e}"
+    );
+    let e = refused(dir.path(), None);
+    assert!(
+        e.contains("is a folder")
+            && e.contains(&dir.path().join("kpis.parquet").display().to_string()),
+        "{e}"
+    );
+    assert_eq!(std::fs::read(&man).unwrap(), before);
+    // Nothing written anywhere: no table, no journal, no temporary file.
+    let mut left: Vec<_> = std::fs::read_dir(dir.path())
+        .unwrap()
+        .map(|e| e.unwrap().file_name())
+        .collect();
+    left.sort();
+    assert_eq!(left, ["season"]);
+    assert!(!season.join(".season.commit.json").exists());
+}

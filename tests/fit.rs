@@ -340,3 +340,87 @@ fn damaged_models_are_refused_by_field_or_predict_alike(
         "{e}"
     );
 }
+
+/// Output paths a user can plausibly get wrong are refused before anything
+/// is read, with exit code 1, the file named, and every file left as it
+/// was: `predict --out` naming its own model or KPI table (once replaced
+/// by the predictions), `report --out` naming a data file (once replaced by
+/// the page), a file where `fit`, `gap` or `gap validate` want a folder
+/// (`gap` once ran the whole diagnosis first), and `report` given the KPI
+/// table instead of its folder.
+#[test]
+fn outputs_that_would_replace_an_input_or_a_folder_are_refused_first() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let model = d.join("physical.json");
+    let kpis = d.join("kpis.parquet");
+    let notes = d.join("notes.txt");
+    for (p, text) in [
+        (&model, "{\"model\": 1}"),
+        (&kpis, "PAR1 not really"),
+        (&notes, "mine"),
+    ] {
+        std::fs::write(p, text).unwrap();
+    }
+    let before: Vec<Vec<u8>> = [&model, &kpis, &notes]
+        .iter()
+        .map(|p| std::fs::read(p).unwrap())
+        .collect();
+    let (m, k, n, dd) = (
+        model.to_str().unwrap(),
+        kpis.to_str().unwrap(),
+        notes.to_str().unwrap(),
+        d.to_str().unwrap(),
+    );
+    for (args, said) in [
+        (
+            vec!["predict", m, k, "--out", m],
+            "input of this command (the model)",
+        ),
+        (
+            vec!["predict", m, k, "--out", k],
+            "input of this command (the KPI database)",
+        ),
+        (vec!["predict", m, k, "--out", dd], "is a folder"),
+        (
+            vec!["report", dd, "--out", k],
+            "is not an HTML page (it is a Parquet file)",
+        ),
+        (
+            vec!["report", dd, "--out", n],
+            "is not an HTML page (it is text, beginning `mine`)",
+        ),
+        (vec!["report", k], "is a file: the report takes the folder"),
+        (
+            vec!["fit", k, "--out", n],
+            "is a file, not a folder: fit writes",
+        ),
+        (
+            vec!["gap", k, "--out", n],
+            "is a file, not a folder: gap writes",
+        ),
+        (
+            vec!["gap", "validate", "--out", n],
+            "is a file, not a folder: gap validate writes",
+        ),
+    ] {
+        let run = std::process::Command::new(env!("CARGO_BIN_EXE_tirewear"))
+            .arg("--quiet")
+            .args(&args)
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&run.stderr);
+        assert_eq!(run.status.code(), Some(1), "{args:?}: {err}");
+        assert!(err.contains(said), "{args:?}: {err}");
+    }
+    let after: Vec<Vec<u8>> = [&model, &kpis, &notes]
+        .iter()
+        .map(|p| std::fs::read(p).unwrap())
+        .collect();
+    assert_eq!(after, before);
+    assert_eq!(
+        std::fs::read_dir(d).unwrap().count(),
+        3,
+        "nothing else written"
+    );
+}

@@ -191,6 +191,41 @@ fn dry_run_writes_nothing_and_force_reprocesses() {
     assert_eq!(tree(&dataset), before, "same inputs, same bytes");
 }
 
+/// A dataset folder that is the archive's folder, or holds it, is refused
+/// before anything is written: `process demo --out demo` once swept the
+/// archive's road profiles away as stale parts. A dataset inside the
+/// archive's folder is allowed and leaves the archive's files as they were.
+#[test]
+fn a_dataset_in_the_archive_folder_or_around_it_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let archive = dir.path().join("season");
+    tiny(&archive, 12);
+    let before = tree(&archive);
+    for (dataset, how) in [
+        (archive.clone(), "is the season archive"),
+        (archive.join("."), "is the season archive"),
+        (dir.path().to_path_buf(), "holds the season archive"),
+    ] {
+        let mut opts = ProcessOptions::new(vec![archive.join("season.toml")], &dataset);
+        for dry_run in [true, false] {
+            opts.dry_run = dry_run;
+            match process(&opts) {
+                Err(NightlyError::Invalid(e)) => assert!(e.contains(how), "{e}"),
+                other => panic!("{}: {:?}", dataset.display(), other.map(|s| s.processed)),
+            }
+        }
+        assert_eq!(tree(&archive), before, "{}", dataset.display());
+    }
+    let inside = archive.join("dataset");
+    assert_eq!(run(&archive, &inside).processed, 4);
+    let after = tree(&archive);
+    let archive_files: BTreeMap<_, _> = after
+        .into_iter()
+        .filter(|(p, _)| !p.starts_with("dataset"))
+        .collect();
+    assert_eq!(archive_files, before);
+}
+
 #[test]
 fn a_second_writer_is_refused_while_the_dataset_is_locked() {
     let dir = tempfile::tempdir().unwrap();

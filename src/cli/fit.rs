@@ -43,11 +43,12 @@ pub(crate) fn run_fit(
     out: &std::path::Path,
 ) -> Result<Vec<(Method, anyhow::Error)>> {
     let t0 = Instant::now();
+    super::not_a_file(out, "fit")?;
     let rows = tirewear::kpi::table::read_parquet(kpis)?;
     let split = fit::split(&rows, settings.test_events.as_deref())
         .with_context(|| format!("splitting {}", kpis.display()))?;
     // Before minutes of fitting, not after: an output folder that cannot be made.
-    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    super::output_folder(out, "fit")?;
     println!(
         "{}: {} rows; training on {} events ({} rows), testing on {} events ({} rows): {}",
         kpis.display(),

@@ -242,6 +242,7 @@ pub(crate) fn run_validate(
     out: &std::path::Path,
 ) -> Result<()> {
     settings.check()?;
+    super::not_a_file(out, "gap validate")?;
     let started = std::time::Instant::now();
     let cases = tirewear::validate::validate(settings);
     let table = tirewear::validate::render(&cases);
@@ -278,6 +279,7 @@ pub(crate) fn run_gap(
     out: &std::path::Path,
 ) -> Result<()> {
     use tirewear::gap::report::{Baseline, diagnose_file, render_markdown, write_diagnosis};
+    super::not_a_file(out, "gap")?;
     let base = if baseline == "physics" {
         Baseline::Physics
     } else if baseline.ends_with(".csv") {

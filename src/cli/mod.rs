@@ -31,3 +31,24 @@ pub(crate) fn parse_jobs(s: &str) -> Result<usize, String> {
         _ => Err(format!("'{s}': worker threads are 1 to {MAX_JOBS}")),
     }
 }
+
+/// Refuses an output folder `out` that is a file, before the work rather
+/// than after it (a diagnosis or a validation may take minutes), naming the
+/// command (`writer`) that writes there.
+pub(crate) fn not_a_file(out: &std::path::Path, writer: &str) -> anyhow::Result<()> {
+    if out.exists() && !out.is_dir() {
+        anyhow::bail!(
+            "{}: is a file, not a folder: {writer} writes its files into a folder; give a folder's path",
+            out.display()
+        );
+    }
+    Ok(())
+}
+
+/// [`not_a_file`], then makes the folder.
+pub(crate) fn output_folder(out: &std::path::Path, writer: &str) -> anyhow::Result<()> {
+    not_a_file(out, writer)?;
+    anyhow::Context::with_context(std::fs::create_dir_all(out), || {
+        format!("creating {}", out.display())
+    })
+}

@@ -21,6 +21,11 @@ pub(crate) fn run_predict(
     kpis: &std::path::Path,
     out: &std::path::Path,
 ) -> Result<()> {
+    let inputs = [
+        ("the model".to_string(), model.to_path_buf()),
+        ("the KPI database".to_string(), kpis.to_path_buf()),
+    ];
+    tirewear::atomic::check_destinations(&[("predictions", out)], &inputs)?;
     let m = SavedModel::load(model)?;
     let units = tirewear::kpi::table::read_units(kpis)?;
     m.check_columns(&units)

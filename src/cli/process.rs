@@ -200,6 +200,15 @@ pub(crate) fn run(a: ProcessArgs, progress: bool) -> Result<Outcome> {
             "--shard stages parts in the dataset folder: give shards a shared folder, not s3://"
         );
     }
+    // Before anything is pulled; local folders are checked by the library.
+    if let Some(a) = archives.iter().find(|a| dataset.holds(a)) {
+        anyhow::bail!(
+            "{}: the dataset is, or holds, the season archive {}: its files would replace the \
+             archive's or sweep them as stale; give the dataset a prefix outside the archive",
+            dataset.url(),
+            a.url()
+        );
+    }
     let session = Session::prepare(
         &archives,
         &dataset,

@@ -359,10 +359,12 @@ fn why_not_parquet(head: &[u8], tail: &[u8], len: u64) -> Option<String> {
     ))
 }
 
-/// What a file's first bytes show it to be, for [`why_not_parquet`].
-fn what_it_is(head: &[u8]) -> String {
-    const KNOWN: [(&[u8], &str); 6] = [
+/// What a file's first bytes show it to be ("it is an MCAP file"), for
+/// [`why_not_parquet`] and a destination the report would replace.
+pub(crate) fn what_it_is(head: &[u8]) -> String {
+    const KNOWN: [(&[u8], &str); 7] = [
         (b"\x89MCAP", "an MCAP file"),
+        (PARQUET_MAGIC, "a Parquet file"),
         (&[0x28, 0xb5, 0x2f, 0xfd], "zstd-compressed data"),
         (&[0x1f, 0x8b], "gzip-compressed data"),
         (b"PK\x03\x04", "a ZIP archive (an .xlsx workbook is one)"),

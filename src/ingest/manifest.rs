@@ -162,6 +162,46 @@ impl Season {
         self.root.join(rel)
     }
 
+    /// Every file the manifest names, with what it is: the manifest itself,
+    /// compounds, wear readings, road profiles and each run's telemetry
+    /// (the inputs an output must not replace).
+    pub fn input_files(&self) -> Vec<(String, PathBuf)> {
+        let m = &self.manifest;
+        let mut files = vec![(
+            "the season manifest".to_string(),
+            self.manifest_path.clone(),
+        )];
+        let named = |what: String, rel: &str| (what, self.path(rel));
+        files.extend(
+            m.compounds
+                .iter()
+                .map(|c| named(format!("compound {}", c.id), &c.file)),
+        );
+        files.extend(
+            m.wear_readings
+                .iter()
+                .map(|f| named("wear readings".into(), f)),
+        );
+        files.extend(
+            m.road_profiles
+                .iter()
+                .map(|f| named("road profiles".into(), f)),
+        );
+        for t in &m.tracks {
+            files.extend(
+                t.profiles
+                    .iter()
+                    .map(|p| named(format!("road profile {} {}", t.id, p.location), &p.file)),
+            );
+        }
+        files.extend(
+            m.runs
+                .iter()
+                .map(|r| named(format!("telemetry of run {}", r.id), &r.telemetry)),
+        );
+        files
+    }
+
     pub fn event(&self, id: &str) -> Option<&Event> {
         self.manifest.events.iter().find(|e| e.id == id)
     }

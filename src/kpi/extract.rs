@@ -768,6 +768,7 @@ pub fn extract(opts: &ExtractOptions) -> Result<ExtractSummary, IngestError> {
         None => &CpuEngine,
     };
     let season = Season::open_with(&opts.season, opts.allow_external_paths)?;
+    check_outputs(opts, &season)?;
     let m = &season.manifest;
     let SeasonInputs {
         compounds,
@@ -875,6 +876,35 @@ fn new_extraction_id() -> String {
         .duration_since(std::time::UNIX_EPOCH)
         .map_or(0, |d| d.as_nanos());
     format!("{nanos:x}-{:x}", std::process::id())
+}
+
+/// Every file an extraction writes, with what it is.
+fn output_paths(opts: &ExtractOptions) -> Vec<(&'static str, PathBuf)> {
+    let side = |suffix| side_table_path(&opts.out, suffix);
+    let mut outputs = vec![
+        ("KPI table", opts.out.clone()),
+        ("road side table", side("road.parquet")),
+        ("energy-map side table", side("energy_maps.parquet")),
+        ("condition-map side table", side("condition_maps.parquet")),
+        ("extraction report", side("report.json")),
+    ];
+    outputs.extend(opts.csv.iter().map(|c| ("CSV copy", c.clone())));
+    outputs
+}
+
+/// Refuses, before any run is read, outputs that would replace one of the
+/// season's files or each other, or that name a folder.
+fn check_outputs(opts: &ExtractOptions, season: &Season) -> Result<(), IngestError> {
+    let outputs = output_paths(opts);
+    let outputs: Vec<(&str, &Path)> = outputs.iter().map(|(w, p)| (*w, p.as_path())).collect();
+    crate::atomic::check_destinations(&outputs, &season.input_files()).map_err(|c| {
+        let hint = if c.dest == opts.out && c.dest.is_dir() {
+            format!(" such as {}", opts.out.join("kpis.parquet").display())
+        } else {
+            String::new()
+        };
+        IngestError::invalid(&c.dest, "output", format!("{}{hint}", c.reason))
+    })
 }
 
 /// The per-tire maps of one extraction.

@@ -111,8 +111,37 @@ impl ProcessOptions {
                     .into(),
             ));
         }
+        for a in &self.archives {
+            check_apart(a, &self.dataset)?;
+        }
         Ok(())
     }
+}
+
+/// Refuses a dataset folder that is an archive's folder or holds one: the
+/// dataset's own folders (`road/`, `kpis/`, …) would replace the archive's
+/// files or sweep them as stale parts (`process demo --out demo` once
+/// deleted the archive's road profiles). A dataset inside an archive's
+/// folder is allowed: the archive is read by its manifest alone.
+fn check_apart(archive: &Path, dataset: &Path) -> Result<(), NightlyError> {
+    let folder = if archive.is_file() {
+        crate::atomic::folder_of(archive)
+    } else {
+        archive
+    };
+    // Folders are compared where they really are, links followed.
+    let real = |p: &Path| std::fs::canonicalize(p).unwrap_or_else(|_| crate::atomic::entry_of(p));
+    let (folder, data) = (real(folder), real(dataset));
+    if !folder.starts_with(&data) {
+        return Ok(());
+    }
+    let how = if folder == data { "is" } else { "holds" };
+    Err(NightlyError::Invalid(format!(
+        "{}: the dataset folder {how} the season archive {}: the dataset's files would replace \
+         the archive's or sweep them as stale; give the dataset a folder outside the archive",
+        dataset.display(),
+        archive.display()
+    )))
 }
 
 /// One committed run of the dataset.

@@ -55,6 +55,30 @@ impl Location {
         }
     }
 
+    /// Whether `other` is this remote location or lies under it (the same
+    /// bucket, its prefix within this one's, part by part). Local paths are
+    /// compared by `ProcessOptions::check`, on their mirrors.
+    pub fn holds(&self, other: &Location) -> bool {
+        match (self, other) {
+            (
+                Location::S3 { bucket, prefix },
+                Location::S3 {
+                    bucket: b,
+                    prefix: p,
+                },
+            ) => {
+                let parts = |x: &str| {
+                    x.split('/')
+                        .filter(|s| !s.is_empty())
+                        .map(str::to_string)
+                        .collect::<Vec<_>>()
+                };
+                bucket == b && parts(p).starts_with(&parts(prefix))
+            }
+            _ => false,
+        }
+    }
+
     /// The folder of the local mirror of a remote location under `cache`.
     pub fn mirror(&self, cache: &Path) -> PathBuf {
         match self {
@@ -583,5 +607,19 @@ mod tests {
             .unwrap()
             .mirror(Path::new("/c"));
         assert_eq!(m, PathBuf::from("/c/s3/b/x/y"));
+    }
+
+    /// A remote dataset holds an archive at its prefix or below it, part by
+    /// part (`x/yz` is not under `x/y`), in its own bucket only.
+    #[test]
+    fn a_remote_dataset_holds_archives_at_or_below_its_prefix() {
+        let at = |s: &str| Location::parse(s).unwrap();
+        assert!(at("s3://b/x").holds(&at("s3://b/x/")));
+        assert!(at("s3://b/x").holds(&at("s3://b/x/y")));
+        assert!(at("s3://b").holds(&at("s3://b/x")));
+        assert!(!at("s3://b/x/y").holds(&at("s3://b/x")));
+        assert!(!at("s3://b/x/y").holds(&at("s3://b/x/yz")));
+        assert!(!at("s3://b/x").holds(&at("s3://c/x")));
+        assert!(!at("data").holds(&at("data")));
     }
 }

@@ -11,6 +11,9 @@ pub enum ReportError {
     },
     #[error("{path}: {message}")]
     Input { path: PathBuf, message: String },
+    /// Where the page may not go (a folder, a file that is no HTML page).
+    #[error("{path}: {message}")]
+    Output { path: PathBuf, message: String },
     #[error("drawing a figure: {0}")]
     Figure(String),
 }

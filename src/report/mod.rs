@@ -369,6 +369,8 @@ pub fn write_report(
     out: &Path,
     bench: &[PathBuf],
 ) -> Result<ReportSummary, ReportError> {
+    check_season_folder(dir)?;
+    check_page_destination(out)?;
     let inputs = Inputs::read(dir, bench)?;
     let (page, sections, not_drawn) = render(&inputs);
     if let Some(parent) = out.parent().filter(|p| !p.as_os_str().is_empty()) {
@@ -394,9 +396,93 @@ pub fn write_report(
     })
 }
 
+/// The report reads a folder: given a file (the KPI table, most likely),
+/// it names the folder that holds it.
+fn check_season_folder(dir: &Path) -> Result<(), ReportError> {
+    if !dir.is_file() {
+        return Ok(());
+    }
+    let parent = match dir.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p,
+        _ => Path::new("."),
+    };
+    Err(ReportError::Input {
+        path: dir.into(),
+        message: format!(
+            "is a file: the report takes the folder that holds kpis.parquet (a season or \
+             a dataset), such as {}",
+            parent.display()
+        ),
+    })
+}
+
+/// Refuses, before anything is read, a destination the page would wrongly
+/// replace: a folder, or a file that is no HTML page (the KPI table, a
+/// model or `gap.json` given as `--out` by mistake). A page written before
+/// is replaced.
+fn check_page_destination(out: &Path) -> Result<(), ReportError> {
+    let refuse = |message: String| ReportError::Output {
+        path: out.into(),
+        message,
+    };
+    crate::atomic::check_destinations(&[("report", out)], &[]).map_err(|c| refuse(c.reason))?;
+    let Ok(file) = std::fs::File::open(out) else {
+        return Ok(());
+    };
+    let mut head = Vec::with_capacity(HEAD_BYTES);
+    std::io::Read::read_to_end(&mut std::io::Read::take(file, HEAD_BYTES as u64), &mut head)
+        .map_err(|source| ReportError::Io {
+            path: out.into(),
+            source,
+        })?;
+    if head.is_empty() || is_html(&head) {
+        return Ok(());
+    }
+    Err(refuse(format!(
+        "exists and is not an HTML page ({}): the report would replace it; give another path",
+        crate::ingest::checksum::what_it_is(&head)
+    )))
+}
+
+/// How much of an existing destination is read to tell what it is.
+const HEAD_BYTES: usize = 256;
+
+/// Whether a file's first bytes begin an HTML page (`<!DOCTYPE html` or
+/// `<html`, in any case, after a byte-order mark and white space).
+fn is_html(head: &[u8]) -> bool {
+    let head = head.strip_prefix(b"\xef\xbb\xbf").unwrap_or(head);
+    let start = head
+        .iter()
+        .position(|b| !b.is_ascii_whitespace())
+        .unwrap_or(head.len());
+    let head = head[start..].to_ascii_lowercase();
+    head.starts_with(b"<!doctype html") || head.starts_with(b"<html")
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Pages as browsers and tirewear write them are HTML; data is not.
+    #[test]
+    fn an_html_page_is_told_from_data_by_its_first_bytes() {
+        for page in [
+            &b"<!DOCTYPE html>\n<html>"[..],
+            b"\xef\xbb\xbf  \n<!doctype HTML>",
+            b"<HTML lang=en>",
+        ] {
+            assert!(is_html(page), "{}", String::from_utf8_lossy(page));
+        }
+        for data in [
+            &b"PAR1"[..],
+            b"{\"html\": 1}",
+            b"format_version = 1",
+            b"<?xml version",
+            b"\x89MCAP",
+        ] {
+            assert!(!is_html(data), "{}", String::from_utf8_lossy(data));
+        }
+    }
 
     #[test]
     fn newest_takes_the_direct_folder_else_the_latest_dated_one() {
