@@ -125,6 +125,106 @@ pub struct Season {
     pub manifest: Manifest,
 }
 
+/// A folder with no `season.toml`, or a file that is no TOML text, named
+/// for what it is and, where one is near, with the archive to give
+/// instead: a `process` dataset, a folder inside an archive, a folder of
+/// archives, the KPI table or a telemetry file (`extract demo/kpis.parquet`
+/// once said only "stream did not contain valid UTF-8").
+fn refuse_non_archive(path: &Path) -> Result<()> {
+    let no_archive = |why: String| Err(IngestError::invalid(path, "season archive", why));
+    let manifest_in = |dir: &Path| dir.join("season.toml").is_file();
+    if path.is_dir() {
+        if manifest_in(path) {
+            return Ok(());
+        }
+        if path.join("dataset.json").is_file() {
+            return no_archive(format!(
+                "is a dataset written by `tirewear process`, not a season archive (no \
+                 season.toml): its KPI table is {}",
+                path.join("kpis.parquet").display()
+            ));
+        }
+        if let Some(up) = archive_above(path) {
+            return no_archive(format!(
+                "holds no season.toml; the season archive is {}, which holds this folder",
+                up.display()
+            ));
+        }
+        let mut inside: Vec<String> = std::fs::read_dir(path)
+            .into_iter()
+            .flatten()
+            .flatten()
+            .filter(|e| manifest_in(&e.path()))
+            .map(|e| e.path().display().to_string())
+            .collect();
+        if !inside.is_empty() {
+            inside.sort();
+            let more = inside.len().saturating_sub(3);
+            inside.truncate(3);
+            let more = if more > 0 {
+                format!(" and {more} more")
+            } else {
+                String::new()
+            };
+            return no_archive(format!(
+                "holds no season.toml, but its folders {}{more} do: give each season \
+                 archive's folder",
+                inside.join(", ")
+            ));
+        }
+        return no_archive(
+            "holds no season.toml: not a season archive (`tirewear simulate` and `tirewear \
+             import` make one; docs/formats.md)"
+                .to_string(),
+        );
+    }
+    let Ok(file) = std::fs::File::open(path) else {
+        return Ok(()); // the manifest's reader names what is wrong
+    };
+    let mut head = Vec::new();
+    if std::io::Read::read_to_end(&mut std::io::Read::take(file, 256), &mut head).is_err() {
+        return Ok(());
+    }
+    let what = super::checksum::what_it_is(&head);
+    if head.is_empty() || what.starts_with("it is text") {
+        return Ok(());
+    }
+    let folder = path
+        .parent()
+        .filter(|p| !p.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
+    let hint = match archive_above(path) {
+        Some(up) if up == folder => format!("give the archive's folder, {}", up.display()),
+        Some(up) => format!("the season archive is {}", up.display()),
+        None => "give a season archive's folder or its season.toml".to_string(),
+    };
+    no_archive(format!(
+        "is not a season manifest (TOML text): {what}; {hint}"
+    ))
+}
+
+/// The nearest folder above `path` (at most three levels) that holds a
+/// `season.toml`.
+fn archive_above(path: &Path) -> Option<PathBuf> {
+    let start = std::path::absolute(path).ok()?;
+    start
+        .ancestors()
+        .skip(1)
+        .take(3)
+        .find(|d| d.join("season.toml").is_file())
+        .map(|d| {
+            // Said as the user wrote it where the path allows.
+            let mut rel = path.to_path_buf();
+            for _ in 0..start.components().count() - d.components().count() {
+                rel = match rel.parent() {
+                    Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+                    _ => return d.to_path_buf(),
+                };
+            }
+            rel
+        })
+}
+
 impl Season {
     /// Reads and validates `DIR/season.toml` (or a manifest path given
     /// directly). Every path in it must stay inside the archive folder.
@@ -136,6 +236,7 @@ impl Season {
     /// paths that leave the archive folder (`..`), which an archive copied
     /// from elsewhere should not be able to point at by itself.
     pub fn open_with(path: &Path, allow_external_paths: bool) -> Result<Season> {
+        refuse_non_archive(path)?;
         let manifest_path = if path.is_dir() {
             path.join("season.toml")
         } else {
@@ -416,6 +517,59 @@ fn valid_date(s: &str) -> bool {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// What is given in an archive's place is named for what it is, with
+    /// the archive near it; an archive and its manifest pass.
+    #[test]
+    fn what_is_no_archive_is_named_with_the_archive_near_it() {
+        let dir = tempfile::tempdir().unwrap();
+        let d = dir.path();
+        for a in ["a1", "a2"] {
+            std::fs::create_dir_all(d.join(a).join("telemetry")).unwrap();
+            std::fs::write(d.join(a).join("season.toml"), "name = 'x'\n").unwrap();
+        }
+        std::fs::write(d.join("a1/telemetry/r.mcap"), b"\x89MCAP0\r\n").unwrap();
+        std::fs::write(d.join("a1/kpis.parquet"), b"PAR1....PAR1").unwrap();
+        std::fs::create_dir_all(d.join("ds")).unwrap();
+        std::fs::write(d.join("ds/dataset.json"), "{}").unwrap();
+        std::fs::create_dir_all(d.join("empty")).unwrap();
+        let said = |p: &Path| refuse_non_archive(p).unwrap_err().to_string();
+        let a1 = d.join("a1").display().to_string();
+        for (p, parts) in [
+            (
+                d.join("a1/kpis.parquet"),
+                vec!["it is a Parquet file", "give the archive's folder"],
+            ),
+            (
+                d.join("a1/telemetry/r.mcap"),
+                vec!["it is an MCAP file", "the season archive is"],
+            ),
+            (
+                d.join("a1/telemetry"),
+                vec!["holds no season.toml; the season archive is"],
+            ),
+            (
+                d.join("ds"),
+                vec![
+                    "is a dataset written by `tirewear process`",
+                    "ds/kpis.parquet",
+                ],
+            ),
+            (d.to_path_buf(), vec!["but its folders", "a1", "a2"]),
+            (d.join("empty"), vec!["not a season archive"]),
+        ] {
+            let e = said(&p);
+            for part in parts {
+                assert!(e.contains(part), "{part} not in {e}");
+            }
+            if p.starts_with(d.join("a1")) {
+                assert!(e.contains(&format!("is {a1}")) || e.ends_with(&a1), "{e}");
+            }
+        }
+        for ok in [d.join("a1"), d.join("a1/season.toml"), d.join("missing")] {
+            assert!(refuse_non_archive(&ok).is_ok(), "{}", ok.display());
+        }
+    }
 
     #[test]
     fn dates_follow_the_calendar() {

@@ -52,6 +52,13 @@ pub(crate) fn open_regular(path: &Path) -> Result<(std::fs::File, std::fs::Metad
         )
     };
     let stated = std::fs::metadata(path).map_err(|e| IngestError::io(path, e))?;
+    if stated.is_dir() {
+        return Err(IngestError::invalid(
+            path,
+            "file",
+            "is a folder, not a regular file",
+        ));
+    }
     if !stated.is_file() {
         return Err(not_regular());
     }

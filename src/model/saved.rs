@@ -142,7 +142,7 @@ impl SavedModel {
         let text = crate::ingest::read_text(path, crate::ingest::MAX_JSON_BYTES).map_err(|e| {
             ModelError::Io {
                 path: path.display().to_string(),
-                message: crate::ingest::unnamed(path, &e),
+                message: crate::ingest::unnamed(path, &e) + &models_in(path),
             }
         })?;
         let head: serde_json::Value =
@@ -310,6 +310,24 @@ fn positive(field: &str, values: &[f64]) -> Result<(), String> {
     }
 }
 
+/// For a model path that is a folder (`predict models …`), the model files
+/// `fit` writes that it holds ("; it holds DIR/physical.json, …").
+fn models_in(path: &Path) -> String {
+    if !path.is_dir() {
+        return String::new();
+    }
+    let held: Vec<String> = ["ffnn", "pca", "physical"]
+        .iter()
+        .map(|m| path.join(format!("{m}.json")))
+        .filter(|p| p.is_file())
+        .map(|p| p.display().to_string())
+        .collect();
+    if held.is_empty() {
+        return "; a model is a JSON file `tirewear fit` writes".to_string();
+    }
+    format!("; give one of the models in it: {}", held.join(", "))
+}
+
 /// Journal of the model files' commit in their folder (`atomic::OutputSet`).
 pub const MODELS_JOURNAL: &str = ".models.journal";
 
@@ -362,6 +380,27 @@ mod tests {
     /// a FIFO is refused before it is read: `/dev/zero` was read until the
     /// memory ran out, and a FIFO's open waited for a writer (`predict`,
     /// `gap --effects`, `gap --baseline`, `report --bench` hung).
+    /// `predict models …`: the folder is named for what it is, with the
+    /// models in it to choose from.
+    #[test]
+    fn a_folder_given_as_a_model_names_the_models_it_holds() {
+        let dir = tempfile::tempdir().unwrap();
+        let e = SavedModel::load(dir.path()).unwrap_err().to_string();
+        assert!(
+            e.contains("is a folder") && e.contains("a model is a JSON file"),
+            "{e}"
+        );
+        std::fs::write(dir.path().join("physical.json"), "{}").unwrap();
+        std::fs::write(dir.path().join("pca.json"), "{}").unwrap();
+        let e = SavedModel::load(dir.path()).unwrap_err().to_string();
+        let pca = dir.path().join("pca.json").display().to_string();
+        let physical = dir.path().join("physical.json").display().to_string();
+        assert!(
+            e.ends_with(&format!("give one of the models in it: {pca}, {physical}")),
+            "{e}"
+        );
+    }
+
     #[cfg(unix)]
     #[test]
     fn a_model_or_hypotheses_file_that_is_no_regular_file_is_refused_unread() {
