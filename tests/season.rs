@@ -357,3 +357,85 @@ fn the_truth_s_scatter_factor_is_what_multiplied_the_wear() {
         (logs.iter().map(|l| (l - mean).powi(2)).sum::<f64>() / (logs.len() - 1) as f64).sqrt();
     assert!((0.1..0.5).contains(&sd), "{sd}");
 }
+
+/// Simulating into a folder that holds an earlier season: one simulated
+/// by tirewear is replaced, its files the new season does not write are
+/// removed and the outputs derived from it are reported as stale; a season
+/// archive tirewear did not simulate (a team's own) is refused untouched,
+/// and so is a file in the folder's place. Before, the team's manifest,
+/// compounds and wear readings were overwritten without a word, and the
+/// earlier season's telemetry stayed beside the new one.
+#[test]
+fn an_earlier_season_is_replaced_only_when_tirewear_simulated_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("season");
+    let opts = |tracks| SimOptions {
+        preset: Preset::Tiny,
+        scale: 1.0,
+        tracks,
+        seed: 7,
+        effects: vec![],
+        generated: None,
+        scatter: tirewear::sim::WearScatter::NONE,
+        encoding: Encoding::Block,
+        rate_hz: Some(5.0),
+        out: out.clone(),
+        sensor_noise: false,
+        logger_export: None,
+        progress: false,
+    };
+    let first = simulate(&opts(Some(3))).unwrap();
+    assert!(first.stale_outputs.is_empty() && first.removed_files == 0);
+    let listed = |dir: &Path| -> std::collections::BTreeSet<std::path::PathBuf> {
+        Season::open(dir)
+            .unwrap()
+            .input_files()
+            .into_iter()
+            .map(|(_, p)| p)
+            .collect()
+    };
+    let earlier = listed(&out);
+    std::fs::write(out.join("kpis.parquet"), b"from the earlier season").unwrap();
+    let second = simulate(&opts(None)).unwrap();
+    let now = listed(&out);
+    let gone: Vec<_> = earlier.difference(&now).collect();
+    assert!(!gone.is_empty(), "three tracks, then the preset's two");
+    assert_eq!(second.removed_files, gone.len());
+    assert!(gone.iter().all(|p| !p.exists()), "{gone:?}");
+    assert!(now.iter().all(|p| p.exists()));
+    assert_eq!(second.stale_outputs, [out.join("kpis.parquet")]);
+    // The same season again: nothing removed, nothing stale.
+    let again = simulate(&opts(None)).unwrap();
+    assert!(again.stale_outputs.is_empty() && again.removed_files == 0);
+
+    let man = out.join("season.toml");
+    let text = std::fs::read_to_string(&man).unwrap();
+    let team = text
+        .lines()
+        .map(|l| {
+            if l.starts_with("description") {
+                "description = \"Team data 2026\""
+            } else {
+                l
+            }
+        })
+        .collect::<Vec<_>>()
+        .join("\n");
+    std::fs::write(&man, &team).unwrap();
+    std::fs::remove_dir_all(out.join("truth")).unwrap();
+    let wear = std::fs::read(out.join("wear/readings.csv")).unwrap();
+    let e = simulate(&opts(None)).unwrap_err().to_string();
+    assert!(
+        e.contains("tirewear did not simulate") && e.contains("give a new folder"),
+        "{e}"
+    );
+    assert_eq!(std::fs::read_to_string(&man).unwrap(), team);
+    assert_eq!(std::fs::read(out.join("wear/readings.csv")).unwrap(), wear);
+
+    let file = dir.path().join("file");
+    std::fs::write(&file, b"x").unwrap();
+    let mut o = opts(None);
+    o.out = file;
+    let e = simulate(&o).unwrap_err().to_string();
+    assert!(e.contains("is a file, not a folder"), "{e}");
+}

@@ -61,7 +61,8 @@ pub(crate) struct SimulateArgs {
     /// import` with a known answer (docs/import.md).
     #[arg(long, value_enum, value_name = "FORMAT")]
     logger_export: Option<LoggerFormatArg>,
-    /// Output folder (created; files in it are replaced).
+    /// Output folder (created). An earlier season tirewear simulated there is
+    /// replaced; a season archive it did not simulate is refused, untouched.
     #[arg(long)]
     out: PathBuf,
 }
@@ -176,7 +177,27 @@ pub(crate) fn run(a: SimulateArgs, progress: bool) -> Result<()> {
         logger_export: a.logger_export.map(Into::into),
         progress,
     };
-    run_simulation(&opts)?;
+    let s = run_simulation(&opts)?;
+    if s.removed_files > 0 {
+        tracing::info!(
+            "removed {} files of the earlier season in {} that this one does not write",
+            s.removed_files,
+            s.out.display()
+        );
+    }
+    if !s.stale_outputs.is_empty() {
+        let names: Vec<String> = s
+            .stale_outputs
+            .iter()
+            .map(|p| p.display().to_string())
+            .collect();
+        tracing::warn!(
+            "{} are from the earlier season in {}, not this one: run `tirewear extract` (and \
+             fit, gap, report) again before using them",
+            names.join(", "),
+            s.out.display()
+        );
+    }
     Ok(())
 }
 

@@ -76,6 +76,13 @@ pub struct SimSummary {
     pub samples: u64,
     pub bytes: u64,
     pub saturated_fraction: f64,
+    /// Outputs derived from an earlier, different season in the folder
+    /// (its KPI table, models, diagnosis, report): no longer this
+    /// season's, left for the user to make again.
+    pub stale_outputs: Vec<PathBuf>,
+    /// Files of that earlier season the new one does not write (its other
+    /// runs' telemetry, its tracks' profiles), removed.
+    pub removed_files: usize,
 }
 
 const ROAD_MICRO_LAMBDA_MM: f64 = 0.5;
@@ -145,6 +152,7 @@ pub fn simulate(opts: &SimOptions) -> Result<SimSummary, SimError> {
     );
     let out = &opts.out;
     let io = |p: &Path, e| SimError::Ingest(IngestError::io(p, e));
+    let earlier = earlier_season(out)?;
     std::fs::create_dir_all(out).map_err(|e| io(out, e))?;
     if opts.logger_export.is_some() {
         let dir = out.join("logger");
@@ -352,7 +360,7 @@ pub fn simulate(opts: &SimOptions) -> Result<SimSummary, SimError> {
         format_version: manifest::FORMAT_VERSION,
         name: plan.name.clone(),
         description: format!(
-            "Simulated by tirewear {} (preset {:?}, seed {}, scale {}, effects [{}])",
+            "{SIMULATED_BY} {} (preset {:?}, seed {}, scale {}, effects [{}])",
             env!("CARGO_PKG_VERSION"),
             opts.preset,
             opts.seed,
@@ -411,6 +419,13 @@ pub fn simulate(opts: &SimOptions) -> Result<SimSummary, SimError> {
     };
     manifest.validate(&out.join("season.toml"))?;
     manifest.write(&out.join("season.toml"))?;
+    let (removed_files, stale_outputs) = match earlier {
+        Some(old) if old != manifest => (
+            remove_earlier_files(out, old, &manifest),
+            derived_outputs(out),
+        ),
+        _ => (0, Vec::new()),
+    };
     Ok(SimSummary {
         out: out.clone(),
         tracks: plan.tracks.len(),
@@ -420,7 +435,90 @@ pub fn simulate(opts: &SimOptions) -> Result<SimSummary, SimError> {
         samples: samples.load(Ordering::Relaxed),
         bytes: dir_size(out),
         saturated_fraction: saturated as f64 / total_samples.max(1) as f64,
+        stale_outputs,
+        removed_files,
     })
+}
+
+/// The manifest of a season tirewear simulated into `out` before, which
+/// the new one replaces. Refused, before anything is written: a file in
+/// the folder's place, and an archive tirewear did not simulate (a team's
+/// own or a hand-made one, whose manifest, compounds and wear readings the
+/// simulator would overwrite) or whose manifest cannot be read.
+fn earlier_season(out: &Path) -> Result<Option<Manifest>, SimError> {
+    if out.exists() && !out.is_dir() {
+        return Err(SimError::Config(format!(
+            "{}: is a file, not a folder: simulate writes a season archive into a folder",
+            out.display()
+        )));
+    }
+    let path = out.join("season.toml");
+    if !path.exists() {
+        return Ok(None);
+    }
+    let refuse = |why: String| {
+        Err(SimError::Config(format!(
+            "{}: {why}: simulating there would overwrite its manifest, compounds and wear \
+             readings; give a new folder (or remove this one)",
+            out.display()
+        )))
+    };
+    match crate::ingest::read_toml::<Manifest>(&path) {
+        Ok(m)
+            if m.description.starts_with(SIMULATED_BY)
+                || out.join("truth/settings.toml").is_file() =>
+        {
+            Ok(Some(m))
+        }
+        Ok(m) => refuse(format!(
+            "holds a season archive tirewear did not simulate ('{}': no \"{SIMULATED_BY}\" \
+             in its description, no truth/settings.toml)",
+            m.name
+        )),
+        Err(e) => refuse(format!("holds a season.toml that cannot be read ({e})")),
+    }
+}
+
+/// How every simulated season's description begins.
+const SIMULATED_BY: &str = "Simulated by tirewear";
+
+/// Removes the files the earlier simulated season listed that the new one
+/// does not (paths inside the folder only); returns how many.
+fn remove_earlier_files(out: &Path, old: Manifest, new: &Manifest) -> usize {
+    let files = |m: Manifest| -> std::collections::BTreeSet<PathBuf> {
+        let season = crate::ingest::manifest::Season {
+            root: out.to_path_buf(),
+            manifest_path: out.join("season.toml"),
+            manifest: m,
+        };
+        season.input_files().into_iter().map(|(_, p)| p).collect()
+    };
+    let keep = files(new.clone());
+    let inside = |p: &Path| {
+        p.strip_prefix(out).is_ok_and(|rel| {
+            rel.components()
+                .all(|c| matches!(c, std::path::Component::Normal(_)))
+        })
+    };
+    let mut removed = 0;
+    for p in files(old).difference(&keep).filter(|p| inside(p)) {
+        match std::fs::remove_file(p) {
+            Ok(()) => removed += 1,
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+            Err(e) => tracing::warn!("{}: left from the earlier season: {e}", p.display()),
+        }
+    }
+    removed
+}
+
+/// What `extract`, `fit`, `gap`, `report` and `process` write into an
+/// archive's folder by default, where present.
+fn derived_outputs(out: &Path) -> Vec<PathBuf> {
+    ["kpis.parquet", "kpis.csv", "models", "gap", "report.html"]
+        .iter()
+        .map(|name| out.join(name))
+        .filter(|p| p.exists())
+        .collect()
 }
 
 fn telemetry_rel(run: &str) -> String {
