@@ -472,6 +472,25 @@ fn bad_logs_are_named_and_do_not_sink_the_batch() {
     let season = tirewear::ingest::manifest::Season::open(&arch).unwrap();
     assert!(season.manifest.runs.iter().any(|r| r.id == "good"));
     assert!(!season.manifest.runs.iter().any(|r| r.id == "no_ws"));
+    // Two logs of one run (a bad one first, then the good one twice, as
+    // `good.csv` and through another spelling of its path): the first
+    // that imports is kept, the later one fails by name, exit 3.
+    let bad_good = tmp.path().join("bad").join("good.csv");
+    std::fs::create_dir_all(bad_good.parent().unwrap()).unwrap();
+    std::fs::write(&bad_good, &no_ws).unwrap();
+    let again = tmp.path().join(".").join("good.csv");
+    let (bad_good, again) = (bad_good.to_str().unwrap(), again.to_str().unwrap());
+    let mut args = vec![bad_good, good_path.as_str(), again];
+    args.extend(common);
+    let (code, text) = tirewear_import(&args);
+    assert_eq!(code, 3, "{text}");
+    assert!(text.contains("imported 1 of 3 logs"), "{text}");
+    assert!(
+        text.contains(&format!(
+            "{again}: run: run 'good' is imported from {good_path} in this call already"
+        )),
+        "{text}"
+    );
     // A new run without --event is a usage error naming what is needed.
     let (code, text) = tirewear_import(&[
         &good_path,

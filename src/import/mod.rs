@@ -23,6 +23,7 @@ use crate::ingest::manifest::{self, Season, TireSets};
 use crate::ingest::telemetry::{Encoding, RunInfo, TelemetryWriter};
 use estimate::{EventConditions, LateralMethod};
 use std::collections::BTreeMap;
+use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
 /// A number as a message quotes it: plainly, or in exponent form where
@@ -397,7 +398,23 @@ pub fn import_logs(
     let season = Season::open(archive)?;
     let mut manifest = season.manifest.clone();
     let mut summary = ImportSummary::default();
+    // Two logs of one run (`logger/*` with both the .ld and the .csv
+    // export): the second would silently replace the first's telemetry.
+    let mut imported_from: HashMap<&str, &Path> = HashMap::new();
     for (log, run) in logs.iter().zip(run_ids) {
+        if let Some(first) = imported_from.get(run.as_str()) {
+            let e = ImportError::log(
+                log,
+                "run",
+                format!(
+                    "run '{run}' is imported from {} in this call already: give one log per run",
+                    first.display()
+                ),
+            );
+            tracing::error!("{e}");
+            summary.failed.push((log.clone(), e.to_string()));
+            continue;
+        }
         let before = manifest.clone();
         // A panic is this log's error: the others are still imported.
         let outcome =
@@ -414,6 +431,7 @@ pub fn import_logs(
         match outcome {
             Ok(r) => {
                 tracing::info!(log = %log.display(), run = %r.run, samples = r.samples, "imported");
+                imported_from.insert(run, log);
                 summary.imported.push(r);
             }
             Err(e) => {
