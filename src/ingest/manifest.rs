@@ -134,7 +134,8 @@ fn refuse_non_archive(path: &Path) -> Result<()> {
     let no_archive = |why: String| Err(IngestError::invalid(path, "season archive", why));
     let manifest_in = |dir: &Path| dir.join("season.toml").is_file();
     if path.is_dir() {
-        if manifest_in(path) {
+        // Whatever stands there, its reader names it (a FIFO, a folder).
+        if path.join("season.toml").exists() {
             return Ok(());
         }
         if path.join("dataset.json").is_file() {
@@ -178,21 +179,14 @@ fn refuse_non_archive(path: &Path) -> Result<()> {
                 .to_string(),
         );
     }
-    let Ok(file) = std::fs::File::open(path) else {
+    let Ok(head) = super::read_head(path, 256) else {
         return Ok(()); // the manifest's reader names what is wrong
     };
-    let mut head = Vec::new();
-    if std::io::Read::read_to_end(&mut std::io::Read::take(file, 256), &mut head).is_err() {
-        return Ok(());
-    }
     let what = super::checksum::what_it_is(&head);
     if head.is_empty() || what.starts_with("it is text") {
         return Ok(());
     }
-    let folder = path
-        .parent()
-        .filter(|p| !p.as_os_str().is_empty())
-        .unwrap_or(Path::new("."));
+    let folder = crate::atomic::folder_of(path);
     let hint = match archive_above(path) {
         Some(up) if up == folder => format!("give the archive's folder, {}", up.display()),
         Some(up) => format!("the season archive is {}", up.display()),
@@ -517,6 +511,25 @@ fn valid_date(s: &str) -> bool {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A manifest that is a FIFO, given directly or in its folder, is left
+    /// to the reader, which refuses it unopened: telling what a path is
+    /// must not open it (the open would wait for a writer).
+    #[cfg(unix)]
+    #[test]
+    fn a_manifest_that_is_a_fifo_is_refused_unopened() {
+        let dir = tempfile::tempdir().unwrap();
+        let fifo = dir.path().join("season.toml");
+        let made = std::process::Command::new("mkfifo").arg(&fifo).status();
+        assert!(made.is_ok_and(|s| s.success()), "mkfifo");
+        for path in [dir.path(), fifo.as_path()] {
+            let e = Season::open(path).unwrap_err().to_string();
+            assert!(
+                e.contains("season.toml") && e.contains("not a regular file"),
+                "{e}"
+            );
+        }
+    }
 
     /// What is given in an archive's place is named for what it is, with
     /// the archive near it; an archive and its manifest pass.

@@ -71,6 +71,18 @@ pub(crate) fn open_regular(path: &Path) -> Result<(std::fs::File, std::fs::Metad
     Ok((file, meta))
 }
 
+/// The first `limit` bytes of a regular file, to tell what it is; opened
+/// only after its metadata says it is one (a FIFO's open would wait).
+pub(crate) fn read_head(path: &Path, limit: u64) -> Result<Vec<u8>> {
+    use std::io::Read;
+    let (file, _) = open_regular(path)?;
+    let mut head = Vec::new();
+    file.take(limit)
+        .read_to_end(&mut head)
+        .map_err(|e| IngestError::io(path, e))?;
+    Ok(head)
+}
+
 /// Largest JSON file read whole (a model, a bench file, an extraction's or
 /// a diagnosis's report): far above the largest season's `gap.json`.
 pub(crate) const MAX_JSON_BYTES: u64 = 1 << 30;

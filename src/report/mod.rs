@@ -402,10 +402,7 @@ fn check_season_folder(dir: &Path) -> Result<(), ReportError> {
     if !dir.is_file() {
         return Ok(());
     }
-    let parent = match dir.parent() {
-        Some(p) if !p.as_os_str().is_empty() => p,
-        _ => Path::new("."),
-    };
+    let parent = crate::atomic::folder_of(dir);
     Err(ReportError::Input {
         path: dir.into(),
         message: format!(
@@ -426,15 +423,13 @@ fn check_page_destination(out: &Path) -> Result<(), ReportError> {
         message,
     };
     crate::atomic::check_destinations(&[("report", out)], &[]).map_err(|c| refuse(c.reason))?;
-    let Ok(file) = std::fs::File::open(out) else {
+    // Nothing there, or no regular file (a FIFO's open would wait): the
+    // rename replaces the entry, as before.
+    if !std::fs::metadata(out).is_ok_and(|m| m.is_file()) {
         return Ok(());
-    };
-    let mut head = Vec::with_capacity(HEAD_BYTES);
-    std::io::Read::read_to_end(&mut std::io::Read::take(file, HEAD_BYTES as u64), &mut head)
-        .map_err(|source| ReportError::Io {
-            path: out.into(),
-            source,
-        })?;
+    }
+    let head = crate::ingest::read_head(out, HEAD_BYTES)
+        .map_err(|e| refuse(crate::ingest::unnamed(out, e)))?;
     if head.is_empty() || is_html(&head) {
         return Ok(());
     }
@@ -445,7 +440,7 @@ fn check_page_destination(out: &Path) -> Result<(), ReportError> {
 }
 
 /// How much of an existing destination is read to tell what it is.
-const HEAD_BYTES: usize = 256;
+const HEAD_BYTES: u64 = 256;
 
 /// Whether a file's first bytes begin an HTML page (`<!DOCTYPE html` or
 /// `<html`, in any case, after a byte-order mark and white space).
@@ -482,6 +477,18 @@ mod tests {
         ] {
             assert!(!is_html(data), "{}", String::from_utf8_lossy(data));
         }
+    }
+
+    /// A FIFO where the page goes is not opened to see what it is (the
+    /// open would wait for a writer): the rename replaces it.
+    #[cfg(unix)]
+    #[test]
+    fn a_fifo_as_the_page_is_not_opened() {
+        let dir = tempfile::tempdir().unwrap();
+        let fifo = dir.path().join("report.html");
+        let made = std::process::Command::new("mkfifo").arg(&fifo).status();
+        assert!(made.is_ok_and(|s| s.success()), "mkfifo");
+        assert!(check_page_destination(&fifo).is_ok());
     }
 
     #[test]
