@@ -123,6 +123,16 @@ pub fn check_destinations(
                 format!("is a folder; the {what} is written to a file: give a file's path"),
             ));
         }
+        if let Some(file) = file_above(dest) {
+            return Err(clash(
+                dest,
+                format!(
+                    "is inside {}, which is a file, not a folder: the {what} cannot be \
+                     written there",
+                    file.display()
+                ),
+            ));
+        }
         let entry = entry_of(dest);
         if let Some(input) = read.get(&entry) {
             return Err(clash(
@@ -141,6 +151,16 @@ pub fn check_destinations(
         }
     }
     Ok(())
+}
+
+/// The nearest existing folder above `dest` when it is something else (a
+/// file): the folders a write would make cannot be made there.
+pub fn file_above(dest: &Path) -> Option<&Path> {
+    let existing = folder_of(dest)
+        .ancestors()
+        .find(|a| a.as_os_str().is_empty() || std::fs::metadata(a).is_ok())?;
+    let is_folder = existing.as_os_str().is_empty() || existing.is_dir();
+    (!is_folder).then_some(existing)
 }
 
 /// Writes a whole file atomically through a buffered writer.
@@ -461,6 +481,24 @@ mod tests {
         let folder = check_destinations(&[("KPI table", &*d.join("sub"))], &inputs).unwrap_err();
         assert_eq!(folder.dest, d.join("sub"));
         assert!(folder.reason.starts_with("is a folder"), "{folder}");
+
+        // A file where a folder of the path would be made: refused before
+        // the work, not when the write's create_dir_all fails after it.
+        for below in ["season.toml/k.parquet", "season.toml/new/k.parquet"] {
+            let e = check_destinations(&[("KPI table", &*d.join(below))], &inputs).unwrap_err();
+            let expected = format!(
+                "is inside {}, which is a file",
+                d.join("season.toml").display()
+            );
+            assert!(e.reason.starts_with(&expected), "{e}");
+        }
+        assert_eq!(
+            check_destinations(
+                &[("KPI table", &*d.join("sub/new/deeper/k.parquet"))],
+                &inputs
+            ),
+            Ok(())
+        );
 
         let twice = [
             ("KPI table", &*d.join("k.parquet")),

@@ -235,6 +235,63 @@ pub fn one_thread<T: Send>(f: impl FnOnce() -> T + Send) -> T {
         .install(f)
 }
 
+/// Checks, before anything is measured, that the results can go to `out`:
+/// not a folder, not a file of the season measured, and, where a file is
+/// already there, an earlier `tirewear bench` result (a JSON object with a
+/// `lines` array, as the report reads it) or an empty file. Anything else
+/// (a KPI table, a model, a page) would be replaced by the results.
+pub fn check_output(
+    out: &std::path::Path,
+    season: Option<&crate::ingest::manifest::Season>,
+) -> Result<(), crate::atomic::Clash> {
+    let inputs = season.map(|s| s.input_files()).unwrap_or_default();
+    crate::atomic::check_destinations(&[("bench result", out)], &inputs)?;
+    // Nothing there, or no regular file (a FIFO's open would wait): the
+    // rename replaces the entry.
+    if !std::fs::metadata(out).is_ok_and(|m| m.is_file()) {
+        return Ok(());
+    }
+    let refuse = |reason: String| crate::atomic::Clash {
+        dest: out.to_path_buf(),
+        reason,
+    };
+    let head = crate::ingest::read_head(out, HEAD_BYTES)
+        .map_err(|e| refuse(crate::ingest::unnamed(out, e)))?;
+    let what = match earlier_result(out, &head) {
+        Ok(()) => return Ok(()),
+        Err(what) => what,
+    };
+    Err(refuse(format!(
+        "exists and is not an earlier `tirewear bench` result ({what}): the results would \
+         replace it; give another path"
+    )))
+}
+
+/// How much of an existing destination is read to tell what it is.
+const HEAD_BYTES: u64 = 256;
+
+/// Largest file read whole to tell whether it is a bench result: a season
+/// bench's JSON is a few tens of kilobytes.
+const MAX_RESULT_BYTES: u64 = 16 << 20;
+
+/// Whether the file whose first bytes are `head` is empty or an earlier
+/// bench result; if not, what it is instead.
+fn earlier_result(path: &std::path::Path, head: &[u8]) -> Result<(), String> {
+    let start = head.iter().position(|b| !b.is_ascii_whitespace());
+    match start {
+        None if head.is_empty() => return Ok(()),
+        Some(i) if head[i] == b'{' => {}
+        _ => return Err(crate::ingest::checksum::what_it_is(head)),
+    }
+    let text = crate::ingest::read_text(path, MAX_RESULT_BYTES)
+        .map_err(|e| crate::ingest::unnamed(path, e))?;
+    match serde_json::from_str::<serde_json::Value>(&text) {
+        Ok(v) if v.get("lines").is_some_and(|l| l.is_array()) => Ok(()),
+        Ok(_) => Err("it is JSON without a bench result's `lines` array".into()),
+        Err(_) => Err(crate::ingest::checksum::what_it_is(head)),
+    }
+}
+
 /// Runs the benchmarks.
 pub fn run_bench(o: &BenchOptions) -> BenchReport {
     let threads = rayon::current_num_threads();
@@ -830,4 +887,58 @@ pub fn render(r: &BenchReport) -> String {
         let _ = writeln!(s, "note: {n}");
     }
     s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// An earlier result (as this build writes it, or pretty-printed by
+    /// hand), an empty file or nothing may be replaced; other files may not.
+    #[test]
+    fn only_an_earlier_result_or_an_empty_file_is_replaced() {
+        let dir = tempfile::tempdir().unwrap();
+        let at = |name: &str, body: &[u8]| {
+            let p = dir.path().join(name);
+            std::fs::write(&p, body).unwrap();
+            p
+        };
+        let report = BenchReport {
+            cpu: "a CPU".into(),
+            gpu: None,
+            threads: 2,
+            lines: Vec::new(),
+            extract_splits: Vec::new(),
+            notes: Vec::new(),
+        };
+        let written = at("bench.json", &serde_json::to_vec_pretty(&report).unwrap());
+        let replaceable = [
+            written,
+            at("hand.json", b"\n  {\"lines\": [], \"cpu\": \"x\"}"),
+            at("empty.json", b""),
+            dir.path().join("absent.json"),
+        ];
+        for p in &replaceable {
+            assert_eq!(check_output(p, None), Ok(()), "{}", p.display());
+        }
+        for (name, body, what) in [
+            ("k.parquet", &b"PAR1...."[..], "(it is a Parquet file)"),
+            ("m.json", b"{\"lines\": 3}", "(it is JSON without"),
+            (
+                "broken.json",
+                b"{\"lines\": [",
+                "(it is text, beginning `{\"lines\": [`)",
+            ),
+            (
+                "notes.txt",
+                b"  my notes",
+                "(it is text, beginning `  my notes`)",
+            ),
+        ] {
+            let p = at(name, body);
+            let e = check_output(&p, None).unwrap_err();
+            assert_eq!(e.dest, p);
+            assert!(e.reason.contains(what), "{e}");
+        }
+    }
 }

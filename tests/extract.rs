@@ -630,6 +630,76 @@ fn bench_refuses_a_season_it_cannot_open() {
     assert!(!out.exists());
 }
 
+/// `tirewear bench --out` that would lose a file is refused before the
+/// minutes of measuring (exit 1, the file named, every file as it was): a
+/// file of the season measured, a folder, a file where a folder would be
+/// made, and a file that is no earlier bench result (a KPI table, a model).
+/// `bench --out season.toml` once replaced the manifest with the results.
+#[test]
+fn bench_refuses_an_out_that_would_lose_a_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let season = d.join("season");
+    common::copy_dir(
+        &std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("datasets/handwritten"),
+        &season,
+    );
+    std::fs::write(d.join("kpis.parquet"), b"PAR1 not really").unwrap();
+    std::fs::write(d.join("physical.json"), b"{\"method\": \"physical\"}").unwrap();
+    let files = |d: &std::path::Path| {
+        let mut all = Vec::new();
+        let mut stack = vec![d.to_path_buf()];
+        while let Some(f) = stack.pop() {
+            for e in std::fs::read_dir(&f).unwrap() {
+                let p = e.unwrap().path();
+                if p.is_dir() {
+                    stack.push(p);
+                } else {
+                    all.push((p.clone(), std::fs::read(&p).unwrap()));
+                }
+            }
+        }
+        all.sort();
+        all
+    };
+    let before = files(d);
+    for (out, said) in [
+        (
+            "season/season.toml",
+            "is an input of this command (the season manifest)",
+        ),
+        (
+            "season/telemetry/H1-car1-R1.mcap",
+            "is an input of this command (telemetry of run",
+        ),
+        ("season", "is a folder"),
+        ("kpis.parquet/bench.json", "which is a file, not a folder"),
+        (
+            "kpis.parquet",
+            "is not an earlier `tirewear bench` result (it is a Parquet file)",
+        ),
+        (
+            "physical.json",
+            "is not an earlier `tirewear bench` result (it is JSON without",
+        ),
+    ] {
+        let run = std::process::Command::new(env!("CARGO_BIN_EXE_tirewear"))
+            .args([
+                "--quiet", "bench", "--only", "decode", "--small", "--season",
+            ])
+            .arg(&season)
+            .arg("--out")
+            .arg(d.join(out))
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&run.stderr);
+        assert_eq!(run.status.code(), Some(1), "{out}: {err}");
+        assert!(err.contains(said), "{out}: {err}");
+        assert!(err.contains(&*d.join(out).to_string_lossy()), "{err}");
+    }
+    assert!(files(d) == before, "a file changed or appeared");
+}
+
 /// `tirewear bench --only decode --season DIR` measures the given archive:
 /// its lines name it, count every sample the simulator wrote (without
 /// sensor noise no sample is dropped), and nothing is skipped.

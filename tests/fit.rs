@@ -345,9 +345,9 @@ fn damaged_models_are_refused_by_field_or_predict_alike(
 /// is read, with exit code 1, the file named, and every file left as it
 /// was: `predict --out` naming its own model or KPI table (once replaced
 /// by the predictions), `report --out` naming a data file (once replaced by
-/// the page), a file where `fit`, `gap` or `gap validate` want a folder
-/// (`gap` once ran the whole diagnosis first), and `report` given the KPI
-/// table instead of its folder.
+/// the page), a file where `fit`, `gap` or `gap validate` want a folder,
+/// or a path inside a file (`gap` once ran the whole diagnosis first), and
+/// `report` given the KPI table instead of its folder.
 #[test]
 fn outputs_that_would_replace_an_input_or_a_folder_are_refused_first() {
     let dir = tempfile::tempdir().unwrap();
@@ -372,6 +372,7 @@ fn outputs_that_would_replace_an_input_or_a_folder_are_refused_first() {
         notes.to_str().unwrap(),
         d.to_str().unwrap(),
     );
+    let below = format!("{n}/gap");
     for (args, said) in [
         (
             vec!["predict", m, k, "--out", m],
@@ -402,6 +403,14 @@ fn outputs_that_would_replace_an_input_or_a_folder_are_refused_first() {
         (
             vec!["gap", "validate", "--out", n],
             "is a file, not a folder: gap validate writes",
+        ),
+        (
+            vec!["gap", k, "--out", &below],
+            "which is a file, not a folder: gap cannot make its folder there",
+        ),
+        (
+            vec!["predict", m, k, "--out", &below],
+            "which is a file, not a folder: the predictions cannot be written there",
         ),
     ] {
         let run = std::process::Command::new(env!("CARGO_BIN_EXE_tirewear"))

@@ -56,10 +56,15 @@ pub(crate) fn run(a: BenchArgs) -> Result<()> {
     use tirewear::bench::BenchParts;
     // A season asked for by name is read, or the command fails: a bench
     // that silently measured something else would mislead the comparison.
-    if let Some(dir) = &season {
-        tirewear::ingest::manifest::Season::open(dir)
-            .with_context(|| format!("--season {}", dir.display()))?;
-    }
+    let opened = match &season {
+        Some(dir) => Some(
+            tirewear::ingest::manifest::Season::open(dir)
+                .with_context(|| format!("--season {}", dir.display()))?,
+        ),
+        None => None,
+    };
+    // Refused before the minutes of measuring, not after them.
+    tirewear::bench::check_output(&out, opened.as_ref())?;
     let r = tirewear::bench::run_bench(&tirewear::bench::BenchOptions {
         small,
         gpu: engine != BenchEngine::Cpu,

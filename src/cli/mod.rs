@@ -32,14 +32,21 @@ pub(crate) fn parse_jobs(s: &str) -> Result<usize, String> {
     }
 }
 
-/// Refuses an output folder `out` that is a file, before the work rather
-/// than after it (a diagnosis or a validation may take minutes), naming the
+/// Refuses an output folder `out` that is a file or lies inside one, before
+/// the work rather than after it (a diagnosis or a validation may take minutes), naming the
 /// command (`writer`) that writes there.
 pub(crate) fn not_a_file(out: &std::path::Path, writer: &str) -> anyhow::Result<()> {
     if out.exists() && !out.is_dir() {
         anyhow::bail!(
             "{}: is a file, not a folder: {writer} writes its files into a folder; give a folder's path",
             out.display()
+        );
+    }
+    if let Some(file) = tirewear::atomic::file_above(out) {
+        anyhow::bail!(
+            "{}: is inside {}, which is a file, not a folder: {writer} cannot make its folder there",
+            out.display(),
+            file.display()
         );
     }
     Ok(())
