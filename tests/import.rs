@@ -896,3 +896,107 @@ fn the_radius_check_finds_a_wrong_wheel_speed_radius() {
         "{e_wrong} vs {e_fixed}"
     );
 }
+
+/// The fenced blocks (language, text) of docs/import.md's "Starting an
+/// archive" section, in order.
+fn starting_an_archive_blocks() -> Vec<(String, String)> {
+    let doc = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("docs/import.md"))
+        .unwrap();
+    let section = doc
+        .split("\n## ")
+        .find(|s| s.starts_with("Starting an archive"))
+        .expect("docs/import.md has a \"Starting an archive\" section");
+    let mut blocks = Vec::new();
+    let mut parts = section.split("```").skip(1);
+    while let Some(block) = parts.next() {
+        let (lang, text) = block.split_once('\n').unwrap();
+        blocks.push((lang.to_string(), text.to_string()));
+        parts.next(); // the prose up to the next block
+    }
+    blocks
+}
+
+/// A season started by hand as docs/import.md, "Starting an archive", says
+/// (its season.toml and compound file taken from the page, the import's
+/// options from its command) takes a simulated logger export through the
+/// binary, and `extract` gives every tire-run a row with finite friction
+/// energy and NaN wear (no readings yet). A folder with no season.toml,
+/// or none at all, is refused with a pointer to that section.
+#[test]
+fn an_archive_started_by_hand_as_docs_import_says_takes_logs() {
+    let blocks = starting_an_archive_blocks();
+    let [(l1, manifest), (l2, compound), (l3, commands)] = &blocks[..] else {
+        panic!("expected season.toml, a compound and the commands: {blocks:?}")
+    };
+    assert_eq!(
+        (l1.as_str(), l2.as_str(), l3.as_str()),
+        ("toml", "toml", "sh")
+    );
+    let dir = tempfile::tempdir().unwrap();
+    let sim = dir.path().join("sim");
+    simulate(&sim, 5, LoggerFormat::MotecLd);
+    let archive = dir.path().join("my-season");
+    let (logs, _) = logger_files(&sim, "ld");
+    let logs: Vec<String> = logs
+        .iter()
+        .filter(|l| l.to_string_lossy().contains("valle-rossa"))
+        .map(|l| l.to_string_lossy().into_owned())
+        .collect();
+    assert_eq!(logs.len(), 2, "{logs:?}");
+    let car = sim.join("logger/car1.car.toml");
+    // The page's import options, after its log, archive and car.
+    let first = commands.replace("\\\n", " ");
+    let words: Vec<&str> = first.lines().next().unwrap().split_whitespace().collect();
+    let from = words.iter().position(|w| *w == "--event").unwrap();
+    let options = &words[from..];
+    let args = |archive: &Path| {
+        let mut a: Vec<String> = logs.clone();
+        a.extend(["--archive".into(), archive.to_string_lossy().into_owned()]);
+        a.extend(["--car".into(), car.to_string_lossy().into_owned()]);
+        a.extend(options.iter().map(|w| w.to_string()));
+        a
+    };
+    let import = |a: Vec<String>| {
+        let a: Vec<&str> = a.iter().map(String::as_str).collect();
+        tirewear_import(&a)
+    };
+
+    std::fs::create_dir(dir.path().join("empty")).unwrap();
+    for (folder, said) in [
+        (dir.path().join("absent"), "does not exist"),
+        (dir.path().join("empty"), "holds no season.toml"),
+    ] {
+        let (code, text) = import(args(&folder));
+        assert_eq!(code, 1, "{text}");
+        assert!(
+            text.contains(said) && text.contains("docs/import.md, \"Starting an archive\""),
+            "{text}"
+        );
+    }
+
+    std::fs::create_dir_all(archive.join("compounds")).unwrap();
+    std::fs::write(archive.join("season.toml"), manifest).unwrap();
+    std::fs::write(archive.join("compounds/soft.toml"), compound).unwrap();
+    let (code, text) = import(args(&archive));
+    assert_eq!(code, 0, "{text}");
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_tirewear"))
+        .args(["--quiet", "extract"])
+        .arg(&archive)
+        .arg("--out")
+        .arg(archive.join("kpis.parquet"))
+        .output()
+        .unwrap();
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let rows = tirewear::kpi::table::read_parquet(&archive.join("kpis.parquet")).unwrap();
+    assert_eq!(rows.len(), 2 * 4);
+    for r in &rows {
+        assert_eq!((r.event.as_str(), r.compound.as_str()), ("E01", "soft"));
+        assert!(r.friction_energy_j.is_finite() && r.friction_energy_j > 0.0);
+        assert!(r.wear_mean_pct.is_nan());
+    }
+}

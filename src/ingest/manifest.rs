@@ -173,11 +173,16 @@ fn refuse_non_archive(path: &Path) -> Result<()> {
                 inside.join(", ")
             ));
         }
-        return no_archive(
-            "holds no season.toml: not a season archive (`tirewear simulate` and `tirewear \
-             import` make one; docs/formats.md)"
-                .to_string(),
-        );
+        return no_archive(format!(
+            "holds no season.toml: not a season archive ({HOW_TO_START})"
+        ));
+    }
+    if std::fs::symlink_metadata(path).is_err_and(|e| e.kind() == std::io::ErrorKind::NotFound) {
+        let hint = match archive_above(path) {
+            Some(up) => format!("the season archive near it is {}", up.display()),
+            None => HOW_TO_START.to_string(),
+        };
+        return no_archive(format!("does not exist ({hint})"));
     }
     let Ok(head) = super::read_head(path, 256) else {
         return Ok(()); // the manifest's reader names what is wrong
@@ -196,6 +201,13 @@ fn refuse_non_archive(path: &Path) -> Result<()> {
         "is not a season manifest (TOML text): {what}; {hint}"
     ))
 }
+
+/// Where a season archive comes from, for a path that holds none: `import`
+/// adds runs to an archive and does not start one (its tracks and
+/// compounds' master curves are the team's own).
+const HOW_TO_START: &str = "`tirewear simulate` writes one; for a team's own logs, write its \
+     season.toml by hand and then `tirewear import` the logs: docs/import.md, \"Starting an \
+     archive\"";
 
 /// The nearest folder above `path` (at most three levels) that holds a
 /// `season.toml`.
@@ -569,7 +581,24 @@ mod tests {
                 ],
             ),
             (d.to_path_buf(), vec!["but its folders", "a1", "a2"]),
-            (d.join("empty"), vec!["not a season archive"]),
+            (
+                d.join("empty"),
+                vec![
+                    "not a season archive",
+                    "docs/import.md, \"Starting an archive\"",
+                ],
+            ),
+            (
+                d.join("missing"),
+                vec![
+                    "missing: season archive: does not exist",
+                    "Starting an archive",
+                ],
+            ),
+            (
+                d.join("a1/telemetry/r2.mcap"),
+                vec!["does not exist (the season archive near it is"],
+            ),
         ] {
             let e = said(&p);
             for part in parts {
@@ -579,7 +608,7 @@ mod tests {
                 assert!(e.contains(&format!("is {a1}")) || e.ends_with(&a1), "{e}");
             }
         }
-        for ok in [d.join("a1"), d.join("a1/season.toml"), d.join("missing")] {
+        for ok in [d.join("a1"), d.join("a1/season.toml")] {
             assert!(refuse_non_archive(&ok).is_ok(), "{}", ok.display());
         }
     }
