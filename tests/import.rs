@@ -542,6 +542,132 @@ fn bad_logs_are_named_and_do_not_sink_the_batch() {
     assert!(!tmp.path().join("escape.mcap").exists());
 }
 
+/// New-run options that contradict the manifest fail the log by name
+/// (exit 3) with nothing written, where they were dropped without a word:
+/// for a run already there (`--compound`, `--event`, `--track`,
+/// `--tire-sets` differing from its entry) and for a new run of a known
+/// event (`--track` other than the event's). The same options as the
+/// entry replace the telemetry as before. A `--tire-sets` typo (a wheel
+/// twice, an unknown wheel, one id on two wheels, an empty id) is a usage
+/// error, exit 2.
+#[test]
+fn options_that_contradict_the_manifest_fail_the_log() {
+    let tmp = tempfile::tempdir().unwrap();
+    let arch = tmp.path().join("season");
+    tiny_archive(&arch);
+    let season = tirewear::ingest::manifest::Season::open(&arch).unwrap();
+    let run = season.manifest.runs[0].clone();
+    let track = season.event(&run.event).unwrap().track.clone();
+    let other_track = season
+        .manifest
+        .tracks
+        .iter()
+        .find(|t| t.id != track)
+        .unwrap()
+        .id
+        .clone();
+    let sets = |t: &tirewear::ingest::manifest::TireSets| {
+        format!("FL={},FR={},RL={},RR={}", t.fl, t.fr, t.rl, t.rr)
+    };
+    let entry_sets = sets(&run.tire_sets);
+    let log = fixture("python-motec.csv");
+    let log = log.to_str().unwrap();
+    let arch_s = arch.to_str().unwrap();
+    let car = concat!(env!("CARGO_MANIFEST_DIR"), "/datasets/import/car.toml");
+    let base = ["--archive", arch_s, "--car", car];
+    let with = |extra: &[&str]| {
+        let mut a = vec![log];
+        a.extend(base);
+        a.extend(extra);
+        tirewear_import(&a)
+    };
+    let files = || {
+        let mcap = std::fs::read(arch.join(&run.telemetry)).unwrap();
+        (std::fs::read(&season.manifest_path).unwrap(), mcap)
+    };
+    let before = files();
+    for (extra, said) in [
+        (
+            vec!["--run", &run.id, "--compound", "hard"],
+            format!("--compound hard (the entry: {})", run.compound),
+        ),
+        (
+            vec!["--run", &run.id, "--event", "E99"],
+            format!("--event E99 (the entry: {})", run.event),
+        ),
+        (
+            vec!["--run", &run.id, "--track", &other_track],
+            format!("--track {other_track} (the entry: {track})"),
+        ),
+        (
+            vec!["--run", &run.id, "--tire-sets", "FL=n1,FR=n2,RL=n3,RR=n4"],
+            format!("--tire-sets FL=n1,FR=n2,RL=n3,RR=n4 (the entry: {entry_sets})"),
+        ),
+        (
+            vec![
+                "--run",
+                "fresh",
+                "--event",
+                &run.event,
+                "--track",
+                &other_track,
+                "--compound",
+                &run.compound,
+                "--tire-sets",
+                "FL=n1,FR=n2,RL=n3,RR=n4",
+            ],
+            format!(
+                "event '{}' is at track '{track}' in the manifest, not '{other_track}'",
+                run.event
+            ),
+        ),
+    ] {
+        let (code, text) = with(&extra);
+        assert_eq!(code, 3, "{extra:?}: {text}");
+        assert!(text.contains(&said), "{said} not in: {text}");
+        assert!(text.contains("python-motec.csv"), "{text}");
+        assert!(files() == before, "{extra:?}: the archive changed");
+    }
+    assert!(!arch.join("telemetry/fresh.mcap").exists());
+
+    // The entry's own options: its telemetry is replaced, its entry kept.
+    let (code, text) = with(&[
+        "--run",
+        &run.id,
+        "--event",
+        &run.event,
+        "--track",
+        &track,
+        "--compound",
+        &run.compound,
+        "--tire-sets",
+        &entry_sets,
+    ]);
+    assert_eq!(code, 0, "{text}");
+    assert!(text.contains("telemetry replaced"), "{text}");
+    let after = tirewear::ingest::manifest::Season::open(&arch).unwrap();
+    assert_eq!(after.manifest.runs[0], run);
+    assert!(files().1 != before.1, "the telemetry was replaced");
+
+    for (sets, said) in [
+        ("FL=a,FR=b,RL=c,RR=d,FL=e", "FL is given twice"),
+        ("LF=a,FR=b,RL=c,RR=d", "'LF' is no wheel position"),
+        ("FL=a,FR=a,RL=c,RR=d", "'a' is given for both FL and FR"),
+        ("FL=,FR=b,RL=c,RR=d", "FL has an empty id"),
+        ("FL=a,FR=b,RL=c", "RR is missing"),
+        ("fl=a,fr=b,rl=c,rr=d", ""),
+    ] {
+        let (code, text) = with(&["--run", "new2", "--tire-sets", sets, "--event", "E99"]);
+        if said.is_empty() {
+            // Any case is a wheel: parsed, then failed for the unknown event.
+            assert_eq!(code, 3, "{sets}: {text}");
+        } else {
+            assert_eq!(code, 2, "{sets}: {text}");
+            assert!(text.contains(said), "{said} not in: {text}");
+        }
+    }
+}
+
 /// A real `.ld` recorded by a MoTeC ADL in 2005 (shipped with the
 /// motec-i2 crate as samples/Sample1.ld): header and first values.
 #[test]

@@ -1,6 +1,6 @@
 //! `tirewear import`: its arguments and what it runs.
 
-use anyhow::{Context, Result, bail};
+use anyhow::{Result, bail};
 use std::path::PathBuf;
 use tirewear::import::{CarDescription, ChannelMap, ImportSettings, NewRun, import_logs};
 use tirewear::ingest::manifest::TireSets;
@@ -37,9 +37,12 @@ pub(crate) struct ImportArgs {
     /// Compound of a new run.
     #[arg(long)]
     compound: Option<String>,
-    /// Tire sets of a new run: FL=ID,FR=ID,RL=ID,RR=ID.
-    #[arg(long, value_name = "FL=..,FR=..,RL=..,RR=..")]
-    tire_sets: Option<String>,
+    /// Tire sets of a new run: FL=ID,FR=ID,RL=ID,RR=ID, each wheel once
+    /// with its own id. For a run already in the manifest, --event,
+    /// --track, --compound and --tire-sets must agree with its entry (a
+    /// differing one fails the log: the entry is changed in season.toml).
+    #[arg(long, value_name = "FL=..,FR=..,RL=..,RR=..", value_parser = parse_tire_sets)]
+    tire_sets: Option<TireSets>,
     /// Sample rate (Hz) to put a `.ld` log's channels on (default: the
     /// fastest mapped channel's rate).
     #[arg(long)]
@@ -51,20 +54,38 @@ pub(crate) struct ImportArgs {
     calibrate_radius: bool,
 }
 
-fn parse_tire_sets(s: &str) -> Result<TireSets> {
+/// `FL=ID,FR=ID,RL=ID,RR=ID`, each wheel once (any case) with its own
+/// non-empty id: a wheel named twice, an unknown one or an id on two wheels
+/// (one tire on two wheels, docs/formats.md: ids are unique) is a typo that
+/// would otherwise be entered in the manifest.
+fn parse_tire_sets(s: &str) -> std::result::Result<TireSets, String> {
+    const WHEELS: [&str; 4] = ["FL", "FR", "RL", "RR"];
     let mut m = std::collections::HashMap::new();
     for part in s.split(',') {
         let (k, v) = part
             .split_once('=')
-            .with_context(|| format!("--tire-sets: '{part}' is not WHEEL=ID"))?;
-        m.insert(k.trim().to_ascii_uppercase(), v.trim().to_string());
+            .ok_or_else(|| format!("'{part}' is not WHEEL=ID"))?;
+        let (wheel, id) = (k.trim().to_ascii_uppercase(), v.trim().to_string());
+        if !WHEELS.contains(&wheel.as_str()) {
+            return Err(format!(
+                "'{}' is no wheel position (FL, FR, RL, RR)",
+                k.trim()
+            ));
+        }
+        if m.contains_key(&wheel) {
+            return Err(format!("{wheel} is given twice"));
+        }
+        if id.is_empty() {
+            return Err(format!("{wheel} has an empty id"));
+        }
+        if let Some((other, _)) = m.iter().find(|(_, given)| **given == id) {
+            return Err(format!(
+                "'{id}' is given for both {other} and {wheel}: each wheel's tire set has its own id"
+            ));
+        }
+        m.insert(wheel, id);
     }
-    let get = |w: &str| {
-        m.get(w)
-            .filter(|v| !v.is_empty())
-            .cloned()
-            .with_context(|| format!("--tire-sets has no {w}"))
-    };
+    let get = |w: &str| m.get(w).cloned().ok_or_else(|| format!("{w} is missing"));
     Ok(TireSets {
         fl: get("FL")?,
         fr: get("FR")?,
@@ -95,7 +116,7 @@ pub(crate) fn run(a: ImportArgs) -> Result<bool> {
             event: a.event,
             track: a.track,
             compound: a.compound,
-            tire_sets: a.tire_sets.as_deref().map(parse_tire_sets).transpose()?,
+            tire_sets: a.tire_sets,
         },
     };
     let ids: Vec<String> = match a.run {

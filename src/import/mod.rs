@@ -108,6 +108,13 @@ pub(crate) fn import_log(
     manifest: &mut manifest::Manifest,
     settings: &ImportSettings,
 ) -> Result<ImportedRun, ImportError> {
+    // Options that contradict the run's entry fail the log before it is
+    // read: they were silently ignored, the entry kept as it was.
+    if let Some(run) = manifest.runs.iter().find(|r| r.id == run_id)
+        && let Some(why) = contradicted_entry(manifest, run, &settings.new_run)
+    {
+        return Err(ImportError::log(log_path, "run", why));
+    }
     let raw = log::read_log(log_path)?;
     let mapping = settings
         .channels
@@ -307,6 +314,59 @@ fn choose_car<'a>(
     }
 }
 
+/// What a new run's option (`--event`, `--track`, `--compound`,
+/// `--tire-sets`) says against the entry of `run`, already in the
+/// manifest, where the two differ: an import replaces only the telemetry
+/// of such a run, so a differing option would be dropped without a word.
+fn contradicted_entry(
+    manifest: &manifest::Manifest,
+    run: &manifest::Run,
+    new: &NewRun,
+) -> Option<String> {
+    let track = manifest
+        .events
+        .iter()
+        .find(|e| e.id == run.event)
+        .map(|e| e.track.as_str());
+    let shown = |t: &manifest::TireSets| format!("FL={},FR={},RL={},RR={}", t.fl, t.fr, t.rl, t.rr);
+    let differs = [
+        ("--event", new.event.clone(), Some(run.event.clone())),
+        ("--track", new.track.clone(), track.map(str::to_string)),
+        (
+            "--compound",
+            new.compound.clone(),
+            Some(run.compound.clone()),
+        ),
+        (
+            "--tire-sets",
+            new.tire_sets.as_ref().map(shown),
+            Some(shown(&run.tire_sets)),
+        ),
+    ]
+    .into_iter()
+    .filter_map(|(option, given, entry)| {
+        let given = given?;
+        (Some(&given) != entry.as_ref()).then(|| {
+            format!(
+                "{option} {given} (the entry: {})",
+                entry.unwrap_or_default()
+            )
+        })
+    })
+    .collect::<Vec<_>>();
+    if differs.is_empty() {
+        return None;
+    }
+    Some(format!(
+        "run '{}' is in the manifest already and an import replaces only its telemetry, \
+         but {} differ{}: leave the option out to replace the telemetry, or change the \
+         run's entry in season.toml (or import the log under a new --run id)",
+        run.id,
+        differs.join(", "),
+        if differs.len() == 1 { "s" } else { "" }
+    ))
+}
+
 /// Enters a new run (and, when missing, its event and car) in the manifest.
 #[allow(clippy::too_many_arguments)]
 fn add_run(
@@ -329,7 +389,17 @@ fn add_run(
         .tire_sets
         .clone()
         .ok_or("a new run needs --tire-sets FL=..,FR=..,RL=..,RR=..")?;
-    if !manifest.events.iter().any(|e| e.id == event_id) {
+    let known = manifest.events.iter().find(|e| e.id == event_id);
+    if let (Some(e), Some(track)) = (known, &nr.track)
+        && &e.track != track
+    {
+        return Err(format!(
+            "event '{event_id}' is at track '{}' in the manifest, not '{track}' (--track): \
+             leave --track out for a run of a known event, or give the event of that track",
+            e.track
+        ));
+    }
+    if known.is_none() {
         let track = nr.track.clone().ok_or(format!(
             "event '{event_id}' is not in the manifest: give --track to create it"
         ))?;
@@ -382,7 +452,7 @@ fn add_run(
 #[derive(Debug, Default, serde::Serialize)]
 pub struct ImportSummary {
     pub imported: Vec<ImportedRun>,
-    /// Logs that failed, with the error.
+    /// Logs that failed, with the error (which begins with the log's path).
     pub failed: Vec<(PathBuf, String)>,
 }
 
@@ -435,9 +505,18 @@ pub fn import_logs(
                 summary.imported.push(r);
             }
             Err(e) => {
-                tracing::error!("{e}");
+                // Named by the log even where the error is the manifest's
+                // (an unknown compound): in a batch, which log failed.
+                let named = log.display().to_string();
+                let message = e.to_string();
+                let message = if message.starts_with(&named) {
+                    message
+                } else {
+                    format!("{named}: {message}")
+                };
+                tracing::error!("{message}");
                 manifest = before;
-                summary.failed.push((log.clone(), e.to_string()));
+                summary.failed.push((log.clone(), message));
             }
         }
     }
