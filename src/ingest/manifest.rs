@@ -480,6 +480,14 @@ impl Manifest {
             if r.telemetry.is_empty() {
                 return Err(bad(rec, "telemetry path is empty".into()));
             }
+            // Identifiers are non-empty (docs/formats.md); a wear reading
+            // names its tire set, and an empty one matches nothing visibly.
+            if let Some(w) = Wheel::ALL
+                .into_iter()
+                .find(|&w| r.tire_sets.get(w).trim().is_empty())
+            {
+                return Err(bad(rec, format!("tire_sets.{} is empty", w.name())));
+            }
             let same = |o: &Run| Path::new(&o.telemetry) == Path::new(&r.telemetry);
             if let Some(o) = self.runs[..i].iter().find(|o| same(o)) {
                 return Err(bad(
@@ -610,6 +618,24 @@ mod tests {
         }
         for ok in [d.join("a1"), d.join("a1/season.toml")] {
             assert!(refuse_non_archive(&ok).is_ok(), "{}", ok.display());
+        }
+    }
+
+    /// An empty tire set id is refused by run and wheel (identifiers are
+    /// non-empty, docs/formats.md); the shipped hand-written one passes.
+    #[test]
+    fn an_empty_tire_set_is_refused_by_run_and_wheel() {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("datasets/handwritten/season.toml");
+        let text = std::fs::read_to_string(&path).unwrap();
+        let parse = |t: &str| toml::from_str::<Manifest>(t).unwrap();
+        assert!(parse(&text).validate(&path).is_ok());
+        for blank in ["\"\"", "\"  \""] {
+            let edited = text.replace("RR = \"HS-4\"", &format!("RR = {blank}"));
+            let e = parse(&edited).validate(&path).unwrap_err().to_string();
+            assert!(
+                e.contains("runs[0] id=H1-car1-R1") && e.contains("tire_sets.RR is empty"),
+                "{e}"
+            );
         }
     }
 
