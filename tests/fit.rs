@@ -433,3 +433,129 @@ fn outputs_that_would_replace_an_input_or_a_folder_are_refused_first() {
         "nothing else written"
     );
 }
+
+/// A season without road profiles (a team without texture scans): extract
+/// leaves the road KPIs NaN, and the viscoelastic ones that need the
+/// road's macro wavelength. `fit` once left out every row ("no usable
+/// training rows"); now the network and PCA fit on the other columns,
+/// naming those left out, and the physical method, whose inputs (paper
+/// table 10) include skewness, kurtosis and tan δ, says so. Without wear
+/// readings, the error counts the rows without wear; the gap diagnosis,
+/// whose law has a road factor, says which columns its rows lack.
+#[test]
+fn a_season_without_road_profiles_fits_on_the_other_columns() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut rows = common::demo_kpis(dir.path());
+    let absent = [
+        "macro_wavelength_mm",
+        "micro_wavelength_mm",
+        "hurst",
+        "hurst_hdc",
+        "ra_macro_mm",
+        "ra_micro_mm",
+        "peakyness_mm",
+        "skewness",
+        "kurtosis",
+        "rq_mm",
+        "ra_mm",
+        "solicitation_frequency_hz",
+        "shifted_temperature_c",
+        "storage_modulus_mpa",
+        "loss_factor",
+    ];
+    for r in &mut rows {
+        for c in absent {
+            assert!(r.set_number(c, f64::NAN), "{c}");
+        }
+    }
+    let s = split(&rows, None).unwrap();
+    let settings = FitSettings {
+        network: NetworkSettings {
+            hidden2_candidates: vec![4],
+            ..Default::default()
+        },
+        ..Default::default()
+    };
+    let mut fitted = Vec::new();
+    for m in [Method::Ffnn, Method::Pca] {
+        let (model, notes) = fit_method(m, &s, &settings).unwrap();
+        let used: Vec<&str> = model.features.iter().map(|f| f.name.as_str()).collect();
+        assert!(
+            !used.is_empty() && used.iter().all(|c| !absent.contains(c)),
+            "{used:?}"
+        );
+        let hurst = absent.iter().filter(|c| **c != "hurst_hdc");
+        let first = &notes[0];
+        assert!(
+            hurst.clone().all(|c| first.contains(c))
+                && first.contains("no training row has a value")
+                && first.contains("road profiles"),
+            "{first}"
+        );
+        // Every training row with a wear is used: the others are the worn-through ones.
+        let worn = s
+            .train
+            .iter()
+            .filter(|r| r.worn_through_readings > 0.0)
+            .count();
+        let line = model
+            .indicators
+            .iter()
+            .find(|i| i.label == "Training")
+            .unwrap();
+        assert_eq!(line.metrics.n, s.train.len() - worn);
+        assert!(testing_r2(&model, "Testing") > 0.5, "{m:?}");
+        fitted.push(model);
+    }
+    let e = fit_method(Method::Physical, &s, &settings)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("the physical method needs skewness, kurtosis, loss_factor")
+            && e.contains("road profiles"),
+        "{e}"
+    );
+
+    let gap = tirewear::gap::report::diagnose(
+        &rows,
+        &std::collections::BTreeMap::new(),
+        &tirewear::gap::report::Baseline::Physics,
+        &tirewear::gap::report::GapSettings::default(),
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(
+        gap.contains("have no baseline prediction; none of them has")
+            && gap.contains("skewness")
+            && gap.contains("road profiles")
+            && gap.contains("`--baseline models/ffnn.json`")
+            && gap.contains("need more observations than 20, got 0"),
+        "{gap}"
+    );
+    // As the error says: a model fitted without the road columns is a
+    // baseline the diagnosis runs against.
+    let pca = fitted.pop().unwrap();
+    let d = tirewear::gap::report::diagnose(
+        &rows,
+        &std::collections::BTreeMap::new(),
+        &tirewear::gap::report::Baseline::Model(Box::new(pca)),
+        &tirewear::gap::report::GapSettings::default(),
+    );
+    assert!(d.is_ok(), "{:?}", d.err());
+
+    for r in &mut rows {
+        r.wear_mean_pct = f64::NAN;
+    }
+    let s = split(&rows, None).unwrap();
+    let e = fit_method(Method::Pca, &s, &settings)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains(&format!(
+            "of the {} training rows, each lacks a value a model needs or is censored: wear_mean_pct in {} (no wear readings",
+            s.train.len(),
+            s.train.len()
+        )),
+        "{e}"
+    );
+}

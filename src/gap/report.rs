@@ -673,6 +673,60 @@ fn predicted(
     }
 }
 
+/// Why training rows have no residual, for the error that too few do:
+/// how many lack a measured wear, how many a prediction, and the columns
+/// every row without a prediction lacks (a season without road profiles:
+/// the law's skewness).
+fn why_unusable(rows: &[&KpiRow], predict: &impl Fn(&KpiRow) -> f64) -> String {
+    let no_wear = rows.iter().filter(|r| !r.wear_mean_pct.is_finite()).count();
+    let unpredicted: Vec<&&KpiRow> = rows.iter().filter(|r| !predict(r).is_finite()).collect();
+    let mut parts = Vec::new();
+    if no_wear > 0 {
+        parts.push(format!(
+            "{no_wear} have no measured wear (no wear readings: docs/formats.md section 5)"
+        ));
+    }
+    if !unpredicted.is_empty() {
+        let lacking: Vec<&str> = KpiRow::NUMBER_COLUMNS
+            .iter()
+            .copied()
+            .filter(|&c| c != "wear_mean_pct")
+            .filter(|c| {
+                unpredicted
+                    .iter()
+                    .all(|r| !r.number(c).is_some_and(f64::is_finite))
+            })
+            .collect();
+        let road = crate::model::fit::road_hint(&lacking);
+        let lacking = if lacking.is_empty() {
+            String::new()
+        } else if road.is_empty() {
+            format!("; none of them has {}", lacking.join(", "))
+        } else {
+            // The law's road factor needs the skewness; a model fitted
+            // without the road columns does not.
+            format!(
+                "; none of them has {}{road}: without road profiles, give a model fitted on \
+                 the other columns as the baseline (`tirewear fit KPIS --method ffnn`, then \
+                 `--baseline models/ffnn.json`: docs/gap.md)",
+                lacking.join(", ")
+            )
+        };
+        parts.push(format!(
+            "{} have no baseline prediction{lacking}",
+            unpredicted.len()
+        ));
+    }
+    if parts.is_empty() {
+        return String::new();
+    }
+    format!(
+        " (of the {} training rows, {})",
+        rows.len(),
+        parts.join("; ")
+    )
+}
+
 /// The rows the diagnosis measures the gap on: the training rows with a
 /// residual first, then the testing ones.
 struct Observed<'a> {
@@ -699,7 +753,7 @@ impl<'a> Observed<'a> {
         let (tr, te) = (usable(&s.train), usable(&s.test));
         if tr.len() < 20 {
             return Err(ModelError::TooFewObservations {
-                what: "gap diagnosis".into(),
+                what: format!("gap diagnosis{}", why_unusable(&s.train, predict)),
                 needed: 20,
                 got: tr.len(),
             });

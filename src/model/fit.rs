@@ -85,6 +85,75 @@ fn usable<'a>(rows: &[&'a KpiRow], inputs: &[String]) -> (Vec<&'a KpiRow>, Vec<S
     (ok, dropped)
 }
 
+/// Where `columns` hold road KPIs or the viscoelastic ones (which need the
+/// road's macro wavelength): why a season may lack them.
+pub(crate) fn road_hint(columns: &[&str]) -> &'static str {
+    const VISCOELASTIC: [&str; 4] = [
+        "solicitation_frequency_hz",
+        "shifted_temperature_c",
+        "storage_modulus_mpa",
+        "loss_factor",
+    ];
+    let road = crate::kpi::road::RoadIndices::UNDEFINED.undefined();
+    if columns
+        .iter()
+        .any(|c| road.contains(c) || VISCOELASTIC.contains(c))
+    {
+        " (a track without road profiles leaves its road KPIs NaN, and the viscoelastic \
+         ones, which need its macro wavelength: docs/formats.md section 4)"
+    } else {
+        ""
+    }
+}
+
+/// Why no training row is usable: how many lack each needed column (the
+/// most first) or are censored, out of how many.
+fn no_rows_left(rows: &[&KpiRow], inputs: &[String]) -> String {
+    if rows.is_empty() {
+        return "no training rows: the table has none outside the testing events".into();
+    }
+    let mut missing: Vec<(usize, &str)> = std::iter::once(TARGET)
+        .chain(inputs.iter().map(String::as_str))
+        .map(|c| {
+            let n = rows
+                .iter()
+                .filter(|r| !r.number(c).is_some_and(f64::is_finite))
+                .count();
+            (n, c)
+        })
+        .filter(|&(n, _)| n > 0)
+        .collect();
+    missing.sort_by(|a, b| b.0.cmp(&a.0).then(a.1.cmp(b.1)));
+    let mut why: Vec<String> = missing
+        .iter()
+        .take(6)
+        .map(|&(n, c)| {
+            let hint = if c == TARGET {
+                " (no wear readings: docs/formats.md section 5)"
+            } else {
+                road_hint(&[c])
+            };
+            format!("{c} in {n}{hint}")
+        })
+        .collect();
+    if missing.len() > 6 {
+        why.push(format!("{} more columns", missing.len() - 6));
+    }
+    let worn = rows
+        .iter()
+        .filter(|r| r.worn_through_readings > 0.0)
+        .count();
+    if worn > 0 {
+        why.push(format!("{worn} worn through (censored)"));
+    }
+    format!(
+        "no usable training rows: of the {} training rows, each lacks a value a model needs \
+         or is censored: {}",
+        rows.len(),
+        why.join(", ")
+    )
+}
+
 fn matrix(rows: &[&KpiRow], inputs: &[String]) -> Vec<Vec<f64>> {
     rows.iter()
         .map(|r| {
@@ -169,12 +238,44 @@ pub fn fit_method(
     settings: &FitSettings,
 ) -> Result<(SavedModel, Vec<String>), ModelError> {
     settings.check()?;
-    let candidates: Vec<String> = candidate_inputs().iter().map(|c| c.to_string()).collect();
-    let (train, mut notes) = usable(&s.train, &candidates);
+    // A column no training row has (the road KPIs of a season without road
+    // profiles) would leave out every row: it is left out instead.
+    let (candidates, absent): (Vec<String>, Vec<String>) = candidate_inputs()
+        .iter()
+        .map(|c| c.to_string())
+        .partition(|c| {
+            s.train
+                .iter()
+                .any(|r| r.number(c).is_some_and(f64::is_finite))
+        });
+    let mut notes = Vec::new();
+    if !absent.is_empty() {
+        if method == Method::Physical {
+            let needed: Vec<&str> = PHYSICAL_INPUTS
+                .into_iter()
+                .filter(|c| absent.iter().any(|a| a == c))
+                .collect();
+            if !needed.is_empty() {
+                return Err(ModelError::Invalid(format!(
+                    "the physical method needs {}, which no training row has{}",
+                    needed.join(", "),
+                    road_hint(&needed)
+                )));
+            }
+        }
+        let shown: Vec<&str> = absent.iter().map(String::as_str).collect();
+        notes.push(format!(
+            "inputs {}: no training row has a value{}",
+            shown.join(", "),
+            road_hint(&shown)
+        ));
+    }
+    let (train, dropped) = usable(&s.train, &candidates);
+    notes.extend(dropped);
     let (test, dropped) = usable(&s.test, &candidates);
     notes.extend(dropped);
     if train.is_empty() {
-        return Err(ModelError::Invalid("no usable training rows".into()));
+        return Err(ModelError::Invalid(no_rows_left(&s.train, &candidates)));
     }
     let columns = |rows: &[&KpiRow]| -> Vec<(&str, Vec<f64>)> {
         candidate_inputs()
