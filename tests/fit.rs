@@ -446,6 +446,7 @@ fn outputs_that_would_replace_an_input_or_a_folder_are_refused_first() {
 fn a_season_without_road_profiles_fits_on_the_other_columns() {
     let dir = tempfile::tempdir().unwrap();
     let mut rows = common::demo_kpis(dir.path());
+    let complete = rows.clone();
     let absent = [
         "macro_wavelength_mm",
         "micro_wavelength_mm",
@@ -543,6 +544,49 @@ fn a_season_without_road_profiles_fits_on_the_other_columns() {
     );
     assert!(d.is_ok(), "{:?}", d.err());
 
+    // One track without profiles among others: the law has no prediction
+    // for its tires (no skewness), which are left out by name, not
+    // silently, and the rest is diagnosed.
+    let track = split(&complete, None).unwrap().train[0].track.clone();
+    let mut mixed = complete.clone();
+    for r in mixed.iter_mut().filter(|r| r.track == track) {
+        r.skewness = f64::NAN;
+    }
+    let d = tirewear::gap::report::diagnose(
+        &mixed,
+        &std::collections::BTreeMap::new(),
+        &tirewear::gap::report::Baseline::Physics,
+        &tirewear::gap::report::GapSettings::default(),
+    )
+    .unwrap();
+    let name = |r: &tirewear::kpi::KpiRow| format!("{}/{}", r.run, r.wheel);
+    let on_track: Vec<String> = mixed
+        .iter()
+        .filter(|r| r.track == track)
+        .map(name)
+        .collect();
+    let measured = mixed
+        .iter()
+        .filter(|r| r.track == track && r.worn_through_readings == 0.0)
+        .map(name);
+    for t in measured {
+        assert!(d.unpredicted.contains(&t), "{t} not in {:?}", d.unpredicted);
+    }
+    assert!(
+        d.unpredicted.iter().all(|t| on_track.contains(t)),
+        "{:?}",
+        d.unpredicted
+    );
+    assert!(d.unpredicted_lacking.iter().any(|c| c == "skewness"));
+    let page = tirewear::gap::render::render_markdown(&d, 10);
+    assert!(
+        page.contains(&format!(
+            "{} tires left out: the baseline has no prediction for them (none of them has",
+            d.unpredicted.len()
+        )) && page.contains("road profiles"),
+        "{page}"
+    );
+
     for r in &mut rows {
         r.wear_mean_pct = f64::NAN;
     }
@@ -558,4 +602,26 @@ fn a_season_without_road_profiles_fits_on_the_other_columns() {
         )),
         "{e}"
     );
+    // One track without profiles among others, and no wear anywhere: both
+    // counted, the road hint said once.
+    let track = split(&complete, None).unwrap().train[0].track.clone();
+    let mut rows = complete;
+    for r in &mut rows {
+        r.wear_mean_pct = f64::NAN;
+        if r.track == track {
+            r.skewness = f64::NAN;
+        }
+    }
+    let s = split(&rows, None).unwrap();
+    let on_track = s.train.iter().filter(|r| r.track == track).count();
+    let e = fit_method(Method::Pca, &s, &settings)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains(&format!(
+            "skewness in {on_track} (a track without road profiles"
+        )),
+        "{e}"
+    );
+    assert_eq!(e.matches("road profiles").count(), 1, "{e}");
 }

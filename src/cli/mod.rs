@@ -33,8 +33,8 @@ pub(crate) fn parse_jobs(s: &str) -> Result<usize, String> {
 }
 
 /// Refuses an output folder `out` that is a file or lies inside one, before
-/// the work rather than after it (a diagnosis or a validation may take minutes), naming the
-/// command (`writer`) that writes there.
+/// the work rather than after it (a diagnosis or a validation may take
+/// minutes), naming the command (`writer`) that writes there.
 pub(crate) fn not_a_file(out: &std::path::Path, writer: &str) -> anyhow::Result<()> {
     if out.exists() && !out.is_dir() {
         anyhow::bail!(

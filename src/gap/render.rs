@@ -179,6 +179,34 @@ pub fn render_markdown(d: &Diagnosis, max_slices: usize) -> String {
     if let Some(p) = &d.physics {
         let _ = writeln!(s, "Calibrated on the training events: {}", describe_law(p));
     }
+    if !d.unpredicted.is_empty() {
+        let lacking: Vec<&str> = d.unpredicted_lacking.iter().map(String::as_str).collect();
+        let why = if lacking.is_empty() {
+            String::new()
+        } else {
+            format!(
+                " (none of them has {}{})",
+                lacking.join(", "),
+                crate::model::fit::road_hint(&lacking)
+            )
+        };
+        let _ = writeln!(
+            s,
+            "\n{} tires left out: the baseline has no prediction for them{why}: {}{}",
+            d.unpredicted.len(),
+            d.unpredicted
+                .iter()
+                .take(10)
+                .cloned()
+                .collect::<Vec<_>>()
+                .join(", "),
+            if d.unpredicted.len() > 10 {
+                ", …"
+            } else {
+                ""
+            }
+        );
+    }
     if !d.censored.is_empty() {
         let listed = format!(
             "{}{}",
@@ -857,6 +885,8 @@ mod tests {
             censored: Vec::new(),
             imputed: Vec::new(),
             imputed_wear_pct: Vec::new(),
+            unpredicted: Vec::new(),
+            unpredicted_lacking: Vec::new(),
             worn_through: Default::default(),
             exchange: Default::default(),
             training: size,

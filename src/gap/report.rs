@@ -210,6 +210,12 @@ pub struct Diagnosis {
     /// Their wear (%) as the baseline's calibration imputed it (same
     /// order); the terms' recalibration imputes it again.
     pub imputed_wear_pct: Vec<f64>,
+    /// Tires with a measured wear but no baseline prediction (run/wheel),
+    /// left out of the whole diagnosis: under the physics law, those of a
+    /// track without road profiles (no skewness).
+    pub unpredicted: Vec<String>,
+    /// The columns none of `unpredicted` has (why the baseline has none).
+    pub unpredicted_lacking: Vec<String>,
     /// What was done with the worn-through tires (`--worn-through`).
     pub worn_through: WornThrough,
     /// What the within-track permutation test exchanged (`--exchange`).
@@ -508,6 +514,21 @@ pub fn diagnose(
     s.train.extend(imputed.iter());
     let predict = |r: &KpiRow| predicted(baseline, physics.as_ref(), r, maps);
     let observed = Observed::new(&s, maps, &predict)?;
+    let unpredicted: Vec<&KpiRow> = s
+        .train
+        .iter()
+        .chain(&s.test)
+        .filter(|r| r.wear_mean_pct.is_finite() && !predict(r).is_finite())
+        .copied()
+        .collect();
+    let unpredicted_lacking = lacking_in_all(&unpredicted);
+    if !unpredicted.is_empty() {
+        tracing::warn!(
+            tires = unpredicted.len(),
+            lacking = unpredicted_lacking.join(", "),
+            "no baseline prediction, left out of the diagnosis"
+        );
+    }
     let n_train = observed.n_train;
     let (trv, tev) = observed.residual.split_at(n_train);
 
@@ -553,6 +574,8 @@ pub fn diagnose(
         censored,
         imputed: imputed_tires,
         imputed_wear_pct: imputed.iter().map(|r| r.wear_mean_pct).collect(),
+        unpredicted: unpredicted.iter().map(|r| tire_name(r)).collect(),
+        unpredicted_lacking,
         worn_through: settings.worn_through,
         exchange: settings.scoring.exchange,
         training: size(trv),
@@ -673,13 +696,34 @@ fn predicted(
     }
 }
 
+/// The KPI columns (the wear aside) that none of `rows` has; empty for
+/// no rows.
+fn lacking_in_all(rows: &[&KpiRow]) -> Vec<String> {
+    if rows.is_empty() {
+        return Vec::new();
+    }
+    KpiRow::NUMBER_COLUMNS
+        .iter()
+        .filter(|&&c| c != "wear_mean_pct")
+        .filter(|c| {
+            rows.iter()
+                .all(|r| !r.number(c).is_some_and(f64::is_finite))
+        })
+        .map(|c| c.to_string())
+        .collect()
+}
+
 /// Why training rows have no residual, for the error that too few do:
 /// how many lack a measured wear, how many a prediction, and the columns
 /// every row without a prediction lacks (a season without road profiles:
 /// the law's skewness).
 fn why_unusable(rows: &[&KpiRow], predict: &impl Fn(&KpiRow) -> f64) -> String {
     let no_wear = rows.iter().filter(|r| !r.wear_mean_pct.is_finite()).count();
-    let unpredicted: Vec<&&KpiRow> = rows.iter().filter(|r| !predict(r).is_finite()).collect();
+    let unpredicted: Vec<&KpiRow> = rows
+        .iter()
+        .filter(|r| !predict(r).is_finite())
+        .copied()
+        .collect();
     let mut parts = Vec::new();
     if no_wear > 0 {
         parts.push(format!(
@@ -687,16 +731,8 @@ fn why_unusable(rows: &[&KpiRow], predict: &impl Fn(&KpiRow) -> f64) -> String {
         ));
     }
     if !unpredicted.is_empty() {
-        let lacking: Vec<&str> = KpiRow::NUMBER_COLUMNS
-            .iter()
-            .copied()
-            .filter(|&c| c != "wear_mean_pct")
-            .filter(|c| {
-                unpredicted
-                    .iter()
-                    .all(|r| !r.number(c).is_some_and(f64::is_finite))
-            })
-            .collect();
+        let lacking = lacking_in_all(&unpredicted);
+        let lacking: Vec<&str> = lacking.iter().map(String::as_str).collect();
         let road = crate::model::fit::road_hint(&lacking);
         let lacking = if lacking.is_empty() {
             String::new()

@@ -124,20 +124,25 @@ fn no_rows_left(rows: &[&KpiRow], inputs: &[String]) -> String {
         .filter(|&(n, _)| n > 0)
         .collect();
     missing.sort_by(|a, b| b.0.cmp(&a.0).then(a.1.cmp(b.1)));
-    let mut why: Vec<String> = missing
+    let shown = &missing[..missing.len().min(6)];
+    let mut why: Vec<String> = shown
         .iter()
-        .take(6)
         .map(|&(n, c)| {
             let hint = if c == TARGET {
                 " (no wear readings: docs/formats.md section 5)"
             } else {
-                road_hint(&[c])
+                ""
             };
             format!("{c} in {n}{hint}")
         })
         .collect();
     if missing.len() > 6 {
         why.push(format!("{} more columns", missing.len() - 6));
+    }
+    // Once, after the columns, where any is a road one.
+    let columns: Vec<&str> = shown.iter().map(|&(_, c)| c).collect();
+    if let Some(last) = why.last_mut() {
+        last.push_str(road_hint(&columns));
     }
     let worn = rows
         .iter()
