@@ -831,3 +831,55 @@ fn outputs_over_the_inputs_or_each_other_are_refused_before_the_work() {
     assert_eq!(left, ["season"]);
     assert!(!season.join(".season.commit.json").exists());
 }
+
+/// A wear or road file put in the archive's `wear/` or `road/` folder but
+/// not listed in season.toml is never read; where tires lack readings or a
+/// track lacks profiles, extract now names it (it said only "no wear
+/// readings"). The hand-written archive, every file listed, has no such
+/// warning.
+#[test]
+fn files_in_the_archive_the_manifest_does_not_list_are_named() {
+    let unlisted = |w: &[String]| -> Vec<String> {
+        w.iter()
+            .filter(|w| w.contains("so not read"))
+            .cloned()
+            .collect()
+    };
+    let source = Path::new(env!("CARGO_MANIFEST_DIR")).join("datasets/handwritten");
+    let dir = tempfile::tempdir().unwrap();
+    let whole = dir.path().join("whole");
+    common::copy_dir(&source, &whole);
+    let s = extract(&ExtractOptions::new(&whole, whole.join("kpis.parquet"))).unwrap();
+    assert_eq!(unlisted(&s.warnings), Vec::<String>::new());
+
+    let bare = dir.path().join("bare");
+    common::copy_dir(&source, &bare);
+    let manifest = std::fs::read_to_string(bare.join("season.toml")).unwrap();
+    let manifest = manifest
+        .replace(
+            "wear_readings = [\"wear/readings.csv\"]",
+            "wear_readings = []",
+        )
+        .replace("road_profiles = \"road/profiles.parquet\"\n", "")
+        .replace(
+            "[[tracks.profiles]]\nlocation = \"L3\"\nfile = \"road/paper-ring-L3.csv\"\n",
+            "",
+        );
+    std::fs::write(bare.join("season.toml"), &manifest).unwrap();
+    let s = extract(&ExtractOptions::new(&bare, bare.join("kpis.parquet"))).unwrap();
+    let said = unlisted(&s.warnings);
+    assert_eq!(said.len(), 2, "{:?}", s.warnings);
+    assert!(
+        said[0].starts_with("wear/readings.csv: in the archive's wear/ folder but not listed in")
+            && said[0].contains("(wear_readings)"),
+        "{}",
+        said[0]
+    );
+    assert!(
+        said[1].starts_with(
+            "road/paper-ring-L3.csv, road/profiles.parquet: in the archive's road/ folder"
+        ) && said[1].contains("road_profiles or a track's [[tracks.profiles]]"),
+        "{}",
+        said[1]
+    );
+}

@@ -965,7 +965,13 @@ fn a_failed_then_step_stops_neither_the_commit_nor_the_others() {
     let (code, out, err) = process(&archive, &dataset);
     assert_eq!(code, Some(3), "{out}\n{err}");
     assert!(dataset.join("dataset.json").exists());
-    assert!(err.contains("--then fit failed: creating"), "{err}");
+    assert!(
+        err.contains("--then fit failed: ")
+            && err.contains(
+                "models, which is a file, not a folder: fit cannot make its folder there"
+            ),
+        "{err}"
+    );
     // The gap succeeded: tonight's folder is the one kept.
     assert_eq!(dated_files(&dataset, "gap"), ["gap.json", "gap.md"]);
     assert!(

@@ -269,6 +269,42 @@ impl Season {
         self.root.join(rel)
     }
 
+    /// Files directly in the archive's `folder` (`wear`, `road`) with one of
+    /// `extensions` that the manifest does not name, sorted: a file a user
+    /// put there and did not list is never read, and says nothing.
+    pub fn unlisted(&self, folder: &str, extensions: &[&str]) -> Vec<String> {
+        let key = |p: &Path| -> PathBuf {
+            p.components()
+                .filter(|c| !matches!(c, std::path::Component::CurDir))
+                .collect()
+        };
+        let named: HashSet<PathBuf> = self
+            .input_files()
+            .into_iter()
+            .map(|(_, p)| key(&p))
+            .collect();
+        let Ok(entries) = std::fs::read_dir(self.path(folder)) else {
+            return Vec::new();
+        };
+        let mut found: Vec<String> = entries
+            .flatten()
+            .filter(|e| e.file_type().is_ok_and(|t| t.is_file()))
+            .map(|e| e.path())
+            .filter(|p| {
+                p.extension()
+                    .and_then(|x| x.to_str())
+                    .is_some_and(|x| extensions.iter().any(|e| x.eq_ignore_ascii_case(e)))
+            })
+            .filter(|p| !named.contains(&key(p)))
+            .filter_map(|p| {
+                let name = p.file_name()?.to_str()?.to_string();
+                Some(format!("{folder}/{name}"))
+            })
+            .collect();
+        found.sort();
+        found
+    }
+
     /// Every file the manifest names, with what it is: the manifest itself,
     /// compounds, wear readings, road profiles and each run's telemetry
     /// (the inputs an output must not replace).

@@ -218,6 +218,15 @@ pub(crate) fn road_kpis(
             roads.notes.insert(t.id.clone(), note);
         }
     }
+    if season
+        .manifest
+        .tracks
+        .iter()
+        .any(|t| wanted(&t.id) && !by_track.contains_key(&t.id))
+    {
+        let key = "road_profiles or a track's [[tracks.profiles]]";
+        warnings.extend(unlisted_warning(season, "road", &["csv", "parquet"], key));
+    }
     Ok((roads, results.into_iter().map(|(p, _, c)| (p, c)).collect()))
 }
 
@@ -565,6 +574,24 @@ pub(crate) struct SeasonInputs {
     pub warnings: Vec<String>,
 }
 
+/// Where some tires or tracks lack their data: the files of the archive's
+/// `folder` the manifest does not list (under `key`), which are not read.
+fn unlisted_warning(
+    season: &Season,
+    folder: &str,
+    extensions: &[&str],
+    key: &str,
+) -> Option<String> {
+    let files = season.unlisted(folder, extensions);
+    (!files.is_empty()).then(|| {
+        format!(
+            "{}: in the archive's {folder}/ folder but not listed in {} ({key}), so not read",
+            files.join(", "),
+            season.manifest_path.display()
+        )
+    })
+}
+
 /// Reads a season's compounds and wear readings. A bad compound file fails
 /// the runs on that compound, not the season.
 pub(crate) fn season_inputs(season: &Season) -> Result<SeasonInputs, IngestError> {
@@ -599,13 +626,21 @@ pub(crate) fn season_inputs(season: &Season) -> Result<SeasonInputs, IngestError
         readings.extend(file_readings);
     }
     let worn = worn_through_readings(&readings);
-    let wear = mean_wear(&readings)
+    let wear: BTreeMap<(String, Wheel), (f64, f64)> = mean_wear(&readings)
         .into_iter()
         .map(|(k, m)| {
             let z = worn.get(&k).copied().unwrap_or(0.0);
             (k, (m, z))
         })
         .collect();
+    let without_readings = m.runs.iter().any(|r| {
+        Wheel::ALL
+            .iter()
+            .any(|&w| !wear.contains_key(&(r.id.clone(), w)))
+    });
+    if without_readings {
+        warnings.extend(unlisted_warning(season, "wear", &["csv"], "wear_readings"));
+    }
     let mut by_run: HashMap<String, Vec<WearReading>> = HashMap::new();
     for r in readings {
         by_run.entry(r.run.clone()).or_default().push(r);
