@@ -153,6 +153,37 @@ pub fn check_destinations(
     Ok(())
 }
 
+/// As [`check_destinations`] for one output, which may replace an existing
+/// regular file only where `replaceable` says so from its first bytes
+/// (`Err` says what the file is instead): a page replaces only a page, a
+/// bench result only an earlier one. A FIFO or device is not opened (the
+/// open would wait); the rename replaces its entry.
+pub(crate) fn check_replaceable(
+    dest: &Path,
+    output: &str,
+    inputs: &[(String, PathBuf)],
+    kind: &str,
+    replaceable: impl FnOnce(&[u8]) -> Result<(), String>,
+) -> Result<(), Clash> {
+    check_destinations(&[(output, dest)], inputs)?;
+    if !std::fs::metadata(dest).is_ok_and(|m| m.is_file()) {
+        return Ok(());
+    }
+    let refuse = |reason: String| Clash {
+        dest: dest.to_path_buf(),
+        reason,
+    };
+    // Enough to tell a file's kind by its magic or first line.
+    const HEAD_BYTES: u64 = 256;
+    let head = crate::ingest::read_head(dest, HEAD_BYTES)
+        .map_err(|e| refuse(crate::ingest::unnamed(dest, e)))?;
+    replaceable(&head).map_err(|what| {
+        refuse(format!(
+            "exists and is not {kind} ({what}): the {output} would replace it; give another path"
+        ))
+    })
+}
+
 /// The nearest existing folder above `dest` when it is something else (a
 /// file): the folders a write would make cannot be made there.
 pub fn file_above(dest: &Path) -> Option<&Path> {

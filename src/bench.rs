@@ -245,30 +245,14 @@ pub fn check_output(
     season: Option<&crate::ingest::manifest::Season>,
 ) -> Result<(), crate::atomic::Clash> {
     let inputs = season.map(|s| s.input_files()).unwrap_or_default();
-    crate::atomic::check_destinations(&[("bench result", out)], &inputs)?;
-    // Nothing there, or no regular file (a FIFO's open would wait): the
-    // rename replaces the entry.
-    if !std::fs::metadata(out).is_ok_and(|m| m.is_file()) {
-        return Ok(());
-    }
-    let refuse = |reason: String| crate::atomic::Clash {
-        dest: out.to_path_buf(),
-        reason,
-    };
-    let head = crate::ingest::read_head(out, HEAD_BYTES)
-        .map_err(|e| refuse(crate::ingest::unnamed(out, e)))?;
-    let what = match earlier_result(out, &head) {
-        Ok(()) => return Ok(()),
-        Err(what) => what,
-    };
-    Err(refuse(format!(
-        "exists and is not an earlier `tirewear bench` result ({what}): the results would \
-         replace it; give another path"
-    )))
+    crate::atomic::check_replaceable(
+        out,
+        "bench result",
+        &inputs,
+        "an earlier `tirewear bench` result",
+        |head| earlier_result(out, head),
+    )
 }
-
-/// How much of an existing destination is read to tell what it is.
-const HEAD_BYTES: u64 = 256;
 
 /// Largest file read whole to tell whether it is a bench result: a season
 /// bench's JSON is a few tens of kilobytes.

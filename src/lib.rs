@@ -24,3 +24,11 @@ pub mod validate;
 pub mod wheel;
 
 pub use wheel::{Axle, Wheel};
+
+/// Makes a FIFO at `path` for tests of files that must not be opened (a
+/// FIFO's open waits for a writer).
+#[cfg(all(test, unix))]
+pub(crate) fn make_fifo(path: &std::path::Path) {
+    let made = std::process::Command::new("mkfifo").arg(path).status();
+    assert!(made.is_ok_and(|s| s.success()), "mkfifo {}", path.display());
+}

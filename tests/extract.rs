@@ -515,17 +515,7 @@ fn bad_inputs_cost_only_their_run_compound_or_track() {
     // WLF t_ref_c = NaN (it panicked in the master-curve lookup before).
     std::fs::write(
         &cpath,
-        ctext
-            .lines()
-            .map(|l| {
-                if l.starts_with("t_ref_c") {
-                    "t_ref_c = nan"
-                } else {
-                    l
-                }
-            })
-            .collect::<Vec<_>>()
-            .join("\n"),
+        common::with_line(&ctext, "t_ref_c", "t_ref_c = nan"),
     )
     .unwrap();
     let s = extract(&opts(dir.path(), dir.path())).unwrap();

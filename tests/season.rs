@@ -1,6 +1,8 @@
 //! End-to-end tests of the season archive: the simulator writes it, the
 //! readers read every file back, and the physics checks out by hand.
 
+mod common;
+
 use std::path::Path;
 use tirewear::Wheel;
 use tirewear::ingest::compound::Compound;
@@ -410,17 +412,7 @@ fn an_earlier_season_is_replaced_only_when_tirewear_simulated_it() {
 
     let man = out.join("season.toml");
     let text = std::fs::read_to_string(&man).unwrap();
-    let team = text
-        .lines()
-        .map(|l| {
-            if l.starts_with("description") {
-                "description = \"Team data 2026\""
-            } else {
-                l
-            }
-        })
-        .collect::<Vec<_>>()
-        .join("\n");
+    let team = common::with_line(&text, "description", "description = \"Team data 2026\"");
     std::fs::write(&man, &team).unwrap();
     std::fs::remove_dir_all(out.join("truth")).unwrap();
     let wear = std::fs::read(out.join("wear/readings.csv")).unwrap();

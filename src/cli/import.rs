@@ -2,6 +2,7 @@
 
 use anyhow::{Result, bail};
 use std::path::PathBuf;
+use tirewear::Wheel;
 use tirewear::import::{CarDescription, ChannelMap, ImportSettings, NewRun, import_logs};
 use tirewear::ingest::manifest::TireSets;
 
@@ -59,19 +60,16 @@ pub(crate) struct ImportArgs {
 /// (one tire on two wheels, docs/formats.md: ids are unique) is a typo that
 /// would otherwise be entered in the manifest.
 fn parse_tire_sets(s: &str) -> std::result::Result<TireSets, String> {
-    const WHEELS: [&str; 4] = ["FL", "FR", "RL", "RR"];
-    let mut m = std::collections::HashMap::new();
+    let mut m: std::collections::HashMap<Wheel, String> = std::collections::HashMap::new();
     for part in s.split(',') {
         let (k, v) = part
             .split_once('=')
             .ok_or_else(|| format!("'{part}' is not WHEEL=ID"))?;
-        let (wheel, id) = (k.trim().to_ascii_uppercase(), v.trim().to_string());
-        if !WHEELS.contains(&wheel.as_str()) {
-            return Err(format!(
-                "'{}' is no wheel position (FL, FR, RL, RR)",
-                k.trim()
-            ));
-        }
+        let wheel: Wheel = k
+            .trim()
+            .parse()
+            .map_err(|_| format!("'{}' is no wheel position (FL, FR, RL, RR)", k.trim()))?;
+        let id = v.trim().to_string();
         if m.contains_key(&wheel) {
             return Err(format!("{wheel} is given twice"));
         }
@@ -85,12 +83,12 @@ fn parse_tire_sets(s: &str) -> std::result::Result<TireSets, String> {
         }
         m.insert(wheel, id);
     }
-    let get = |w: &str| m.get(w).cloned().ok_or_else(|| format!("{w} is missing"));
+    let mut get = |w: Wheel| m.remove(&w).ok_or_else(|| format!("{w} is missing"));
     Ok(TireSets {
-        fl: get("FL")?,
-        fr: get("FR")?,
-        rl: get("RL")?,
-        rr: get("RR")?,
+        fl: get(Wheel::FL)?,
+        fr: get(Wheel::FR)?,
+        rl: get(Wheel::RL)?,
+        rr: get(Wheel::RR)?,
     })
 }
 

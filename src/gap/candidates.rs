@@ -8,6 +8,7 @@ use super::user_effects::UserEffect;
 use crate::kpi::KpiRow;
 use crate::kpi::cpu::condition_map::{CONDITIONS, Component, N_PAIRS, pair_conditions};
 use crate::kpi::energy_maps::EnergyMaps;
+use crate::kpi::table::ROAD_KPIS;
 use crate::model::data::candidate_inputs;
 use crate::{Axle, Wheel};
 use std::sync::Arc;
@@ -636,21 +637,6 @@ impl Feature {
 /// "energy with accel_x_mps2 above −39 m/s²", 96 % of that energy, among a
 /// dozen such terms whose held-out gains differ in the third decimal.)
 pub const SET_UP_SHARE: f64 = 0.95;
-
-/// The road KPIs (paper table 3): one value per track.
-pub(crate) const ROAD_KPIS: [&str; 11] = [
-    "macro_wavelength_mm",
-    "micro_wavelength_mm",
-    "hurst",
-    "hurst_hdc",
-    "ra_macro_mm",
-    "ra_micro_mm",
-    "peakyness_mm",
-    "skewness",
-    "kurtosis",
-    "rq_mm",
-    "ra_mm",
-];
 
 /// KPI columns the physics baseline already uses, and the one the road
 /// abrasion mechanism scales by: not generic candidates.

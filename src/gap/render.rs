@@ -187,7 +187,7 @@ pub fn render_markdown(d: &Diagnosis, max_slices: usize) -> String {
             format!(
                 " (none of them has {}{})",
                 lacking.join(", "),
-                crate::model::fit::road_hint(&lacking)
+                crate::kpi::table::road_hint(&lacking)
             )
         };
         let _ = writeln!(

@@ -514,14 +514,8 @@ pub fn diagnose(
     s.train.extend(imputed.iter());
     let predict = |r: &KpiRow| predicted(baseline, physics.as_ref(), r, maps);
     let observed = Observed::new(&s, maps, &predict)?;
-    let unpredicted: Vec<&KpiRow> = s
-        .train
-        .iter()
-        .chain(&s.test)
-        .filter(|r| r.wear_mean_pct.is_finite() && !predict(r).is_finite())
-        .copied()
-        .collect();
-    let unpredicted_lacking = lacking_in_all(&unpredicted);
+    let unpredicted = &observed.unpredicted;
+    let unpredicted_lacking = lacking_in_all(unpredicted);
     if !unpredicted.is_empty() {
         tracing::warn!(
             tires = unpredicted.len(),
@@ -733,7 +727,7 @@ fn why_unusable(rows: &[&KpiRow], predict: &impl Fn(&KpiRow) -> f64) -> String {
     if !unpredicted.is_empty() {
         let lacking = lacking_in_all(&unpredicted);
         let lacking: Vec<&str> = lacking.iter().map(String::as_str).collect();
-        let road = crate::model::fit::road_hint(&lacking);
+        let road = crate::kpi::table::road_hint(&lacking);
         let lacking = if lacking.is_empty() {
             String::new()
         } else if road.is_empty() {
@@ -773,6 +767,9 @@ struct Observed<'a> {
     /// Measured − the baseline's prediction (%).
     residual: Vec<f64>,
     n_train: usize,
+    /// Rows (training, then testing) with a measured wear but no
+    /// prediction: left out, and named in the diagnosis.
+    unpredicted: Vec<&'a KpiRow>,
 }
 
 impl<'a> Observed<'a> {
@@ -781,12 +778,21 @@ impl<'a> Observed<'a> {
         maps: &'a BTreeMap<TireRun, EnergyMaps>,
         predict: &impl Fn(&KpiRow) -> f64,
     ) -> Result<Observed<'a>, ModelError> {
-        let usable = |set: &[&KpiRow]| -> Vec<usize> {
-            (0..set.len())
-                .filter(|&i| (set[i].wear_mean_pct - predict(set[i])).is_finite())
-                .collect()
+        // Each row predicted once: (row, residual) where it has one.
+        let mut unpredicted = Vec::new();
+        let mut observed = |set: &[&'a KpiRow]| -> Vec<(&'a KpiRow, f64)> {
+            let mut kept = Vec::new();
+            for &r in set {
+                let residual = r.wear_mean_pct - predict(r);
+                if residual.is_finite() {
+                    kept.push((r, residual));
+                } else if r.wear_mean_pct.is_finite() {
+                    unpredicted.push(r);
+                }
+            }
+            kept
         };
-        let (tr, te) = (usable(&s.train), usable(&s.test));
+        let (tr, te) = (observed(&s.train), observed(&s.test));
         if tr.len() < 20 {
             return Err(ModelError::TooFewObservations {
                 what: format!("gap diagnosis{}", why_unusable(&s.train, predict)),
@@ -794,14 +800,15 @@ impl<'a> Observed<'a> {
                 got: tr.len(),
             });
         }
-        let mut rows: Vec<&KpiRow> = tr.iter().map(|&i| s.train[i]).collect();
-        rows.extend(te.iter().map(|&i| s.test[i]));
+        let n_train = tr.len();
+        let (rows, residual): (Vec<&KpiRow>, Vec<f64>) = tr.into_iter().chain(te).unzip();
         Ok(Observed {
             maps: rows.iter().map(|r| maps.get(&r.tire_run())).collect(),
             y: rows.iter().map(|r| r.wear_mean_pct).collect(),
-            residual: rows.iter().map(|r| r.wear_mean_pct - predict(r)).collect(),
-            n_train: tr.len(),
+            residual,
+            n_train,
             rows,
+            unpredicted,
         })
     }
 

@@ -414,8 +414,7 @@ mod tests {
     fn a_log_that_is_no_regular_file_is_refused_not_opened() {
         let dir = tempfile::tempdir().unwrap();
         let fifo = dir.path().join("X.ld");
-        let made = std::process::Command::new("mkfifo").arg(&fifo).status();
-        assert!(made.is_ok_and(|s| s.success()), "mkfifo");
+        crate::make_fifo(&fifo);
         let folder = dir.path().join("Y.csv");
         std::fs::create_dir(&folder).unwrap();
         for path in [fifo.as_path(), Path::new("/dev/zero"), folder.as_path()] {
@@ -426,8 +425,7 @@ mod tests {
             );
         }
         let sidecar = dir.path().join("X.ldx");
-        let made = std::process::Command::new("mkfifo").arg(&sidecar).status();
-        assert!(made.is_ok_and(|s| s.success()), "mkfifo");
+        crate::make_fifo(&sidecar);
         let e = super::super::ld::read_ldx(&sidecar).expect_err("refused");
         assert!(e.to_string().contains("not a regular file"), "{e}");
     }

@@ -138,6 +138,45 @@ pub fn schema() -> Arc<Schema> {
     Arc::new(Schema::new(fields))
 }
 
+/// The road KPIs (paper table 3): one value per track, NaN for a track
+/// without a usable road profile.
+pub const ROAD_KPIS: [&str; 11] = [
+    "macro_wavelength_mm",
+    "micro_wavelength_mm",
+    "hurst",
+    "hurst_hdc",
+    "ra_macro_mm",
+    "ra_micro_mm",
+    "peakyness_mm",
+    "skewness",
+    "kurtosis",
+    "rq_mm",
+    "ra_mm",
+];
+
+/// The viscoelastic KPIs (paper table 5): they need the road's macro
+/// wavelength, so they are NaN where the road KPIs are.
+pub const VISCOELASTIC_KPIS: [&str; 4] = [
+    "solicitation_frequency_hz",
+    "shifted_temperature_c",
+    "storage_modulus_mpa",
+    "loss_factor",
+];
+
+/// Where `columns` hold road or viscoelastic KPIs: why a season may lack
+/// them (appended to a message that names the columns).
+pub(crate) fn road_hint(columns: &[&str]) -> &'static str {
+    if columns
+        .iter()
+        .any(|c| ROAD_KPIS.contains(c) || VISCOELASTIC_KPIS.contains(c))
+    {
+        " (a track without road profiles leaves its road KPIs NaN, and the viscoelastic \
+         ones, which need its macro wavelength: docs/formats.md section 4)"
+    } else {
+        ""
+    }
+}
+
 /// The unit of a numeric column, from its name's suffix (the naming rule of
 /// docs/kpis.md); "1" for dimensionless indices. Written into the Parquet
 /// schema as field metadata `unit`, and checked by `tirewear predict`.

@@ -11,6 +11,7 @@ use super::saved::{Feature, Indicators, MODEL_FORMAT, MODEL_VERSION, ModelBody, 
 use super::{Dataset, Fit, ModelError};
 use crate::Axle;
 use crate::kpi::KpiRow;
+use crate::kpi::table::road_hint;
 use std::fmt::Write;
 
 /// A wear-model method.
@@ -83,27 +84,6 @@ fn usable<'a>(rows: &[&'a KpiRow], inputs: &[String]) -> (Vec<&'a KpiRow>, Vec<S
         }
     }
     (ok, dropped)
-}
-
-/// Where `columns` hold road KPIs or the viscoelastic ones (which need the
-/// road's macro wavelength): why a season may lack them.
-pub(crate) fn road_hint(columns: &[&str]) -> &'static str {
-    const VISCOELASTIC: [&str; 4] = [
-        "solicitation_frequency_hz",
-        "shifted_temperature_c",
-        "storage_modulus_mpa",
-        "loss_factor",
-    ];
-    let road = crate::kpi::road::RoadIndices::UNDEFINED.undefined();
-    if columns
-        .iter()
-        .any(|c| road.contains(c) || VISCOELASTIC.contains(c))
-    {
-        " (a track without road profiles leaves its road KPIs NaN, and the viscoelastic \
-         ones, which need its macro wavelength: docs/formats.md section 4)"
-    } else {
-        ""
-    }
 }
 
 /// Why no training row is usable: how many lack each needed column (the

@@ -406,8 +406,7 @@ mod tests {
     fn a_model_or_hypotheses_file_that_is_no_regular_file_is_refused_unread() {
         let dir = tempfile::tempdir().unwrap();
         let fifo = dir.path().join("model.json");
-        let made = std::process::Command::new("mkfifo").arg(&fifo).status();
-        assert!(made.is_ok_and(|s| s.success()), "mkfifo");
+        crate::make_fifo(&fifo);
         for path in [std::path::Path::new("/dev/zero"), fifo.as_path()] {
             let e = SavedModel::load(path).unwrap_err().to_string();
             assert_eq!(

@@ -418,29 +418,18 @@ fn check_season_folder(dir: &Path) -> Result<(), ReportError> {
 /// model or `gap.json` given as `--out` by mistake). A page written before
 /// is replaced.
 fn check_page_destination(out: &Path) -> Result<(), ReportError> {
-    let refuse = |message: String| ReportError::Output {
+    crate::atomic::check_replaceable(out, "report", &[], "an HTML page", |head| {
+        if head.is_empty() || is_html(head) {
+            Ok(())
+        } else {
+            Err(crate::ingest::checksum::what_it_is(head))
+        }
+    })
+    .map_err(|c| ReportError::Output {
         path: out.into(),
-        message,
-    };
-    crate::atomic::check_destinations(&[("report", out)], &[]).map_err(|c| refuse(c.reason))?;
-    // Nothing there, or no regular file (a FIFO's open would wait): the
-    // rename replaces the entry, as before.
-    if !std::fs::metadata(out).is_ok_and(|m| m.is_file()) {
-        return Ok(());
-    }
-    let head = crate::ingest::read_head(out, HEAD_BYTES)
-        .map_err(|e| refuse(crate::ingest::unnamed(out, e)))?;
-    if head.is_empty() || is_html(&head) {
-        return Ok(());
-    }
-    Err(refuse(format!(
-        "exists and is not an HTML page ({}): the report would replace it; give another path",
-        crate::ingest::checksum::what_it_is(&head)
-    )))
+        message: c.reason,
+    })
 }
-
-/// How much of an existing destination is read to tell what it is.
-const HEAD_BYTES: u64 = 256;
 
 /// Whether a file's first bytes begin an HTML page (`<!DOCTYPE html` or
 /// `<html`, in any case, after a byte-order mark and white space).
@@ -486,8 +475,7 @@ mod tests {
     fn a_fifo_as_the_page_is_not_opened() {
         let dir = tempfile::tempdir().unwrap();
         let fifo = dir.path().join("report.html");
-        let made = std::process::Command::new("mkfifo").arg(&fifo).status();
-        assert!(made.is_ok_and(|s| s.success()), "mkfifo");
+        crate::make_fifo(&fifo);
         assert!(check_page_destination(&fifo).is_ok());
     }
 

@@ -98,6 +98,15 @@ pub fn hungriest_run(
     (run.clone(), need, needs.get(1).map_or(0, |n| n.0))
 }
 
+/// `text` with every line that starts with `prefix` replaced by `line`
+/// (one field of a TOML file changed by hand).
+pub fn with_line(text: &str, prefix: &str, line: &str) -> String {
+    text.lines()
+        .map(|l| if l.starts_with(prefix) { line } else { l })
+        .collect::<Vec<_>>()
+        .join("\n")
+}
+
 /// Copies a folder recursively.
 pub fn copy_dir(from: &Path, to: &Path) {
     std::fs::create_dir_all(to).unwrap();
