@@ -215,6 +215,71 @@ fn a_damaged_run_fails_alone() {
     }
 }
 
+/// Every file an extraction into `dir` wrote (`kpis*`), with its bytes.
+fn outputs(dir: &Path) -> Vec<(String, Vec<u8>)> {
+    let mut files: Vec<(String, Vec<u8>)> = std::fs::read_dir(dir)
+        .unwrap()
+        .flatten()
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .filter(|n| n.starts_with("kpis"))
+        .map(|n| (n.clone(), std::fs::read(dir.join(&n)).unwrap()))
+        .collect();
+    files.sort();
+    files
+}
+
+/// Before 2026-12-02 an extraction that could read none of its runs (every
+/// telemetry file cut short, as a sync half done leaves them) wrote an
+/// empty KPI table over the last good one and exited 3; a manifest with no
+/// runs wrote an empty table and exited 0. Now both are errors naming what
+/// was wrong, and the last good outputs stay byte for byte.
+#[test]
+fn an_extraction_that_reads_no_run_writes_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    let season_dir = dir.path().join("season");
+    let out = dir.path().join("out");
+    std::fs::create_dir(&out).unwrap();
+    sim(&season_dir, Preset::Tiny, 20.0);
+    let good = extract(&opts(&season_dir, &out)).unwrap();
+    assert_eq!((good.rows, good.skipped.len()), (16, 0));
+    let before = outputs(&out);
+    assert_eq!(before.len(), 6, "the table, three side tables, report, CSV");
+
+    let season = Season::open(&season_dir).unwrap();
+    for run in &season.manifest.runs {
+        let path = season.path(&run.telemetry);
+        let bytes = std::fs::read(&path).unwrap();
+        std::fs::write(&path, &bytes[..bytes.len() / 2]).unwrap();
+    }
+    let e = extract(&opts(&season_dir, &out)).unwrap_err().to_string();
+    assert!(e.contains("none of its 4 runs could be read"), "{e}");
+    assert!(e.contains("nothing was written"), "{e}");
+    let first = &season.manifest.runs[0];
+    assert!(e.contains(&format!("run {}: ", first.id)), "{e}");
+    assert!(e.contains(&first.telemetry), "{e}");
+    assert!(e.contains("and 1 more"), "{e}");
+    assert_eq!(outputs(&out), before, "the last good outputs are kept");
+
+    // A manifest that lists no runs (an archive started by hand).
+    let manifest = season_dir.join("season.toml");
+    let text = std::fs::read_to_string(&manifest).unwrap();
+    let head = &text[..text.find("[[runs]]").unwrap()];
+    let first_table = head.find("\n[").unwrap() + 1;
+    let no_runs = format!(
+        "{}runs = []\n{}",
+        &head[..first_table],
+        &head[first_table..]
+    );
+    std::fs::write(&manifest, no_runs).unwrap();
+    let e = extract(&opts(&season_dir, &out)).unwrap_err().to_string();
+    assert!(
+        e.contains("season.toml: runs: the manifest lists no runs"),
+        "{e}"
+    );
+    assert!(e.contains("docs/import.md"), "{e}");
+    assert_eq!(outputs(&out), before);
+}
+
 /// A run that alone needs more memory than `--memory-limit` is skipped by
 /// name (exit 3) and the others extracted as without a limit; the same on
 /// the GPU engine's pipelined route.
@@ -837,13 +902,24 @@ fn files_in_the_archive_the_manifest_does_not_list_are_named() {
     };
     let source = Path::new(env!("CARGO_MANIFEST_DIR")).join("datasets/handwritten");
     let dir = tempfile::tempdir().unwrap();
+    // Its telemetry (0.4 s) is below the 10 s an extraction needs, and an
+    // extraction that reads no run writes nothing: a simulated run's
+    // telemetry stands in, so the summary's warnings can be read.
+    let sim_dir = dir.path().join("sim");
+    sim(&sim_dir, Preset::Tiny, 20.0);
+    let sim_season = Season::open(&sim_dir).unwrap();
+    let sim_telemetry = sim_season.path(&sim_season.manifest.runs[0].telemetry);
     let whole = dir.path().join("whole");
     common::copy_dir(&source, &whole);
+    let telemetry = whole.join("telemetry/H1-car1-R1.mcap");
+    std::fs::copy(&sim_telemetry, &telemetry).unwrap();
     let s = extract(&ExtractOptions::new(&whole, whole.join("kpis.parquet"))).unwrap();
     assert_eq!(unlisted(&s.warnings), Vec::<String>::new());
 
+    assert_eq!(s.skipped.len(), 0, "{:?}", s.skipped);
     let bare = dir.path().join("bare");
     common::copy_dir(&source, &bare);
+    std::fs::copy(&sim_telemetry, bare.join("telemetry/H1-car1-R1.mcap")).unwrap();
     let manifest = std::fs::read_to_string(bare.join("season.toml")).unwrap();
     let manifest = manifest
         .replace(

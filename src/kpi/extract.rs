@@ -805,6 +805,14 @@ pub fn extract(opts: &ExtractOptions) -> Result<ExtractSummary, IngestError> {
     let season = Season::open_with(&opts.season, opts.allow_external_paths)?;
     check_outputs(opts, &season)?;
     let m = &season.manifest;
+    if m.runs.is_empty() {
+        return Err(IngestError::invalid(
+            &season.manifest_path,
+            "runs",
+            "the manifest lists no runs, so there is nothing to extract and nothing was \
+             written (`tirewear import` adds runs from logs: docs/import.md)",
+        ));
+    }
     let SeasonInputs {
         compounds,
         wear,
@@ -868,6 +876,14 @@ pub fn extract(opts: &ExtractOptions) -> Result<ExtractSummary, IngestError> {
             }
         }
     }
+    if skipped.len() == m.runs.len() {
+        // No summary will carry the season's warnings (a file not listed,
+        // a compound left out), and they may say why.
+        for w in &warnings {
+            tracing::warn!("{w}");
+        }
+        return Err(nothing_read(opts, &skipped));
+    }
     let extraction_id = new_extraction_id();
     let summary = ExtractSummary {
         extraction_id: extraction_id.clone(),
@@ -893,6 +909,35 @@ pub fn extract(opts: &ExtractOptions) -> Result<ExtractSummary, IngestError> {
     };
     write_outputs(opts, &extraction_id, &rows, &curves, maps, &summary)?;
     Ok(summary)
+}
+
+/// The error for an extraction that could read none of its runs: an empty
+/// table written over the last good one would lose it (a telemetry mount
+/// down, a sync half done), and no later step has anything to work on.
+fn nothing_read(opts: &ExtractOptions, skipped: &[Skipped]) -> IngestError {
+    const SHOWN: usize = 3;
+    let mut why: Vec<String> = skipped
+        .iter()
+        .take(SHOWN)
+        .map(|k| format!("run {}: {}", k.run, k.reason))
+        .collect();
+    if skipped.len() > SHOWN {
+        why.push(format!(
+            "and {} more (each logged as a warning)",
+            skipped.len() - SHOWN
+        ));
+    }
+    IngestError::invalid(
+        &opts.season,
+        "runs",
+        format!(
+            "none of its {} runs could be read, so nothing was written ({} and its side \
+             tables are as they were): {}",
+            skipped.len(),
+            opts.out.display(),
+            why.join("; ")
+        ),
+    )
 }
 
 /// Runs `f`, turning a panic into an error: a bug met by one run's data
