@@ -377,6 +377,133 @@ fn a_failed_run_is_reported_and_the_rest_committed() {
     assert_eq!((s.processed, s.unchanged, s.failed.len()), (1, 3, 1));
 }
 
+/// Before 2026-12-02 a committed run that failed on a later night (its
+/// telemetry cut short by a sync half done, gone with a mount) was dropped
+/// from the dataset: with every file damaged the night committed an empty
+/// dataset. Now a failed run keeps its last committed rows (`kept`, and
+/// the reason says so) and, its key still the old one, is tried again; the
+/// files put back, it is unchanged. A kept run whose parts are damaged is
+/// left out, with a warning naming the part. Sharded, the commit does the
+/// same.
+#[test]
+fn a_committed_run_that_fails_later_keeps_its_rows() {
+    let dir = tempfile::tempdir().unwrap();
+    let archive = dir.path().join("season");
+    let dataset = dir.path().join("dataset");
+    tiny(&archive, 21);
+    run(&archive, &dataset);
+    let before = processed_rows(&dataset);
+    assert_eq!(before.len(), 16);
+    let season = tirewear::ingest::manifest::Season::open(&archive).unwrap();
+    let runs = &season.manifest.runs;
+    let originals: Vec<(PathBuf, Vec<u8>)> = runs
+        .iter()
+        .map(|r| {
+            let p = season.path(&r.telemetry);
+            let bytes = std::fs::read(&p).unwrap();
+            (p, bytes)
+        })
+        .collect();
+    let damage = |i: usize| {
+        let (p, bytes) = &originals[i];
+        std::fs::write(p, &bytes[..bytes.len() / 2]).unwrap();
+    };
+    let restore = || {
+        for (p, bytes) in &originals {
+            std::fs::write(p, bytes).unwrap();
+        }
+    };
+
+    // Every file cut short: four failures, every row kept.
+    (0..4).for_each(damage);
+    let s = run(&archive, &dataset);
+    assert_eq!(
+        (s.processed, s.failed.len(), s.rows),
+        (4, 4, 16),
+        "{:?}",
+        s.failed
+    );
+    for f in &s.failed {
+        assert!(f.kept, "{f:?}");
+        assert!(
+            f.reason.contains("is truncated") || f.reason.contains("past the end"),
+            "{f:?}"
+        );
+        assert!(
+            f.reason
+                .ends_with("its rows from the last commit are kept until it is processed")
+        );
+    }
+    assert_eq!(processed_rows(&dataset), before);
+    // Tried again the next night, still failing.
+    let s = run(&archive, &dataset);
+    assert_eq!((s.processed, s.failed.len()), (4, 4));
+    // One file gone altogether (fails before processing): kept as well.
+    std::fs::remove_file(&originals[0].0).unwrap();
+    let s = run(&archive, &dataset);
+    assert_eq!((s.processed, s.failed.len()), (3, 4));
+    assert!(s.failed.iter().all(|f| f.kept), "{:?}", s.failed);
+    assert_eq!(processed_rows(&dataset), before);
+    // The files put back: nothing to process, the dataset as it was.
+    restore();
+    let s = run(&archive, &dataset);
+    assert_eq!((s.processed, s.unchanged, s.failed.len()), (0, 4, 0));
+    assert_eq!(processed_rows(&dataset), before);
+
+    // A failed run whose committed part is damaged too: left out, named.
+    damage(1);
+    let part = std::fs::read_dir(dataset.join("kpis"))
+        .unwrap()
+        .flatten()
+        .flat_map(|e| std::fs::read_dir(e.path()).unwrap().flatten())
+        .map(|e| e.path())
+        .find(|p| {
+            p.file_name()
+                .unwrap()
+                .to_str()
+                .unwrap()
+                .starts_with(&runs[1].id)
+        })
+        .unwrap();
+    std::fs::write(&part, b"not parquet").unwrap();
+    let s = run(&archive, &dataset);
+    assert_eq!((s.failed.len(), s.rows), (1, 12), "{:?}", s.failed);
+    assert!(!s.failed[0].kept);
+    assert!(
+        s.warnings
+            .iter()
+            .any(|w| w.contains(&format!("run {} failed", runs[1].id))
+                && w.contains(&part.display().to_string())
+                && w.contains("left out")),
+        "{:?}",
+        s.warnings
+    );
+    assert!(
+        !processed_rows(&dataset)
+            .keys()
+            .any(|(r, _)| *r == runs[1].id)
+    );
+    restore();
+    let s = run(&archive, &dataset);
+    assert_eq!((s.processed, s.failed.len(), s.rows), (1, 0, 16));
+    assert_eq!(processed_rows(&dataset), before);
+
+    // Sharded: the run fails in its shard and the commit keeps its rows.
+    damage(2);
+    for index in 0..2 {
+        let mut o = ProcessOptions::new(vec![archive.clone()], &dataset);
+        o.mode = Mode::Shard { index, count: 2 };
+        process(&o).unwrap();
+    }
+    let mut c = ProcessOptions::new(vec![], &dataset);
+    c.mode = Mode::Commit;
+    let s = process(&c).unwrap();
+    assert_eq!(s.failed.len(), 1, "{:?}", s.failed);
+    assert_eq!(s.failed[0].run, runs[2].id);
+    assert!(s.failed[0].kept);
+    assert_eq!(processed_rows(&dataset), before);
+}
+
 /// A run that alone needs more memory than the budget fails by name (its
 /// file, its need, the budget and the flag to raise it) instead of the
 /// night being killed; the others commit, and the next night, with the
@@ -595,12 +722,15 @@ fn an_unreadable_archive_or_file_fails_only_its_own_runs() {
     assert_eq!(b_rows(&rows), b_rows(&before));
     std::fs::rename(manifest.with_extension("away"), &manifest).unwrap();
 
-    // A telemetry file gone: that run fails, every other one is unchanged.
+    // A telemetry file gone: that run fails (its committed rows kept),
+    // every other one is unchanged.
     let gone = &season_a.manifest.runs[0];
     std::fs::remove_file(season_a.path(&gone.telemetry)).unwrap();
     let s = process(&both()).unwrap();
     assert_eq!((s.processed, s.unchanged, s.failed.len()), (0, 7, 1));
     assert_eq!(s.failed[0].run, gone.id);
+    assert!(s.failed[0].kept);
+    assert_eq!(processed_rows(&dataset).len(), 32);
     assert!(
         s.failed[0].reason.contains(&gone.telemetry),
         "{}",

@@ -183,12 +183,17 @@ struct DatasetManifest {
     files: BTreeMap<String, FileStamp>,
 }
 
-/// A run that was not committed, and why.
+/// A run that could not be processed, and why.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct Failed {
     pub run: String,
     pub season: String,
     pub reason: String,
+    /// Its rows from an earlier commit stay in the dataset (its key the
+    /// old one, so it is tried again next time). Absent in records written
+    /// before 2026-12-02.
+    #[serde(default)]
+    pub kept: bool,
 }
 
 /// A run's estimated memory need, in bytes.
@@ -372,6 +377,51 @@ fn parts_intact(dataset: &Path, e: &RunEntry, warnings: &mut Vec<String>) -> boo
     })
 }
 
+/// Keeps the committed entry of each run that failed this time, where its
+/// parts are intact: a telemetry mount that is down or a sync half done
+/// would otherwise empty the dataset for a night, and the rows are only as
+/// stale as the last commit. The entry keeps its old key, so the run is
+/// processed again next time; `Failed::kept` and the reason say so.
+fn keep_failed_runs(
+    dataset: &Path,
+    committed: &BTreeMap<&str, &RunEntry>,
+    runs: &mut Vec<(RunEntry, Option<&Planned>)>,
+    summary: &mut ProcessSummary,
+) {
+    let listed: BTreeSet<String> = runs.iter().map(|(e, _)| e.run.clone()).collect();
+    for f in &mut summary.failed {
+        let Some(e) = committed.get(f.run.as_str()) else {
+            continue;
+        };
+        if e.season != f.season || listed.contains(&f.run) {
+            continue;
+        }
+        let damage: Vec<String> = PART_KINDS
+            .iter()
+            .filter_map(|kind| {
+                let path = committed_part(dataset, kind, e);
+                let rows = (*kind == "kpis").then_some(e.rows);
+                part_damage(&path, rows).map(|why| format!("{}: {why}", path.display()))
+            })
+            .collect();
+        if damage.is_empty() {
+            runs.push(((*e).clone(), None));
+            f.kept = true;
+            f.reason
+                .push_str("; its rows from the last commit are kept until it is processed");
+        } else {
+            let w = format!(
+                "run {} failed and its committed parts cannot be kept ({}): its rows are \
+                 left out until it is processed",
+                f.run,
+                damage.join("; ")
+            );
+            tracing::warn!("{w}");
+            summary.warnings.push(w);
+        }
+    }
+}
+
 /// What is wrong with a committed part, if anything (see [`parts_intact`]).
 fn part_damage(path: &Path, rows: Option<usize>) -> Option<String> {
     use crate::ingest::checksum::ParquetSource;
@@ -509,6 +559,7 @@ fn process_under_lock(opts: &ProcessOptions) -> Result<ProcessSummary, NightlyEr
                     run: "(every run of the archive)".into(),
                     season: a.display().to_string(),
                     reason: format!("{e}; its committed runs are kept as they were"),
+                    kept: old.runs.iter().any(|r| r.archive == *a),
                 });
             }
         }
@@ -555,6 +606,7 @@ fn process_under_lock(opts: &ProcessOptions) -> Result<ProcessSummary, NightlyEr
                         run: run.id.clone(),
                         season: season.manifest.name.clone(),
                         reason: e.to_string(),
+                        kept: false,
                     });
                     continue;
                 }
@@ -641,6 +693,7 @@ fn process_under_lock(opts: &ProcessOptions) -> Result<ProcessSummary, NightlyEr
                 run: p.run.id.clone(),
                 season: seasons[p.season].manifest.name.clone(),
                 reason,
+                kept: false,
             });
         } else {
             to_process.push(p);
@@ -714,6 +767,7 @@ fn process_under_lock(opts: &ProcessOptions) -> Result<ProcessSummary, NightlyEr
             runs.push(((*e).clone(), None));
         }
     }
+    keep_failed_runs(dataset, &committed, &mut runs, &mut summary);
     runs.extend(carried.iter().map(|e| ((*e).clone(), None)));
     runs.sort_by(|a, b| (&a.0.event, &a.0.run).cmp(&(&b.0.event, &b.0.run)));
     // Each track's road key: from this night's plan, else the last commit's.
@@ -954,6 +1008,7 @@ fn stage_runs<'a>(
                         run: p.run.id.clone(),
                         season: season.manifest.name.clone(),
                         reason,
+                        kept: false,
                     };
                     let path = staged_failure(dataset, &p.key);
                     let text = sealed(&f);

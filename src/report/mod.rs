@@ -642,7 +642,10 @@ mod tests {
             dir: "season".into(),
             rows: Vec::new(),
             extraction: Some(serde_json::json!({
-                "failed": [{"run": "E01-car1-R2", "season": "s", "reason": "CRC mismatch in chunk 3"}]
+                "failed": [
+                    {"run": "E01-car1-R2", "season": "s", "reason": "CRC mismatch in chunk 3"},
+                    {"run": "E02-car1-R1", "season": "s", "reason": "cut short", "kept": true}
+                ]
             })),
             models: Vec::new(),
             gap: None,
@@ -653,7 +656,17 @@ mod tests {
             unread: Vec::new(),
         };
         let s = sections::season(&inputs);
-        assert!(s.html.contains("Skipped runs (1)"), "{}", s.html);
+        assert!(s.html.contains("Failed runs (2)"), "{}", s.html);
         assert!(s.html.contains("E01-car1-R2") && s.html.contains("CRC mismatch in chunk 3"));
+        // A record without `kept` (before 2026-12-02) has no rows kept.
+        assert!(
+            s.html
+                .contains("<td class=\"t\">CRC mismatch in chunk 3</td><td class=\"t\">none</td>")
+                && s.html.contains(
+                    "<td class=\"t\">cut short</td><td class=\"t\">the last commit&#39;s</td>"
+                ),
+            "{}",
+            s.html
+        );
     }
 }

@@ -46,30 +46,42 @@ pub(super) fn season(inputs: &Inputs) -> Section {
     );
     match &inputs.extraction {
         Some(report) => {
-            // `extract`'s skipped runs, or `process`'s failed ones.
-            let list = if report["skipped"].is_array() {
-                &report["skipped"]
-            } else {
+            // `extract`'s skipped runs, or `process`'s failed ones (which
+            // may keep their rows from an earlier commit).
+            let process = !report["skipped"].is_array();
+            let list = if process {
                 &report["failed"]
+            } else {
+                &report["skipped"]
             };
-            let skipped: Vec<Vec<String>> = list
+            let failed: Vec<Vec<String>> = list
                 .as_array()
                 .into_iter()
                 .flatten()
                 .map(|s| {
-                    vec![
+                    let mut row = vec![
                         s["run"].as_str().unwrap_or("").to_string(),
                         s["reason"].as_str().unwrap_or("").to_string(),
-                    ]
+                    ];
+                    if process {
+                        let kept = s["kept"].as_bool().unwrap_or(false);
+                        row.push(if kept { "the last commit's" } else { "none" }.into());
+                    }
+                    row
                 })
                 .collect();
+            let (title, columns): (&str, &[&str]) = if process {
+                ("Failed runs", &["run", "reason", "rows in the dataset"])
+            } else {
+                ("Skipped runs", &["run", "reason"])
+            };
             html += &format!(
-                "<h3>Skipped runs ({})</h3>\n{}",
-                skipped.len(),
-                if skipped.is_empty() {
+                "<h3>{title} ({})</h3>\n{}",
+                failed.len(),
+                if failed.is_empty() {
                     "<p>None: every run of the manifest was extracted.</p>".to_string()
                 } else {
-                    table(&["run", "reason"], &skipped)
+                    table(columns, &failed)
                 }
             );
         }
