@@ -44,7 +44,7 @@ pub(crate) fn run_fit(
 ) -> Result<Vec<(Method, anyhow::Error)>> {
     let t0 = Instant::now();
     super::not_a_file(out, "fit")?;
-    let rows = tirewear::kpi::table::read_parquet(kpis)?;
+    let rows = tirewear::kpi::table::read_parquet_rows(kpis)?;
     let split = fit::split(&rows, settings.test_events.as_deref())
         .with_context(|| format!("splitting {}", kpis.display()))?;
     // Before minutes of fitting, not after: an output folder that cannot be made.

@@ -284,7 +284,7 @@ pub(crate) fn run_gap(
         Baseline::Physics
     } else if baseline.ends_with(".csv") {
         let p = tirewear::gap::report::Predictions::read(std::path::Path::new(baseline))?;
-        let rows = tirewear::kpi::table::read_parquet(kpis)?;
+        let rows = tirewear::kpi::table::read_parquet_rows(kpis)?;
         let missing = rows
             .iter()
             .filter(|r| !p.wear_pct.contains_key(&r.tire_run()))

@@ -448,7 +448,7 @@ pub fn diagnose_file(
     baseline: &Baseline,
     settings: &GapSettings,
 ) -> Result<Diagnosis, GapError> {
-    let rows = crate::kpi::table::read_parquet(kpis)?;
+    let rows = crate::kpi::table::read_parquet_rows(kpis)?;
     let maps = crate::kpi::energy_maps::read_tire_maps(kpis)?;
     if maps.is_empty() {
         tracing::warn!(

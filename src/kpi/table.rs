@@ -617,6 +617,35 @@ fn not_a_kpi_database(path: &Path, why: String) -> IngestError {
     IngestError::invalid(path, "file", format!("{why}{hint}"))
 }
 
+/// As [`read_parquet`], for a command that learns from the rows (`fit`,
+/// `gap`): a table without rows is an error saying where it came from,
+/// rather than each method's "no training rows" or "got 0 observations".
+/// (`extract` writes none since 2026-12-02; a night whose every run failed
+/// before any was committed still commits one, and older versions wrote
+/// them.)
+pub fn read_parquet_rows(path: &Path) -> Result<Vec<KpiRow>, IngestError> {
+    let rows = read_parquet(path)?;
+    if rows.is_empty() {
+        // A `process` dataset's summary, else `extract`'s report.
+        let summary = path.with_file_name("summary.json");
+        let why = if summary.is_file() {
+            summary
+        } else {
+            side_table_path(path, "report.json")
+        };
+        return Err(IngestError::invalid(
+            path,
+            "rows",
+            format!(
+                "the KPI table has no rows: every run of the extraction or night that wrote it \
+                 failed or was skipped ({} says why)",
+                why.display()
+            ),
+        ));
+    }
+    Ok(rows)
+}
+
 /// Reads a KPI Parquet file back (for `fit`, `predict`, `gap` and tests).
 /// Nulls, cells of the wrong type and columns in other units are errors
 /// naming the column (and row).
@@ -887,6 +916,36 @@ mod tests {
         write_batch(&old, &full.project(&keep).unwrap()).unwrap();
         let err = read_parquet(&old).unwrap_err().to_string();
         assert!(err.contains("missing column 'hurst'"), "{err}");
+    }
+
+    /// A table without rows (a night whose every run failed before any
+    /// was committed) reads as empty, but `fit` and `gap` are told where
+    /// it came from instead of "no training rows" or "got 0".
+    #[test]
+    fn a_table_without_rows_is_named_for_fit_and_gap() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("kpis.parquet");
+        write_parquet(&path, &[]).unwrap();
+        assert!(read_parquet(&path).unwrap().is_empty());
+        let e = read_parquet_rows(&path).unwrap_err().to_string();
+        assert!(
+            e.starts_with(&format!(
+                "{}: rows: the KPI table has no rows",
+                path.display()
+            )),
+            "{e}"
+        );
+        let report = dir.path().join("kpis.report.json");
+        assert!(
+            e.ends_with(&format!("({} says why)", report.display())),
+            "{e}"
+        );
+        // In a `process` dataset, its summary.
+        std::fs::write(dir.path().join("summary.json"), "{}").unwrap();
+        let e = read_parquet_rows(&path).unwrap_err().to_string();
+        assert!(e.ends_with("summary.json says why)"), "{e}");
+        write_parquet(&path, &[KpiRow::default()]).unwrap();
+        assert_eq!(read_parquet_rows(&path).unwrap().len(), 1);
     }
 
     /// The CSV copy handed in for the KPI database is refused, for what it
