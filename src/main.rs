@@ -60,9 +60,10 @@ enum Command {
     /// killed run resumes where it stopped, outputs are committed together,
     /// and `--shard K/N` + `--commit` spread the work over machines
     /// (Slurm, Kubernetes; docs/nightly.md). Exit 3: some runs failed, the
-    /// rest committed, or a `--then` step failed (the others still ran; a
-    /// step not done runs again the next night); exit 4: another process
-    /// holds the dataset.
+    /// rest committed (a failed run keeps its rows from an earlier commit,
+    /// and is tried again), or a `--then` step failed (the others still
+    /// ran; a step not done runs again the next night); exit 4: another
+    /// process holds the dataset.
     Process(cli::process::ProcessArgs),
     /// Import logger data (MoTeC, CSV, Parquet) into a season archive.
     ///

@@ -359,21 +359,27 @@ fn read_batches(path: &Path) -> Result<Vec<RecordBatch>, NightlyError> {
 /// or fails this is reported in `warnings` and its run is processed again
 /// (docs/nightly.md, "Damaged parts and tables").
 fn parts_intact(dataset: &Path, e: &RunEntry, warnings: &mut Vec<String>) -> bool {
-    PART_KINDS.iter().all(|kind| {
+    match first_damaged_part(dataset, e) {
+        None => true,
+        Some((path, why)) => {
+            warn_damage(
+                warnings,
+                &path,
+                &why,
+                &format!("run {} processed again", e.run),
+            );
+            false
+        }
+    }
+}
+
+/// The first committed part of `e` that is missing or damaged, with why
+/// (see [`parts_intact`]).
+fn first_damaged_part(dataset: &Path, e: &RunEntry) -> Option<(PathBuf, String)> {
+    PART_KINDS.iter().find_map(|kind| {
         let path = committed_part(dataset, kind, e);
         let rows = (*kind == "kpis").then_some(e.rows);
-        match part_damage(&path, rows) {
-            None => true,
-            Some(why) => {
-                warn_damage(
-                    warnings,
-                    &path,
-                    &why,
-                    &format!("run {} processed again", e.run),
-                );
-                false
-            }
-        }
+        part_damage(&path, rows).map(|why| (path, why))
     })
 }
 
@@ -396,28 +402,23 @@ fn keep_failed_runs(
         if e.season != f.season || listed.contains(&f.run) {
             continue;
         }
-        let damage: Vec<String> = PART_KINDS
-            .iter()
-            .filter_map(|kind| {
-                let path = committed_part(dataset, kind, e);
-                let rows = (*kind == "kpis").then_some(e.rows);
-                part_damage(&path, rows).map(|why| format!("{}: {why}", path.display()))
-            })
-            .collect();
-        if damage.is_empty() {
-            runs.push(((*e).clone(), None));
-            f.kept = true;
-            f.reason
-                .push_str("; its rows from the last commit are kept until it is processed");
-        } else {
-            let w = format!(
-                "run {} failed and its committed parts cannot be kept ({}): its rows are \
-                 left out until it is processed",
-                f.run,
-                damage.join("; ")
-            );
-            tracing::warn!("{w}");
-            summary.warnings.push(w);
+        match first_damaged_part(dataset, e) {
+            None => {
+                runs.push(((*e).clone(), None));
+                f.kept = true;
+                f.reason
+                    .push_str("; its rows from the last commit are kept until it is processed");
+            }
+            Some((path, why)) => warn_damage(
+                &mut summary.warnings,
+                &path,
+                &why,
+                &format!(
+                    "run {} failed, so its committed rows cannot be kept: they are left out \
+                     until it is processed",
+                    f.run
+                ),
+            ),
         }
     }
 }
