@@ -121,7 +121,8 @@ fn left_out_lines(previous: Option<&[String]>, notes: &[String]) -> Vec<String> 
     if previous == Some(notes) {
         return match notes.len() {
             0 => Vec::new(),
-            n => vec![format!("left out: the same {n} rows as above")],
+            // Each line is a row, a track's rows or an input column.
+            _ => vec!["left out: the same as above".to_string()],
         };
     }
     let mut lines: Vec<String> = notes
@@ -131,8 +132,7 @@ fn left_out_lines(previous: Option<&[String]>, notes: &[String]) -> Vec<String> 
         .collect();
     match notes.len().saturating_sub(5) {
         0 => {}
-        1 => lines.push("... and 1 more row left out".into()),
-        more => lines.push(format!("... and {more} more rows left out")),
+        more => lines.push(format!("... and {more} more left out")),
     }
     lines
 }
@@ -166,16 +166,16 @@ mod tests {
         let first = left_out_lines(None, &six);
         assert_eq!(first.len(), 6);
         assert_eq!(first[0], "left out: row 1");
-        assert_eq!(first[5], "... and 1 more row left out");
+        assert_eq!(first[5], "... and 1 more left out");
         assert_eq!(
             left_out_lines(Some(&six), &six),
-            ["left out: the same 6 rows as above"]
+            ["left out: the same as above"]
         );
-        // Different rows are listed in full; seven leave "2 more rows".
+        // Different rows are listed in full; seven leave "2 more".
         let seven: Vec<String> = (1..=7).map(|i| format!("row {i}")).collect();
         assert_eq!(
             left_out_lines(Some(&six), &seven)[5],
-            "... and 2 more rows left out"
+            "... and 2 more left out"
         );
         assert!(left_out_lines(Some(&[]), &[]).is_empty());
         assert!(left_out_lines(None, &[]).is_empty());

@@ -50,9 +50,12 @@ impl FitSettings {
 
 /// Rows usable by a model: finite target and inputs, and a tread not worn
 /// through (censored wear). Returns the kept rows and a note for each
-/// dropped one.
-fn usable<'a>(rows: &[&'a KpiRow], inputs: &[String]) -> (Vec<&'a KpiRow>, Vec<String>) {
-    let (mut ok, mut dropped) = (Vec::new(), Vec::new());
+/// dropped one; where every row of a track lacks the same values (a track
+/// without road profiles), one note for the track says so instead of one
+/// per tire.
+fn usable<'a>(rows: &[&'a KpiRow], inputs: &[String], set: &str) -> (Vec<&'a KpiRow>, Vec<String>) {
+    let mut ok = Vec::new();
+    let mut dropped: Vec<(&KpiRow, Option<Vec<&str>>)> = Vec::new();
     for r in rows {
         let bad: Vec<&str> = std::iter::once(TARGET)
             .chain(inputs.iter().map(String::as_str))
@@ -61,7 +64,54 @@ fn usable<'a>(rows: &[&'a KpiRow], inputs: &[String]) -> (Vec<&'a KpiRow>, Vec<S
         if r.worn_through_readings > 0.0 {
             // A reading at the worn-through depth: the tread is gone there, and the
             // tire's wear is only a lower bound.
-            dropped.push(format!(
+            dropped.push((r, None));
+        } else if bad.is_empty() {
+            ok.push(*r)
+        } else {
+            dropped.push((r, Some(bad)))
+        }
+    }
+    (ok, drop_notes(rows, &dropped, set))
+}
+
+/// The notes for [`usable`]'s dropped rows (`None`: censored; else the
+/// columns without a value), a whole track's rows lacking the same road
+/// or viscoelastic columns in one note.
+fn drop_notes(
+    rows: &[&KpiRow],
+    dropped: &[(&KpiRow, Option<Vec<&str>>)],
+    set: &str,
+) -> Vec<String> {
+    use std::collections::{HashMap, HashSet};
+    /// A track's rows here, how many were dropped for missing values, and
+    /// those values: `Some(None)` once two rows lack different ones.
+    type Tally<'r> = (usize, usize, Option<Option<&'r [&'r str]>>);
+    let mut per_track: HashMap<&str, Tally> = HashMap::new();
+    for r in rows {
+        per_track.entry(r.track.as_str()).or_default().0 += 1;
+    }
+    for (r, bad) in dropped {
+        let Some(bad) = bad else { continue };
+        let t = per_track.entry(r.track.as_str()).or_default();
+        t.1 += 1;
+        t.2 = match t.2 {
+            None => Some(Some(bad.as_slice())),
+            Some(Some(b)) if b == bad.as_slice() => Some(Some(b)),
+            _ => Some(None),
+        };
+    }
+    let whole_tracks: HashSet<&str> = per_track
+        .iter()
+        .filter(|(_, (n, lacking, bad))| {
+            n == lacking && bad.flatten().is_some_and(|b| !road_hint(b).is_empty())
+        })
+        .map(|(t, _)| *t)
+        .collect();
+    let mut noted: HashSet<&str> = HashSet::new();
+    let mut notes = Vec::new();
+    for (r, bad) in dropped {
+        match bad {
+            None => notes.push(format!(
                 "run {} wheel {}: tread worn through at {} reading{}, the wear is censored",
                 r.run,
                 r.wheel,
@@ -71,19 +121,27 @@ fn usable<'a>(rows: &[&'a KpiRow], inputs: &[String]) -> (Vec<&'a KpiRow>, Vec<S
                 } else {
                     "s"
                 }
-            ))
-        } else if bad.is_empty() {
-            ok.push(*r)
-        } else {
-            dropped.push(format!(
+            )),
+            Some(bad) if whole_tracks.contains(r.track.as_str()) => {
+                if noted.insert(r.track.as_str()) {
+                    notes.push(format!(
+                        "track {}: all its {} {set} rows: not finite: {}{}",
+                        r.track,
+                        per_track[r.track.as_str()].0,
+                        bad.join(", "),
+                        road_hint(bad)
+                    ));
+                }
+            }
+            Some(bad) => notes.push(format!(
                 "run {} wheel {}: not finite: {}",
                 r.run,
                 r.wheel,
                 bad.join(", ")
-            ))
+            )),
         }
     }
-    (ok, dropped)
+    notes
 }
 
 /// Why no training row is usable: how many lack each needed column (the
@@ -255,9 +313,9 @@ pub fn fit_method(
             road_hint(&shown)
         ));
     }
-    let (train, dropped) = usable(&s.train, &candidates);
+    let (train, dropped) = usable(&s.train, &candidates, "training");
     notes.extend(dropped);
-    let (test, dropped) = usable(&s.test, &candidates);
+    let (test, dropped) = usable(&s.test, &candidates, "testing");
     notes.extend(dropped);
     if train.is_empty() {
         return Err(ModelError::Invalid(no_rows_left(&s.train, &candidates)));
@@ -527,5 +585,73 @@ mod tests {
                 ..
             })
         ));
+    }
+
+    /// A track without road profiles: its rows left out in one note naming
+    /// the track, not one per tire (64 lines on the demo); other rows
+    /// still one note each.
+    #[test]
+    fn a_whole_track_without_road_values_is_one_note() {
+        let row = |track: &str, run: &str| KpiRow {
+            track: track.into(),
+            run: run.into(),
+            wear_mean_pct: 10.0,
+            friction_energy_j: 1e6,
+            skewness: 0.1,
+            loss_factor: 0.3,
+            ..Default::default()
+        };
+        let no_road = |run: &str| KpiRow {
+            skewness: f64::NAN,
+            loss_factor: f64::NAN,
+            ..row("a", run)
+        };
+        let rows = [
+            no_road("a1"),
+            no_road("a2"),
+            no_road("a3"),
+            row("b", "b1"),
+            KpiRow {
+                friction_energy_j: f64::NAN,
+                ..row("b", "b2")
+            },
+            KpiRow {
+                skewness: f64::NAN,
+                ..row("b", "b3")
+            },
+            KpiRow {
+                worn_through_readings: 2.0,
+                ..row("c", "c1")
+            },
+        ];
+        let refs: Vec<&KpiRow> = rows.iter().collect();
+        let inputs: Vec<String> = ["friction_energy_j", "skewness", "loss_factor"]
+            .map(String::from)
+            .to_vec();
+        let (ok, notes) = usable(&refs, &inputs, "training");
+        assert_eq!(ok.len(), 1);
+        assert_eq!(notes.len(), 4, "{notes:#?}");
+        assert!(
+            notes[0].starts_with("track a: all its 3 training rows: not finite: skewness, loss_factor (a track without road profiles"),
+            "{}",
+            notes[0]
+        );
+        // Track b lacks values in two of its three rows, and not the same.
+        assert_eq!(notes[1], "run b2 wheel FL: not finite: friction_energy_j");
+        assert_eq!(notes[2], "run b3 wheel FL: not finite: skewness");
+        assert_eq!(
+            notes[3],
+            "run c1 wheel FL: tread worn through at 2 readings, the wear is censored"
+        );
+        // A track whose every row lacks a value the road does not explain
+        // keeps one note per row.
+        let rows: Vec<KpiRow> = ["d1", "d2"]
+            .map(|r| KpiRow {
+                friction_energy_j: f64::NAN,
+                ..row("d", r)
+            })
+            .to_vec();
+        let refs: Vec<&KpiRow> = rows.iter().collect();
+        assert_eq!(usable(&refs, &inputs, "training").1.len(), 2);
     }
 }
