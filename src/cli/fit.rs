@@ -119,10 +119,11 @@ pub(crate) fn run_fit(
 /// how many more, or one line when the method before left out the same.
 fn left_out_lines(previous: Option<&[String]>, notes: &[String]) -> Vec<String> {
     if previous == Some(notes) {
-        return match notes.len() {
-            0 => Vec::new(),
-            // Each line is a row, a track's rows or an input column.
-            _ => vec!["left out: the same as above".to_string()],
+        // Each line is a row, a track's rows or an input column.
+        return if notes.is_empty() {
+            Vec::new()
+        } else {
+            vec!["left out: the same as above".to_string()]
         };
     }
     let mut lines: Vec<String> = notes

@@ -83,27 +83,24 @@ fn drop_notes(
     set: &str,
 ) -> Vec<String> {
     use std::collections::{HashMap, HashSet};
-    /// A track's rows here, how many were dropped for missing values, and
-    /// those values: `Some(None)` once two rows lack different ones.
-    type Tally<'r> = (usize, usize, Option<Option<&'r [&'r str]>>);
-    let mut per_track: HashMap<&str, Tally> = HashMap::new();
+    // Per track: how many rows it has here, and what each row dropped for
+    // missing values lacks.
+    let mut count: HashMap<&str, usize> = HashMap::new();
     for r in rows {
-        per_track.entry(r.track.as_str()).or_default().0 += 1;
+        *count.entry(r.track.as_str()).or_default() += 1;
     }
+    let mut lacking: HashMap<&str, Vec<&[&str]>> = HashMap::new();
     for (r, bad) in dropped {
-        let Some(bad) = bad else { continue };
-        let t = per_track.entry(r.track.as_str()).or_default();
-        t.1 += 1;
-        t.2 = match t.2 {
-            None => Some(Some(bad.as_slice())),
-            Some(Some(b)) if b == bad.as_slice() => Some(Some(b)),
-            _ => Some(None),
-        };
+        if let Some(bad) = bad {
+            lacking.entry(r.track.as_str()).or_default().push(bad);
+        }
     }
-    let whole_tracks: HashSet<&str> = per_track
+    let whole_tracks: HashSet<&str> = lacking
         .iter()
-        .filter(|(_, (n, lacking, bad))| {
-            n == lacking && bad.flatten().is_some_and(|b| !road_hint(b).is_empty())
+        .filter(|(t, bads)| {
+            bads.len() == count[*t]
+                && bads.iter().all(|b| *b == bads[0])
+                && !road_hint(bads[0]).is_empty()
         })
         .map(|(t, _)| *t)
         .collect();
@@ -127,7 +124,7 @@ fn drop_notes(
                     notes.push(format!(
                         "track {}: all its {} {set} rows: not finite: {}{}",
                         r.track,
-                        per_track[r.track.as_str()].0,
+                        count[r.track.as_str()],
                         bad.join(", "),
                         road_hint(bad)
                     ));
