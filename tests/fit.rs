@@ -168,6 +168,73 @@ fn demo_fit_ranks_like_the_paper_and_models_round_trip() {
         e.contains("t_surface_avg_c") && e.contains("is in K"),
         "{e}"
     );
+    predict_writes_each_rows_prediction_and_refuses_an_empty_table(&phys, dir.path(), &rows);
+}
+
+/// `tirewear predict` end to end: one CSV line per KPI row, in the table's
+/// order, with the saved model's prediction for it (the CSV writer keeps
+/// an f64 exactly); a table without rows (a night on which every run
+/// failed) is refused, exit 1, naming it, and no predictions file appears
+/// (it once wrote an empty one and exited 0).
+fn predict_writes_each_rows_prediction_and_refuses_an_empty_table(
+    phys: &SavedModel,
+    dir: &std::path::Path,
+    rows: &[KpiRow],
+) {
+    let model = dir.join("models").join("physical.json");
+    let predict = |kpis: &std::path::Path, out: &std::path::Path| {
+        std::process::Command::new(env!("CARGO_BIN_EXE_tirewear"))
+            .arg("--quiet")
+            .arg("predict")
+            .arg(&model)
+            .arg(kpis)
+            .arg("--out")
+            .arg(out)
+            .output()
+            .unwrap()
+    };
+    let csv = dir.join("predictions.csv");
+    let run = predict(&dir.join("kpis.parquet"), &csv);
+    assert_eq!(run.status.code(), Some(0), "{run:?}");
+    let mut reader = csv::Reader::from_path(&csv).unwrap();
+    let header = reader.headers().unwrap().clone();
+    let column = |name: &str| header.iter().position(|h| h == name).unwrap();
+    let (run_col, wheel_col, predicted_col) =
+        (column("run"), column("wheel"), column("predicted_wear_pct"));
+    let lines: Vec<csv::StringRecord> = reader.records().map(|r| r.unwrap()).collect();
+    assert_eq!(lines.len(), rows.len());
+    for (line, r) in lines.iter().zip(rows) {
+        assert_eq!(
+            (&line[run_col], &line[wheel_col]),
+            (r.run.as_str(), r.wheel.name())
+        );
+        let predicted: f64 = line[predicted_col].parse().unwrap();
+        assert_eq!(predicted, phys.predict_row(r).unwrap(), "{line:?}");
+    }
+
+    // The same table without its rows: same schema and units.
+    let batch = {
+        let file = std::fs::File::open(dir.join("kpis.parquet")).unwrap();
+        let mut r = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file)
+            .unwrap()
+            .build()
+            .unwrap();
+        r.next().unwrap().unwrap()
+    };
+    let empty = dir.join("empty.parquet");
+    write_batch(&empty, &batch.slice(0, 0)).unwrap();
+    let none = dir.join("none.csv");
+    let run = predict(&empty, &none);
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert_eq!(run.status.code(), Some(1), "{stderr}");
+    assert!(
+        stderr.contains(&format!(
+            "{}: rows: the KPI table has no rows",
+            empty.display()
+        )),
+        "{stderr}"
+    );
+    assert!(!none.exists());
 }
 
 /// JSON pointers of every non-empty array in `v`.

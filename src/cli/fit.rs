@@ -32,6 +32,21 @@ pub(crate) enum MethodArg {
     All,
 }
 
+/// The testing events, or why there are none: a first night's table with
+/// two events has no third one to test on, and the models then carry
+/// training indicators only.
+fn testing_events_said(split: &fit::Split) -> String {
+    if split.test_events.is_empty() {
+        format!(
+            "none: the default tests every third event and the table has {} events \
+             (--test-events names testing events); the models have training indicators only",
+            split.train_events.len()
+        )
+    } else {
+        split.test_events.join(", ")
+    }
+}
+
 /// Fits each method and writes the models that fitted, together, into
 /// `out`. A method that fails does not stop the others (a singular design
 /// for the physical model says nothing of the network); only when none
@@ -57,7 +72,7 @@ pub(crate) fn run_fit(
         split.train.len(),
         split.test_events.len(),
         split.test.len(),
-        split.test_events.join(", ")
+        testing_events_said(&split)
     );
     let mut models = Vec::new();
     let mut failed = Vec::new();
@@ -98,7 +113,7 @@ pub(crate) fn run_fit(
     }
     let paths = tirewear::model::saved::save_all(&models, out)
         .with_context(|| format!("writing models to {}", out.display()))?;
-    if models.len() > 1 {
+    if models.len() > 1 && !split.test.is_empty() {
         println!("{}", fit::render_comparison(&models));
     }
     for p in paths {

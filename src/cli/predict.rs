@@ -36,7 +36,9 @@ pub(crate) fn run_predict(
             kpis.display()
         );
     }
-    let rows = tirewear::kpi::table::read_parquet(kpis)?;
+    // A table without rows (a night on which every run failed) would give an
+    // empty predictions file and exit 0: refused like `fit` and `gap` do.
+    let rows = tirewear::kpi::table::read_parquet_rows(kpis)?;
     #[derive(serde::Serialize)]
     struct Prediction<'a> {
         event: &'a str,
@@ -100,9 +102,10 @@ pub(crate) fn run_predict(
             x.rmse
         ),
         Err(_) => println!(
-            "wrote {}: {} predictions ({} model)",
+            "wrote {}: {} rows, {} with a prediction ({} model)",
             out.display(),
             out_rows.len(),
+            out_rows.len() - missing,
             m.method()
         ),
     }
