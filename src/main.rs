@@ -19,7 +19,7 @@ use clap::{Parser, Subcommand};
     long_about,
     after_help = "Exit codes: 0 done; 1 an error stopped the command (it names the file, \
 record and what was wrong); 2 bad command line; 3 extract wrote its outputs but skipped \
-some runs (listed, and in NAME.report.json), import imported some logs but not all (listed), \
+some runs (listed, and in NAME.report.json), import imported some logs but not all (listed; none imported is exit 1), \
 fit wrote some models but not all (the others named), report wrote the page without \
 inputs it could not read (named), or process committed all runs but some that \
 failed (listed, and in DATASET/summary.json) or a --then step failed (named); 4 process found the dataset locked by another \
@@ -74,7 +74,7 @@ enum Command {
     /// record (wheel loads, forces, wheel-centre and sliding velocities) is
     /// estimated from a vehicle description (car.toml) and marked as
     /// estimated (docs/import.md). Exit 3: some logs failed, the rest were
-    /// imported.
+    /// imported; exit 1: every log failed (the archive is as it was).
     Import(cli::import::ImportArgs),
     /// Fit the three wear models on a KPI database.
     ///

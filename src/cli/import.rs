@@ -92,7 +92,7 @@ fn parse_tire_sets(s: &str) -> std::result::Result<TireSets, String> {
     })
 }
 
-/// Runs `tirewear import`; false when some logs failed.
+/// Runs `tirewear import`; false when some logs failed, an error when all did.
 pub(crate) fn run(a: ImportArgs) -> Result<bool> {
     if a.run.is_some() && a.logs.len() > 1 {
         bail!("--run names one run: give one log with it");
@@ -180,6 +180,18 @@ pub(crate) fn run(a: ImportArgs) -> Result<bool> {
     }
     for (_, e) in &s.failed {
         eprintln!("failed: {e}");
+    }
+    // Nothing imported is not a partial import (exit 3) but a failed one:
+    // a nightly script must not go on as if the logs were in.
+    if s.imported.is_empty() {
+        bail!(
+            "{}: {}, so the archive is as it was",
+            a.archive.display(),
+            match a.logs.len() {
+                1 => "the log could not be imported (its error above)".to_string(),
+                n => format!("none of the {n} logs could be imported (each one's error above)"),
+            }
+        );
     }
     println!(
         "imported {} of {} logs into {}",
