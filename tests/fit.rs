@@ -582,7 +582,10 @@ fn a_season_without_road_profiles_fits_on_the_other_columns() {
             && gap.contains("skewness")
             && gap.contains("road profiles")
             && gap.contains("`--baseline models/ffnn.json`")
-            && gap.contains("need more observations than 20, got 0"),
+            && gap.contains(
+                "it needs at least 20 training tires with a measured wear and a baseline \
+                 prediction, and has 0"
+            ),
         "{gap}"
     );
     // As the error says: a model fitted without the road columns is a

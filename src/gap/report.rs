@@ -772,6 +772,11 @@ struct Observed<'a> {
     unpredicted: Vec<&'a KpiRow>,
 }
 
+/// Training tires the diagnosis needs (with a measured wear and a
+/// baseline prediction): fewer leave the permutation tests and the
+/// track-level cross-validation nothing to stand on.
+const MIN_TRAINING_TIRES: usize = 20;
+
 impl<'a> Observed<'a> {
     fn new(
         s: &Split<'a>,
@@ -793,12 +798,18 @@ impl<'a> Observed<'a> {
             kept
         };
         let (tr, te) = (observed(&s.train), observed(&s.test));
-        if tr.len() < 20 {
-            return Err(ModelError::TooFewObservations {
-                what: format!("gap diagnosis{}", why_unusable(&s.train, predict)),
-                needed: 20,
-                got: tr.len(),
-            });
+        if tr.len() < MIN_TRAINING_TIRES {
+            // Not TooFewObservations ("more than"): the bound is inclusive, and
+            // the user needs to hear what counts and where it comes from.
+            return Err(ModelError::Invalid(format!(
+                "gap diagnosis{}: it needs at least {MIN_TRAINING_TIRES} training tires with a \
+                 measured wear and a baseline prediction, and has {} (on {} training events, \
+                 {} testing; docs/gap.md: a diagnosis is made on a season)",
+                why_unusable(&s.train, predict),
+                tr.len(),
+                s.train_events.len(),
+                s.test_events.len(),
+            )));
         }
         let n_train = tr.len();
         let (rows, residual): (Vec<&KpiRow>, Vec<f64>) = tr.into_iter().chain(te).unzip();
