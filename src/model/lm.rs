@@ -1,7 +1,8 @@
 //! Levenberg–Marquardt for nonlinear least squares, as used to train the
 //! feed-forward network (paper table 6): solve (JᵀJ + μI) δ = −Jᵀr with a
-//! Cholesky factorisation (faer); accept the step and lower μ when the sum
-//! of squares falls, otherwise raise μ and try again.
+//! Cholesky factorisation (faer; in the residuals' space when they are
+//! fewer than the parameters); accept the step and lower μ when the sum of
+//! squares falls, otherwise raise μ and try again.
 
 use super::ModelError;
 use faer::linalg::matmul::triangular::BlockStructure;
@@ -96,34 +97,32 @@ impl LmSolver {
 
     /// One iteration. Returns false when no step improves the sum of squares
     /// by more than the tolerance (μ has reached its maximum or the fit converged).
+    ///
+    /// With fewer residuals than parameters (a network on a few hundred
+    /// tires: 177 residuals, up to 1 131 weights on the demo) the step is
+    /// solved in the residuals' space: (JᵀJ + μI)⁻¹Jᵀr = Jᵀ(JJᵀ + μI)⁻¹r
+    /// for μ > 0, an n × n Cholesky instead of an m × m one, the same step
+    /// up to rounding (unit test `the_dual_step_is_the_primal_one`).
     pub fn step(&mut self, problem: &impl LeastSquares) -> bool {
         let (n, m) = (self.r.len(), self.params.len());
         problem.jacobian(&self.params, &mut self.jac);
-        // JᵀJ's lower triangle only, all the Cholesky reads (Side::Lower):
-        // half the flops of the full product, which was three quarters of
-        // a network's training (docs/models.md).
-        let mut jtj = Mat::<f64>::zeros(m, m);
-        faer::linalg::matmul::triangular::matmul(
-            jtj.as_mut(),
-            BlockStructure::TriangularLower,
-            Accum::Replace,
-            self.jac.transpose(),
-            BlockStructure::Rectangular,
-            self.jac.as_ref(),
-            BlockStructure::Rectangular,
-            1.0,
-            faer::get_global_parallelism(),
-        );
-        let jtr = self.jac.transpose() * Mat::from_fn(n, 1, |i, _| self.r[i]);
+        let dual = n < m;
+        let (gram, rhs) = self.gram_and_rhs(dual);
+        let k = gram.nrows();
         while self.mu <= self.settings.mu_max {
-            let a = Mat::from_fn(m, m, |i, j| {
-                jtj[(i, j)] + if i == j { self.mu } else { 0.0 }
+            let a = Mat::from_fn(k, k, |i, j| {
+                gram[(i, j)] + if i == j { self.mu } else { 0.0 }
             });
             let Ok(llt) = a.llt(Side::Lower) else {
                 self.mu *= self.settings.mu_increase;
                 continue;
             };
-            let delta = llt.solve(&jtr);
+            let solved = llt.solve(&rhs);
+            let delta = if dual {
+                self.jac.transpose() * &solved
+            } else {
+                solved
+            };
             let trial: Vec<f64> = (0..m).map(|i| self.params[i] - delta[(i, 0)]).collect();
             problem.residuals(&trial, &mut self.trial_r);
             let trial_sse = sse(&self.trial_r);
@@ -138,6 +137,35 @@ impl LmSolver {
             self.mu *= self.settings.mu_increase;
         }
         false
+    }
+
+    /// The Gram matrix the step factorises, lower triangle only (all the
+    /// Cholesky reads, Side::Lower: half the flops of the full product,
+    /// which was three quarters of a network's training, docs/models.md),
+    /// and the right-hand side: JᵀJ and Jᵀr, or, `dual`, JJᵀ and r.
+    fn gram_and_rhs(&self, dual: bool) -> (Mat<f64>, Mat<f64>) {
+        let n = self.r.len();
+        let r = Mat::from_fn(n, 1, |i, _| self.r[i]);
+        let (left, right) = if dual {
+            (self.jac.as_ref(), self.jac.transpose())
+        } else {
+            (self.jac.transpose(), self.jac.as_ref())
+        };
+        let k = left.nrows();
+        let mut gram = Mat::<f64>::zeros(k, k);
+        faer::linalg::matmul::triangular::matmul(
+            gram.as_mut(),
+            BlockStructure::TriangularLower,
+            Accum::Replace,
+            left,
+            BlockStructure::Rectangular,
+            right,
+            BlockStructure::Rectangular,
+            1.0,
+            faer::get_global_parallelism(),
+        );
+        let rhs = if dual { r } else { self.jac.transpose() * &r };
+        (gram, rhs)
     }
 }
 
@@ -254,6 +282,43 @@ mod tests {
             let expected = -delta[(j, 0)];
             assert!(
                 (solver.params[j] - expected).abs() <= 1e-12 * expected.abs().max(1.0),
+                "{j}: {} vs {expected}",
+                solver.params[j]
+            );
+        }
+    }
+
+    /// More parameters than residuals (a network on few tires): the step,
+    /// solved in the residuals' space, is the primal one, (JᵀJ + μI)δ = Jᵀr
+    /// formed in full and solved by LU, to 1e-9 relative. With μ = 0.7 the
+    /// m × m system is well conditioned, so the LU route is exact enough
+    /// to judge by.
+    #[test]
+    fn the_dual_step_is_the_primal_one() {
+        use faer::linalg::solvers::Solve;
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(6);
+        let (n, m) = (40, 300);
+        let problem = Linear {
+            a: Mat::from_fn(n, m, |_, _| rng.random_range(-1.0..1.0)),
+            b: (0..n).map(|_| rng.random_range(-3.0..3.0)).collect(),
+        };
+        let settings = LmSettings {
+            mu: 0.7,
+            ..LmSettings::default()
+        };
+        let mut solver = LmSolver::new(&problem, &vec![0.0; m], settings).unwrap();
+        assert!(solver.step(&problem));
+        assert_eq!(solver.mu, 0.7 * 0.1, "the first trial was accepted");
+        let a = &problem.a;
+        let damped = a.transpose() * a + Mat::<f64>::identity(m, m) * 0.7;
+        let atr = a.transpose() * Mat::from_fn(n, 1, |i, _| -problem.b[i]);
+        let delta = damped.partial_piv_lu().solve(&atr);
+        let scale = (0..m).map(|j| delta[(j, 0)].abs()).fold(0.0, f64::max);
+        for j in 0..m {
+            let expected = -delta[(j, 0)];
+            assert!(
+                (solver.params[j] - expected).abs() <= 1e-9 * scale,
                 "{j}: {} vs {expected}",
                 solver.params[j]
             );
