@@ -194,7 +194,7 @@ fn run() -> Result<std::process::ExitCode> {
             }
         }
         Command::Fit(a) => {
-            if !cli::fit::run(a)? {
+            if !cli::fit::run(a, progress)? {
                 return Ok(std::process::ExitCode::from(EXIT_RUNS_SKIPPED));
             }
         }

@@ -68,7 +68,10 @@ pub(crate) fn run(a: DemoArgs, progress: bool) -> Result<()> {
     run_fit(
         &out.join("kpis.parquet"),
         &Method::ALL,
-        &FitSettings::default(),
+        &FitSettings {
+            progress,
+            ..Default::default()
+        },
         &out.join("models"),
     )?;
     println!();

@@ -154,7 +154,7 @@ fn left_out_lines(previous: Option<&[String]>, notes: &[String]) -> Vec<String> 
 }
 
 /// Runs `tirewear fit`; false when some methods fitted and others did not.
-pub(crate) fn run(a: FitArgs) -> Result<bool> {
+pub(crate) fn run(a: FitArgs, progress: bool) -> Result<bool> {
     let methods = match a.method {
         MethodArg::Ffnn => vec![Method::Ffnn],
         MethodArg::Pca => vec![Method::Pca],
@@ -167,6 +167,7 @@ pub(crate) fn run(a: FitArgs) -> Result<bool> {
             seed: a.seed,
             ..Default::default()
         },
+        progress,
         ..Default::default()
     };
     Ok(run_fit(&a.kpis, &methods, &settings, &a.out)?.is_empty())

@@ -440,7 +440,10 @@ fn then_steps(
         match super::fit::run_fit(
             &kpis,
             &tirewear::model::fit::Method::ALL,
-            &tirewear::model::fit::FitSettings::default(),
+            &tirewear::model::fit::FitSettings {
+                progress: opts.progress,
+                ..Default::default()
+            },
             &opts.dataset.join("models").join(&stamp),
         ) {
             // Some methods fitted: the report shows those (from this fit only).

@@ -38,6 +38,9 @@ pub struct FitSettings {
     pub network: NetworkSettings,
     /// The PCA + regression method's components (threshold 0.99, the paper's).
     pub pca: PcaSettings,
+    /// A progress bar over the network's widths (a season's network takes
+    /// a minute: docs/models.md).
+    pub progress: bool,
 }
 
 impl FitSettings {
@@ -338,7 +341,10 @@ pub fn fit_method(
                 ns.max_mutual_corr,
             );
             let x = matrix(&train, &inputs);
-            let network = ns.fit(Dataset::new(&x, &y, &inputs))?;
+            let bar = crate::progress::bar(settings.progress, 0, "training the network's widths");
+            let network = super::network::fit_network(&x, &y, ns, &bar);
+            bar.finish_and_clear();
+            let network = network?;
             let net = network.net.clone();
             let predict = |r: &KpiRow| {
                 net.predict_one(

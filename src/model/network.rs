@@ -122,7 +122,7 @@ impl Fit for NetworkSettings {
     /// The network method on rows of selected inputs and the target.
     fn fit(&self, data: Dataset<'_>) -> Result<NetworkFit, ModelError> {
         self.check()?;
-        fit_network(data.x, data.y, self)
+        fit_network(data.x, data.y, self, &indicatif::ProgressBar::hidden())
     }
 }
 
@@ -133,7 +133,13 @@ impl Predict for NetworkFit {
 }
 
 /// Fits the network method on rows of selected inputs and the target.
-fn fit_network(x: &[Vec<f64>], y: &[f64], s: &NetworkSettings) -> Result<NetworkFit, ModelError> {
+/// `bar` counts the widths trained and the retrained pair.
+pub(crate) fn fit_network(
+    x: &[Vec<f64>],
+    y: &[f64],
+    s: &NetworkSettings,
+    bar: &indicatif::ProgressBar,
+) -> Result<NetworkFit, ModelError> {
     let d = x.first().map_or(0, Vec::len);
     if d == 0 {
         return Err(ModelError::Invalid(
@@ -170,9 +176,14 @@ fn fit_network(x: &[Vec<f64>], y: &[f64], s: &NetworkSettings) -> Result<Network
         validation_checks: s.validation_checks,
         seed,
     };
+    bar.set_length(candidates.len() as u64 + 1);
     let nets: Vec<Ffnn> = candidates
         .par_iter()
-        .map(|&h2| Ffnn::fit(&xt, &yt, &xv, &yv, &settings(h2, s.seed)))
+        .map(|&h2| {
+            let net = Ffnn::fit(&xt, &yt, &xv, &yv, &settings(h2, s.seed));
+            bar.inc(1);
+            net
+        })
         .collect::<Result<_, _>>()?;
     let trials: Vec<WidthTrial> = nets
         .iter()
@@ -196,6 +207,7 @@ fn fit_network(x: &[Vec<f64>], y: &[f64], s: &NetworkSettings) -> Result<Network
         &yv,
         &settings(nets[best].hidden2, s.seed + 1),
     )?;
+    bar.inc(1);
     let retrained_kept = validation_mse(&again, &xv, &yv) < trials[best].validation_mse;
     Ok(NetworkFit {
         net: if retrained_kept {
