@@ -234,13 +234,26 @@ pub fn split<'a>(
                 "testing events not in the table: {}",
                 unknown
                     .iter()
-                    .map(|s| s.as_str())
+                    .map(|s| if s.is_empty() {
+                        "'' (an empty id: a stray comma?)"
+                    } else {
+                        s.as_str()
+                    })
                     .collect::<Vec<_>>()
                     .join(", ")
             )));
         }
     }
     let (tr, te, test_events) = split_by_events(rows, test_events);
+    if tr.is_empty() && !te.is_empty() {
+        // Else each method (and gap) fails on its own, the physical one
+        // blaming road profiles for columns no training row has.
+        return Err(ModelError::Invalid(format!(
+            "testing events {}: they are every event of the table, so no row is left to \
+             train on (name fewer, or leave --test-events out: every third event tests)",
+            test_events.join(", ")
+        )));
+    }
     let mut train_events: Vec<String> = tr.iter().map(|&i| rows[i].event.clone()).collect();
     train_events.sort();
     train_events.dedup();
@@ -588,6 +601,39 @@ mod tests {
                 ..
             })
         ));
+    }
+
+    /// Testing events that are every event of the table leave nothing to
+    /// train on: one error saying so, not one per method (the physical
+    /// one blamed road profiles); unknown events are named as before.
+    #[test]
+    fn testing_every_event_is_refused_by_the_split() {
+        let rows: Vec<KpiRow> = ["E1", "E2", "E1"]
+            .iter()
+            .map(|e| KpiRow {
+                event: e.to_string(),
+                ..Default::default()
+            })
+            .collect();
+        let all = ["E2".to_string(), "E1".to_string()];
+        let e = split(&rows, Some(&all)).err().unwrap().to_string();
+        assert!(
+            e.starts_with("testing events E2, E1: they are every event of the table"),
+            "{e}"
+        );
+        let s = split(&rows, Some(&all[..1])).ok().unwrap();
+        assert_eq!((s.train.len(), s.test.len()), (2, 1));
+        let e = split(&rows, Some(&["E9".to_string()]))
+            .err()
+            .unwrap()
+            .to_string();
+        assert_eq!(e, "testing events not in the table: E9");
+        let stray = ["E1".to_string(), String::new()];
+        let e = split(&rows, Some(&stray)).err().unwrap().to_string();
+        assert_eq!(
+            e,
+            "testing events not in the table: '' (an empty id: a stray comma?)"
+        );
     }
 
     /// A track without road profiles: its rows left out in one note naming
