@@ -103,13 +103,7 @@ pub(crate) fn run_fit(
         models.push(model);
     }
     if models.is_empty() {
-        let mut failed = failed.into_iter();
-        let (_, first) = failed.next().context("no method to fit")?;
-        let others: Vec<String> = failed.map(|(_, e)| format!("{e:#}")).collect();
-        return Err(match others.as_slice() {
-            [] => first,
-            _ => first.context(format!("no model fitted; also: {}", others.join("; "))),
-        });
+        return Err(none_fitted(kpis, failed));
     }
     let paths = tirewear::model::saved::save_all(&models, out)
         .with_context(|| format!("writing models to {}", out.display()))?;
@@ -128,6 +122,34 @@ pub(crate) fn run_fit(
     }
     println!("fitted in {:.1} s", t0.elapsed().as_secs_f64());
     Ok(failed)
+}
+
+/// The error when no method fitted: one sentence when every method failed
+/// for the same reason (a table without wear readings: three copies of
+/// one message), else the first error with the others.
+fn none_fitted(kpis: &std::path::Path, failed: Vec<(Method, anyhow::Error)>) -> anyhow::Error {
+    let causes: Vec<String> = failed
+        .iter()
+        .map(|(_, e)| e.root_cause().to_string())
+        .collect();
+    if failed.len() > 1 && causes.iter().all(|c| *c == causes[0]) {
+        let names: Vec<String> = failed.iter().map(|(m, _)| format!("{m:?}")).collect();
+        return anyhow::anyhow!(
+            "{}: no model fitted: every method ({}) failed alike: {}",
+            kpis.display(),
+            names.join(", "),
+            causes[0]
+        );
+    }
+    let mut failed = failed.into_iter();
+    let Some((_, first)) = failed.next() else {
+        return anyhow::anyhow!("{}: no method to fit", kpis.display());
+    };
+    let others: Vec<String> = failed.map(|(_, e)| format!("{e:#}")).collect();
+    match others.as_slice() {
+        [] => first,
+        _ => first.context(format!("no model fitted; also: {}", others.join("; "))),
+    }
 }
 
 /// What `fit` prints of the rows a method leaves out: the first five and
@@ -175,7 +197,38 @@ pub(crate) fn run(a: FitArgs, progress: bool) -> Result<bool> {
 
 #[cfg(test)]
 mod tests {
-    use super::left_out_lines;
+    use super::{Method, left_out_lines, none_fitted};
+
+    /// Every method failing for one reason is one sentence; different
+    /// reasons keep each method's own error.
+    #[test]
+    fn methods_failing_alike_are_said_once() {
+        let kpis = std::path::Path::new("nw/kpis.parquet");
+        let failing = |why: &str| {
+            Method::ALL
+                .iter()
+                .map(|&m| {
+                    (
+                        m,
+                        anyhow::anyhow!("{why}").context(format!("fitting the {m:?} model")),
+                    )
+                })
+                .collect::<Vec<_>>()
+        };
+        let e = none_fitted(kpis, failing("no usable training rows")).to_string();
+        assert_eq!(
+            e,
+            "nw/kpis.parquet: no model fitted: every method (Ffnn, Pca, Physical) failed \
+             alike: no usable training rows"
+        );
+        let mut mixed = failing("no usable training rows");
+        mixed[2].1 = anyhow::anyhow!("singular").context("fitting the Physical model");
+        let e = format!("{:#}", none_fitted(kpis, mixed));
+        assert!(
+            e.starts_with("no model fitted; also: fitting the Pca model: no usable training rows; fitting the Physical model: singular"),
+            "{e}"
+        );
+    }
 
     #[test]
     fn left_out_rows_are_listed_once_across_methods() {
