@@ -37,6 +37,8 @@ pub enum BenchParts {
     Decode,
     /// The gap diagnosis of simulated seasons, against its 10 s target.
     Gap,
+    /// Levenberg–Marquardt's step in either space, and the demo's network.
+    Fit,
 }
 
 /// One measured line.
@@ -310,6 +312,9 @@ pub fn run_bench(o: &BenchOptions) -> BenchReport {
     }
     if matches!(o.parts, BenchParts::All | BenchParts::Gap) {
         gap_lines(o, &mut report);
+    }
+    if matches!(o.parts, BenchParts::All | BenchParts::Fit) {
+        fit_lines(o, &mut report);
     }
     report
 }
@@ -813,6 +818,155 @@ fn season_gap_lines(
     Ok(())
 }
 
+/// r(p) = A p − b with a random A: a least-squares problem of a chosen
+/// shape whose Jacobian costs only a copy, so a step's time is its linear
+/// algebra.
+struct RandomLinear {
+    a: faer::Mat<f64>,
+    b: Vec<f64>,
+}
+
+impl RandomLinear {
+    fn new(residuals: usize, params: usize) -> Self {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(1);
+        RandomLinear {
+            a: faer::Mat::from_fn(residuals, params, |_, _| rng.random_range(-1.0..1.0)),
+            b: (0..residuals)
+                .map(|_| rng.random_range(-1.0..1.0))
+                .collect(),
+        }
+    }
+}
+
+impl crate::model::lm::LeastSquares for RandomLinear {
+    fn n_residuals(&self) -> usize {
+        self.a.nrows()
+    }
+    fn n_params(&self) -> usize {
+        self.a.ncols()
+    }
+    fn residuals(&self, p: &[f64], r: &mut [f64]) {
+        for (i, ri) in r.iter_mut().enumerate() {
+            *ri = (0..p.len()).map(|j| self.a[(i, j)] * p[j]).sum::<f64>() - self.b[i];
+        }
+    }
+    fn jacobian(&self, _: &[f64], jac: &mut faer::Mat<f64>) {
+        jac.copy_from(&self.a);
+    }
+}
+
+/// Levenberg–Marquardt's step solved in the residuals' space and in the
+/// parameters' on one problem of the demo network's shape (more weights
+/// than residuals) and one of a season's (more residuals), each line's
+/// `vs ref` the other space's time over its own, the space `step` picks
+/// marked; then the network method on the demo's KPI table (docs/models.md,
+/// "In the residuals' space when they are fewer than the weights").
+fn fit_lines(o: &BenchOptions, report: &mut BenchReport) {
+    use crate::model::lm::{LmSettings, LmSolver, StepSpace};
+    let shapes: &[(&'static str, usize, usize)] = if o.small {
+        &[("LM step, small", 40, 300)]
+    } else {
+        // The demo network at its widest (22 inputs, 26 in the second
+        // layer) on 177 training residuals; the season preset's (19, 23)
+        // on 870.
+        &[("LM step, demo", 177, 1131), ("LM step, season", 870, 864)]
+    };
+    for &(label, n, m) in shapes {
+        let problem = RandomLinear::new(n, m);
+        let time = |space| {
+            best(o.repeats, || {
+                let mut solver = LmSolver::new(&problem, &vec![0.0; m], LmSettings::default())
+                    .expect("the start point has the problem's size");
+                solver.step_in(&problem, space)
+            })
+            .0
+        };
+        let (residuals, parameters) = (time(StepSpace::Residuals), time(StepSpace::Parameters));
+        let chosen = StepSpace::for_shape(n, m);
+        for (space, t, other, name, other_name) in [
+            (
+                StepSpace::Residuals,
+                residuals,
+                parameters,
+                "n × n (residuals')",
+                "the m × m step",
+            ),
+            (
+                StepSpace::Parameters,
+                parameters,
+                residuals,
+                "m × m (weights')",
+                "the n × n step",
+            ),
+        ] {
+            let w = Workload {
+                kernel: label,
+                size: format!("{n} residuals, {m} weights"),
+                items: 1.0,
+                unit: "steps/s",
+                bytes: 0.0,
+                memory_pass: other,
+                reference: other_name,
+            };
+            // The space `step` picks for this shape.
+            let engine = if space == chosen {
+                format!("{name} *")
+            } else {
+                name.to_string()
+            };
+            report.lines.push(w.line(&engine, t, None));
+        }
+    }
+    if let Err(e) = demo_network_lines(o, report) {
+        report.notes.push(format!("fit, network skipped: {e}"));
+    }
+}
+
+/// The network method (`fit --method ffnn`: every width and the retrained
+/// pair) on the demo season's KPI table (the tiny one with `--small`), one
+/// thread and all.
+fn demo_network_lines(o: &BenchOptions, report: &mut BenchReport) -> Result<(), String> {
+    use crate::model::fit::{FitSettings, Method, fit_method, split};
+    let dir = tempfile::tempdir().map_err(|e| e.to_string())?;
+    let season = BenchSeason {
+        preset: if o.small {
+            crate::sim::Preset::Tiny
+        } else {
+            crate::sim::Preset::Demo
+        },
+        scale: 1.0,
+        rate_hz: None,
+        effect: None,
+    };
+    let out = dir.path().join("season");
+    let kpis = crate::validate::simulate_and_extract(
+        &season.options(crate::ingest::telemetry::Encoding::Block, &out),
+    )
+    .map_err(|e| e.to_string())?;
+    let rows = crate::kpi::table::read_parquet_rows(&kpis).map_err(|e| e.to_string())?;
+    let s = split(&rows, None).map_err(|e| e.to_string())?;
+    let settings = FitSettings::default();
+    let run = || fit_method(Method::Ffnn, &s, &settings).map(|_| ());
+    let (t1, fitted) = best(o.repeats, || one_thread(run));
+    fitted.map_err(|e| e.to_string())?;
+    let w = Workload {
+        kernel: "fit, network",
+        size: format!("{} tire-runs", rows.len()),
+        items: rows.len() as f64,
+        unit: "tires/s",
+        bytes: 0.0,
+        memory_pass: Duration::ZERO,
+        reference: "none",
+    };
+    report.lines.push(w.line("tirewear, 1 thread", t1, None));
+    let (tn, _) = best(o.repeats, run);
+    report
+        .lines
+        .push(w.line(&format!("tirewear, {} threads", report.threads), tn, None));
+    Ok(())
+}
+
 /// The report as a table.
 pub fn render(r: &BenchReport) -> String {
     let mut s = String::new();
@@ -839,6 +993,7 @@ pub fn render(r: &BenchReport) -> String {
             match l.unit.as_str() {
                 "samples/s" => "S/s",
                 "tires/s" => "T/s",
+                "steps/s" => "st/s",
                 _ => "P/s",
             },
             l.gb_per_s,
@@ -849,7 +1004,8 @@ pub fn render(r: &BenchReport) -> String {
         s,
         "vs ref: the reference's time over this time (kernels: a memory pass over \
          the same bytes; decode: zstd alone decompressing the same chunks; gap: \
-         its 10 s target)"
+         its 10 s target; LM step: the step solved in the other space on the same \
+         problem, * the space fit uses; fit, network: none, 0)"
     );
     for x in &r.extract_splits {
         let ms = |v: f64| v * 1e3;

@@ -115,11 +115,13 @@ enum Command {
     /// ones.
     #[command(args_conflicts_with_subcommands = true, subcommand_negates_reqs = true)]
     Gap(cli::gap::GapArgs),
-    /// Measure the engines, decoding against zstd, and the diagnosis's time.
+    /// Measure the engines, decoding against zstd, the diagnosis's and the fit's time.
     ///
     /// Measure the engines: each kernel on the CPU (1 thread, all threads) and
     /// the GPU (upload, compute, readback), against a plain memory pass over
-    /// the same buffer. Prints a table and saves it as JSON; run it on two
+    /// the same buffer; decoding against zstd alone; the gap diagnosis
+    /// against its 10 s target; the network's Levenberg–Marquardt step in
+    /// both spaces. Prints a table and saves it as JSON; run it on two
     /// machines to compare them.
     Bench(cli::bench::BenchArgs),
     /// Write the season's HTML report (one offline page).

@@ -15,9 +15,11 @@ pub(crate) struct BenchArgs {
     #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u32).range(1..))]
     repeats: u32,
     /// Measure only one part: `kernels` (the engines on synthetic buffers),
-    /// `decode` (MCAP decoding against zstd alone on a simulated season) or
+    /// `decode` (MCAP decoding against zstd alone on a simulated season),
     /// `gap` (the gap diagnosis of the demo season and of `gap validate`'s
-    /// season, against its 10 s target).
+    /// season, against its 10 s target) or `fit` (Levenberg–Marquardt's
+    /// step in the residuals' and the parameters' space, and the network
+    /// method on the demo's KPI table).
     #[arg(long, value_enum)]
     only: Option<BenchPart>,
     /// Season archive (folder with season.toml) to measure decoding and
@@ -34,6 +36,7 @@ pub(crate) enum BenchPart {
     Kernels,
     Decode,
     Gap,
+    Fit,
 }
 
 #[derive(Clone, Copy, PartialEq, clap::ValueEnum)]
@@ -74,6 +77,7 @@ pub(crate) fn run(a: BenchArgs) -> Result<()> {
             Some(BenchPart::Kernels) => BenchParts::Kernels,
             Some(BenchPart::Decode) => BenchParts::Decode,
             Some(BenchPart::Gap) => BenchParts::Gap,
+            Some(BenchPart::Fit) => BenchParts::Fit,
         },
         season,
     });

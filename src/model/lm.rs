@@ -57,6 +57,26 @@ fn sse(r: &[f64]) -> f64 {
     r.iter().map(|v| v * v).sum()
 }
 
+/// Where a step's damped normal equations are solved: the parameters'
+/// space, (JᵀJ + μI)δ = Jᵀr (m × m), or the residuals', (JJᵀ + μI)u = r
+/// then δ = Jᵀu (n × n): the same step for μ > 0.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum StepSpace {
+    Parameters,
+    Residuals,
+}
+
+impl StepSpace {
+    /// The smaller of the two systems.
+    pub(crate) fn for_shape(residuals: usize, params: usize) -> StepSpace {
+        if residuals < params {
+            StepSpace::Residuals
+        } else {
+            StepSpace::Parameters
+        }
+    }
+}
+
 /// One solver in progress: call [`LmSolver::step`] once per epoch (so a
 /// caller can stop early on validation error), or [`levenberg_marquardt`].
 pub(crate) struct LmSolver {
@@ -104,9 +124,16 @@ impl LmSolver {
     /// for μ > 0, an n × n Cholesky instead of an m × m one, the same step
     /// up to rounding (unit test `the_dual_step_is_the_primal_one`).
     pub fn step(&mut self, problem: &impl LeastSquares) -> bool {
-        let (n, m) = (self.r.len(), self.params.len());
+        let space = StepSpace::for_shape(self.r.len(), self.params.len());
+        self.step_in(problem, space)
+    }
+
+    /// [`LmSolver::step`] solved in the given space (`tirewear bench --only
+    /// fit` times both on one problem).
+    pub(crate) fn step_in(&mut self, problem: &impl LeastSquares, space: StepSpace) -> bool {
+        let m = self.params.len();
         problem.jacobian(&self.params, &mut self.jac);
-        let dual = n < m;
+        let dual = space == StepSpace::Residuals;
         let (gram, rhs) = self.gram_and_rhs(dual);
         let k = gram.nrows();
         while self.mu <= self.settings.mu_max {
@@ -307,21 +334,28 @@ mod tests {
             mu: 0.7,
             ..LmSettings::default()
         };
-        let mut solver = LmSolver::new(&problem, &vec![0.0; m], settings).unwrap();
-        assert!(solver.step(&problem));
-        assert_eq!(solver.mu, 0.7 * 0.1, "the first trial was accepted");
+        assert_eq!(StepSpace::for_shape(n, m), StepSpace::Residuals);
         let a = &problem.a;
         let damped = a.transpose() * a + Mat::<f64>::identity(m, m) * 0.7;
         let atr = a.transpose() * Mat::from_fn(n, 1, |i, _| -problem.b[i]);
         let delta = damped.partial_piv_lu().solve(&atr);
         let scale = (0..m).map(|j| delta[(j, 0)].abs()).fold(0.0, f64::max);
-        for j in 0..m {
-            let expected = -delta[(j, 0)];
-            assert!(
-                (solver.params[j] - expected).abs() <= 1e-9 * scale,
-                "{j}: {} vs {expected}",
-                solver.params[j]
-            );
+        // The chosen space (the residuals'), and the parameters' forced.
+        for space in [None, Some(StepSpace::Parameters)] {
+            let mut solver = LmSolver::new(&problem, &vec![0.0; m], settings).unwrap();
+            assert!(match space {
+                None => solver.step(&problem),
+                Some(s) => solver.step_in(&problem, s),
+            });
+            assert_eq!(solver.mu, 0.7 * 0.1, "the first trial was accepted");
+            for j in 0..m {
+                let expected = -delta[(j, 0)];
+                assert!(
+                    (solver.params[j] - expected).abs() <= 1e-9 * scale,
+                    "{space:?} {j}: {} vs {expected}",
+                    solver.params[j]
+                );
+            }
         }
     }
 }

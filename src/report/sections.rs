@@ -1614,8 +1614,9 @@ fn one_machine(b: &Value) -> Result<String, ReportError> {
             &svg,
             "Each benchmark line's speed as the reference's time over its time: above 1 \
 faster than the reference (a plain memory pass over the same buffer for the kernels, zstd \
-alone over the same chunks for decoding, the 10 s target for the gap diagnosis); one colour \
-per kernel, the lines numbered as in the table.",
+alone over the same chunks for decoding, the 10 s target for the gap diagnosis, the step \
+solved in the other space for Levenberg–Marquardt's step, none (0) for the network's fit); \
+one colour per kernel, the lines numbered as in the table.",
             &table(
                 &[
                     "#",
