@@ -251,15 +251,20 @@ pub fn render_markdown(d: &Diagnosis, max_slices: usize) -> String {
         "| training | {} | {:+.3} | {:.3} |",
         d.training.n, d.training.bias_pct, d.training.rmse_pct
     );
-    if let Some(t) = &d.testing {
-        let _ = writeln!(
-            s,
-            "| testing ({}) | {} | {:+.3} | {:.3} |",
-            d.testing_events.join(", "),
-            t.n,
-            t.bias_pct,
-            t.rmse_pct
-        );
+    match &d.testing {
+        Some(t) => {
+            let _ = writeln!(
+                s,
+                "| testing ({}) | {} | {:+.3} | {:.3} |",
+                d.testing_events.join(", "),
+                t.n,
+                t.bias_pct,
+                t.rmse_pct
+            );
+        }
+        None => {
+            let _ = writeln!(s, "\n{}", no_testing_said(d));
+        }
     }
     s.push_str("\n## Findings\n\n");
     write_findings(&mut s, &d.findings);
@@ -398,6 +403,26 @@ pub fn render_markdown(d: &Diagnosis, max_slices: usize) -> String {
         }
     }
     s
+}
+
+/// Why the table has no testing line, and what judges a term without one.
+fn no_testing_said(d: &Diagnosis) -> String {
+    let why = if d.testing_events.is_empty() {
+        format!(
+            "No testing events: the default tests every third event and the table has {} \
+             (`--test-events` names some)",
+            d.training_events.len()
+        )
+    } else {
+        format!(
+            "No testing tire has a measured wear and a prediction (testing events {})",
+            d.testing_events.join(", ")
+        )
+    };
+    format!(
+        "{why}, so how far the gap shrinks on events the selection never saw is not \
+         measured; the held-out tracks of the cross-validation alone judge a term."
+    )
 }
 
 /// The Findings of [`render_markdown`] as lines: each paragraph or numbered
@@ -951,6 +976,31 @@ mod tests {
         assert!(lines[0].ends_with("the flagged slices below stay unexplained."));
         assert!(lines[1].starts_with("Leads, not findings"), "{lines:?}");
         assert_eq!(leads_scope(&d).as_deref(), Some("the rear axle"));
+    }
+
+    /// Without testing events (a season of two events) or without testing
+    /// tires to measure, gap.md says which, instead of a table whose
+    /// testing line is silently missing.
+    #[test]
+    fn a_diagnosis_without_testing_events_says_why() {
+        let mut d = without_terms(Vec::new());
+        assert!(!render_markdown(&d, 5).contains("No testing"));
+        d.testing = None;
+        let t = render_markdown(&d, 5);
+        assert!(
+            t.contains("No testing tire has a measured wear and a prediction (testing events E2)"),
+            "{t}"
+        );
+        d.testing_events.clear();
+        d.training_events = vec!["E1".into(), "E3".into()];
+        let t = render_markdown(&d, 5);
+        assert!(
+            t.contains(
+                "No testing events: the default tests every third event and the table has 2 \
+                 (`--test-events` names some), so how far the gap shrinks"
+            ),
+            "{t}"
+        );
     }
 
     /// A significant candidate that did not enter (no gain across tracks):
