@@ -135,6 +135,17 @@ impl Workload {
     }
 }
 
+impl Workload {
+    /// The CPU-only lines of one workload: its time on one thread and on all.
+    fn push_thread_lines(&self, report: &mut BenchReport, one: Duration, all: Duration) {
+        report
+            .lines
+            .push(self.line("tirewear, 1 thread", one, None));
+        let threads = format!("tirewear, {} threads", report.threads);
+        report.lines.push(self.line(&threads, all, None));
+    }
+}
+
 /// The best time of `repeats` calls, with that call's result.
 fn best<T>(repeats: usize, mut f: impl FnMut() -> T) -> (Duration, T) {
     let mut out = None;
@@ -810,50 +821,9 @@ fn season_gap_lines(
         memory_pass: Duration::from_secs_f64(GAP_TARGET_S),
         reference: "target 10 s",
     };
-    report.lines.push(w.line("tirewear, 1 thread", t1, None));
     let (tn, _) = best(o.repeats, run);
-    report
-        .lines
-        .push(w.line(&format!("tirewear, {} threads", report.threads), tn, None));
+    w.push_thread_lines(report, t1, tn);
     Ok(())
-}
-
-/// r(p) = A p − b with a random A: a least-squares problem of a chosen
-/// shape whose Jacobian costs only a copy, so a step's time is its linear
-/// algebra.
-struct RandomLinear {
-    a: faer::Mat<f64>,
-    b: Vec<f64>,
-}
-
-impl RandomLinear {
-    fn new(residuals: usize, params: usize) -> Self {
-        use rand::{Rng, SeedableRng};
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(1);
-        RandomLinear {
-            a: faer::Mat::from_fn(residuals, params, |_, _| rng.random_range(-1.0..1.0)),
-            b: (0..residuals)
-                .map(|_| rng.random_range(-1.0..1.0))
-                .collect(),
-        }
-    }
-}
-
-impl crate::model::lm::LeastSquares for RandomLinear {
-    fn n_residuals(&self) -> usize {
-        self.a.nrows()
-    }
-    fn n_params(&self) -> usize {
-        self.a.ncols()
-    }
-    fn residuals(&self, p: &[f64], r: &mut [f64]) {
-        for (i, ri) in r.iter_mut().enumerate() {
-            *ri = (0..p.len()).map(|j| self.a[(i, j)] * p[j]).sum::<f64>() - self.b[i];
-        }
-    }
-    fn jacobian(&self, _: &[f64], jac: &mut faer::Mat<f64>) {
-        jac.copy_from(&self.a);
-    }
 }
 
 /// Levenberg–Marquardt's step solved in the residuals' space and in the
@@ -863,7 +833,7 @@ impl crate::model::lm::LeastSquares for RandomLinear {
 /// marked; then the network method on the demo's KPI table (docs/models.md,
 /// "In the residuals' space when they are fewer than the weights").
 fn fit_lines(o: &BenchOptions, report: &mut BenchReport) {
-    use crate::model::lm::{LmSettings, LmSolver, StepSpace};
+    use crate::model::lm::{LmSettings, LmSolver, RandomLinear, StepSpace};
     let shapes: &[(&'static str, usize, usize)] = if o.small {
         &[("LM step, small", 40, 300)]
     } else {
@@ -873,7 +843,7 @@ fn fit_lines(o: &BenchOptions, report: &mut BenchReport) {
         &[("LM step, demo", 177, 1131), ("LM step, season", 870, 864)]
     };
     for &(label, n, m) in shapes {
-        let problem = RandomLinear::new(n, m);
+        let problem = RandomLinear::new(1, n, m);
         let time = |space| {
             best(o.repeats, || {
                 let mut solver = LmSolver::new(&problem, &vec![0.0; m], LmSettings::default())
@@ -959,11 +929,8 @@ fn demo_network_lines(o: &BenchOptions, report: &mut BenchReport) -> Result<(), 
         memory_pass: Duration::ZERO,
         reference: "none",
     };
-    report.lines.push(w.line("tirewear, 1 thread", t1, None));
     let (tn, _) = best(o.repeats, run);
-    report
-        .lines
-        .push(w.line(&format!("tirewear, {} threads", report.threads), tn, None));
+    w.push_thread_lines(report, t1, tn);
     Ok(())
 }
 

@@ -196,6 +196,44 @@ impl LmSolver {
     }
 }
 
+/// r(p) = A p − b with A uniform in ±1 and b in ±3 (seeded): a problem of
+/// any shape whose Jacobian costs only a copy, so a step's time is its
+/// linear algebra (the unit tests, and `tirewear bench --only fit`).
+pub(crate) struct RandomLinear {
+    pub a: Mat<f64>,
+    pub b: Vec<f64>,
+}
+
+impl RandomLinear {
+    pub(crate) fn new(seed: u64, residuals: usize, params: usize) -> Self {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+        RandomLinear {
+            a: Mat::from_fn(residuals, params, |_, _| rng.random_range(-1.0..1.0)),
+            b: (0..residuals)
+                .map(|_| rng.random_range(-3.0..3.0))
+                .collect(),
+        }
+    }
+}
+
+impl LeastSquares for RandomLinear {
+    fn n_residuals(&self) -> usize {
+        self.a.nrows()
+    }
+    fn n_params(&self) -> usize {
+        self.a.ncols()
+    }
+    fn residuals(&self, p: &[f64], r: &mut [f64]) {
+        for (i, ri) in r.iter_mut().enumerate() {
+            *ri = (0..p.len()).map(|j| self.a[(i, j)] * p[j]).sum::<f64>() - self.b[i];
+        }
+    }
+    fn jacobian(&self, _: &[f64], j: &mut Mat<f64>) {
+        j.copy_from(&self.a);
+    }
+}
+
 /// Minimises Σ r(p)² from `p0`.
 pub fn levenberg_marquardt(
     problem: &impl LeastSquares,
@@ -259,54 +297,31 @@ mod tests {
         assert!(res.history.windows(2).all(|w| w[1] < w[0]));
     }
 
-    /// r(p) = A p − b, with a Jacobian A of 300 × 40 (large enough for
-    /// faer's blocked products).
-    struct Linear {
-        a: Mat<f64>,
-        b: Vec<f64>,
-    }
-    impl LeastSquares for Linear {
-        fn n_residuals(&self) -> usize {
-            self.a.nrows()
-        }
-        fn n_params(&self) -> usize {
-            self.a.ncols()
-        }
-        fn residuals(&self, p: &[f64], r: &mut [f64]) {
-            for (i, ri) in r.iter_mut().enumerate() {
-                *ri = (0..p.len()).map(|j| self.a[(i, j)] * p[j]).sum::<f64>() - self.b[i];
-            }
-        }
-        fn jacobian(&self, _: &[f64], j: &mut Mat<f64>) {
-            j.copy_from(&self.a);
-        }
+    /// The step from p = 0 with damping μ by another route: AᵀA formed in
+    /// full (not its lower triangle alone) and solved by LU, so the new p
+    /// is −δ with (AᵀA + μI) δ = Aᵀr, r = −b.
+    fn step_by_lu(problem: &RandomLinear, mu: f64) -> Vec<f64> {
+        use faer::linalg::solvers::Solve;
+        let (a, m) = (&problem.a, problem.a.ncols());
+        let damped = a.transpose() * a + Mat::<f64>::identity(m, m) * mu;
+        let atr = a.transpose() * Mat::from_fn(a.nrows(), 1, |i, _| -problem.b[i]);
+        let delta = damped.partial_piv_lu().solve(&atr);
+        (0..m).map(|j| -delta[(j, 0)]).collect()
     }
 
     #[test]
     fn a_step_solves_the_damped_normal_equations() {
-        // The step from p = 0 solves (AᵀA + μI) δ = Aᵀr with r = −b, so the
-        // new p is −δ: checked against AᵀA as a full product, solved by
-        // LU, the route that does not use the lower triangle alone.
-        use faer::linalg::solvers::Solve;
-        use rand::{Rng, SeedableRng};
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+        // A Jacobian of 300 × 40: large enough for faer's blocked products.
         let (n, m) = (300, 40);
-        let problem = Linear {
-            a: Mat::from_fn(n, m, |_, _| rng.random_range(-1.0..1.0)),
-            b: (0..n).map(|_| rng.random_range(-3.0..3.0)).collect(),
-        };
+        let problem = RandomLinear::new(5, n, m);
         let settings = LmSettings {
             mu: 0.7,
             ..LmSettings::default()
         };
         let mut solver = LmSolver::new(&problem, &vec![0.0; m], settings).unwrap();
         assert!(solver.step(&problem));
-        let a = &problem.a;
-        let damped = a.transpose() * a + Mat::<f64>::identity(m, m) * 0.7;
-        let atr = a.transpose() * Mat::from_fn(n, 1, |i, _| -problem.b[i]);
-        let delta = damped.partial_piv_lu().solve(&atr);
-        for j in 0..m {
-            let expected = -delta[(j, 0)];
+        let lu = step_by_lu(&problem, 0.7);
+        for (j, &expected) in lu.iter().enumerate() {
             assert!(
                 (solver.params[j] - expected).abs() <= 1e-12 * expected.abs().max(1.0),
                 "{j}: {} vs {expected}",
@@ -322,24 +337,15 @@ mod tests {
     /// to judge by.
     #[test]
     fn the_dual_step_is_the_primal_one() {
-        use faer::linalg::solvers::Solve;
-        use rand::{Rng, SeedableRng};
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(6);
         let (n, m) = (40, 300);
-        let problem = Linear {
-            a: Mat::from_fn(n, m, |_, _| rng.random_range(-1.0..1.0)),
-            b: (0..n).map(|_| rng.random_range(-3.0..3.0)).collect(),
-        };
+        let problem = RandomLinear::new(6, n, m);
         let settings = LmSettings {
             mu: 0.7,
             ..LmSettings::default()
         };
         assert_eq!(StepSpace::for_shape(n, m), StepSpace::Residuals);
-        let a = &problem.a;
-        let damped = a.transpose() * a + Mat::<f64>::identity(m, m) * 0.7;
-        let atr = a.transpose() * Mat::from_fn(n, 1, |i, _| -problem.b[i]);
-        let delta = damped.partial_piv_lu().solve(&atr);
-        let scale = (0..m).map(|j| delta[(j, 0)].abs()).fold(0.0, f64::max);
+        let lu = step_by_lu(&problem, 0.7);
+        let scale = lu.iter().fold(0.0, |s: f64, v| s.max(v.abs()));
         // The chosen space (the residuals'), and the parameters' forced.
         for space in [None, Some(StepSpace::Parameters)] {
             let mut solver = LmSolver::new(&problem, &vec![0.0; m], settings).unwrap();
@@ -348,8 +354,7 @@ mod tests {
                 Some(s) => solver.step_in(&problem, s),
             });
             assert_eq!(solver.mu, 0.7 * 0.1, "the first trial was accepted");
-            for j in 0..m {
-                let expected = -delta[(j, 0)];
+            for (j, &expected) in lu.iter().enumerate() {
                 assert!(
                     (solver.params[j] - expected).abs() <= 1e-9 * scale,
                     "{space:?} {j}: {} vs {expected}",
