@@ -173,7 +173,10 @@ fn demo_fit_ranks_like_the_paper_and_models_round_trip() {
 
 /// `tirewear predict` end to end: one CSV line per KPI row, in the table's
 /// order, with the saved model's prediction for it (the CSV writer keeps
-/// an f64 exactly); a table without rows (a night on which every run
+/// an f64 exactly) and its 95 % prediction interval around it, whose
+/// coverage of the measured wear it prints as counted here from the CSV
+/// (worn-through tires left out); a level outside (0, 1) is a bad command
+/// line (exit 2); a table without rows (a night on which every run
 /// failed) is refused, exit 1, naming it, and no predictions file appears
 /// (it once wrote an empty one and exited 0).
 fn predict_writes_each_rows_prediction_and_refuses_an_empty_table(
@@ -182,7 +185,7 @@ fn predict_writes_each_rows_prediction_and_refuses_an_empty_table(
     rows: &[KpiRow],
 ) {
     let model = dir.join("models").join("physical.json");
-    let predict = |kpis: &std::path::Path, out: &std::path::Path| {
+    let predict_at = |kpis: &std::path::Path, out: &std::path::Path, level: &str| {
         std::process::Command::new(env!("CARGO_BIN_EXE_tirewear"))
             .arg("--quiet")
             .arg("predict")
@@ -190,9 +193,11 @@ fn predict_writes_each_rows_prediction_and_refuses_an_empty_table(
             .arg(kpis)
             .arg("--out")
             .arg(out)
+            .args(["--interval", level])
             .output()
             .unwrap()
     };
+    let predict = |kpis: &std::path::Path, out: &std::path::Path| predict_at(kpis, out, "0.95");
     let csv = dir.join("predictions.csv");
     let run = predict(&dir.join("kpis.parquet"), &csv);
     assert_eq!(run.status.code(), Some(0), "{run:?}");
@@ -201,16 +206,82 @@ fn predict_writes_each_rows_prediction_and_refuses_an_empty_table(
     let column = |name: &str| header.iter().position(|h| h == name).unwrap();
     let (run_col, wheel_col, predicted_col) =
         (column("run"), column("wheel"), column("predicted_wear_pct"));
+    let (low_col, high_col) = (column("predicted_low_pct"), column("predicted_high_pct"));
     let lines: Vec<csv::StringRecord> = reader.records().map(|r| r.unwrap()).collect();
     assert_eq!(lines.len(), rows.len());
+    let level = tirewear::model::ols::IntervalLevel::new(0.95).unwrap();
+    let mut inside = [0usize; 2];
     for (line, r) in lines.iter().zip(rows) {
         assert_eq!(
             (&line[run_col], &line[wheel_col]),
             (r.run.as_str(), r.wheel.name())
         );
-        let predicted: f64 = line[predicted_col].parse().unwrap();
+        let value = |c: usize| -> f64 { line[c].parse().unwrap() };
+        let predicted = value(predicted_col);
         assert_eq!(predicted, phys.predict_row(r).unwrap(), "{line:?}");
+        let (low, high) = (value(low_col), value(high_col));
+        assert_eq!(
+            (predicted, Some((low, high))),
+            phys.predict_row_within(r, Some(level)).unwrap()
+        );
+        assert!(low < predicted && predicted < high, "{line:?}");
+        if r.worn_through_readings == 0.0 && r.wear_mean_pct.is_finite() {
+            inside[0] += usize::from(low <= r.wear_mean_pct && r.wear_mean_pct <= high);
+            inside[1] += 1;
+        }
     }
+    let stdout = String::from_utf8_lossy(&run.stdout);
+    let share = format!(
+        "95 % prediction intervals: they hold {:.1} % of {} measured wears (",
+        100.0 * inside[0] as f64 / inside[1] as f64,
+        inside[1]
+    );
+    assert!(stdout.contains(&share), "{share} not in {stdout}");
+    // A model saved before the intervals (no `xtx_inverse`; without its
+    // checksum, as such files were): predictions alike, no bounds, and why.
+    let mut old: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&model).unwrap()).unwrap();
+    let body = old.as_object_mut().unwrap();
+    body.remove("data_crc32");
+    for axle in ["front", "rear"] {
+        body["model"][axle]["regression"]
+            .as_object_mut()
+            .unwrap()
+            .remove("xtx_inverse");
+    }
+    let old_model = dir.join("old-physical.json");
+    std::fs::write(&old_model, serde_json::to_string(&old).unwrap()).unwrap();
+    let old_csv = dir.join("old.csv");
+    let run = std::process::Command::new(env!("CARGO_BIN_EXE_tirewear"))
+        .args(["--quiet", "predict"])
+        .args([
+            &old_model,
+            &dir.join("kpis.parquet"),
+            &"--out".into(),
+            &old_csv,
+        ])
+        .output()
+        .unwrap();
+    assert_eq!(run.status.code(), Some(0), "{run:?}");
+    assert!(
+        String::from_utf8_lossy(&run.stdout)
+            .contains("no prediction intervals: the model was saved before"),
+        "{run:?}"
+    );
+    let mut reader = csv::Reader::from_path(&old_csv).unwrap();
+    for (line, r) in reader.records().map(Result::unwrap).zip(rows) {
+        assert_eq!(
+            line[predicted_col].parse::<f64>().unwrap(),
+            phys.predict_row(r).unwrap()
+        );
+        assert_eq!((&line[low_col], &line[high_col]), ("NaN", "NaN"));
+    }
+    let run = predict_at(&dir.join("kpis.parquet"), &dir.join("p.csv"), "1");
+    assert_eq!(run.status.code(), Some(2), "{run:?}");
+    assert!(
+        String::from_utf8_lossy(&run.stderr).contains("between 0 and 1"),
+        "{run:?}"
+    );
 
     // The same table without its rows: same schema and units.
     let batch = {

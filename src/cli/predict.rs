@@ -2,6 +2,7 @@
 
 use anyhow::{Context, Result};
 use std::path::PathBuf;
+use tirewear::model::ols::IntervalLevel;
 use tirewear::model::saved::SavedModel;
 
 #[derive(clap::Args)]
@@ -11,15 +12,27 @@ pub(crate) struct PredictArgs {
     /// KPI database (Parquet, as written by `tirewear extract`).
     kpis: PathBuf,
     /// Predictions to write (CSV: event, track, car, run, wheel, axle,
-    /// compound, measured and predicted mean wear in %).
+    /// compound, measured and predicted mean wear in %, the prediction
+    /// interval's bounds in %, a note where a row has no prediction).
     #[arg(long, default_value = "predictions.csv")]
     out: PathBuf,
+    /// Coverage of the prediction interval written beside each prediction
+    /// of the PCA and physical models (their regressions' interval for a
+    /// new tire: docs/models.md); the network gives none. Between 0 and 1.
+    #[arg(long, default_value = "0.95", value_name = "LEVEL", value_parser = parse_level)]
+    interval: IntervalLevel,
+}
+
+fn parse_level(s: &str) -> Result<IntervalLevel, String> {
+    let v: f64 = s.parse().map_err(|e| format!("{e}"))?;
+    IntervalLevel::new(v).map_err(|e| e.to_string())
 }
 
 pub(crate) fn run_predict(
     model: &std::path::Path,
     kpis: &std::path::Path,
     out: &std::path::Path,
+    level: IntervalLevel,
 ) -> Result<()> {
     let inputs = [
         ("the model".to_string(), model.to_path_buf()),
@@ -51,13 +64,18 @@ pub(crate) fn run_predict(
         measured_wear_pct: f64,
         /// NaN when the row has no prediction; `note` says why.
         predicted_wear_pct: f64,
+        /// The prediction interval's bounds; NaN without one.
+        predicted_low_pct: f64,
+        predicted_high_pct: f64,
         note: String,
+        #[serde(skip)]
+        worn_through: bool,
     }
     let mut out_rows = Vec::with_capacity(rows.len());
     for r in &rows {
-        let (p, note) = match m.predict_row(r) {
-            Ok(p) => (p, String::new()),
-            Err(e) => (f64::NAN, e.to_string()),
+        let (p, (low, high), note) = match m.predict_row_within(r, Some(level)) {
+            Ok((p, interval)) => (p, interval.unwrap_or((f64::NAN, f64::NAN)), String::new()),
+            Err(e) => (f64::NAN, (f64::NAN, f64::NAN), e.to_string()),
         };
         out_rows.push(Prediction {
             event: &r.event,
@@ -69,7 +87,10 @@ pub(crate) fn run_predict(
             compound: &r.compound,
             measured_wear_pct: r.wear_mean_pct,
             predicted_wear_pct: p,
+            predicted_low_pct: low,
+            predicted_high_pct: high,
             note,
+            worn_through: r.worn_through_readings > 0.0,
         });
     }
     let missing = out_rows.iter().filter(|p| !p.note.is_empty()).count();
@@ -109,10 +130,97 @@ pub(crate) fn run_predict(
             m.method()
         ),
     }
+    let inside = |events: Option<&[String]>| {
+        let within: Vec<bool> = out_rows
+            .iter()
+            .filter(|p| events.is_none_or(|e| e.iter().any(|e| *e == p.event)))
+            .filter(|p| {
+                !p.worn_through
+                    && p.measured_wear_pct.is_finite()
+                    && p.predicted_low_pct.is_finite()
+            })
+            .map(|p| (p.predicted_low_pct..=p.predicted_high_pct).contains(&p.measured_wear_pct))
+            .collect();
+        Coverage {
+            inside: within.iter().filter(|&&b| b).count(),
+            of: within.len(),
+        }
+    };
+    println!(
+        "{}",
+        interval_line(
+            &m,
+            level,
+            inside(None),
+            inside(Some(&m.training_events)),
+            inside(Some(&m.testing_events))
+        )
+    );
     Ok(())
+}
+
+/// Of `of` measured wears, how many lie inside their prediction interval.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Coverage {
+    inside: usize,
+    of: usize,
+}
+
+impl std::fmt::Display for Coverage {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "{:.1} % of {}",
+            100.0 * self.inside as f64 / self.of as f64,
+            self.of
+        )
+    }
+}
+
+/// What `predict` says of its intervals: why there are none, or how many
+/// measured wears they hold (all rows, then the model's training and
+/// testing events), the check that they are as wide as they claim.
+fn interval_line(
+    m: &SavedModel,
+    level: IntervalLevel,
+    all: Coverage,
+    training: Coverage,
+    testing: Coverage,
+) -> String {
+    // 0.9 is 90.00000000000001 %.
+    let pct = (1e6 * level.get()).round() / 1e4;
+    if !m.has_intervals() {
+        return match m.method() {
+            "ffnn" => "no prediction intervals: the network gives none (docs/models.md)".into(),
+            _ => "no prediction intervals: the model was saved before tirewear kept what they \
+                  need ((XᵀX)⁻¹); fit it again to have them"
+                .into(),
+        };
+    }
+    if all.of == 0 {
+        return format!(
+            "{pct} % prediction intervals written; no measured wear to check them against"
+        );
+    }
+    let part = |name: &str, c: Coverage| (c.of > 0).then(|| format!("{name} {c}"));
+    let parts: Vec<String> = [
+        part("training events", training),
+        part("testing events", testing),
+    ]
+    .into_iter()
+    .flatten()
+    .collect();
+    format!(
+        "{pct} % prediction intervals: they hold {all} measured wears{}",
+        if parts.is_empty() {
+            String::new()
+        } else {
+            format!(" ({})", parts.join(", "))
+        }
+    )
 }
 
 /// Runs `tirewear predict`.
 pub(crate) fn run(a: PredictArgs) -> Result<()> {
-    run_predict(&a.model, &a.kpis, &a.out)
+    run_predict(&a.model, &a.kpis, &a.out, a.interval)
 }

@@ -23,6 +23,12 @@ pub struct OlsFit {
     /// Residual variance SSE/(n − k − 1).
     pub sigma2: f64,
     pub df_resid: usize,
+    /// (XᵀX)⁻¹ of the design `[1, X]`, row-major, (k + 1)²: σ² times it is
+    /// the coefficients' covariance (statsmodels' `normalized_cov_params`),
+    /// and a prediction interval needs it. None in models saved before
+    /// 2026-12-02, which predict without an interval.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub xtx_inverse: Option<Vec<f64>>,
     /// Indicators on the training data.
     pub train: Metrics,
 }
@@ -103,6 +109,12 @@ impl OlsFit {
             p_values,
             sigma2,
             df_resid,
+            xtx_inverse: Some(
+                (0..=k)
+                    .flat_map(|i| (0..=k).map(move |j| (i, j)))
+                    .map(|(i, j)| inv[(i, j)])
+                    .collect(),
+            ),
             train: metrics(y, &fitted, k)?,
         })
     }
@@ -118,6 +130,51 @@ impl OlsFit {
 
     pub fn predict(&self, rows: &[Vec<f64>]) -> Vec<f64> {
         rows.iter().map(|r| self.predict_one(r)).collect()
+    }
+
+    /// The `level` prediction interval of a new observation at `x`, its
+    /// lower and upper bound (statsmodels' `obs_ci_lower`, `obs_ci_upper`):
+    /// ŷ ± t · √(σ² (1 + x₀ᵀ(XᵀX)⁻¹x₀)), x₀ = [1, x], t the (1 + level)/2
+    /// quantile of Student's t with n − k − 1 degrees of freedom. None for
+    /// a model saved without (XᵀX)⁻¹, or one whose bounds are not finite.
+    pub fn prediction_interval(&self, x: &[f64], level: IntervalLevel) -> Option<(f64, f64)> {
+        let inv = self.xtx_inverse.as_ref()?;
+        let x0: Vec<f64> = std::iter::once(1.0).chain(x.iter().copied()).collect();
+        let k1 = x0.len();
+        if inv.len() != k1 * k1 || self.df_resid == 0 {
+            return None;
+        }
+        let quadratic: f64 = (0..k1)
+            .map(|i| x0[i] * (0..k1).map(|j| inv[i * k1 + j] * x0[j]).sum::<f64>())
+            .sum();
+        let t = StudentsT::new(0.0, 1.0, self.df_resid as f64)
+            .ok()?
+            .inverse_cdf(0.5 + 0.5 * level.0);
+        let half = t * (self.sigma2 * (1.0 + quadratic)).sqrt();
+        let y = self.predict_one(x);
+        (half.is_finite() && y.is_finite()).then_some((y - half, y + half))
+    }
+}
+
+/// The coverage of a prediction interval, strictly between 0 and 1 (0.95:
+/// a new tire's wear falls inside 95 % of the time, under the regression's
+/// assumptions).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct IntervalLevel(f64);
+
+impl IntervalLevel {
+    pub fn new(level: f64) -> Result<IntervalLevel, ModelError> {
+        if level > 0.0 && level < 1.0 {
+            Ok(IntervalLevel(level))
+        } else {
+            Err(ModelError::Invalid(format!(
+                "a prediction interval's level must be between 0 and 1 (0.95 for 95 %), got {level}"
+            )))
+        }
+    }
+
+    pub fn get(self) -> f64 {
+        self.0
     }
 }
 
@@ -139,6 +196,48 @@ mod tests {
         assert!(two_sided_p(&t, f64::NAN).is_nan());
         assert_eq!(two_sided_p(&t, f64::INFINITY), 0.0);
         assert_eq!(two_sided_p(&t, 0.0), 1.0);
+    }
+
+    /// A straight line's prediction interval in closed form:
+    /// ŷ ± t · s · √(1 + 1/n + (x₀ − x̄)²/Sxx), with t₀.₉₇₅ on 4 degrees of
+    /// freedom 2.7764451051977987 (scipy.stats.t.ppf(0.975, 4)); a model
+    /// saved without (XᵀX)⁻¹ has none; a level outside (0, 1) is refused.
+    #[test]
+    fn a_lines_prediction_interval_in_closed_form() {
+        let xs = [0.0, 1.0, 2.0, 3.0, 4.0, 5.0];
+        let y = [2.1, 4.9, 8.2, 10.8, 14.1, 17.2];
+        let rows: Vec<Vec<f64>> = xs.iter().map(|&x| vec![x]).collect();
+        let f = OlsSettings
+            .fit(Dataset::new(&rows, &y, &["x".into()]))
+            .unwrap();
+        let n = xs.len() as f64;
+        let mean = xs.iter().sum::<f64>() / n;
+        let sxx: f64 = xs.iter().map(|x| (x - mean).powi(2)).sum();
+        let b = xs.iter().zip(&y).map(|(x, y)| (x - mean) * y).sum::<f64>() / sxx;
+        let a = y.iter().sum::<f64>() / n - b * mean;
+        let s2 = xs
+            .iter()
+            .zip(&y)
+            .map(|(x, y)| (y - a - b * x).powi(2))
+            .sum::<f64>()
+            / (n - 2.0);
+        let t = 2.7764451051977987;
+        let level = IntervalLevel::new(0.95).unwrap();
+        for x0 in [-2.0, 0.0, 2.5, 7.0] {
+            let half = t * (s2 * (1.0 + 1.0 / n + (x0 - mean).powi(2) / sxx)).sqrt();
+            let (lo, hi) = f.prediction_interval(&[x0], level).unwrap();
+            let centre = a + b * x0;
+            assert!((lo - (centre - half)).abs() < 1e-10, "{x0}: {lo}");
+            assert!((hi - (centre + half)).abs() < 1e-10, "{x0}: {hi}");
+        }
+        let old = OlsFit {
+            xtx_inverse: None,
+            ..f
+        };
+        assert_eq!(old.prediction_interval(&[1.0], level), None);
+        for bad in [0.0, 1.0, -0.5, 95.0, f64::NAN] {
+            assert!(IntervalLevel::new(bad).is_err(), "{bad}");
+        }
     }
 
     #[test]

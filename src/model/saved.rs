@@ -6,7 +6,7 @@
 use super::ModelError;
 use super::metrics::Metrics;
 use super::network::{NetworkFit, NetworkSettings};
-use super::ols::OlsFit;
+use super::ols::{IntervalLevel, OlsFit};
 use super::pca::PcaFit;
 use super::physical::{AxleAnalysis, PHYSICAL_INPUTS, inputs_of};
 use crate::kpi::{KpiRow, table::unit};
@@ -87,6 +87,19 @@ impl SavedModel {
     /// Predicted mean wear (%) of one row; the physical model picks the
     /// regression of the row's axle.
     pub fn predict_row(&self, r: &KpiRow) -> Result<f64, ModelError> {
+        let (p, _) = self.predict_row_within(r, None)?;
+        Ok(p)
+    }
+
+    /// Predicted mean wear (%) of one row and, given a level, its prediction
+    /// interval (lower, upper bound in %) where the model has one: the
+    /// regressions of the PCA and physical methods
+    /// ([`OlsFit::prediction_interval`]); the network gives none.
+    pub fn predict_row_within(
+        &self,
+        r: &KpiRow,
+        level: Option<IntervalLevel>,
+    ) -> Result<(f64, Option<(f64, f64)>), ModelError> {
         let x: Vec<f64> = self
             .features
             .iter()
@@ -101,14 +114,20 @@ impl SavedModel {
                 r.run, r.wheel, f.name
             )));
         }
-        let p = match &self.model {
-            ModelBody::Ffnn { network, .. } => network.net.predict_one(&x),
+        let regression = |ols: &OlsFit, x: &[f64]| {
+            let p = ols.predict_one(x);
+            (p, level.and_then(|l| ols.prediction_interval(x, l)))
+        };
+        let (p, interval) = match &self.model {
+            ModelBody::Ffnn { network, .. } => (network.net.predict_one(&x), None),
             ModelBody::Pca {
-                pca, regression, ..
-            } => regression.predict_one(&pca.transform(&[x])[0]),
+                pca,
+                regression: ols,
+                ..
+            } => regression(ols, &pca.transform(&[x])[0]),
             ModelBody::Physical { front, rear } => match r.axle {
-                crate::Axle::Front => front.regression.predict_one(&inputs_of(r)),
-                crate::Axle::Rear => rear.regression.predict_one(&inputs_of(r)),
+                crate::Axle::Front => regression(&front.regression, &inputs_of(r)),
+                crate::Axle::Rear => regression(&rear.regression, &inputs_of(r)),
             },
         };
         if !p.is_finite() {
@@ -117,7 +136,20 @@ impl SavedModel {
                 r.run, r.wheel
             )));
         }
-        Ok(p)
+        Ok((p, interval))
+    }
+
+    /// Whether the model gives prediction intervals: a regression saved
+    /// with its (XᵀX)⁻¹ (not the network, nor a model saved before
+    /// 2026-12-02).
+    pub fn has_intervals(&self) -> bool {
+        match &self.model {
+            ModelBody::Ffnn { .. } => false,
+            ModelBody::Pca { regression, .. } => regression.xtx_inverse.is_some(),
+            ModelBody::Physical { front, rear } => {
+                front.regression.xtx_inverse.is_some() && rear.regression.xtx_inverse.is_some()
+            }
+        }
     }
 
     /// The file's text: the model as pretty JSON, then, as its last field,
@@ -236,13 +268,15 @@ impl SavedModel {
                     length(&format!("{at}.loadings[{c}]"), a, d, "the features")?;
                 }
                 let why = "an intercept and one per component kept";
-                length("model.regression.coef", &regression.coef, pca.kept + 1, why)
+                length("model.regression.coef", &regression.coef, pca.kept + 1, why)?;
+                interval_parts("model.regression", regression, why)
             }
             ModelBody::Physical { front, rear } => {
                 let why = "an intercept and one per physical input";
                 for (axle, a) in [("front", front), ("rear", rear)] {
                     let field = format!("model.{axle}.regression.coef");
                     length(&field, &a.regression.coef, PHYSICAL_INPUTS.len() + 1, why)?;
+                    interval_parts(&format!("model.{axle}.regression"), &a.regression, why)?;
                 }
                 Ok(())
             }
@@ -280,6 +314,31 @@ impl SavedModel {
 /// Largest hidden layer a saved network may declare (`fit` tries up to the
 /// number of inputs plus 4).
 const MAX_HIDDEN: usize = 4096;
+
+/// What a regression's prediction interval reads, where it has one:
+/// (XᵀX)⁻¹ with (k + 1)² finite numbers for k + 1 coefficients (`why`:
+/// what sets their count), σ² finite and not negative, and at least one
+/// residual degree of freedom.
+fn interval_parts(at: &str, ols: &OlsFit, why: &str) -> Result<(), String> {
+    let Some(inv) = &ols.xtx_inverse else {
+        return Ok(());
+    };
+    let k1 = ols.coef.len();
+    length(
+        &format!("{at}.xtx_inverse"),
+        inv,
+        k1 * k1,
+        &format!("the square of {k1}: {why}"),
+    )?;
+    finite(&format!("{at}.sigma2"), &[ols.sigma2])?;
+    if ols.sigma2 < 0.0 {
+        return Err(format!("{at}.sigma2 is {}, a variance", ols.sigma2));
+    }
+    if ols.df_resid == 0 {
+        return Err(format!("{at}.df_resid is 0: no prediction interval"));
+    }
+    Ok(())
+}
 
 /// `values` has `want` numbers (`why`: what sets that) and each is finite.
 fn length(field: &str, values: &[f64], want: usize, why: &str) -> Result<(), String> {

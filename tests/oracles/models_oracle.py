@@ -1,5 +1,6 @@
 """Model oracles: statsmodels OLS (coefficients, standard errors, p-values,
-R², adjusted R²) and scikit-learn PCA (proportions, loadings) on a committed
+R², adjusted R², and the prediction intervals of the front rows as new
+observations of the rear fit, at 95 % and 80 %) and scikit-learn PCA (proportions, loadings) on a committed
 table, tests/fixtures/model_table.csv (rear-axle and front rows of the demo
 season's KPI database, written by `tirewear demo`).
 
@@ -25,6 +26,14 @@ def main():
     t = pd.read_csv(ROOT / "tests" / "fixtures" / "model_table.csv")
     rear = t[t["axle"] == "rear"]
     fit = sm.OLS(rear["wear_mean_pct"], sm.add_constant(rear[OLS_INPUTS])).fit()
+    front = t[t["axle"] == "front"]
+    intervals = {}
+    for level in (0.95, 0.8):
+        frame = fit.get_prediction(sm.add_constant(front[OLS_INPUTS])).summary_frame(alpha=1 - level)
+        intervals[str(level)] = {
+            "mean": list(frame["mean"]), "lower": list(frame["obs_ci_lower"]),
+            "upper": list(frame["obs_ci_upper"]),
+        }
     pca = PCA().fit(StandardScaler().fit_transform(t[PCA_INPUTS]))
     out = {
         "ols": {
@@ -32,6 +41,7 @@ def main():
             "coef": list(fit.params), "std_err": list(fit.bse), "t_values": list(fit.tvalues),
             "p_values": list(fit.pvalues), "r2": fit.rsquared, "r2_adj": fit.rsquared_adj,
             "sigma2": fit.scale,
+            "front_rows_intervals": intervals,
         },
         "pca": {
             "inputs": PCA_INPUTS, "proportions": list(pca.explained_variance_ratio_),
