@@ -112,6 +112,29 @@ fn demo_fit_ranks_like_the_paper_and_models_round_trip() {
         .collect();
     let m = tirewear::model::metrics::metrics(&y, &p, 6).unwrap();
     assert!((m.r2 - phys_rear).abs() < 1e-12);
+    // The share inside the 95 % prediction interval, counted from the
+    // reloaded model's intervals; the network has none.
+    let level = tirewear::model::ols::IntervalLevel::new(0.95).unwrap();
+    let inside = rear_test
+        .iter()
+        .filter(|r| {
+            let (_, interval) = phys.predict_row_within(r, Some(level)).unwrap();
+            let (low, high) = interval.unwrap();
+            low <= r.wear_mean_pct && r.wear_mean_pct <= high
+        })
+        .count();
+    let line = |m: &SavedModel, label: &str| {
+        m.indicators
+            .iter()
+            .find(|i| i.label == label)
+            .unwrap()
+            .inside_95_interval
+    };
+    assert_eq!(
+        line(&phys, "Rear—Testing"),
+        Some(inside as f64 / rear_test.len() as f64)
+    );
+    assert_eq!(line(&models["ffnn"], "Testing"), None);
 
     // The KPI table carries units; a changed unit or a missing column is refused by name.
     let units = read_units(&dir.path().join("kpis.parquet")).unwrap();

@@ -4,7 +4,7 @@
 use super::data::{TARGET, candidate_inputs, select_inputs, split_by_events};
 use super::metrics::metrics;
 use super::network::NetworkSettings;
-use super::ols::OlsSettings;
+use super::ols::{IntervalLevel, OlsSettings};
 use super::pca::PcaSettings;
 use super::physical::{PHYSICAL_INPUTS, analyse_axle};
 use super::saved::{Feature, Indicators, MODEL_FORMAT, MODEL_VERSION, ModelBody, SavedModel};
@@ -271,20 +271,34 @@ fn indicators(
     train: &[&KpiRow],
     test: &[&KpiRow],
     k: usize,
-    predict: impl Fn(&KpiRow) -> f64,
+    predict: impl Fn(&KpiRow) -> (f64, Option<(f64, f64)>),
 ) -> Result<Vec<Indicators>, ModelError> {
     let mut out = Vec::new();
     for (label, rows) in [("Training", train), ("Testing", test)] {
         if rows.is_empty() {
             continue;
         }
-        let p: Vec<f64> = rows.iter().map(|r| predict(r)).collect();
+        let predicted: Vec<(f64, Option<(f64, f64)>)> = rows.iter().map(|r| predict(r)).collect();
+        let p: Vec<f64> = predicted.iter().map(|(p, _)| *p).collect();
+        let y = target(rows);
+        let inside: Option<Vec<bool>> = predicted
+            .iter()
+            .zip(&y)
+            .map(|((_, interval), y)| interval.map(|(lo, hi)| (lo..=hi).contains(y)))
+            .collect();
         out.push(Indicators {
             label: format!("{prefix}{label}"),
-            metrics: metrics(&target(rows), &p, k)?,
+            metrics: metrics(&y, &p, k)?,
+            inside_95_interval: inside
+                .map(|b| b.iter().filter(|&&b| b).count() as f64 / b.len() as f64),
         });
     }
     Ok(out)
+}
+
+/// The level of the prediction intervals `fit` checks on its tires.
+fn fit_interval_level() -> IntervalLevel {
+    IntervalLevel::new(0.95).expect("within (0, 1)")
 }
 
 /// Fits one method on the split.
@@ -360,12 +374,11 @@ pub fn fit_method(
             let network = network?;
             let net = network.net.clone();
             let predict = |r: &KpiRow| {
-                net.predict_one(
-                    &inputs
-                        .iter()
-                        .map(|c| r.number(c).expect("column"))
-                        .collect::<Vec<_>>(),
-                )
+                let x: Vec<f64> = inputs
+                    .iter()
+                    .map(|c| r.number(c).expect("column"))
+                    .collect();
+                (net.predict_one(&x), None)
             };
             let table = indicators("", &train, &test, inputs.len(), predict)?;
             (
@@ -395,7 +408,11 @@ pub fn fit_method(
                     .iter()
                     .map(|c| r.number(c).expect("column"))
                     .collect();
-                regression.predict_one(&pca.transform(&[x])[0])
+                let scores = &pca.transform(&[x])[0];
+                (
+                    regression.predict_one(scores),
+                    regression.prediction_interval(scores, fit_interval_level()),
+                )
             };
             let table = indicators("", &train, &test, pca.kept, predict)?;
             (
@@ -416,7 +433,11 @@ pub fn fit_method(
             let (front, rear) = (of(Axle::Front)?, of(Axle::Rear)?);
             let mut table = Vec::new();
             for (name, a) in [("Front—", &front), ("Rear—", &rear)] {
-                let predict = |r: &KpiRow| a.regression.predict_one(&super::physical::inputs_of(r));
+                let predict = |r: &KpiRow| {
+                    let x = super::physical::inputs_of(r);
+                    let interval = a.regression.prediction_interval(&x, fit_interval_level());
+                    (a.regression.predict_one(&x), interval)
+                };
                 table.extend(indicators(
                     name,
                     &axle(&train, a.axle),
@@ -456,26 +477,56 @@ fn r2_adj_cell(r2_adj: Option<f64>) -> String {
     r2_adj.map_or_else(|| "–".to_string(), |v| format!("{v:.4}"))
 }
 
-/// The performance table of a model, like the paper's tables 8, 9 and 11.
+/// The column of the share of tires inside their 95 % prediction interval,
+/// where one of `lines` has it: its header, or a line's cell ("–" without).
+fn interval_header(lines: &[&Indicators]) -> &'static str {
+    if lines.iter().any(|i| i.inside_95_interval.is_some()) {
+        "  in 95 % PI"
+    } else {
+        ""
+    }
+}
+
+fn interval_cell(lines: &[&Indicators], i: &Indicators) -> String {
+    if interval_header(lines).is_empty() {
+        return String::new();
+    }
+    match i.inside_95_interval {
+        Some(v) => format!(" {:>10.1} %", 100.0 * v),
+        None => format!(" {:>12}", "–"),
+    }
+}
+
+/// The performance table of a model, like the paper's tables 8, 9 and 11,
+/// with the share of tires inside their 95 % prediction interval for the
+/// regressions.
 pub fn render_table(m: &SavedModel) -> String {
     let mut s = String::new();
+    let lines: Vec<&Indicators> = m.indicators.iter().collect();
     let _ = writeln!(s, "{} — inputs: {}", method_title(m), m.features.len());
     let _ = writeln!(
         s,
-        "  {:<20} {:>5} {:>8} {:>8} {:>9} {:>9}",
-        "", "n", "R²", "R²adj", "RMSE %", "MAE %"
+        "  {:<20} {:>5} {:>8} {:>8} {:>9} {:>9}{}",
+        "",
+        "n",
+        "R²",
+        "R²adj",
+        "RMSE %",
+        "MAE %",
+        interval_header(&lines)
     );
     for i in &m.indicators {
         let x = &i.metrics;
         let _ = writeln!(
             s,
-            "  {:<20} {:>5} {:>8.4} {:>8} {:>9.4} {:>9.4}",
+            "  {:<20} {:>5} {:>8.4} {:>8} {:>9.4} {:>9.4}{}",
             i.label,
             x.n,
             x.r2,
             r2_adj_cell(x.r2_adj),
             x.rmse,
-            x.mae
+            x.mae,
+            interval_cell(&lines, i)
         );
     }
     match &m.model {
@@ -545,13 +596,25 @@ pub fn render_table(m: &SavedModel) -> String {
 /// A comparison of the methods' testing indicators (one line per model and axle).
 pub fn render_comparison(models: &[SavedModel]) -> String {
     let mut s = String::from("Comparison on the testing events\n");
+    fn testing(m: &SavedModel) -> Vec<&Indicators> {
+        m.indicators
+            .iter()
+            .filter(|i| i.label.ends_with("Testing"))
+            .collect()
+    }
+    let lines: Vec<&Indicators> = models.iter().flat_map(testing).collect();
     let _ = writeln!(
         s,
-        "  {:<42} {:>5} {:>8} {:>8} {:>9}",
-        "model", "n", "R²", "R²adj", "RMSE %"
+        "  {:<42} {:>5} {:>8} {:>8} {:>9}{}",
+        "model",
+        "n",
+        "R²",
+        "R²adj",
+        "RMSE %",
+        interval_header(&lines)
     );
     for m in models {
-        for i in m.indicators.iter().filter(|i| i.label.ends_with("Testing")) {
+        for i in testing(m) {
             let label = format!(
                 "{} {}",
                 m.method(),
@@ -560,12 +623,13 @@ pub fn render_comparison(models: &[SavedModel]) -> String {
             let x = &i.metrics;
             let _ = writeln!(
                 s,
-                "  {:<42} {:>5} {:>8.4} {:>8} {:>9.4}",
+                "  {:<42} {:>5} {:>8.4} {:>8} {:>9.4}{}",
                 label.trim(),
                 x.n,
                 x.r2,
                 r2_adj_cell(x.r2_adj),
-                x.rmse
+                x.rmse,
+                interval_cell(&lines, i)
             );
         }
     }

@@ -37,6 +37,12 @@ pub struct Indicators {
     /// e.g. "Training", "Testing", "Rear—Testing".
     pub label: String,
     pub metrics: Metrics,
+    /// The share (0–1) of these tires whose measured wear lies inside its
+    /// 95 % prediction interval ([`OlsFit::prediction_interval`]): near
+    /// 0.95 where the regression's error holds on these events. None for
+    /// the network, which has no interval, and in files before 2026-12-02.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub inside_95_interval: Option<f64>,
 }
 
 /// What was fitted, by method.

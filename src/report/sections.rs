@@ -1093,28 +1093,58 @@ pub(super) fn models(inputs: &Inputs) -> Result<Section, ReportError> {
     let mut summary = Vec::new();
     for (path, m) in &inputs.models {
         let (mut train, mut test, mut csv) = (Vec::new(), Vec::new(), Vec::new());
+        // Per split, of the tires with a 95 % prediction interval, how many
+        // hold their measured wear (the regressions; docs/models.md).
+        let mut inside = [[0usize; 2]; 2];
+        let level = crate::model::ols::IntervalLevel::new(0.95).expect("within (0, 1)");
         for r in inputs.rows.iter().filter(|r| measured(r)) {
-            let Ok(p) = m.predict_row(r) else { continue };
+            let Ok((p, interval)) = m.predict_row_within(r, Some(level)) else {
+                continue;
+            };
             if !p.is_finite() {
                 continue;
             }
             let split = if m.training_events.contains(&r.event) {
                 train.push((r.wear_mean_pct, p));
-                "training"
+                0
             } else if m.testing_events.contains(&r.event) {
                 test.push((r.wear_mean_pct, p));
-                "testing"
+                1
             } else {
                 continue;
             };
+            if let Some((low, high)) = interval {
+                inside[split][0] += usize::from((low..=high).contains(&r.wear_mean_pct));
+                inside[split][1] += 1;
+            }
+            let (low, high) = interval.unwrap_or((f64::NAN, f64::NAN));
             csv.push(vec![
                 r.run.clone(),
                 r.wheel.to_string(),
-                split.into(),
+                ["training", "testing"][split].into(),
                 num(r.wear_mean_pct, 4),
                 num(p, 4),
+                num(low, 4),
+                num(high, 4),
             ]);
         }
+        let share = |[n, of]: [usize; 2]| {
+            if of == 0 {
+                "–".to_string()
+            } else {
+                format!("{} %", num(100.0 * n as f64 / of as f64, 1))
+            }
+        };
+        let intervals = if inside.iter().any(|s| s[1] > 0) {
+            format!(
+                " The 95 % prediction intervals hold {} of the training and {} of the testing \
+tires' measured wear.",
+                share(inside[0]),
+                share(inside[1])
+            )
+        } else {
+            String::new()
+        };
         let (r2_train, rmse_train) = fit_quality(&train);
         let (r2_test, rmse_test) = fit_quality(&test);
         let all = train.iter().chain(&test);
@@ -1161,7 +1191,7 @@ pub(super) fn models(inputs: &Inputs) -> Result<Section, ReportError> {
             &svg,
             &format!(
                 "{title} ({name}): filled marks training events, hollow testing events, grey the 1:1 \
-line. Training R² {} RMSE {} %, testing R² {} RMSE {} %.",
+line. Training R² {} RMSE {} %, testing R² {} RMSE {} %.{intervals}",
                 num(r2_train, 3),
                 num(rmse_train, 2),
                 num(r2_test, 3),
@@ -1169,7 +1199,15 @@ line. Training R² {} RMSE {} %, testing R² {} RMSE {} %.",
             ),
             &csv_link(
                 &format!("predictions_{method}.csv"),
-                &["run", "wheel", "split", "measured_pct", "predicted_pct"],
+                &[
+                    "run",
+                    "wheel",
+                    "split",
+                    "measured_pct",
+                    "predicted_pct",
+                    "interval_95_low_pct",
+                    "interval_95_high_pct",
+                ],
                 &csv,
             ),
         );
@@ -1185,6 +1223,7 @@ line. Training R² {} RMSE {} %, testing R² {} RMSE {} %.",
             test.len().to_string(),
             num(r2_test, 3),
             num(rmse_test, 2),
+            share(inside[1]),
         ]);
     }
     if !summary.is_empty() {
@@ -1197,6 +1236,7 @@ line. Training R² {} RMSE {} %, testing R² {} RMSE {} %.",
                 "testing n",
                 "testing R²",
                 "testing RMSE (%)",
+                "testing in 95 % PI",
             ],
             &summary,
         );
