@@ -469,6 +469,8 @@ fn bad_logs_are_named_and_do_not_sink_the_batch() {
         for w in want {
             assert!(text.contains(w), "'{w}' not in: {text}");
         }
+        // Said once (it was a tracing error line and a `failed:` line).
+        assert_eq!(text.matches(want[0]).count(), 1, "{text}");
     }
     // A good log beside a bad one: the good one is imported, exit 3.
     let good_path = write("good.csv", &good);

@@ -481,7 +481,9 @@ pub fn import_logs(
                     first.display()
                 ),
             );
-            tracing::error!("{e}");
+            // Debug, not error: the summary carries it, and `tirewear
+            // import` prints each failure once (it printed them twice).
+            tracing::debug!("{e}");
             summary.failed.push((log.clone(), e.to_string()));
             continue;
         }
@@ -514,7 +516,7 @@ pub fn import_logs(
                 } else {
                     format!("{named}: {message}")
                 };
-                tracing::error!("{message}");
+                tracing::debug!("{message}");
                 manifest = before;
                 summary.failed.push((log.clone(), message));
             }
