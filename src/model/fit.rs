@@ -296,11 +296,6 @@ fn indicators(
     Ok(out)
 }
 
-/// The level of the prediction intervals `fit` checks on its tires.
-fn fit_interval_level() -> IntervalLevel {
-    IntervalLevel::new(0.95).expect("within (0, 1)")
-}
-
 /// Fits one method on the split.
 pub fn fit_method(
     method: Method,
@@ -411,7 +406,7 @@ pub fn fit_method(
                 let scores = &pca.transform(&[x])[0];
                 (
                     regression.predict_one(scores),
-                    regression.prediction_interval(scores, fit_interval_level()),
+                    regression.prediction_interval(scores, IntervalLevel::P95),
                 )
             };
             let table = indicators("", &train, &test, pca.kept, predict)?;
@@ -435,7 +430,7 @@ pub fn fit_method(
             for (name, a) in [("Front—", &front), ("Rear—", &rear)] {
                 let predict = |r: &KpiRow| {
                     let x = super::physical::inputs_of(r);
-                    let interval = a.regression.prediction_interval(&x, fit_interval_level());
+                    let interval = a.regression.prediction_interval(&x, IntervalLevel::P95);
                     (a.regression.predict_one(&x), interval)
                 };
                 table.extend(indicators(

@@ -163,6 +163,9 @@ impl OlsFit {
 pub struct IntervalLevel(f64);
 
 impl IntervalLevel {
+    /// 95 %: the level `fit` and the report check their intervals at.
+    pub const P95: IntervalLevel = IntervalLevel(0.95);
+
     pub fn new(level: f64) -> Result<IntervalLevel, ModelError> {
         if level > 0.0 && level < 1.0 {
             Ok(IntervalLevel(level))

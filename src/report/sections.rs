@@ -1096,9 +1096,10 @@ pub(super) fn models(inputs: &Inputs) -> Result<Section, ReportError> {
         // Per split, of the tires with a 95 % prediction interval, how many
         // hold their measured wear (the regressions; docs/models.md).
         let mut inside = [[0usize; 2]; 2];
-        let level = crate::model::ols::IntervalLevel::new(0.95).expect("within (0, 1)");
         for r in inputs.rows.iter().filter(|r| measured(r)) {
-            let Ok((p, interval)) = m.predict_row_within(r, Some(level)) else {
+            let Ok((p, interval)) =
+                m.predict_row_within(r, Some(crate::model::ols::IntervalLevel::P95))
+            else {
                 continue;
             };
             if !p.is_finite() {
