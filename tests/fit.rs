@@ -12,6 +12,7 @@ use std::sync::Arc;
 use tirewear::kpi::KpiRow;
 use tirewear::kpi::table::{ROAD_KPIS, VISCOELASTIC_KPIS, read_units, write_batch};
 use tirewear::model::fit::{FitSettings, Method, fit_method, split};
+use tirewear::model::interval::IntervalLevel;
 use tirewear::model::network::NetworkSettings;
 use tirewear::model::saved::{ModelBody, SavedModel};
 
@@ -113,8 +114,8 @@ fn demo_fit_ranks_like_the_paper_and_models_round_trip() {
     let m = tirewear::model::metrics::metrics(&y, &p, 6).unwrap();
     assert!((m.r2 - phys_rear).abs() < 1e-12);
     // The share inside the 95 % prediction interval, counted from the
-    // reloaded model's intervals; the network has none.
-    let level = tirewear::model::ols::IntervalLevel::new(0.95).unwrap();
+    // reloaded model's intervals.
+    let level = IntervalLevel::P95;
     let inside = rear_test
         .iter()
         .filter(|r| {
@@ -134,7 +135,36 @@ fn demo_fit_ranks_like_the_paper_and_models_round_trip() {
         line(&phys, "Rear—Testing"),
         Some(inside as f64 / rear_test.len() as f64)
     );
-    assert_eq!(line(&models["ffnn"], "Testing"), None);
+    // The network's: ŷ ± the ⌈(n + 1)·0.95⌉-th smallest of its n
+    // validation errors, one half-width for every tire.
+    let ffnn = SavedModel::load(&out.join("ffnn.json")).unwrap();
+    let ModelBody::Ffnn { network, .. } = &ffnn.model else {
+        panic!("network body")
+    };
+    let scores = network.validation_abs_residuals.as_ref().unwrap();
+    let n = scores.len();
+    assert!(n == network.validation_rows && n >= 19, "{n}");
+    assert!(scores.windows(2).all(|w| w[0] <= w[1]));
+    let half = scores[((n + 1) as f64 * 0.95).ceil() as usize - 1];
+    let measured: Vec<&KpiRow> = s
+        .test
+        .iter()
+        .copied()
+        .filter(|r| r.worn_through_readings <= 0.0 && r.wear_mean_pct.is_finite())
+        .collect();
+    let inside = measured
+        .iter()
+        .filter(|r| {
+            let (p, interval) = ffnn.predict_row_within(r, Some(level)).unwrap();
+            let (low, high) = interval.unwrap();
+            assert_eq!((low, high), (p - half, p + half));
+            low <= r.wear_mean_pct && r.wear_mean_pct <= high
+        })
+        .count();
+    assert_eq!(
+        line(&ffnn, "Testing"),
+        Some(inside as f64 / measured.len() as f64)
+    );
 
     // The KPI table carries units; a changed unit or a missing column is refused by name.
     let units = read_units(&dir.path().join("kpis.parquet")).unwrap();
@@ -232,7 +262,7 @@ fn predict_writes_each_rows_prediction_and_refuses_an_empty_table(
     let (low_col, high_col) = (column("predicted_low_pct"), column("predicted_high_pct"));
     let lines: Vec<csv::StringRecord> = reader.records().map(|r| r.unwrap()).collect();
     assert_eq!(lines.len(), rows.len());
-    let level = tirewear::model::ols::IntervalLevel::new(0.95).unwrap();
+    let level = IntervalLevel::P95;
     let mut inside = [0usize; 2];
     for (line, r) in lines.iter().zip(rows) {
         assert_eq!(
@@ -288,7 +318,7 @@ fn predict_writes_each_rows_prediction_and_refuses_an_empty_table(
     assert_eq!(run.status.code(), Some(0), "{run:?}");
     assert!(
         String::from_utf8_lossy(&run.stdout)
-            .contains("no prediction intervals: the model was saved before"),
+            .contains("no 95 % prediction intervals: the model was saved before"),
         "{run:?}"
     );
     let mut reader = csv::Reader::from_path(&old_csv).unwrap();
@@ -299,6 +329,36 @@ fn predict_writes_each_rows_prediction_and_refuses_an_empty_table(
         );
         assert_eq!((&line[low_col], &line[high_col]), ("NaN", "NaN"));
     }
+    // The network's conformal intervals: written at 95 %; at 99.9 % its
+    // validation rows are too few (⌈(n + 1)·0.999⌉ ≤ n needs n ≥ 999), and
+    // it says so.
+    let network = |level: &str| {
+        std::process::Command::new(env!("CARGO_BIN_EXE_tirewear"))
+            .args(["--quiet", "predict"])
+            .arg(dir.join("models").join("ffnn.json"))
+            .arg(dir.join("kpis.parquet"))
+            .arg("--out")
+            .arg(dir.join("ffnn.csv"))
+            .args(["--interval", level])
+            .output()
+            .unwrap()
+    };
+    let run = network("0.95");
+    assert_eq!(run.status.code(), Some(0), "{run:?}");
+    let stdout = String::from_utf8_lossy(&run.stdout);
+    assert!(
+        stdout.contains("95 % prediction intervals: they hold"),
+        "{stdout}"
+    );
+    let run = network("0.999");
+    assert_eq!(run.status.code(), Some(0), "{run:?}");
+    let stdout = String::from_utf8_lossy(&run.stdout);
+    assert!(
+        stdout.contains("no 99.9 % prediction intervals: the network kept")
+            && stdout.contains("at this level needs 999"),
+        "{stdout}"
+    );
+
     let run = predict_at(&dir.join("kpis.parquet"), &dir.join("p.csv"), "1");
     assert_eq!(run.status.code(), Some(2), "{run:?}");
     assert!(
@@ -478,8 +538,8 @@ fn damaged_models_are_refused_by_field_or_predict_alike(
                 Ok(back) => {
                     for r in rows {
                         assert_eq!(
-                            back.predict_row(r).ok(),
-                            m.predict_row(r).ok(),
+                            back.predict_row_within(r, Some(IntervalLevel::P95)).ok(),
+                            m.predict_row_within(r, Some(IntervalLevel::P95)).ok(),
                             "{} with {p} one short predicts otherwise",
                             m.method()
                         );
@@ -500,6 +560,26 @@ fn damaged_models_are_refused_by_field_or_predict_alike(
         e.contains("model.network.net.hidden1 is 18446744073709551615"),
         "{e}"
     );
+    // The conformal scores edited out of order or below zero: the interval
+    // takes the k-th by position, so both are refused by the field.
+    let scores = "/model/network/validation_abs_residuals";
+    for (edit, why) in [
+        (
+            (|a: &mut Vec<serde_json::Value>| a.reverse()) as fn(&mut Vec<serde_json::Value>),
+            "below the",
+        ),
+        (|a| a[0] = (-1.0).into(), "[0] is -1, an absolute error"),
+    ] {
+        let mut v: serde_json::Value = serde_json::from_str(&text).unwrap();
+        v.as_object_mut().unwrap().remove("data_crc32");
+        edit(v.pointer_mut(scores).unwrap().as_array_mut().unwrap());
+        std::fs::write(&damaged, serde_json::to_string(&v).unwrap()).unwrap();
+        let e = SavedModel::load(&damaged).unwrap_err().to_string();
+        assert!(
+            e.contains("model.network.validation_abs_residuals") && e.contains(why),
+            "{e}"
+        );
+    }
 }
 
 /// Output paths a user can plausibly get wrong are refused before anything

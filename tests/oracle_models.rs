@@ -1,5 +1,7 @@
 //! OLS against statsmodels and PCA against scikit-learn on a committed table
-//! (tests/oracles/models_oracle.py). Tolerances: relative 1e-8 on
+//! (tests/oracles/models_oracle.py), the network's conformal interval width
+//! against numpy (tests/oracles/conformal_oracle.py, exact: it picks one
+//! of its inputs). Tolerances: relative 1e-8 on
 //! coefficients, standard errors and R² (QR versus statsmodels' pinv: both
 //! f64, the design is well conditioned after nothing but an intercept);
 //! p-values absolute 1e-9 (they are down to ~1e-200, where only the
@@ -12,8 +14,9 @@
 
 use serde_json::Value;
 use std::path::PathBuf;
+use tirewear::model::interval::{IntervalLevel, conformal_half_width};
 use tirewear::model::lm::{LeastSquares, LmSettings, levenberg_marquardt};
-use tirewear::model::ols::{IntervalLevel, OlsSettings};
+use tirewear::model::ols::OlsSettings;
 use tirewear::model::pca::PcaSettings;
 use tirewear::model::{Dataset, Fit, Predict};
 
@@ -224,6 +227,29 @@ impl LeastSquares for ExpDecay {
             j[(i, 2)] = 1.0;
         }
     }
+}
+
+/// The network's split-conformal half-width against numpy's quantile
+/// (tests/oracles/conformal_oracle.py): the same score exactly (one of the
+/// inputs, chosen by rank), or none where the scores are too few.
+#[test]
+fn conformal_half_width_matches_numpy() {
+    let p = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/golden/conformal.json");
+    let g: Value = serde_json::from_str(&std::fs::read_to_string(p).unwrap()).unwrap();
+    let cases = g["cases"].as_array().unwrap();
+    assert_eq!(cases.len(), 48);
+    let mut nones = 0;
+    for c in cases {
+        let mut scores = floats(&c["scores"]);
+        scores.sort_by(f64::total_cmp);
+        let level = IntervalLevel::new(c["level"].as_f64().unwrap()).unwrap();
+        let got = conformal_half_width(&scores, level);
+        let want = c["half_width"].as_f64();
+        assert_eq!(got, want, "{} scores at {level:?}", scores.len());
+        nones += usize::from(want.is_none());
+    }
+    // One score from 80 % up, 12 and 18 at 95 and 99 %, 19 to 45 at 99 %.
+    assert_eq!(nones, 11);
 }
 
 #[test]

@@ -2,7 +2,7 @@
 
 use anyhow::{Context, Result};
 use std::path::PathBuf;
-use tirewear::model::ols::IntervalLevel;
+use tirewear::model::interval::{Coverage, IntervalLevel};
 use tirewear::model::saved::SavedModel;
 
 #[derive(clap::Args)]
@@ -16,9 +16,10 @@ pub(crate) struct PredictArgs {
     /// interval's bounds in %, a note where a row has no prediction).
     #[arg(long, default_value = "predictions.csv")]
     out: PathBuf,
-    /// Coverage of the prediction interval written beside each prediction
-    /// of the PCA and physical models (their regressions' interval for a
-    /// new tire: docs/models.md); the network gives none. Between 0 and 1.
+    /// Coverage of the prediction interval written beside each prediction:
+    /// the PCA and physical models' regressions' interval for a new tire,
+    /// the network's split-conformal one from its validation rows
+    /// (docs/models.md). Between 0 and 1.
     #[arg(long, default_value = "0.95", value_name = "LEVEL", value_parser = parse_level)]
     interval: IntervalLevel,
 }
@@ -131,20 +132,20 @@ pub(crate) fn run_predict(
         ),
     }
     let inside = |events: Option<&[String]>| {
-        let within: Vec<bool> = out_rows
-            .iter()
-            .filter(|p| events.is_none_or(|e| e.iter().any(|e| *e == p.event)))
-            .filter(|p| {
-                !p.worn_through
-                    && p.measured_wear_pct.is_finite()
-                    && p.predicted_low_pct.is_finite()
-            })
-            .map(|p| (p.predicted_low_pct..=p.predicted_high_pct).contains(&p.measured_wear_pct))
-            .collect();
-        Coverage {
-            inside: within.iter().filter(|&&b| b).count(),
-            of: within.len(),
-        }
+        Coverage::of(
+            out_rows
+                .iter()
+                .filter(|p| events.is_none_or(|e| e.iter().any(|e| *e == p.event)))
+                .filter(|p| {
+                    !p.worn_through
+                        && p.measured_wear_pct.is_finite()
+                        && p.predicted_low_pct.is_finite()
+                })
+                .map(|p| {
+                    let interval = (p.predicted_low_pct, p.predicted_high_pct);
+                    (p.measured_wear_pct, Some(interval))
+                }),
+        )
     };
     println!(
         "{}",
@@ -159,24 +160,6 @@ pub(crate) fn run_predict(
     Ok(())
 }
 
-/// Of `of` measured wears, how many lie inside their prediction interval.
-#[derive(Debug, Clone, Copy, PartialEq)]
-struct Coverage {
-    inside: usize,
-    of: usize,
-}
-
-impl std::fmt::Display for Coverage {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(
-            f,
-            "{:.1} % of {}",
-            100.0 * self.inside as f64 / self.of as f64,
-            self.of
-        )
-    }
-}
-
 /// What `predict` says of its intervals: why there are none, or how many
 /// measured wears they hold (all rows, then the model's training and
 /// testing events), the check that they are as wide as they claim.
@@ -189,13 +172,8 @@ fn interval_line(
 ) -> String {
     // 0.9 is 90.00000000000001 %.
     let pct = (1e6 * level.get()).round() / 1e4;
-    if !m.has_intervals() {
-        return match m.method() {
-            "ffnn" => "no prediction intervals: the network gives none (docs/models.md)".into(),
-            _ => "no prediction intervals: the model was saved before tirewear kept what they \
-                  need ((XᵀX)⁻¹); fit it again to have them"
-                .into(),
-        };
+    if let Some(why) = m.why_no_intervals(level) {
+        return format!("no {pct} % prediction intervals: {why}");
     }
     if all.of == 0 {
         return format!(

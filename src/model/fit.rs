@@ -2,9 +2,10 @@
 //! each returned as a saved model with its performance table.
 
 use super::data::{TARGET, candidate_inputs, select_inputs, split_by_events};
+use super::interval::{Coverage, IntervalLevel};
 use super::metrics::metrics;
 use super::network::NetworkSettings;
-use super::ols::{IntervalLevel, OlsSettings};
+use super::ols::OlsSettings;
 use super::pca::PcaSettings;
 use super::physical::{PHYSICAL_INPUTS, analyse_axle};
 use super::saved::{Feature, Indicators, MODEL_FORMAT, MODEL_VERSION, ModelBody, SavedModel};
@@ -281,16 +282,11 @@ fn indicators(
         let predicted: Vec<(f64, Option<(f64, f64)>)> = rows.iter().map(|r| predict(r)).collect();
         let p: Vec<f64> = predicted.iter().map(|(p, _)| *p).collect();
         let y = target(rows);
-        let inside: Option<Vec<bool>> = predicted
-            .iter()
-            .zip(&y)
-            .map(|((_, interval), y)| interval.map(|(lo, hi)| (lo..=hi).contains(y)))
-            .collect();
+        let inside = Coverage::of(predicted.iter().zip(&y).map(|(&(_, i), &y)| (y, i)));
         out.push(Indicators {
             label: format!("{prefix}{label}"),
             metrics: metrics(&y, &p, k)?,
-            inside_95_interval: inside
-                .map(|b| b.iter().filter(|&&b| b).count() as f64 / b.len() as f64),
+            inside_95_interval: inside.share(),
         });
     }
     Ok(out)
@@ -367,13 +363,15 @@ pub fn fit_method(
             let network = super::network::fit_network(&x, &y, ns, &bar);
             bar.finish_and_clear();
             let network = network?;
-            let net = network.net.clone();
             let predict = |r: &KpiRow| {
                 let x: Vec<f64> = inputs
                     .iter()
                     .map(|c| r.number(c).expect("column"))
                     .collect();
-                (net.predict_one(&x), None)
+                (
+                    network.net.predict_one(&x),
+                    network.prediction_interval(&x, IntervalLevel::P95),
+                )
             };
             let table = indicators("", &train, &test, inputs.len(), predict)?;
             (

@@ -7,6 +7,7 @@ pub mod data;
 pub mod error;
 pub mod ffnn;
 pub mod fit;
+pub mod interval;
 pub mod lm;
 pub mod metrics;
 pub mod network;

@@ -5,6 +5,7 @@
 //! best pair and keep whichever of the two is better.
 
 use super::ffnn::{Ffnn, FfnnSettings};
+use super::interval::{IntervalLevel, conformal_half_width};
 use super::{Dataset, Fit, ModelError, Predict};
 use rand::SeedableRng;
 use rand::seq::SliceRandom;
@@ -109,6 +110,28 @@ pub struct NetworkFit {
     pub retrained_kept: bool,
     pub training_rows: usize,
     pub validation_rows: usize,
+    /// |measured − predicted| wear (%) of the validation rows under the
+    /// chosen network, ascending: the calibration scores of its
+    /// split-conformal prediction interval ([`NetworkFit::prediction_interval`]).
+    /// None in model files before 2026-12-03, which predict without one.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub validation_abs_residuals: Option<Vec<f64>>,
+}
+
+impl NetworkFit {
+    /// The `level` prediction interval of a new tire with inputs `x` (lower,
+    /// upper bound in %): split conformal, ŷ ± q with q the ⌈(n + 1)·level⌉-th
+    /// smallest of the n validation rows' |y − ŷ|
+    /// ([`conformal_half_width`]). The validation rows chose the width and
+    /// the epoch the training stopped at, so their errors run a little
+    /// smaller than a new tire's (measured: docs/models.md). None without
+    /// the scores (an older file), with too few validation rows for the
+    /// level, or where the bounds are not finite.
+    pub fn prediction_interval(&self, x: &[f64], level: IntervalLevel) -> Option<(f64, f64)> {
+        let half = conformal_half_width(self.validation_abs_residuals.as_deref()?, level)?;
+        let y = self.net.predict_one(x);
+        (half.is_finite() && y.is_finite()).then_some((y - half, y + half))
+    }
 }
 
 fn validation_mse(net: &Ffnn, x: &[Vec<f64>], y: &[f64]) -> f64 {
@@ -209,16 +232,25 @@ pub(crate) fn fit_network(
     )?;
     bar.inc(1);
     let retrained_kept = validation_mse(&again, &xv, &yv) < trials[best].validation_mse;
+    let net = if retrained_kept {
+        again
+    } else {
+        nets[best].clone()
+    };
+    let mut scores: Vec<f64> = net
+        .predict(&xv)
+        .iter()
+        .zip(&yv)
+        .map(|(p, y)| (y - p).abs())
+        .collect();
+    scores.sort_by(f64::total_cmp);
     Ok(NetworkFit {
-        net: if retrained_kept {
-            again
-        } else {
-            nets[best].clone()
-        },
+        net,
         trials,
         retrained_kept,
         training_rows: xt.len(),
         validation_rows: xv.len(),
+        validation_abs_residuals: Some(scores),
     })
 }
 
@@ -253,6 +285,24 @@ mod tests {
         assert!(min < 1e-3, "a linear target is easy: validation MSE {min}");
         // Same seed, same network.
         assert_eq!(s.fit(Dataset::new(&x, &y, &inputs)).unwrap(), f);
+        // The conformal scores: the validation rows (the first 12 of the
+        // seeded shuffle) and their errors, ascending.
+        let mut idx: Vec<usize> = (0..60).collect();
+        idx.shuffle(&mut ChaCha8Rng::seed_from_u64(s.seed));
+        let mut want: Vec<f64> = idx[..12]
+            .iter()
+            .map(|&i| (y[i] - f.net.predict_one(&x[i])).abs())
+            .collect();
+        want.sort_by(f64::total_cmp);
+        assert_eq!(f.validation_abs_residuals.as_deref(), Some(&want[..]));
+        // At 90 %: ⌈13 · 0.9⌉ = ⌈11.7⌉ = 12, the largest of the 12; at 95 %
+        // ⌈12.35⌉ = 13 of 12: none.
+        let p = f.predict_one(&x[0]);
+        let (lo, hi) = f
+            .prediction_interval(&x[0], IntervalLevel::new(0.9).unwrap())
+            .unwrap();
+        assert_eq!((lo, hi), (p - want[11], p + want[11]));
+        assert_eq!(f.prediction_interval(&x[0], IntervalLevel::P95), None);
         assert_eq!(f.predict_one(&x[0]), f.net.predict_one(&x[0]));
     }
 }

@@ -2,6 +2,7 @@
 //! coefficients by a QR least-squares solve, standard errors from
 //! σ²(XᵀX)⁻¹ by a Cholesky factorisation, two-sided t-test p-values.
 
+use super::interval::IntervalLevel;
 use super::{
     Dataset, Fit, ModelError, Predict, design,
     metrics::{Metrics, metrics},
@@ -149,35 +150,10 @@ impl OlsFit {
             .sum();
         let t = StudentsT::new(0.0, 1.0, self.df_resid as f64)
             .ok()?
-            .inverse_cdf(0.5 + 0.5 * level.0);
+            .inverse_cdf(0.5 + 0.5 * level.get());
         let half = t * (self.sigma2 * (1.0 + quadratic)).sqrt();
         let y = self.predict_one(x);
         (half.is_finite() && y.is_finite()).then_some((y - half, y + half))
-    }
-}
-
-/// The coverage of a prediction interval, strictly between 0 and 1 (0.95:
-/// a new tire's wear falls inside 95 % of the time, under the regression's
-/// assumptions).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct IntervalLevel(f64);
-
-impl IntervalLevel {
-    /// 95 %: the level `fit` and the report check their intervals at.
-    pub const P95: IntervalLevel = IntervalLevel(0.95);
-
-    pub fn new(level: f64) -> Result<IntervalLevel, ModelError> {
-        if level > 0.0 && level < 1.0 {
-            Ok(IntervalLevel(level))
-        } else {
-            Err(ModelError::Invalid(format!(
-                "a prediction interval's level must be between 0 and 1 (0.95 for 95 %), got {level}"
-            )))
-        }
-    }
-
-    pub fn get(self) -> f64 {
-        self.0
     }
 }
 

@@ -4,9 +4,10 @@
 //! settings and the indicators. Format: docs/models.md.
 
 use super::ModelError;
+use super::interval::{IntervalLevel, conformal_half_width, conformal_rows_needed};
 use super::metrics::Metrics;
 use super::network::{NetworkFit, NetworkSettings};
-use super::ols::{IntervalLevel, OlsFit};
+use super::ols::OlsFit;
 use super::pca::PcaFit;
 use super::physical::{AxleAnalysis, PHYSICAL_INPUTS, inputs_of};
 use crate::kpi::{KpiRow, table::unit};
@@ -38,9 +39,9 @@ pub struct Indicators {
     pub label: String,
     pub metrics: Metrics,
     /// The share (0–1) of these tires whose measured wear lies inside its
-    /// 95 % prediction interval ([`OlsFit::prediction_interval`]): near
-    /// 0.95 where the regression's error holds on these events. None for
-    /// the network, which has no interval, and in files before 2026-12-02.
+    /// 95 % prediction interval ([`SavedModel::predict_row_within`]): near
+    /// 0.95 where the model's error holds on these events. None in files
+    /// before 2026-12-02 (the network's before 2026-12-03).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub inside_95_interval: Option<f64>,
 }
@@ -99,8 +100,10 @@ impl SavedModel {
 
     /// Predicted mean wear (%) of one row and, given a level, its prediction
     /// interval (lower, upper bound in %) where the model has one: the
-    /// regressions of the PCA and physical methods
-    /// ([`OlsFit::prediction_interval`]); the network gives none.
+    /// regressions' of the PCA and physical methods
+    /// ([`OlsFit::prediction_interval`]), the network's split-conformal one
+    /// ([`NetworkFit::prediction_interval`]); [`SavedModel::why_no_intervals`]
+    /// says why a model has none.
     pub fn predict_row_within(
         &self,
         r: &KpiRow,
@@ -125,7 +128,10 @@ impl SavedModel {
             (p, level.and_then(|l| ols.prediction_interval(x, l)))
         };
         let (p, interval) = match &self.model {
-            ModelBody::Ffnn { network, .. } => (network.net.predict_one(&x), None),
+            ModelBody::Ffnn { network, .. } => (
+                network.net.predict_one(&x),
+                level.and_then(|l| network.prediction_interval(&x, l)),
+            ),
             ModelBody::Pca {
                 pca,
                 regression: ols,
@@ -145,16 +151,34 @@ impl SavedModel {
         Ok((p, interval))
     }
 
-    /// Whether the model gives prediction intervals: a regression saved
-    /// with its (XᵀX)⁻¹ (not the network, nor a model saved before
-    /// 2026-12-02).
-    pub fn has_intervals(&self) -> bool {
+    /// Why the model gives no `level` prediction intervals, or None when it
+    /// does: a regression saved without its (XᵀX)⁻¹ (before 2026-12-02), a
+    /// network saved without its validation errors (before 2026-12-03), or
+    /// one with too few validation rows for the level.
+    pub fn why_no_intervals(&self, level: IntervalLevel) -> Option<String> {
+        let again = "; fit it again to have them";
         match &self.model {
-            ModelBody::Ffnn { .. } => false,
-            ModelBody::Pca { regression, .. } => regression.xtx_inverse.is_some(),
-            ModelBody::Physical { front, rear } => {
-                front.regression.xtx_inverse.is_some() && rear.regression.xtx_inverse.is_some()
-            }
+            ModelBody::Ffnn { network, .. } => match &network.validation_abs_residuals {
+                None => Some(format!(
+                    "the network was saved before tirewear kept its validation errors{again}"
+                )),
+                Some(scores) if conformal_half_width(scores, level).is_none() => {
+                    let needed = conformal_rows_needed(level);
+                    Some(format!(
+                        "the network kept {} validation rows, and a conformal interval at \
+                         this level needs {needed} (a lower --interval, or more training rows)",
+                        scores.len()
+                    ))
+                }
+                Some(_) => None,
+            },
+            ModelBody::Pca { regression, .. } => regression
+                .xtx_inverse
+                .is_none()
+                .then(|| format!("the model was saved before tirewear kept (XᵀX)⁻¹{again}")),
+            ModelBody::Physical { front, rear } => (front.regression.xtx_inverse.is_none()
+                || rear.regression.xtx_inverse.is_none())
+            .then(|| format!("the model was saved before tirewear kept (XᵀX)⁻¹{again}")),
         }
     }
 
@@ -251,7 +275,8 @@ impl SavedModel {
                 )?;
                 positive(&format!("{at}.input_std"), &net.input_std)?;
                 finite(&format!("{at}.target_mean"), &[net.target_mean])?;
-                positive(&format!("{at}.target_std"), &[net.target_std])
+                positive(&format!("{at}.target_std"), &[net.target_std])?;
+                conformal_scores(network)
             }
             ModelBody::Pca {
                 pca, regression, ..
@@ -342,6 +367,33 @@ fn interval_parts(at: &str, ols: &OlsFit, why: &str) -> Result<(), String> {
     }
     if ols.df_resid == 0 {
         return Err(format!("{at}.df_resid is 0: no prediction interval"));
+    }
+    Ok(())
+}
+
+/// What the network's conformal interval reads, where it has it: one
+/// |residual| per validation row, finite, not negative and ascending (the
+/// interval takes the k-th by position).
+fn conformal_scores(network: &NetworkFit) -> Result<(), String> {
+    let Some(scores) = &network.validation_abs_residuals else {
+        return Ok(());
+    };
+    let at = "model.network.validation_abs_residuals";
+    length(
+        at,
+        scores,
+        network.validation_rows,
+        "one per validation row (model.network.validation_rows)",
+    )?;
+    if let Some(i) = scores.iter().position(|&v| v < 0.0) {
+        return Err(format!("{at}[{i}] is {}, an absolute error", scores[i]));
+    }
+    if let Some(i) = (1..scores.len()).find(|&i| scores[i] < scores[i - 1]) {
+        return Err(format!(
+            "{at}[{i}] is {}, below the {} before it: the errors must be ascending",
+            scores[i],
+            scores[i - 1]
+        ));
     }
     Ok(())
 }

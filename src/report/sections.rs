@@ -5,6 +5,7 @@ use super::html::{csv_link, escape, figure as fig, num, table};
 use super::{Inputs, ReportError, Section};
 use crate::Axle;
 use crate::kpi::KpiRow;
+use crate::model::interval::{Coverage, IntervalLevel};
 use serde_json::Value;
 use std::collections::BTreeSet;
 
@@ -1095,11 +1096,9 @@ pub(super) fn models(inputs: &Inputs) -> Result<Section, ReportError> {
         let (mut train, mut test, mut csv) = (Vec::new(), Vec::new(), Vec::new());
         // Per split, of the tires with a 95 % prediction interval, how many
         // hold their measured wear (the regressions; docs/models.md).
-        let mut inside = [[0usize; 2]; 2];
+        let mut inside = [Coverage::default(); 2];
         for r in inputs.rows.iter().filter(|r| measured(r)) {
-            let Ok((p, interval)) =
-                m.predict_row_within(r, Some(crate::model::ols::IntervalLevel::P95))
-            else {
+            let Ok((p, interval)) = m.predict_row_within(r, Some(IntervalLevel::P95)) else {
                 continue;
             };
             if !p.is_finite() {
@@ -1115,8 +1114,7 @@ pub(super) fn models(inputs: &Inputs) -> Result<Section, ReportError> {
                 continue;
             };
             if let Some((low, high)) = interval {
-                inside[split][0] += usize::from((low..=high).contains(&r.wear_mean_pct));
-                inside[split][1] += 1;
+                inside[split].add(r.wear_mean_pct, low, high);
             }
             let (low, high) = interval.unwrap_or((f64::NAN, f64::NAN));
             csv.push(vec![
@@ -1129,14 +1127,11 @@ pub(super) fn models(inputs: &Inputs) -> Result<Section, ReportError> {
                 num(high, 4),
             ]);
         }
-        let share = |[n, of]: [usize; 2]| {
-            if of == 0 {
-                "–".to_string()
-            } else {
-                format!("{} %", num(100.0 * n as f64 / of as f64, 1))
-            }
+        let share = |c: Coverage| {
+            c.share()
+                .map_or("–".into(), |s| format!("{} %", num(100.0 * s, 1)))
         };
-        let intervals = if inside.iter().any(|s| s[1] > 0) {
+        let intervals = if inside.iter().any(|c| c.of > 0) {
             format!(
                 " The 95 % prediction intervals hold {} of the training and {} of the testing \
 tires' measured wear.",
