@@ -96,6 +96,7 @@ fn demo_fit_ranks_like_the_paper_and_models_round_trip() {
         }
     }
     damaged_models_are_refused_by_field_or_predict_alike(&models, &out, &rows);
+    undefined_numbers_read_back(&rows, dir.path());
     changed_bytes_of_a_model_file_are_refused(&models, &out);
 
     // The indicators recomputed from the reloaded model's predictions on the testing events.
@@ -389,6 +390,79 @@ fn predict_writes_each_rows_prediction_and_refuses_an_empty_table(
         "{stderr}"
     );
     assert!(!none.exists());
+}
+
+/// A physical model whose tracks' lines are all unreliable but one's (the
+/// other tracks cut to two tires an axle, and a line needs three): the
+/// correlation of the slopes of the reliable tracks with temperature is
+/// undefined, NaN, which serde_json writes as `null`. Such a file (on a
+/// real-data-noise season, a training set without one event) was written
+/// by `fit` and then refused by `predict` as "invalid type: null, expected
+/// f64". It now reads back and predicts as the fitted model. A NaN where a
+/// prediction needs a number is refused when saving, not left for
+/// `predict` to find.
+fn undefined_numbers_read_back(rows: &[KpiRow], dir: &std::path::Path) {
+    let first = rows[0].track.clone();
+    let mut count: HashMap<(String, tirewear::Axle), usize> = HashMap::new();
+    let cut: Vec<KpiRow> = rows
+        .iter()
+        .filter(|r| r.worn_through_readings <= 0.0)
+        .filter(|r| {
+            let n = count.entry((r.track.clone(), r.axle)).or_default();
+            *n += 1;
+            r.track == first || *n <= 2
+        })
+        .cloned()
+        .collect();
+    let test = cut
+        .iter()
+        .rev()
+        .find(|r| r.track != first)
+        .unwrap()
+        .event
+        .clone();
+    let s = split(&cut, Some(std::slice::from_ref(&test))).unwrap();
+    let (model, _) = fit_method(Method::Physical, &s, &FitSettings::default()).unwrap();
+    let ModelBody::Physical { front, rear } = &model.model else {
+        panic!("physical body")
+    };
+    for a in [front, rear] {
+        assert_eq!(
+            a.lines.iter().filter(|l| l.n >= 3).count(),
+            1,
+            "{:?}",
+            a.lines
+        );
+        assert!(a.slope_vs_t_surface.is_nan());
+    }
+    let out = dir.join("one-reliable-track");
+    tirewear::model::saved::save_all(std::slice::from_ref(&model), &out).unwrap();
+    let text = std::fs::read_to_string(out.join("physical.json")).unwrap();
+    assert!(text.contains("\"slope_vs_t_surface\": null"), "{text}");
+    let back = SavedModel::load(&out.join("physical.json")).unwrap();
+    let ModelBody::Physical { front, .. } = &back.model else {
+        panic!("physical body")
+    };
+    assert!(front.slope_vs_t_surface.is_nan());
+    for r in rows.iter().take(40) {
+        assert_eq!(
+            back.predict_row_within(r, Some(IntervalLevel::P95)).ok(),
+            model.predict_row_within(r, Some(IntervalLevel::P95)).ok()
+        );
+    }
+    // A coefficient that is not a number: refused when saving, by the field.
+    let mut broken = model.clone();
+    if let ModelBody::Physical { rear, .. } = &mut broken.model {
+        rear.regression.coef[2] = f64::NAN;
+    }
+    let e = tirewear::model::saved::save_all(&[broken], &dir.join("broken"))
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("the physical model would not read back") && e.contains("null, expected f64"),
+        "{e}"
+    );
+    assert!(!dir.join("broken").join("physical.json").exists());
 }
 
 /// JSON pointers of every non-empty array in `v`.

@@ -35,6 +35,7 @@ pub struct Ffnn {
     pub target_mean: f64,
     pub target_std: f64,
     /// Per epoch: (training MSE, validation MSE), normalised units.
+    #[serde(deserialize_with = "super::nullable::f64_pairs_or_nan")]
     pub curve: Vec<(f64, f64)>,
     pub best_epoch: usize,
 }

@@ -74,7 +74,7 @@ pub struct Coverage {
 impl Coverage {
     /// Counts measured wears against their intervals; a wear without an
     /// interval is not counted.
-    pub fn of<'a>(pairs: impl IntoIterator<Item = (f64, Option<(f64, f64)>)> + 'a) -> Coverage {
+    pub fn of(pairs: impl IntoIterator<Item = (f64, Option<(f64, f64)>)>) -> Coverage {
         let mut c = Coverage::default();
         for (measured, interval) in pairs {
             if let Some((low, high)) = interval {

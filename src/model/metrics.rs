@@ -9,6 +9,7 @@ pub struct Metrics {
     /// Number of regressors (inputs), not counting the intercept.
     pub k: usize,
     /// R² = 1 − SSE/SST (eq. 11).
+    #[serde(deserialize_with = "super::nullable::f64_or_nan")]
     pub r2: f64,
     /// Adjusted R² in the usual form with an intercept, 1 − (n−1)/(n−k−1)·(1−R²)
     /// (statsmodels, MATLAB fitlm). The paper's eq. 12 divides by n−k instead.
@@ -16,7 +17,9 @@ pub struct Metrics {
     /// a few testing tires do not sink a model with many inputs.
     pub r2_adj: Option<f64>,
     /// √(SSE/n) (eq. 13).
+    #[serde(deserialize_with = "super::nullable::f64_or_nan")]
     pub rmse: f64,
+    #[serde(deserialize_with = "super::nullable::f64_or_nan")]
     pub mae: f64,
 }
 

@@ -11,6 +11,7 @@ pub mod interval;
 pub mod lm;
 pub mod metrics;
 pub mod network;
+mod nullable;
 pub mod ols;
 pub mod pca;
 pub mod physical;

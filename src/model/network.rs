@@ -98,6 +98,7 @@ impl NetworkSettings {
 pub struct WidthTrial {
     pub hidden2: usize,
     /// Validation MSE in normalised units.
+    #[serde(deserialize_with = "super::nullable::f64_or_nan")]
     pub validation_mse: f64,
 }
 
@@ -244,13 +245,16 @@ pub(crate) fn fit_network(
         .map(|(p, y)| (y - p).abs())
         .collect();
     scores.sort_by(f64::total_cmp);
+    // A network that predicts a validation row as NaN has no interval (and
+    // a file that reads back: the scores are checked finite on reading).
+    let scores = scores.iter().all(|s| s.is_finite()).then_some(scores);
     Ok(NetworkFit {
         net,
         trials,
         retrained_kept,
         training_rows: xt.len(),
         validation_rows: xv.len(),
-        validation_abs_residuals: Some(scores),
+        validation_abs_residuals: scores,
     })
 }
 

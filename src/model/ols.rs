@@ -18,8 +18,11 @@ pub struct OlsFit {
     pub inputs: Vec<String>,
     /// β0 (intercept) then β1..βk.
     pub coef: Vec<f64>,
+    #[serde(deserialize_with = "super::nullable::f64s_or_nan")]
     pub std_err: Vec<f64>,
+    #[serde(deserialize_with = "super::nullable::f64s_or_nan")]
     pub t_values: Vec<f64>,
+    #[serde(deserialize_with = "super::nullable::f64s_or_nan")]
     pub p_values: Vec<f64>,
     /// Residual variance SSE/(n − k − 1).
     pub sigma2: f64,

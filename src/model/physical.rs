@@ -28,17 +28,23 @@ pub(crate) const MIN_R2_CONSISTENT: f64 = 0.5;
 pub struct TrackLine {
     pub track: String,
     pub n: usize,
+    #[serde(deserialize_with = "super::nullable::f64_or_nan")]
     pub intercept_pct: f64,
     /// b, in % of tread per MJ of friction energy.
+    #[serde(deserialize_with = "super::nullable::f64_or_nan")]
     pub slope_pct_per_mj: f64,
     /// R1 = 1 − RMSE/(max wear − min wear): the range-normalised RMSE
     /// turned into a score (1 = every point on the line).
+    #[serde(deserialize_with = "super::nullable::f64_or_nan")]
     pub r1: f64,
     /// R2 = consistent points / the most consistent points of any track.
+    #[serde(deserialize_with = "super::nullable::f64_or_nan")]
     pub r2: f64,
     /// Points within 3 robust standard deviations (1.4826·MAD) of the line.
     pub n_consistent: usize,
+    #[serde(deserialize_with = "super::nullable::f64_or_nan")]
     pub t_surface_avg_c: f64,
+    #[serde(deserialize_with = "super::nullable::f64_or_nan")]
     pub skewness: f64,
 }
 
@@ -48,9 +54,13 @@ pub struct AxleAnalysis {
     pub axle: Axle,
     pub lines: Vec<TrackLine>,
     /// Pearson correlation of per-track slopes with mean surface temperature,
-    /// weighted by R1, over tracks with R2 ≥ 0.5 (figure 13).
+    /// weighted by R1, over tracks with R2 ≥ 0.5 (figure 13); NaN (`null`
+    /// in the file) with fewer than two such tracks or no spread.
+    #[serde(deserialize_with = "super::nullable::f64_or_nan")]
     pub slope_vs_t_surface: f64,
-    /// Residuals of `wear = a + b·E + c·E·T_surf` against skewness (figure 14).
+    /// Residuals of `wear = a + b·E + c·E·T_surf` against skewness (figure
+    /// 14); NaN (`null`) where either has no spread.
+    #[serde(deserialize_with = "super::nullable::f64_or_nan")]
     pub residual_vs_skewness: f64,
     pub regression: OlsFit,
 }

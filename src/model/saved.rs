@@ -192,7 +192,25 @@ impl SavedModel {
 
     /// Writes the model atomically.
     pub fn save(&self, path: &Path) -> std::io::Result<()> {
-        crate::atomic::write_bytes(path, self.to_json().as_bytes())
+        crate::atomic::write_bytes(path, self.checked_json()?.as_bytes())
+    }
+
+    /// [`SavedModel::to_json`], refused unless [`SavedModel::load`] would
+    /// read it back: a number a model cannot hold (NaN where `load` wants a
+    /// finite one) is an error now, not a file that nothing reads later.
+    fn checked_json(&self) -> std::io::Result<String> {
+        let text = self.to_json();
+        serde_json::from_str::<SavedModel>(&text)
+            .map_err(|e| e.to_string())
+            .and_then(|back| back.check_shapes())
+            .map_err(|why| {
+                std::io::Error::other(format!(
+                    "the {} model would not read back ({why}); this is a tirewear bug, \
+                     please report it with the KPI table",
+                    self.method()
+                ))
+            })?;
+        Ok(text)
     }
 
     /// Reads a model file, refusing other formats and newer versions.
@@ -385,6 +403,13 @@ fn conformal_scores(network: &NetworkFit) -> Result<(), String> {
         network.validation_rows,
         "one per validation row (model.network.validation_rows)",
     )?;
+    ascending_errors(at, scores)
+}
+
+/// Conformal scores as an interval reads them: finite, not negative and
+/// ascending (it takes the k-th by position).
+fn ascending_errors(at: &str, scores: &[f64]) -> Result<(), String> {
+    finite(at, scores)?;
     if let Some(i) = scores.iter().position(|&v| v < 0.0) {
         return Err(format!("{at}[{i}] is {}, an absolute error", scores[i]));
     }
@@ -457,7 +482,10 @@ pub fn save_all(models: &[SavedModel], dir: &Path) -> std::io::Result<Vec<std::p
         .iter()
         .map(|m| dir.join(format!("{}.json", m.method())))
         .collect();
-    let texts: Vec<String> = models.iter().map(SavedModel::to_json).collect();
+    let texts: Vec<String> = models
+        .iter()
+        .map(SavedModel::checked_json)
+        .collect::<std::io::Result<_>>()?;
     let files: Vec<_> = paths
         .iter()
         .zip(&texts)

@@ -1095,7 +1095,7 @@ pub(super) fn models(inputs: &Inputs) -> Result<Section, ReportError> {
     for (path, m) in &inputs.models {
         let (mut train, mut test, mut csv) = (Vec::new(), Vec::new(), Vec::new());
         // Per split, of the tires with a 95 % prediction interval, how many
-        // hold their measured wear (the regressions; docs/models.md).
+        // hold their measured wear (docs/models.md).
         let mut inside = [Coverage::default(); 2];
         for r in inputs.rows.iter().filter(|r| measured(r)) {
             let Ok((p, interval)) = m.predict_row_within(r, Some(IntervalLevel::P95)) else {
