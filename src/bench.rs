@@ -894,8 +894,9 @@ fn fit_lines(o: &BenchOptions, report: &mut BenchReport) {
 }
 
 /// The network method (`fit --method ffnn`: every width and the retrained
-/// pair) on the demo season's KPI table (the tiny one with `--small`), one
-/// thread and all.
+/// pair, then the refits without each training event for the new-event
+/// intervals) on the demo season's KPI table (the tiny one with
+/// `--small`), one thread and all.
 fn demo_network_lines(o: &BenchOptions, report: &mut BenchReport) -> Result<(), String> {
     use crate::model::fit::{FitSettings, Method, fit_method, split};
     let dir = tempfile::tempdir().map_err(|e| e.to_string())?;

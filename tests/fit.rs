@@ -97,6 +97,7 @@ fn demo_fit_ranks_like_the_paper_and_models_round_trip() {
     }
     damaged_models_are_refused_by_field_or_predict_alike(&models, &out, &rows);
     undefined_numbers_read_back(&rows, dir.path());
+    event_errors_match_the_hat_matrix(&models["physical"], &s);
     changed_bytes_of_a_model_file_are_refused(&models, &out);
 
     // The indicators recomputed from the reloaded model's predictions on the testing events.
@@ -291,6 +292,33 @@ fn predict_writes_each_rows_prediction_and_refuses_an_empty_table(
         inside[1]
     );
     assert!(stdout.contains(&share), "{share} not in {stdout}");
+    // The new-event intervals: each row's prediction ± the ⌈(n + 1)·0.95⌉-th
+    // of its axle's leave-one-event-out errors, their share printed too.
+    let (event_low_col, event_high_col) =
+        (column("new_event_low_pct"), column("new_event_high_pct"));
+    let errors = phys.event_errors.as_ref().unwrap();
+    let mut inside = [0usize; 2];
+    for (line, r) in lines.iter().zip(rows) {
+        let value = |c: usize| -> f64 { line[c].parse().unwrap() };
+        let scores = match r.axle {
+            tirewear::Axle::Front => &errors.front,
+            tirewear::Axle::Rear => &errors.rear,
+        };
+        let half = scores[((scores.len() + 1) as f64 * 0.95).ceil() as usize - 1];
+        let p = value(predicted_col);
+        let (low, high) = (value(event_low_col), value(event_high_col));
+        assert_eq!((low, high), (p - half, p + half), "{line:?}");
+        if r.worn_through_readings == 0.0 && r.wear_mean_pct.is_finite() {
+            inside[0] += usize::from(low <= r.wear_mean_pct && r.wear_mean_pct <= high);
+            inside[1] += 1;
+        }
+    }
+    let share = format!(
+        "95 % new-event intervals: they hold {:.1} % of {} measured wears (",
+        100.0 * inside[0] as f64 / inside[1] as f64,
+        inside[1]
+    );
+    assert!(stdout.contains(&share), "{share} not in {stdout}");
     // A model saved before the intervals (no `xtx_inverse`; without its
     // checksum, as such files were): predictions alike, no bounds, and why.
     let mut old: serde_json::Value =
@@ -400,7 +428,8 @@ fn predict_writes_each_rows_prediction_and_refuses_an_empty_table(
 /// by `fit` and then refused by `predict` as "invalid type: null, expected
 /// f64". It now reads back and predicts as the fitted model. A NaN where a
 /// prediction needs a number is refused when saving, not left for
-/// `predict` to find.
+/// `predict` to find. And a fit on one training event has no new-event
+/// intervals, and says so.
 fn undefined_numbers_read_back(rows: &[KpiRow], dir: &std::path::Path) {
     let first = rows[0].track.clone();
     let mut count: HashMap<(String, tirewear::Axle), usize> = HashMap::new();
@@ -463,6 +492,115 @@ fn undefined_numbers_read_back(rows: &[KpiRow], dir: &std::path::Path) {
         "{e}"
     );
     assert!(!dir.join("broken").join("physical.json").exists());
+
+    // One training event: nothing to leave out.
+    let mut events: Vec<String> = rows.iter().map(|r| r.event.clone()).collect();
+    events.sort();
+    events.dedup();
+    let s = split(rows, Some(&events[1..])).unwrap();
+    let (model, notes) = fit_method(Method::Pca, &s, &FitSettings::default()).unwrap();
+    assert!(model.event_errors.is_none());
+    assert!(
+        notes
+            .iter()
+            .any(|n| n.starts_with("no new-event intervals: one training event")),
+        "{notes:?}"
+    );
+}
+
+/// The physical model's leave-one-event-out errors by a second route:
+/// for least squares, leaving out a group g turns its residuals e_g into
+/// (I − H_gg)⁻¹ e_g, with H_gg = X_g (XᵀX)⁻¹ X_gᵀ the hat matrix's block of
+/// the full fit (no refit; the physical method's regression inputs are
+/// fixed, so its refits are this regression without the event). Each
+/// axle's errors equal the refits' to 1e-7 % of the tread (the refits
+/// solve by QR, this route through the saved (XᵀX)⁻¹), and the shares of
+/// the model's indicator lines are the tires inside p ± the conformal
+/// width of those errors.
+fn event_errors_match_the_hat_matrix(model: &SavedModel, s: &tirewear::model::fit::Split) {
+    use faer::linalg::solvers::Solve;
+    let ModelBody::Physical { front, rear } = &model.model else {
+        panic!("physical body")
+    };
+    let errors = model.event_errors.as_ref().expect("event errors");
+    assert_eq!(errors.events, s.train_events);
+    for (a, want) in [(front, &errors.front), (rear, &errors.rear)] {
+        let ols = &a.regression;
+        let inv = ols.xtx_inverse.as_ref().unwrap();
+        let k1 = ols.coef.len();
+        let x = |r: &KpiRow| -> Vec<f64> {
+            std::iter::once(1.0)
+                .chain(ols.inputs.iter().map(|c| r.number(c).unwrap()))
+                .collect()
+        };
+        let mut got = Vec::new();
+        for e in &s.train_events {
+            let g: Vec<Vec<f64>> = s
+                .train
+                .iter()
+                .filter(|r| r.axle == a.axle && r.event == *e && r.worn_through_readings <= 0.0)
+                .map(|r| {
+                    let mut v = x(r);
+                    v.push(r.wear_mean_pct);
+                    v
+                })
+                .collect();
+            let n = g.len();
+            let hat = |i: usize, j: usize| -> f64 {
+                (0..k1)
+                    .map(|p| g[i][p] * (0..k1).map(|q| inv[p * k1 + q] * g[j][q]).sum::<f64>())
+                    .sum()
+            };
+            let i_minus_h =
+                faer::Mat::from_fn(n, n, |i, j| f64::from(u8::from(i == j)) - hat(i, j));
+            // y − [1, x]·β.
+            let residual = faer::Mat::from_fn(n, 1, |i, _| {
+                g[i][k1]
+                    - g[i][..k1]
+                        .iter()
+                        .zip(&ols.coef)
+                        .map(|(x, b)| x * b)
+                        .sum::<f64>()
+            });
+            let left_out = i_minus_h.partial_piv_lu().solve(&residual);
+            got.extend((0..n).map(|i| left_out[(i, 0)].abs()));
+        }
+        got.sort_by(f64::total_cmp);
+        assert_eq!(got.len(), want.len(), "{}", a.axle);
+        for (g, w) in got.iter().zip(want.iter()) {
+            assert!(
+                (g - w).abs() < 1e-7,
+                "{}: {g} by the hat matrix, {w} refitted",
+                a.axle
+            );
+        }
+        // The testing line's share: p ± the ⌈(n + 1)·0.95⌉-th error.
+        let half = want[((want.len() + 1) as f64 * 0.95).ceil() as usize - 1];
+        let tires: Vec<&KpiRow> = s
+            .test
+            .iter()
+            .copied()
+            .filter(|r| r.axle == a.axle && r.worn_through_readings <= 0.0)
+            .collect();
+        let inside = tires
+            .iter()
+            .filter(|r| (model.predict_row(r).unwrap() - r.wear_mean_pct).abs() <= half)
+            .count();
+        let label = format!(
+            "{}—Testing",
+            if a.axle == tirewear::Axle::Front {
+                "Front"
+            } else {
+                "Rear"
+            }
+        );
+        let line = model.indicators.iter().find(|i| i.label == label).unwrap();
+        assert_eq!(
+            line.inside_95_event_interval,
+            Some(inside as f64 / tires.len() as f64),
+            "{label}"
+        );
+    }
 }
 
 /// JSON pointers of every non-empty array in `v`.

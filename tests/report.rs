@@ -132,6 +132,17 @@ fn the_demo_report_has_every_section_its_figures_and_no_external_url() {
         share("Testing")
     );
     assert!(html.contains(&text), "{text}");
+    // And inside the new-event intervals (from the fit's leave-one-event-out refits).
+    let share = |label: &str| {
+        let i = pca.indicators.iter().find(|i| i.label == label).unwrap();
+        100.0 * i.inside_95_event_interval.unwrap()
+    };
+    let text = format!(
+        "their event left out) hold {:.1} % and {:.1} %.",
+        share("Training"),
+        share("Testing")
+    );
+    assert!(html.contains(&text), "{text}");
     // The per-track line of one track and axle against the closed form of
     // least squares (slope = Σ(x−x̄)(y−ȳ) / Σ(x−x̄)²) on the rows.
     let track = rows[0].track.clone();

@@ -13,13 +13,16 @@ pub(crate) struct PredictArgs {
     kpis: PathBuf,
     /// Predictions to write (CSV: event, track, car, run, wheel, axle,
     /// compound, measured and predicted mean wear in %, the prediction
-    /// interval's bounds in %, a note where a row has no prediction).
+    /// interval's and the new-event interval's bounds in %, a note where a
+    /// row has no prediction).
     #[arg(long, default_value = "predictions.csv")]
     out: PathBuf,
-    /// Coverage of the prediction interval written beside each prediction:
-    /// the PCA and physical models' regressions' interval for a new tire,
-    /// the network's split-conformal one from its validation rows
-    /// (docs/models.md). Between 0 and 1.
+    /// Coverage of the two intervals written beside each prediction: the
+    /// model's own for a new tire at the training events (the PCA and
+    /// physical models' regression interval, the network's split-conformal
+    /// one from its validation rows) and the one for a tire at a new event
+    /// (split conformal on the training tires' errors with their event left
+    /// out of the fit): docs/models.md. Between 0 and 1.
     #[arg(long, default_value = "0.95", value_name = "LEVEL", value_parser = parse_level)]
     interval: IntervalLevel,
 }
@@ -68,6 +71,9 @@ pub(crate) fn run_predict(
         /// The prediction interval's bounds; NaN without one.
         predicted_low_pct: f64,
         predicted_high_pct: f64,
+        /// The new-event interval's bounds (docs/models.md); NaN without one.
+        new_event_low_pct: f64,
+        new_event_high_pct: f64,
         note: String,
         #[serde(skip)]
         worn_through: bool,
@@ -78,6 +84,9 @@ pub(crate) fn run_predict(
             Ok((p, interval)) => (p, interval.unwrap_or((f64::NAN, f64::NAN)), String::new()),
             Err(e) => (f64::NAN, (f64::NAN, f64::NAN), e.to_string()),
         };
+        let (event_low, event_high) = m
+            .event_interval_around(p, r.axle, level)
+            .unwrap_or((f64::NAN, f64::NAN));
         out_rows.push(Prediction {
             event: &r.event,
             track: &r.track,
@@ -90,6 +99,8 @@ pub(crate) fn run_predict(
             predicted_wear_pct: p,
             predicted_low_pct: low,
             predicted_high_pct: high,
+            new_event_low_pct: event_low,
+            new_event_high_pct: event_high,
             note,
             worn_through: r.worn_through_readings > 0.0,
         });
@@ -131,71 +142,86 @@ pub(crate) fn run_predict(
             m.method()
         ),
     }
-    let inside = |events: Option<&[String]>| {
+    // Of the measured, uncensored wears with an interval, how many it holds.
+    let inside = |events: Option<&[String]>, bounds: fn(&Prediction) -> (f64, f64)| {
         Coverage::of(
             out_rows
                 .iter()
                 .filter(|p| events.is_none_or(|e| e.iter().any(|e| *e == p.event)))
-                .filter(|p| {
-                    !p.worn_through
-                        && p.measured_wear_pct.is_finite()
-                        && p.predicted_low_pct.is_finite()
-                })
+                .filter(|p| !p.worn_through && p.measured_wear_pct.is_finite())
                 .map(|p| {
-                    let interval = (p.predicted_low_pct, p.predicted_high_pct);
-                    (p.measured_wear_pct, Some(interval))
+                    (
+                        p.measured_wear_pct,
+                        Some(bounds(p)).filter(|b| b.0.is_finite()),
+                    )
                 }),
         )
     };
-    println!(
-        "{}",
-        interval_line(
-            &m,
+    type Bounds = fn(&Prediction) -> (f64, f64);
+    let own: Bounds = |p| (p.predicted_low_pct, p.predicted_high_pct);
+    let new_event: Bounds = |p| (p.new_event_low_pct, p.new_event_high_pct);
+    for (what, why, bounds) in [
+        ("prediction intervals", m.why_no_intervals(level), own),
+        (
+            "new-event intervals",
+            m.why_no_event_intervals(level),
+            new_event,
+        ),
+    ] {
+        let line = IntervalLine {
+            what,
             level,
-            inside(None),
-            inside(Some(&m.training_events)),
-            inside(Some(&m.testing_events))
-        )
-    );
+            all: inside(None, bounds),
+            training: inside(Some(&m.training_events), bounds),
+            testing: inside(Some(&m.testing_events), bounds),
+        };
+        println!("{}", line.render(why));
+    }
     Ok(())
 }
 
-/// What `predict` says of its intervals: why there are none, or how many
-/// measured wears they hold (all rows, then the model's training and
-/// testing events), the check that they are as wide as they claim.
-fn interval_line(
-    m: &SavedModel,
+/// One kind of interval `predict` wrote and how many measured wears it
+/// holds: all rows, then the model's training and testing events.
+struct IntervalLine {
+    /// "prediction intervals" or "new-event intervals".
+    what: &'static str,
     level: IntervalLevel,
     all: Coverage,
     training: Coverage,
     testing: Coverage,
-) -> String {
-    // 0.9 is 90.00000000000001 %.
-    let pct = (1e6 * level.get()).round() / 1e4;
-    if let Some(why) = m.why_no_intervals(level) {
-        return format!("no {pct} % prediction intervals: {why}");
-    }
-    if all.of == 0 {
-        return format!(
-            "{pct} % prediction intervals written; no measured wear to check them against"
-        );
-    }
-    let part = |name: &str, c: Coverage| (c.of > 0).then(|| format!("{name} {c}"));
-    let parts: Vec<String> = [
-        part("training events", training),
-        part("testing events", testing),
-    ]
-    .into_iter()
-    .flatten()
-    .collect();
-    format!(
-        "{pct} % prediction intervals: they hold {all} measured wears{}",
-        if parts.is_empty() {
-            String::new()
-        } else {
-            format!(" ({})", parts.join(", "))
+}
+
+impl IntervalLine {
+    /// What `predict` says of them: why there are none (`why`), or the
+    /// check that they are as wide as they claim.
+    fn render(&self, why: Option<String>) -> String {
+        let what = self.what;
+        // 0.9 is 90.00000000000001 %.
+        let pct = (1e6 * self.level.get()).round() / 1e4;
+        if let Some(why) = why {
+            return format!("no {pct} % {what}: {why}");
         }
-    )
+        if self.all.of == 0 {
+            return format!("{pct} % {what} written; no measured wear to check them against");
+        }
+        let part = |name: &str, c: Coverage| (c.of > 0).then(|| format!("{name} {c}"));
+        let parts: Vec<String> = [
+            part("training events", self.training),
+            part("testing events", self.testing),
+        ]
+        .into_iter()
+        .flatten()
+        .collect();
+        format!(
+            "{pct} % {what}: they hold {} measured wears{}",
+            self.all,
+            if parts.is_empty() {
+                String::new()
+            } else {
+                format!(" ({})", parts.join(", "))
+            }
+        )
+    }
 }
 
 /// Runs `tirewear predict`.

@@ -8,7 +8,9 @@ use super::network::NetworkSettings;
 use super::ols::OlsSettings;
 use super::pca::PcaSettings;
 use super::physical::{PHYSICAL_INPUTS, analyse_axle};
-use super::saved::{Feature, Indicators, MODEL_FORMAT, MODEL_VERSION, ModelBody, SavedModel};
+use super::saved::{
+    EventErrors, Feature, Indicators, MODEL_FORMAT, MODEL_VERSION, ModelBody, SavedModel,
+};
 use super::{Dataset, Fit, ModelError};
 use crate::Axle;
 use crate::kpi::KpiRow;
@@ -287,17 +289,152 @@ fn indicators(
             label: format!("{prefix}{label}"),
             metrics: metrics(&y, &p, k)?,
             inside_95_interval: inside.share(),
+            inside_95_event_interval: None,
         });
     }
     Ok(out)
 }
 
-/// Fits one method on the split.
+/// Fits one method on the split, then again without each training event
+/// in turn for its new-event intervals ([`event_errors`]).
 pub fn fit_method(
     method: Method,
     s: &Split,
     settings: &FitSettings,
 ) -> Result<(SavedModel, Vec<String>), ModelError> {
+    let Fitted {
+        mut model,
+        mut notes,
+        train,
+        test,
+    } = fit_core(method, s, settings)?;
+    model.event_errors = event_errors(method, s, settings, &model, &mut notes);
+    if model.event_errors.is_some() {
+        let mut lines = std::mem::take(&mut model.indicators);
+        for line in &mut lines {
+            let rows = if line.label.ends_with("Testing") {
+                &test
+            } else {
+                &train
+            };
+            let axle = [("Front—", Axle::Front), ("Rear—", Axle::Rear)]
+                .into_iter()
+                .find(|(prefix, _)| line.label.starts_with(prefix))
+                .map(|(_, a)| a);
+            let inside = Coverage::of(
+                rows.iter()
+                    .filter(|r| axle.is_none_or(|a| r.axle == a))
+                    .filter_map(|r| {
+                        let p = model.predict_row(r).ok()?;
+                        Some((
+                            r.wear_mean_pct,
+                            model.event_interval_around(p, r.axle, IntervalLevel::P95),
+                        ))
+                    }),
+            );
+            line.inside_95_event_interval = inside.share();
+        }
+        model.indicators = lines;
+    }
+    Ok((model, notes))
+}
+
+/// The training tires' errors when their event is left out of the fit,
+/// |y − ŷ₋ₑ| in %: the method fitted again on the other training events
+/// (the network at the width the full fit chose, its input selection and
+/// training redone; PCA's selection and components and the physical
+/// method's lines redone) predicts the left-out event's measured tires.
+/// The scores of the split-conformal new-event interval
+/// (`SavedModel::event_interval_around`): a new race is a new event, whose
+/// shift from the training events the model's own interval does not see.
+/// None with one training event; an event whose refit fails is named in
+/// the notes and left out.
+fn event_errors(
+    method: Method,
+    s: &Split,
+    settings: &FitSettings,
+    model: &SavedModel,
+    notes: &mut Vec<String>,
+) -> Option<EventErrors> {
+    use rayon::prelude::*;
+    if s.train_events.len() < 2 {
+        notes.push(
+            "no new-event intervals: one training event, none to leave out (docs/models.md)".into(),
+        );
+        return None;
+    }
+    let mut again = settings.clone();
+    again.progress = false;
+    if let ModelBody::Ffnn { network, .. } = &model.model {
+        again.network.hidden2_candidates = vec![network.net.hidden2];
+    }
+    let per_event: Vec<Result<Vec<(Axle, f64)>, String>> = s
+        .train_events
+        .par_iter()
+        .map(|e| {
+            let (test, train): (Vec<&KpiRow>, Vec<&KpiRow>) =
+                s.train.iter().copied().partition(|r| r.event == *e);
+            let sub = Split {
+                train,
+                test,
+                test_events: vec![e.clone()],
+                train_events: s.train_events.iter().filter(|x| *x != e).cloned().collect(),
+            };
+            let m = fit_core(method, &sub, &again)
+                .map_err(|err| format!("{e}: {err}"))?
+                .model;
+            Ok(sub
+                .test
+                .iter()
+                .filter(|r| r.worn_through_readings <= 0.0 && r.wear_mean_pct.is_finite())
+                .filter_map(|r| {
+                    let p = m.predict_row(r).ok().filter(|p| p.is_finite())?;
+                    Some((r.axle, (r.wear_mean_pct - p).abs()))
+                })
+                .collect())
+        })
+        .collect();
+    let mut errors = EventErrors {
+        events: Vec::new(),
+        front: Vec::new(),
+        rear: Vec::new(),
+    };
+    for (e, result) in s.train_events.iter().zip(per_event) {
+        match result {
+            Ok(scores) => {
+                errors.events.push(e.clone());
+                for (axle, v) in scores {
+                    match axle {
+                        Axle::Front => errors.front.push(v),
+                        Axle::Rear => errors.rear.push(v),
+                    }
+                }
+            }
+            Err(why) => notes.push(format!(
+                "new-event intervals: event {why}; its tires are not among the scores"
+            )),
+        }
+    }
+    errors.front.sort_by(f64::total_cmp);
+    errors.rear.sort_by(f64::total_cmp);
+    (errors.events.len() >= 2).then_some(errors)
+}
+
+/// A method fitted on a split, with what its indicators were computed on.
+struct Fitted<'a> {
+    model: SavedModel,
+    notes: Vec<String>,
+    /// The usable training and testing rows ([`usable`]).
+    train: Vec<&'a KpiRow>,
+    test: Vec<&'a KpiRow>,
+}
+
+/// Fits one method on the split.
+fn fit_core<'a>(
+    method: Method,
+    s: &Split<'a>,
+    settings: &FitSettings,
+) -> Result<Fitted<'a>, ModelError> {
     settings.check()?;
     // A column no training row has (the road KPIs of a season without road
     // profiles) would leave out every row: it is left out instead.
@@ -453,8 +590,14 @@ pub fn fit_method(
         testing_events: s.test_events.clone(),
         indicators: table,
         model: body,
+        event_errors: None,
     };
-    Ok((model, notes))
+    Ok(Fitted {
+        model,
+        notes,
+        train,
+        test,
+    })
 }
 
 fn method_title(m: &SavedModel) -> &'static str {
@@ -470,24 +613,36 @@ fn r2_adj_cell(r2_adj: Option<f64>) -> String {
     r2_adj.map_or_else(|| "–".to_string(), |v| format!("{v:.4}"))
 }
 
-/// The column of the share of tires inside their 95 % prediction interval,
-/// where one of `lines` has it: its header, or a line's cell ("–" without).
-fn interval_header(lines: &[&Indicators]) -> &'static str {
-    if lines.iter().any(|i| i.inside_95_interval.is_some()) {
-        "  in 95 % PI"
-    } else {
-        ""
-    }
+/// A share an indicator line may carry.
+type IndicatorShare = fn(&Indicators) -> Option<f64>;
+
+/// The columns of the shares of tires inside their 95 % intervals, each
+/// where one of `lines` has it: the model's own prediction interval ("in
+/// 95 % PI") and the new-event interval ("new-event PI").
+const INTERVAL_COLUMNS: [(&str, IndicatorShare); 2] = [
+    ("  in 95 % PI", |i| i.inside_95_interval),
+    ("  new-event PI", |i| i.inside_95_event_interval),
+];
+
+fn interval_header(lines: &[&Indicators]) -> String {
+    INTERVAL_COLUMNS
+        .iter()
+        .filter(|(_, share)| lines.iter().any(|i| share(i).is_some()))
+        .map(|(header, _)| *header)
+        .collect()
 }
 
+/// A line's cells under [`interval_header`], right-aligned to it ("–"
+/// where the line has no share).
 fn interval_cell(lines: &[&Indicators], i: &Indicators) -> String {
-    if interval_header(lines).is_empty() {
-        return String::new();
-    }
-    match i.inside_95_interval {
-        Some(v) => format!(" {:>10.1} %", 100.0 * v),
-        None => format!(" {:>12}", "–"),
-    }
+    INTERVAL_COLUMNS
+        .iter()
+        .filter(|(_, share)| lines.iter().any(|i| share(i).is_some()))
+        .map(|(header, share)| {
+            let cell = share(i).map_or("–".into(), |v| format!("{:.1} %", 100.0 * v));
+            format!("{cell:>w$}", w = header.chars().count())
+        })
+        .collect()
 }
 
 /// The performance table of a model, like the paper's tables 8, 9 and 11,

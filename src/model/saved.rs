@@ -44,6 +44,32 @@ pub struct Indicators {
     /// before 2026-12-02 (the network's before 2026-12-03).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub inside_95_interval: Option<f64>,
+    /// The same for the 95 % new-event interval
+    /// ([`SavedModel::event_interval_around`]). None in files before
+    /// 2026-12-03 and for a model without event errors.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub inside_95_event_interval: Option<f64>,
+}
+
+/// The training tires' errors when their event was left out of the fit
+/// (`fit::event_errors`): |y − ŷ₋ₑ| in % of the tread, per axle,
+/// ascending. The calibration scores of the new-event interval.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct EventErrors {
+    /// The training events left out one at a time (those whose refit
+    /// succeeded).
+    pub events: Vec<String>,
+    pub front: Vec<f64>,
+    pub rear: Vec<f64>,
+}
+
+impl EventErrors {
+    fn of(&self, axle: crate::Axle) -> &[f64] {
+        match axle {
+            crate::Axle::Front => &self.front,
+            crate::Axle::Rear => &self.rear,
+        }
+    }
 }
 
 /// What was fitted, by method.
@@ -80,6 +106,10 @@ pub struct SavedModel {
     pub testing_events: Vec<String>,
     pub indicators: Vec<Indicators>,
     pub model: ModelBody,
+    /// The new-event interval's scores; None in files before 2026-12-03
+    /// and for a fit on one training event.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub event_errors: Option<EventErrors>,
 }
 
 impl SavedModel {
@@ -149,6 +179,47 @@ impl SavedModel {
             )));
         }
         Ok((p, interval))
+    }
+
+    /// The `level` new-event interval around a prediction `p` (%) of a tire
+    /// on `axle`: split conformal, p ± the ⌈(n + 1)·level⌉-th smallest of
+    /// the n training tires' leave-one-event-out errors on that axle
+    /// ([`EventErrors`]). Where the model's own interval is for a new tire
+    /// at the training events, this one is for a tire at an event the fit
+    /// did not see, the shift of a new track included. None without the
+    /// scores or with too few for the level.
+    pub fn event_interval_around(
+        &self,
+        p: f64,
+        axle: crate::Axle,
+        level: IntervalLevel,
+    ) -> Option<(f64, f64)> {
+        let half = conformal_half_width(self.event_errors.as_ref()?.of(axle), level)?;
+        (half.is_finite() && p.is_finite()).then_some((p - half, p + half))
+    }
+
+    /// Why the model gives no `level` new-event intervals (on some axle),
+    /// or None when it does.
+    pub fn why_no_event_intervals(&self, level: IntervalLevel) -> Option<String> {
+        let Some(errors) = &self.event_errors else {
+            return Some(
+                "the model was saved before tirewear kept its leave-one-event-out errors, or \
+                 was fitted on one training event"
+                    .into(),
+            );
+        };
+        let needed = conformal_rows_needed(level);
+        let short: Vec<String> = [crate::Axle::Front, crate::Axle::Rear]
+            .into_iter()
+            .filter(|&a| conformal_half_width(errors.of(a), level).is_none())
+            .map(|a| format!("{} {} of {needed}", a, errors.of(a).len()))
+            .collect();
+        (!short.is_empty()).then(|| {
+            format!(
+                "too few training tires' errors for this level ({}; a lower --interval)",
+                short.join(", ")
+            )
+        })
     }
 
     /// Why the model gives no `level` prediction intervals, or None when it
@@ -255,6 +326,10 @@ impl SavedModel {
     /// against the features and the layer sizes, its numbers finite and the
     /// standard deviations positive. The first problem, by its field.
     fn check_shapes(&self) -> Result<(), String> {
+        if let Some(errors) = &self.event_errors {
+            ascending_errors("event_errors.front", &errors.front)?;
+            ascending_errors("event_errors.rear", &errors.rear)?;
+        }
         let d = self.features.len();
         match &self.model {
             ModelBody::Ffnn { network, .. } => {

@@ -1095,8 +1095,10 @@ pub(super) fn models(inputs: &Inputs) -> Result<Section, ReportError> {
     for (path, m) in &inputs.models {
         let (mut train, mut test, mut csv) = (Vec::new(), Vec::new(), Vec::new());
         // Per split, of the tires with a 95 % prediction interval, how many
-        // hold their measured wear (docs/models.md).
+        // hold their measured wear, and the same for the new-event interval
+        // (docs/models.md).
         let mut inside = [Coverage::default(); 2];
+        let mut inside_event = [Coverage::default(); 2];
         for r in inputs.rows.iter().filter(|r| measured(r)) {
             let Ok((p, interval)) = m.predict_row_within(r, Some(IntervalLevel::P95)) else {
                 continue;
@@ -1116,7 +1118,12 @@ pub(super) fn models(inputs: &Inputs) -> Result<Section, ReportError> {
             if let Some((low, high)) = interval {
                 inside[split].add(r.wear_mean_pct, low, high);
             }
+            let event = m.event_interval_around(p, r.axle, IntervalLevel::P95);
+            if let Some((low, high)) = event {
+                inside_event[split].add(r.wear_mean_pct, low, high);
+            }
             let (low, high) = interval.unwrap_or((f64::NAN, f64::NAN));
+            let (event_low, event_high) = event.unwrap_or((f64::NAN, f64::NAN));
             csv.push(vec![
                 r.run.clone(),
                 r.wheel.to_string(),
@@ -1125,13 +1132,15 @@ pub(super) fn models(inputs: &Inputs) -> Result<Section, ReportError> {
                 num(p, 4),
                 num(low, 4),
                 num(high, 4),
+                num(event_low, 4),
+                num(event_high, 4),
             ]);
         }
         let share = |c: Coverage| {
             c.share()
                 .map_or("–".into(), |s| format!("{} %", num(100.0 * s, 1)))
         };
-        let intervals = if inside.iter().any(|c| c.of > 0) {
+        let mut intervals = if inside.iter().any(|c| c.of > 0) {
             format!(
                 " The 95 % prediction intervals hold {} of the training and {} of the testing \
 tires' measured wear.",
@@ -1141,6 +1150,14 @@ tires' measured wear.",
         } else {
             String::new()
         };
+        if inside_event.iter().any(|c| c.of > 0) {
+            intervals += &format!(
+                " The 95 % intervals for a new event (from the training tires' errors with \
+their event left out) hold {} and {}.",
+                share(inside_event[0]),
+                share(inside_event[1])
+            );
+        }
         let (r2_train, rmse_train) = fit_quality(&train);
         let (r2_test, rmse_test) = fit_quality(&test);
         let all = train.iter().chain(&test);
@@ -1203,6 +1220,8 @@ line. Training R² {} RMSE {} %, testing R² {} RMSE {} %.{intervals}",
                     "predicted_pct",
                     "interval_95_low_pct",
                     "interval_95_high_pct",
+                    "new_event_95_low_pct",
+                    "new_event_95_high_pct",
                 ],
                 &csv,
             ),
@@ -1220,6 +1239,7 @@ line. Training R² {} RMSE {} %, testing R² {} RMSE {} %.{intervals}",
             num(r2_test, 3),
             num(rmse_test, 2),
             share(inside[1]),
+            share(inside_event[1]),
         ]);
     }
     if !summary.is_empty() {
@@ -1233,6 +1253,7 @@ line. Training R² {} RMSE {} %, testing R² {} RMSE {} %.{intervals}",
                 "testing R²",
                 "testing RMSE (%)",
                 "testing in 95 % PI",
+                "testing in 95 % new-event PI",
             ],
             &summary,
         );
