@@ -98,6 +98,14 @@ fn demo_fit_ranks_like_the_paper_and_models_round_trip() {
     damaged_models_are_refused_by_field_or_predict_alike(&models, &out, &rows);
     undefined_numbers_read_back(&rows, dir.path());
     event_errors_match_the_hat_matrix(&models["physical"], &s);
+    // Nine training events: eight folds, one of two events.
+    let mut events: Vec<String> = rows.iter().map(|r| r.event.clone()).collect();
+    events.sort();
+    events.dedup();
+    let nine = split(&rows, Some(&events[..1])).unwrap();
+    assert_eq!(nine.train_events.len(), 9);
+    let (model, _) = fit_method(Method::Physical, &nine, &settings).unwrap();
+    event_errors_match_the_hat_matrix(&model, &nine);
     changed_bytes_of_a_model_file_are_refused(&models, &out);
 
     // The indicators recomputed from the reloaded model's predictions on the testing events.
@@ -395,6 +403,19 @@ fn predict_writes_each_rows_prediction_and_refuses_an_empty_table(
         "{run:?}"
     );
 
+    // `fit --method` takes a list: those two models, no network.
+    let two = dir.join("two-models");
+    let run = std::process::Command::new(env!("CARGO_BIN_EXE_tirewear"))
+        .args(["--quiet", "fit"])
+        .arg(dir.join("kpis.parquet"))
+        .args(["--method", "physical,pca", "--out"])
+        .arg(&two)
+        .output()
+        .unwrap();
+    assert_eq!(run.status.code(), Some(0), "{run:?}");
+    assert!(two.join("physical.json").is_file() && two.join("pca.json").is_file());
+    assert!(!two.join("ffnn.json").exists());
+
     // The same table without its rows: same schema and units.
     let batch = {
         let file = std::fs::File::open(dir.join("kpis.parquet")).unwrap();
@@ -512,7 +533,7 @@ fn undefined_numbers_read_back(rows: &[KpiRow], dir: &std::path::Path) {
 /// for least squares, leaving out a group g turns its residuals e_g into
 /// (I − H_gg)⁻¹ e_g, with H_gg = X_g (XᵀX)⁻¹ X_gᵀ the hat matrix's block of
 /// the full fit (no refit; the physical method's regression inputs are
-/// fixed, so its refits are this regression without the event). Each
+/// fixed, so its refits are this regression without the event or fold). Each
 /// axle's errors equal the refits' to 1e-7 % of the tread (the refits
 /// solve by QR, this route through the saved (XᵀX)⁻¹), and the shares of
 /// the model's indicator lines are the tires inside p ± the conformal
@@ -524,6 +545,16 @@ fn event_errors_match_the_hat_matrix(model: &SavedModel, s: &tirewear::model::fi
     };
     let errors = model.event_errors.as_ref().expect("event errors");
     assert_eq!(errors.events, s.train_events);
+    // Each event its own fold up to MAX_EVENT_FOLDS; beyond, the sorted
+    // events dealt round-robin into that many.
+    let k = s
+        .train_events
+        .len()
+        .min(tirewear::model::fit::MAX_EVENT_FOLDS);
+    assert_eq!(errors.folds, k);
+    let folds: Vec<Vec<&String>> = (0..k)
+        .map(|f| s.train_events.iter().skip(f).step_by(k).collect())
+        .collect();
     for (a, want) in [(front, &errors.front), (rear, &errors.rear)] {
         let ols = &a.regression;
         let inv = ols.xtx_inverse.as_ref().unwrap();
@@ -534,11 +565,13 @@ fn event_errors_match_the_hat_matrix(model: &SavedModel, s: &tirewear::model::fi
                 .collect()
         };
         let mut got = Vec::new();
-        for e in &s.train_events {
+        for fold in &folds {
             let g: Vec<Vec<f64>> = s
                 .train
                 .iter()
-                .filter(|r| r.axle == a.axle && r.event == *e && r.worn_through_readings <= 0.0)
+                .filter(|r| {
+                    r.axle == a.axle && fold.contains(&&r.event) && r.worn_through_readings <= 0.0
+                })
                 .map(|r| {
                     let mut v = x(r);
                     v.push(r.wear_mean_pct);

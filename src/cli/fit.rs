@@ -9,9 +9,9 @@ use tirewear::model::fit::{self, FitSettings, Method};
 pub(crate) struct FitArgs {
     /// KPI database (Parquet, as written by `tirewear extract`).
     kpis: PathBuf,
-    /// Method(s) to fit.
-    #[arg(long, value_enum, default_value = "all")]
-    method: MethodArg,
+    /// Method(s) to fit, comma-separated (`--method physical,pca`).
+    #[arg(long, value_enum, value_delimiter = ',', default_value = "all")]
+    method: Vec<MethodArg>,
     /// Testing events (comma-separated event ids), never seen in training.
     /// Default: every third event in event-id order.
     #[arg(long, value_delimiter = ',')]
@@ -177,12 +177,18 @@ fn left_out_lines(previous: Option<&[String]>, notes: &[String]) -> Vec<String> 
 
 /// Runs `tirewear fit`; false when some methods fitted and others did not.
 pub(crate) fn run(a: FitArgs, progress: bool) -> Result<bool> {
-    let methods = match a.method {
-        MethodArg::Ffnn => vec![Method::Ffnn],
-        MethodArg::Pca => vec![Method::Pca],
-        MethodArg::Physical => vec![Method::Physical],
-        MethodArg::All => Method::ALL.to_vec(),
-    };
+    // In the usual order (network, PCA, physical), each once.
+    let methods: Vec<Method> = Method::ALL
+        .into_iter()
+        .filter(|&m| {
+            a.method.iter().any(|&arg| match arg {
+                MethodArg::Ffnn => m == Method::Ffnn,
+                MethodArg::Pca => m == Method::Pca,
+                MethodArg::Physical => m == Method::Physical,
+                MethodArg::All => true,
+            })
+        })
+        .collect();
     let settings = FitSettings {
         test_events: a.test_events,
         network: tirewear::model::network::NetworkSettings {

@@ -339,16 +339,22 @@ pub fn fit_method(
     Ok((model, notes))
 }
 
+/// Most refits the new-event errors take: a season's training events are
+/// grouped into this many folds beyond it (a network refit at season scale
+/// costs about a second per training on 2 cores).
+pub const MAX_EVENT_FOLDS: usize = 8;
+
 /// The training tires' errors when their event is left out of the fit,
-/// |y − ŷ₋ₑ| in %: the method fitted again on the other training events
-/// (the network at the width the full fit chose, its input selection and
-/// training redone; PCA's selection and components and the physical
-/// method's lines redone) predicts the left-out event's measured tires.
-/// The scores of the split-conformal new-event interval
-/// (`SavedModel::event_interval_around`): a new race is a new event, whose
-/// shift from the training events the model's own interval does not see.
-/// None with one training event; an event whose refit fails is named in
-/// the notes and left out.
+/// |y − ŷ₋ₑ| in %: the method fitted again without the event (the network
+/// at the width the full fit chose, its input selection and training
+/// redone; PCA's selection and components and the physical method's lines
+/// redone) predicts the left-out event's measured tires. With more than
+/// [`MAX_EVENT_FOLDS`] training events, they are left out in that many
+/// folds (the sorted events dealt round-robin). The scores of the
+/// split-conformal new-event interval (`SavedModel::event_interval_around`):
+/// a new race is a new event, whose shift from the training events the
+/// model's own interval does not see. None with one training event; a fold
+/// whose refit fails is named in the notes and left out.
 fn event_errors(
     method: Method,
     s: &Split,
@@ -368,20 +374,40 @@ fn event_errors(
     if let ModelBody::Ffnn { network, .. } = &model.model {
         again.network.hidden2_candidates = vec![network.net.hidden2];
     }
-    let per_event: Vec<Result<Vec<(Axle, f64)>, String>> = s
-        .train_events
+    let k = s.train_events.len().min(MAX_EVENT_FOLDS);
+    let mut events = s.train_events.clone();
+    events.sort();
+    let folds: Vec<Vec<String>> = (0..k)
+        .map(|f| events.iter().skip(f).step_by(k).cloned().collect())
+        .collect();
+    // A season's network takes as long again as its width search: a bar.
+    let bar = crate::progress::bar(
+        settings.progress,
+        k as u64,
+        "refitting without each training event",
+    );
+    let per_fold: Vec<Result<Vec<(Axle, f64)>, String>> = folds
         .par_iter()
-        .map(|e| {
-            let (test, train): (Vec<&KpiRow>, Vec<&KpiRow>) =
-                s.train.iter().copied().partition(|r| r.event == *e);
+        .map(|fold| {
+            let (test, train): (Vec<&KpiRow>, Vec<&KpiRow>) = s
+                .train
+                .iter()
+                .copied()
+                .partition(|r| fold.contains(&r.event));
             let sub = Split {
                 train,
                 test,
-                test_events: vec![e.clone()],
-                train_events: s.train_events.iter().filter(|x| *x != e).cloned().collect(),
+                test_events: fold.clone(),
+                train_events: events
+                    .iter()
+                    .filter(|e| !fold.contains(e))
+                    .cloned()
+                    .collect(),
             };
-            let m = fit_core(method, &sub, &again)
-                .map_err(|err| format!("{e}: {err}"))?
+            let fitted = fit_core(method, &sub, &again);
+            bar.inc(1);
+            let m = fitted
+                .map_err(|err| format!("{}: {err}", fold.join(", ")))?
                 .model;
             Ok(sub
                 .test
@@ -394,15 +420,18 @@ fn event_errors(
                 .collect())
         })
         .collect();
+    bar.finish_and_clear();
     let mut errors = EventErrors {
         events: Vec::new(),
+        folds: 0,
         front: Vec::new(),
         rear: Vec::new(),
     };
-    for (e, result) in s.train_events.iter().zip(per_event) {
+    for (fold, result) in folds.iter().zip(per_fold) {
         match result {
             Ok(scores) => {
-                errors.events.push(e.clone());
+                errors.events.extend(fold.iter().cloned());
+                errors.folds += 1;
                 for (axle, v) in scores {
                     match axle {
                         Axle::Front => errors.front.push(v),
@@ -411,13 +440,14 @@ fn event_errors(
                 }
             }
             Err(why) => notes.push(format!(
-                "new-event intervals: event {why}; its tires are not among the scores"
+                "new-event intervals: leaving out {why}; its tires are not among the scores"
             )),
         }
     }
+    errors.events.sort();
     errors.front.sort_by(f64::total_cmp);
     errors.rear.sort_by(f64::total_cmp);
-    (errors.events.len() >= 2).then_some(errors)
+    (errors.folds >= 2).then_some(errors)
 }
 
 /// A method fitted on a split, with what its indicators were computed on.

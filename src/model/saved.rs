@@ -52,13 +52,17 @@ pub struct Indicators {
 }
 
 /// The training tires' errors when their event was left out of the fit
-/// (`fit::event_errors`): |y − ŷ₋ₑ| in % of the tread, per axle,
-/// ascending. The calibration scores of the new-event interval.
+/// (with more than `fit::MAX_EVENT_FOLDS` training events, their fold):
+/// |y − ŷ₋ₑ| in % of the tread, per axle, ascending. The calibration
+/// scores of the new-event interval.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct EventErrors {
-    /// The training events left out one at a time (those whose refit
-    /// succeeded).
+    /// The training events whose tires are among the scores (those whose
+    /// fold's refit succeeded), sorted.
     pub events: Vec<String>,
+    /// The refits: one per training event, or `fit::MAX_EVENT_FOLDS` folds
+    /// of them.
+    pub folds: usize,
     pub front: Vec<f64>,
     pub rear: Vec<f64>,
 }
