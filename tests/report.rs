@@ -121,28 +121,31 @@ fn the_demo_report_has_every_section_its_figures_and_no_external_url() {
         let text = format!("{split_name} R² {:.3} RMSE {:.2} %", m.r2, m.rmse);
         assert!(html.contains(&text), "{text}");
     }
-    // So are the shares of tires inside their 95 % prediction interval.
-    let share = |label: &str| {
+    // So are the shares of tires inside their 95 % prediction interval,
+    // and inside the new-event one (from the fit's leave-one-event-out refits).
+    let share = |label: &str, event: bool| {
         let i = pca.indicators.iter().find(|i| i.label == label).unwrap();
-        100.0 * i.inside_95_interval.unwrap()
+        let s = if event {
+            i.inside_95_event_interval
+        } else {
+            i.inside_95_interval
+        };
+        100.0 * s.unwrap()
     };
-    let text = format!(
-        "The 95 % prediction intervals hold {:.1} % of the training and {:.1} % of the testing",
-        share("Training"),
-        share("Testing")
-    );
-    assert!(html.contains(&text), "{text}");
-    // And inside the new-event intervals (from the fit's leave-one-event-out refits).
-    let share = |label: &str| {
-        let i = pca.indicators.iter().find(|i| i.label == label).unwrap();
-        100.0 * i.inside_95_event_interval.unwrap()
-    };
-    let text = format!(
-        "their event left out) hold {:.1} % and {:.1} %.",
-        share("Training"),
-        share("Testing")
-    );
-    assert!(html.contains(&text), "{text}");
+    for text in [
+        format!(
+            "The 95 % prediction intervals hold {:.1} % of the training and {:.1} % of the testing",
+            share("Training", false),
+            share("Testing", false)
+        ),
+        format!(
+            "their event left out) hold {:.1} % and {:.1} %.",
+            share("Training", true),
+            share("Testing", true)
+        ),
+    ] {
+        assert!(html.contains(&text), "{text}");
+    }
     // The per-track line of one track and axle against the closed form of
     // least squares (slope = Σ(x−x̄)(y−ȳ) / Σ(x−x̄)²) on the rows.
     let track = rows[0].track.clone();

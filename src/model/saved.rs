@@ -232,29 +232,32 @@ impl SavedModel {
     /// one with too few validation rows for the level.
     pub fn why_no_intervals(&self, level: IntervalLevel) -> Option<String> {
         let again = "; fit it again to have them";
-        match &self.model {
-            ModelBody::Ffnn { network, .. } => match &network.validation_abs_residuals {
-                None => Some(format!(
-                    "the network was saved before tirewear kept its validation errors{again}"
-                )),
-                Some(scores) if conformal_half_width(scores, level).is_none() => {
-                    let needed = conformal_rows_needed(level);
-                    Some(format!(
+        let regression_without = match &self.model {
+            ModelBody::Ffnn { network, .. } => {
+                let scores = match &network.validation_abs_residuals {
+                    None => {
+                        return Some(format!(
+                            "the network was saved before tirewear kept its validation errors{again}"
+                        ));
+                    }
+                    Some(scores) => scores,
+                };
+                return conformal_half_width(scores, level).is_none().then(|| {
+                    format!(
                         "the network kept {} validation rows, and a conformal interval at \
-                         this level needs {needed} (a lower --interval, or more training rows)",
-                        scores.len()
-                    ))
-                }
-                Some(_) => None,
-            },
-            ModelBody::Pca { regression, .. } => regression
-                .xtx_inverse
-                .is_none()
-                .then(|| format!("the model was saved before tirewear kept (XᵀX)⁻¹{again}")),
-            ModelBody::Physical { front, rear } => (front.regression.xtx_inverse.is_none()
-                || rear.regression.xtx_inverse.is_none())
-            .then(|| format!("the model was saved before tirewear kept (XᵀX)⁻¹{again}")),
-        }
+                         this level needs {} (a lower --interval, or more training rows)",
+                        scores.len(),
+                        conformal_rows_needed(level)
+                    )
+                });
+            }
+            ModelBody::Pca { regression, .. } => regression.xtx_inverse.is_none(),
+            ModelBody::Physical { front, rear } => {
+                front.regression.xtx_inverse.is_none() || rear.regression.xtx_inverse.is_none()
+            }
+        };
+        regression_without
+            .then(|| format!("the model was saved before tirewear kept (XᵀX)⁻¹{again}"))
     }
 
     /// The file's text: the model as pretty JSON, then, as its last field,
