@@ -146,6 +146,86 @@ fn the_demo_report_has_every_section_its_figures_and_no_external_url() {
     ] {
         assert!(html.contains(&text), "{text}");
     }
+    // Each testing tire's 95 % new-event interval drawn as a whisker under
+    // its mark (drawn at opacity 0.35, the report's `WHISKER_OPACITY`), in
+    // the rows' order: the half-width by hand as the ⌈0.95 (n + 1)⌉-th
+    // smallest of the axle's leave-one-event-out errors, and the whiskers'
+    // pixels an affine map of (measured, predicted ± half-width), within the
+    // one pixel plotters rounds to.
+    let errors = pca.event_errors.as_ref().unwrap();
+    let half = |scores: &[f64]| {
+        let mut s = scores.to_vec();
+        s.sort_by(f64::total_cmp);
+        let rank = (0.95 * (s.len() + 1) as f64).ceil() as usize;
+        s[rank - 1]
+    };
+    let (front_half, rear_half) = (half(&errors.front), half(&errors.rear));
+    let expected: Vec<(f64, f64, f64)> = rows
+        .iter()
+        .filter(|r| pca.testing_events.contains(&r.event))
+        .filter(|r| r.wear_mean_pct.is_finite() && r.worn_through_readings <= 0.0)
+        .filter_map(|r| {
+            let p = pca.predict_row(r).ok().filter(|p| p.is_finite())?;
+            let h = match r.axle {
+                tirewear::Axle::Front => front_half,
+                tirewear::Axle::Rear => rear_half,
+            };
+            Some((r.wear_mean_pct, p - h, p + h))
+        })
+        .collect();
+    let caption = html.find("Predicted against measured wear: pca").unwrap();
+    let svg = &html[html[..caption].rfind("<svg").unwrap()..];
+    let svg = &svg[..svg.find("</svg>").unwrap()];
+    let drawn: Vec<(f64, f64, f64)> = svg
+        .split("<polyline")
+        .skip(1)
+        .filter(|l| l.contains("opacity=\"0.35\""))
+        .map(|l| {
+            let points = attributes(l, "points")[0];
+            let xy: Vec<f64> = points
+                .split([' ', ','])
+                .filter(|v| !v.is_empty())
+                .map(|v| v.parse().unwrap())
+                .collect();
+            assert_eq!(xy.len(), 4, "{points}");
+            assert_eq!(xy[0], xy[2], "a whisker is vertical: {points}");
+            (xy[0], xy[1], xy[3])
+        })
+        .collect();
+    assert!(expected.len() >= 40, "{} testing tires", expected.len());
+    assert_eq!(drawn.len(), expected.len());
+    assert!(html.contains("Whiskers: each testing tire&#39;s 95 % interval for a new event."));
+    // Least-squares line of pixels on values; every point within a pixel.
+    let affine = |pairs: Vec<(f64, f64)>| {
+        let n = pairs.len() as f64;
+        let (mv, mp) = (
+            pairs.iter().map(|q| q.0).sum::<f64>() / n,
+            pairs.iter().map(|q| q.1).sum::<f64>() / n,
+        );
+        let b = pairs.iter().map(|q| (q.0 - mv) * (q.1 - mp)).sum::<f64>()
+            / pairs.iter().map(|q| (q.0 - mv).powi(2)).sum::<f64>();
+        let worst = pairs
+            .iter()
+            .map(|q| (q.1 - mp - b * (q.0 - mv)).abs())
+            .fold(0.0, f64::max);
+        (b, worst)
+    };
+    let zipped = || expected.iter().zip(&drawn);
+    let (x_scale, x_worst) = affine(zipped().map(|(e, d)| (e.0, d.0)).collect());
+    let (y_scale, y_worst) = affine(
+        zipped()
+            .flat_map(|(e, d)| [(e.1, d.1), (e.2, d.2)])
+            .collect(),
+    );
+    assert!(
+        x_scale > 0.0 && x_worst <= 1.0,
+        "x: {x_scale} px/%, off by {x_worst} px"
+    );
+    assert!(
+        y_scale < 0.0 && y_worst <= 1.0,
+        "y: {y_scale} px/%, off by {y_worst} px"
+    );
+
     // The per-track line of one track and axle against the closed form of
     // least squares (slope = Σ(x−x̄)(y−ȳ) / Σ(x−x̄)²) on the rows.
     let track = rows[0].track.clone();

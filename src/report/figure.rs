@@ -25,6 +25,14 @@ pub(crate) struct Segment {
     pub to: (f64, f64),
 }
 
+/// A vertical interval at `x` from `y.0` to `y.1` (a prediction interval
+/// around a predicted value), drawn in a group's colour under its marks.
+pub(crate) struct Whisker {
+    pub color: usize,
+    pub x: f64,
+    pub y: (f64, f64),
+}
+
 /// Axis titles with units.
 pub(crate) struct Axes<'a> {
     pub title: &'a str,
@@ -145,11 +153,48 @@ fn line_mark(c: RGBColor) -> impl Fn((i32, i32)) -> PathElement<(i32, i32)> {
     move |(x, y)| PathElement::new([(x, y), (x + 16, y)], c.stroke_width(2))
 }
 
+/// The y range of marks `ys` (padded) widened to the whiskers' ends, by at
+/// most [`WHISKER_REACH`] of the marks' range on either side.
+fn reaching_whiskers<I: Iterator<Item = f64>>(
+    ys: impl Fn() -> I,
+    whiskers: &[Whisker],
+    from_zero: bool,
+) -> (f64, f64) {
+    let (m0, m1) = padded(ys(), from_zero);
+    let reach = WHISKER_REACH * (m1 - m0);
+    let ends = whiskers
+        .iter()
+        .flat_map(|w| [w.y.0, w.y.1])
+        .map(|y| y.clamp(m0 - reach, m1 + reach));
+    padded(ys().chain(ends), from_zero)
+}
+
+/// Opacity of a whisker: the marks stay readable where intervals overlap.
+pub(crate) const WHISKER_OPACITY: f64 = 0.35;
+
+/// How far beyond the marks' range the y axis may reach for a whisker, as
+/// a share of that range.
+pub(crate) const WHISKER_REACH: f64 = 0.5;
+
 /// A scatter of point groups with lines over them, as an SVG element.
 pub(crate) fn scatter(
     axes: &Axes,
     points: &[Points],
     lines: &[Segment],
+    from_zero: bool,
+) -> Result<String, ReportError> {
+    scatter_with_whiskers(axes, points, lines, &[], from_zero)
+}
+
+/// [`scatter`] with vertical intervals under the marks. The y axis reaches
+/// the whiskers' ends, but by at most [`WHISKER_REACH`] of the marks' own
+/// range on either side, a longer whisker being cut at the frame: one wide
+/// interval must not squeeze every mark into a line.
+pub(crate) fn scatter_with_whiskers(
+    axes: &Axes,
+    points: &[Points],
+    lines: &[Segment],
+    whiskers: &[Whisker],
     from_zero: bool,
 ) -> Result<String, ReportError> {
     // Lines count too: a fit's end may lie beyond the marks.
@@ -158,18 +203,29 @@ pub(crate) fn scatter(
         .iter()
         .flat_map(|p| p.xy.iter().map(|q| q.0))
         .chain(ends().map(|q| q.0));
-    let ys = points
-        .iter()
-        .flat_map(|p| p.xy.iter().map(|q| q.1))
-        .chain(ends().map(|q| q.1));
+    let ys = || {
+        points
+            .iter()
+            .flat_map(|p| p.xy.iter().map(|q| q.1))
+            .chain(ends().map(|q| q.1))
+    };
     let (x0, x1) = padded(xs, from_zero);
-    let (y0, y1) = padded(ys, from_zero);
+    let (y0, y1) = reaching_whiskers(ys, whiskers, from_zero);
     let at = |(x, y): (f64, f64)| (clip(x, (x0, x1)), clip(y, (y0, y1)));
     svg(|root| {
         let mut chart = frame(root, axes)
             .build_cartesian_2d(x0..x1, y0..y1)
             .map_err(draw_error)?;
         mesh!(chart, axes).draw().map_err(draw_error)?;
+        for w in whiskers {
+            let ends = [at((w.x, w.y.0)), at((w.x, w.y.1))];
+            if ends.iter().all(|e| e.0.is_finite() && e.1.is_finite()) {
+                let c = color(Some(w.color)).mix(WHISKER_OPACITY);
+                chart
+                    .draw_series(LineSeries::new(ends, c.stroke_width(1)))
+                    .map_err(draw_error)?;
+            }
+        }
         for l in lines {
             let c = color(l.color);
             chart
@@ -647,6 +703,34 @@ mod tests {
             }];
             assert!(scatter(&axes, &points, &[], false).is_ok());
         }
+        // Whiskers widen the y range by at most half the marks' padded
+        // range (0..10 padded: −0.5..10.5, so down to −6): by hand,
+        // −6..10 padded 5 % (0.8); a NaN or ±1e308 end draws, cut.
+        let whisker = |y| Whisker {
+            color: 0,
+            x: 1.0,
+            y,
+        };
+        let marks = || [0.0, 10.0].into_iter();
+        let (lo, hi) = reaching_whiskers(marks, &[whisker((-100.0, 3.0))], false);
+        assert!(
+            (lo + 6.8).abs() < 1e-12 && (hi - 10.8).abs() < 1e-12,
+            "{lo} {hi}"
+        );
+        let (lo, hi) = reaching_whiskers(marks, &[whisker((-1.0, 11.0))], false);
+        assert!(
+            (lo + 1.6).abs() < 1e-12 && (hi - 11.6).abs() < 1e-12,
+            "{lo} {hi}"
+        );
+        assert_eq!(reaching_whiskers(marks, &[], false), (-0.5, 10.5));
+        let points = [Points {
+            label: "a".into(),
+            color: 0,
+            xy: vec![(1.0, 0.0), (2.0, 10.0)],
+            filled: false,
+        }];
+        let odd = [whisker((f64::NAN, 1e308)), whisker((-1e308, f64::INFINITY))];
+        assert!(scatter_with_whiskers(&axes, &points, &[], &odd, false).is_ok());
         // A heat map whose edges are not increasing or do not match its
         // cells is an error, not a hang or an index out of bounds.
         let cells = vec![vec![1.0; 2]; 2];

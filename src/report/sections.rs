@@ -1,6 +1,6 @@
 //! The report's sections, one function each, in page order.
 
-use super::figure::{self, Axes, Bar, Points, Segment};
+use super::figure::{self, Axes, Bar, Points, Segment, Whisker};
 use super::html::{csv_link, escape, figure as fig, num, table};
 use super::{Inputs, ReportError, Section};
 use crate::Axle;
@@ -1099,6 +1099,11 @@ pub(super) fn models(inputs: &Inputs) -> Result<Section, ReportError> {
         // (docs/models.md).
         let mut inside = [Coverage::default(); 2];
         let mut inside_event = [Coverage::default(); 2];
+        // Each testing tire's interval as a whisker: a testing event is a new
+        // event to the model, so its new-event interval where the fit kept
+        // the event errors, else the model's own.
+        let mut whiskers = Vec::new();
+        let mut whisker_kinds = [0usize; 2];
         for r in inputs.rows.iter().filter(|r| measured(r)) {
             let Ok((p, interval)) = m.predict_row_within(r, Some(IntervalLevel::P95)) else {
                 continue;
@@ -1121,6 +1126,15 @@ pub(super) fn models(inputs: &Inputs) -> Result<Section, ReportError> {
             let event = m.event_interval_around(p, r.axle, IntervalLevel::P95);
             if let Some((low, high)) = event {
                 inside_event[split].add(r.wear_mean_pct, low, high);
+            }
+            let drawn = if event.is_some() { event } else { interval };
+            if let (1, Some(y)) = (split, drawn) {
+                whiskers.push(Whisker {
+                    color: 1,
+                    x: r.wear_mean_pct,
+                    y,
+                });
+                whisker_kinds[usize::from(event.is_some())] += 1;
             }
             let (low, high) = interval.unwrap_or((f64::NAN, f64::NAN));
             let (event_low, event_high) = event.unwrap_or((f64::NAN, f64::NAN));
@@ -1169,7 +1183,7 @@ their event left out) hold {} and {}.",
         let method = m.method();
         let title = format!("Predicted against measured wear: {method}");
         let swap = |v: &[(f64, f64)]| v.to_vec();
-        let svg = figure::scatter(
+        let svg = figure::scatter_with_whiskers(
             &Axes {
                 title: &title,
                 x: "measured mean wear (%)",
@@ -1194,8 +1208,17 @@ their event left out) hold {} and {}.",
                 from: (lo, lo),
                 to: (hi, hi),
             }],
+            &whiskers,
             false,
         )?;
+        let whiskers_are = match whisker_kinds {
+            [0, 0] => String::new(),
+            [_, 0] => " Whiskers: each testing tire's 95 % prediction interval.".into(),
+            [0, _] => " Whiskers: each testing tire's 95 % interval for a new event.".into(),
+            _ => " Whiskers: each testing tire's 95 % interval for a new event, the model's own \
+95 % prediction interval where the fit kept no event errors for its axle."
+                .into(),
+        };
         let name = path
             .file_name()
             .map(|n| n.to_string_lossy().into_owned())
@@ -1204,7 +1227,7 @@ their event left out) hold {} and {}.",
             &svg,
             &format!(
                 "{title} ({name}): filled marks training events, hollow testing events, grey the 1:1 \
-line. Training R² {} RMSE {} %, testing R² {} RMSE {} %.{intervals}",
+line. Training R² {} RMSE {} %, testing R² {} RMSE {} %.{intervals}{whiskers_are}",
                 num(r2_train, 3),
                 num(rmse_train, 2),
                 num(r2_test, 3),
