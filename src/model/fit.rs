@@ -268,14 +268,21 @@ pub fn split<'a>(
     })
 }
 
+/// One line of a model's indicator table and the rows it was computed on
+/// (a split, of one axle for the physical method's lines).
+struct Line<'a> {
+    indicators: Indicators,
+    rows: Vec<&'a KpiRow>,
+}
+
 /// Training and (when there are testing rows) testing indicators of a predictor.
-fn indicators(
+fn indicators<'a>(
     prefix: &str,
-    train: &[&KpiRow],
-    test: &[&KpiRow],
+    train: &[&'a KpiRow],
+    test: &[&'a KpiRow],
     k: usize,
     predict: impl Fn(&KpiRow) -> (f64, Option<(f64, f64)>),
-) -> Result<Vec<Indicators>, ModelError> {
+) -> Result<Vec<Line<'a>>, ModelError> {
     let mut out = Vec::new();
     for (label, rows) in [("Training", train), ("Testing", test)] {
         if rows.is_empty() {
@@ -285,11 +292,14 @@ fn indicators(
         let p: Vec<f64> = predicted.iter().map(|(p, _)| *p).collect();
         let y = target(rows);
         let inside = Coverage::of(predicted.iter().zip(&y).map(|(&(_, i), &y)| (y, i)));
-        out.push(Indicators {
-            label: format!("{prefix}{label}"),
-            metrics: metrics(&y, &p, k)?,
-            inside_95_interval: inside.share(),
-            inside_95_event_interval: None,
+        out.push(Line {
+            indicators: Indicators {
+                label: format!("{prefix}{label}"),
+                metrics: metrics(&y, &p, k)?,
+                inside_95_interval: inside.share(),
+                inside_95_event_interval: None,
+            },
+            rows: rows.to_vec(),
         });
     }
     Ok(out)
@@ -305,33 +315,21 @@ pub fn fit_method(
     let Fitted {
         mut model,
         mut notes,
-        train,
-        test,
+        line_rows,
     } = fit_core(method, s, settings)?;
     model.event_errors = event_errors(method, s, settings, &model, &mut notes);
     if model.event_errors.is_some() {
+        // The event errors come after the lines (the network's refits need
+        // its chosen width): each line's share is added on its own rows.
         let mut lines = std::mem::take(&mut model.indicators);
-        for line in &mut lines {
-            let rows = if line.label.ends_with("Testing") {
-                &test
-            } else {
-                &train
-            };
-            let axle = [("Front—", Axle::Front), ("Rear—", Axle::Rear)]
-                .into_iter()
-                .find(|(prefix, _)| line.label.starts_with(prefix))
-                .map(|(_, a)| a);
-            let inside = Coverage::of(
-                rows.iter()
-                    .filter(|r| axle.is_none_or(|a| r.axle == a))
-                    .filter_map(|r| {
-                        let p = model.predict_row(r).ok()?;
-                        Some((
-                            r.wear_mean_pct,
-                            model.event_interval_around(p, r.axle, IntervalLevel::P95),
-                        ))
-                    }),
-            );
+        for (line, rows) in lines.iter_mut().zip(&line_rows) {
+            let inside = Coverage::of(rows.iter().filter_map(|r| {
+                let p = model.predict_row(r).ok()?;
+                Some((
+                    r.wear_mean_pct,
+                    model.event_interval_around(p, r.axle, IntervalLevel::P95),
+                ))
+            }));
             line.inside_95_event_interval = inside.share();
         }
         model.indicators = lines;
@@ -454,9 +452,9 @@ fn event_errors(
 struct Fitted<'a> {
     model: SavedModel,
     notes: Vec<String>,
-    /// The usable training and testing rows ([`usable`]).
-    train: Vec<&'a KpiRow>,
-    test: Vec<&'a KpiRow>,
+    /// The rows of each of `model.indicators`, in its order (usable rows,
+    /// [`usable`]).
+    line_rows: Vec<Vec<&'a KpiRow>>,
 }
 
 /// Fits one method on the split.
@@ -610,6 +608,8 @@ fn fit_core<'a>(
             (inputs, ModelBody::Physical { front, rear }, table)
         }
     };
+    let (table, line_rows): (Vec<Indicators>, Vec<Vec<&KpiRow>>) =
+        table.into_iter().map(|l| (l.indicators, l.rows)).unzip();
     let model = SavedModel {
         format: MODEL_FORMAT.into(),
         version: MODEL_VERSION,
@@ -625,8 +625,7 @@ fn fit_core<'a>(
     Ok(Fitted {
         model,
         notes,
-        train,
-        test,
+        line_rows,
     })
 }
 
