@@ -1177,235 +1177,33 @@ pub(crate) fn rank(
     fdr: f64,
     progress: &indicatif::ProgressBar,
 ) -> Vec<Score> {
-    let rows = problem.rows;
-    let n = rows.len();
-    let all: Vec<usize> = (0..n).collect();
-    let groups = folds(rows);
-    // Relative scale: every row divided by the baseline's prediction.
-    let w = if problem.relative {
-        relative_weights(&problem.base, problem.y)
-    } else {
-        vec![1.0; n]
-    };
-    let y = weighted(problem.y, &w);
-    let y = y.as_slice();
-    let base: Vec<Vec<f64>> = problem.base.iter().map(|c| weighted(c, &w)).collect();
-    // The baseline's prediction on the (weighted) scale, for the track scales.
-    // On the relative scale it is 1 by construction (w = 1/prediction).
-    let prediction: Vec<f64> = if problem.relative {
-        vec![1.0; n]
-    } else {
-        let refs: Vec<&[f64]> = base.iter().map(|c| c.as_slice()).collect();
-        let k = lstsq(&refs, y, &all);
-        all.iter()
-            .map(|&i| y[i] - residual(&refs, &k, y, i))
-            .collect()
-    };
-    // The within-track null's track cells span every base column constant
-    // within tracks (the law's skewness derivative, a road term already
-    // in), as in the track test's stage 1. Kept beside them, such a column
-    // is collinear with the cells but for the relative weights, and a
-    // fold's fit took coefficients in the hundreds along that direction:
-    // they cancel on the fold's own rows and not on the held-out track's,
-    // whose predictions then decided the CV gain (docs/gap.md, "The
-    // held-out tracks' predictions").
-    let within_base = varying_within_tracks(&base, &problem.track_level);
-    let within = Null::new(rows, &within_base, y, &groups, Some(&prediction), None);
-    let within = match RunWhitening::estimate(rows, &within.e0) {
-        Some(w) => Null::new(rows, &within_base, y, &groups, Some(&prediction), Some(w)),
-        None => within,
-    };
-    let across = Null::new(rows, &base, y, &groups, None, None);
-    let severities = Severities::new(rows, y, &base, &problem.track_level, &prediction);
-    let mut stream = PermutationStream::new(&run_exchange(rows), settings.seed, settings.exchange);
-    let permuted = PermutedNulls::drawn(&within.e0, &within.q, &mut stream, settings.permutations);
-
-    let scored: Vec<(Score, Option<NullDraws>, Option<AtTheFloor>)> = library
+    let scorer = Scorer::new(problem, settings);
+    let scored: Vec<Scored> = library
         .par_iter()
         .inspect(|_| progress.inc(1))
-        .filter_map(|c| {
-            let scale = kpi_scale(c, rows);
-            // Every scope's every threshold: column s·T + t. The scan and
-            // the max-F run over all of them, so the test pays for both.
-            let scopes = c.resolved();
-            let n_thresholds = c.thresholds.len();
-            // A band on a scope's tires is scanned only where they can tell
-            // it from a one-sided threshold (`band_admissible`): the others
-            // are zero columns, which no fit or test takes.
-            let bands: Vec<Option<Vec<f64>>> = scopes
-                .iter()
-                .map(|sc| sc.band_energy(rows, problem.maps))
-                .collect();
-            let columns: Vec<(&Candidate, f64)> = scopes
-                .iter()
-                .flat_map(|sc| c.thresholds.iter().map(move |&t| (sc, t)))
-                .collect();
-            let admissible: Vec<bool> = columns
-                .iter()
-                .zip(
-                    bands
-                        .iter()
-                        .flat_map(|b| std::iter::repeat_n(b, n_thresholds)),
-                )
-                .map(|(&(sc, t), b)| match (b, sc.feature) {
-                    (Some(e), Feature::BandEnergy { condition, .. }) => {
-                        band_admissible(e, condition, t)
-                    }
-                    _ => true,
-                })
-                .collect();
-            // Row by row, every column: a row's maps (30 kB) are read
-            // from the cache for all but its first column. Column by
-            // column, a season's maps passed through memory once a
-            // column: on 17 280 tire-runs that was a fifth of the
-            // candidates' scoring, three times what it is now
-            // (docs/gap.md, "Time, by season size").
-            let mut x = vec![vec![0.0; n]; columns.len()];
-            for i in 0..n {
-                let law = problem.law[i];
-                for ((xj, &(sc, t)), _) in x
-                    .iter_mut()
-                    .zip(&columns)
-                    .zip(&admissible)
-                    .filter(|(_, a)| **a)
-                {
-                    xj[i] = w[i] * candidate_feature(sc, rows[i], problem.maps[i], t, scale, law);
-                }
-            }
-            if x.iter().flatten().any(|v| !v.is_finite()) {
-                return None;
-            }
-            let positive = c.adds_wear_only();
-            let track_level = c.feature.track_level();
-            let null = if track_level { &across } else { &within };
-            let (gain, sse_by_fold) = cv_gain(rows, null, &groups, &x, positive, !track_level);
-            let gain_across = if track_level {
-                gain
-            } else {
-                cv_gain(rows, &across, &groups, &x, positive, false).0
-            };
-            // Fit on all rows, and the permutation test, on the null's scale.
-            let xs = null.columns(&x);
-            let fit = best_threshold(&null.fit, &xs, positive);
-            let (threshold, coefficient, front_share) = match &fit {
-                Some((t, k)) => {
-                    // The term's wear (%) is x/w: the share in wear, not on
-                    // the relative scale (which weights the lightly worn rows up).
-                    let c1 = k[k.len() - 1];
-                    let wear = |i: usize| c1 * x[*t][i] / w[i];
-                    let total: f64 = (0..n).map(wear).sum();
-                    let front: f64 = (0..n)
-                        .filter(|&i| rows[i].axle == Axle::Front)
-                        .map(wear)
-                        .sum();
-                    // A term that changes sign across rows (a generic KPI,
-                    // a two-sided hypothesis) has no share to speak of.
-                    let share = if positive { front / total } else { f64::NAN };
-                    (c.thresholds[*t % n_thresholds], c1, share)
-                }
-                None => (f64::NAN, 0.0, f64::NAN),
-            };
-            // The chosen scope (a candidate without scopes is its own).
-            let scope = match &fit {
-                Some((t, _)) => &scopes[*t / n_thresholds],
-                None => c,
-            };
-            let (ft, nf) = projected(&null.q, &xs);
-            let on_one_car: Vec<bool> = (0..x.len())
-                .map(|j| {
-                    scopes[j / n_thresholds]
-                        .group
-                        .as_ref()
-                        .is_some_and(|g| g.car.is_some())
-                })
-                .collect();
-            let observed = max_f(&null.e0, &null.q, &ft, &nf, positive);
-            let testable = fit.is_some() && observed > 0.0;
-            // The statistic under every permutation: for a candidate's own
-            // p-value when it has one to test, and under the max-statistic
-            // for every within-track candidate (also where its own observed
-            // one is 0), since the family's max over them is that null.
-            let family = settings.multiple_testing == MultipleTesting::MaxStatistic;
-            let draws = (!track_level && (testable || family)).then(|| NullDraws {
-                observed: if fit.is_none() { 0.0 } else { observed },
-                stats: permuted.max_f(&ft, &nf, positive, &on_one_car),
-            });
-            // A per-sample mechanism's between-track part (under
-            // Benjamini–Hochberg; the max-statistic's family is the
-            // within-track permutations' alone).
-            let p_between = if problem.between_tracks
-                && testable
-                && !track_level
-                && !family
-                && c.tested_between_tracks()
-            {
-                let columns: Vec<(Option<Axle>, &[f64])> = x
-                    .iter()
-                    .enumerate()
-                    .map(|(j, v)| (scopes[j / n_thresholds].axle, v.as_slice()))
-                    .collect();
-                severities.p_between(
-                    &columns,
-                    positive,
-                    settings.permutations,
-                    settings.seed ^ 0x6265_7477,
-                )
-            } else {
-                f64::NAN
-            };
-            let mut floor = None;
-            let p = if !testable {
-                1.0
-            } else if track_level {
-                severities.p_value(
-                    c,
-                    scale,
-                    settings.permutations,
-                    settings.seed ^ 0x7472_6163_6b73,
-                )
-            } else {
-                let d = draws.as_ref().expect("within-track draws");
-                let exceed = d.stats.iter().filter(|&&f| f >= observed).count();
-                let p_within = (1 + exceed) as f64 / (1 + settings.permutations) as f64;
-                if exceed == 0 && !family {
-                    floor = Some(AtTheFloor {
-                        ft: ft.clone(),
-                        nf: nf.clone(),
-                        on_one_car,
-                        observed,
-                        positive,
-                    });
-                }
-                combined(p_within, p_between)
-            };
-            let score = Score {
-                name: scope.name.clone(),
-                candidate: c.name.clone(),
-                feature: c.feature,
-                axle: scope.axle,
-                group: scope.group.clone(),
-                threshold: if matches!(c.feature, Feature::Kpi(_)) {
-                    f64::NAN
-                } else {
-                    threshold
-                },
-                coefficient,
-                cv_gain: gain,
-                cv_sse_by_fold: sse_by_fold,
-                cv_gain_across: gain_across,
-                p,
-                p_between,
-                p_adjusted: f64::NAN,
-                front_share,
-                kpi_scale: scale,
-                acts_in: Vec::new(),
-            };
-            Some((score, draws, floor))
-        })
+        .filter_map(|c| scorer.score(c))
         .collect();
-    // The refinement draws its own.
-    drop(permuted);
-    let mut scores = match settings.multiple_testing {
+    // The refinement draws its own permutations: the scorer's go first.
+    let within = scorer.into_within();
+    let mut scores = adjusted(scored, problem.rows, &within, settings, fdr);
+    scores.sort_by(|a, b| b.cv_gain.total_cmp(&a.cv_gain));
+    scores
+}
+
+/// A candidate's score, its within-track statistic under the permutations
+/// (for the max-statistic), and what refining its p needs when it beat
+/// every permutation (for Benjamini–Hochberg).
+type Scored = (Score, Option<NullDraws>, Option<AtTheFloor>);
+
+/// The p-values adjusted over the family (`settings.multiple_testing`).
+fn adjusted(
+    scored: Vec<Scored>,
+    rows: &[&KpiRow],
+    within: &Null,
+    settings: &ScoringSettings,
+    fdr: f64,
+) -> Vec<Score> {
+    match settings.multiple_testing {
         MultipleTesting::MaxStatistic => split_between_families(
             adjust(
                 scored.into_iter().map(|(s, d, _)| (s, d)).collect(),
@@ -1426,9 +1224,298 @@ pub(crate) fn rank(
             };
             refine.apply(scores, floors)
         }
-    };
-    scores.sort_by(|a, b| b.cv_gain.total_cmp(&a.cv_gain));
-    scores
+    }
+}
+
+/// What scoring every candidate of a problem shares: the rows' weights on
+/// the scale scored, the cross-validation groups, the two nulls (within
+/// tracks, with a scale per track cell; across them, without), the
+/// tracks' severities and the within-track null's permuted residuals.
+struct Scorer<'a> {
+    problem: &'a Problem<'a>,
+    settings: &'a ScoringSettings,
+    w: Vec<f64>,
+    groups: Vec<Vec<usize>>,
+    within: Null,
+    across: Null,
+    severities: Severities<'a>,
+    permuted: PermutedNulls,
+}
+
+impl<'a> Scorer<'a> {
+    fn new(problem: &'a Problem<'a>, settings: &'a ScoringSettings) -> Scorer<'a> {
+        let rows = problem.rows;
+        let n = rows.len();
+        let all: Vec<usize> = (0..n).collect();
+        let groups = folds(rows);
+        // Relative scale: every row divided by the baseline's prediction.
+        let w = if problem.relative {
+            relative_weights(&problem.base, problem.y)
+        } else {
+            vec![1.0; n]
+        };
+        let y = weighted(problem.y, &w);
+        let y = y.as_slice();
+        let base: Vec<Vec<f64>> = problem.base.iter().map(|c| weighted(c, &w)).collect();
+        // The baseline's prediction on the (weighted) scale, for the track scales.
+        // On the relative scale it is 1 by construction (w = 1/prediction).
+        let prediction: Vec<f64> = if problem.relative {
+            vec![1.0; n]
+        } else {
+            let refs: Vec<&[f64]> = base.iter().map(|c| c.as_slice()).collect();
+            let k = lstsq(&refs, y, &all);
+            all.iter()
+                .map(|&i| y[i] - residual(&refs, &k, y, i))
+                .collect()
+        };
+        // The within-track null's track cells span every base column constant
+        // within tracks (the law's skewness derivative, a road term already
+        // in), as in the track test's stage 1. Kept beside them, such a column
+        // is collinear with the cells but for the relative weights, and a
+        // fold's fit took coefficients in the hundreds along that direction:
+        // they cancel on the fold's own rows and not on the held-out track's,
+        // whose predictions then decided the CV gain (docs/gap.md, "The
+        // held-out tracks' predictions").
+        let within_base = varying_within_tracks(&base, &problem.track_level);
+        let within = Null::new(rows, &within_base, y, &groups, Some(&prediction), None);
+        let within = match RunWhitening::estimate(rows, &within.e0) {
+            Some(w) => Null::new(rows, &within_base, y, &groups, Some(&prediction), Some(w)),
+            None => within,
+        };
+        let across = Null::new(rows, &base, y, &groups, None, None);
+        let severities = Severities::new(rows, y, &base, &problem.track_level, &prediction);
+        let mut stream =
+            PermutationStream::new(&run_exchange(rows), settings.seed, settings.exchange);
+        let permuted =
+            PermutedNulls::drawn(&within.e0, &within.q, &mut stream, settings.permutations);
+        Scorer {
+            problem,
+            settings,
+            w,
+            groups,
+            within,
+            across,
+            severities,
+            permuted,
+        }
+    }
+
+    /// The within-track null, the rest (the permuted residuals above all)
+    /// freed.
+    fn into_within(self) -> Null {
+        self.within
+    }
+
+    /// A candidate's columns on the scale scored: every scope's every
+    /// threshold, column s·T + t (the scan and the max-F run over all of
+    /// them, so the test pays for both). None where a value is not finite.
+    fn columns(
+        &self,
+        c: &Candidate,
+        scopes: &[Candidate],
+        scale: KpiScale,
+    ) -> Option<Vec<Vec<f64>>> {
+        let Problem {
+            rows, maps, law, ..
+        } = self.problem;
+        let n = rows.len();
+        let n_thresholds = c.thresholds.len();
+        // A band on a scope's tires is scanned only where they can tell
+        // it from a one-sided threshold (`band_admissible`): the others
+        // are zero columns, which no fit or test takes.
+        let bands: Vec<Option<Vec<f64>>> =
+            scopes.iter().map(|sc| sc.band_energy(rows, maps)).collect();
+        let columns: Vec<(&Candidate, f64)> = scopes
+            .iter()
+            .flat_map(|sc| c.thresholds.iter().map(move |&t| (sc, t)))
+            .collect();
+        let admissible: Vec<bool> = columns
+            .iter()
+            .zip(
+                bands
+                    .iter()
+                    .flat_map(|b| std::iter::repeat_n(b, n_thresholds)),
+            )
+            .map(|(&(sc, t), b)| match (b, sc.feature) {
+                (Some(e), Feature::BandEnergy { condition, .. }) => {
+                    band_admissible(e, condition, t)
+                }
+                _ => true,
+            })
+            .collect();
+        // Row by row, every column: a row's maps (30 kB) are read
+        // from the cache for all but its first column. Column by
+        // column, a season's maps passed through memory once a
+        // column: on 17 280 tire-runs that was a fifth of the
+        // candidates' scoring, three times what it is now
+        // (docs/gap.md, "Time, by season size").
+        let mut x = vec![vec![0.0; n]; columns.len()];
+        for i in 0..n {
+            for ((xj, &(sc, t)), _) in x
+                .iter_mut()
+                .zip(&columns)
+                .zip(&admissible)
+                .filter(|(_, a)| **a)
+            {
+                xj[i] = self.w[i] * candidate_feature(sc, rows[i], maps[i], t, scale, law[i]);
+            }
+        }
+        x.iter().flatten().all(|v| v.is_finite()).then_some(x)
+    }
+
+    /// The term's threshold, coefficient and share of its wear on the
+    /// front axle, fitted on all rows at the best column `fit` (NaN, 0,
+    /// NaN without one).
+    fn sized(
+        &self,
+        c: &Candidate,
+        x: &[Vec<f64>],
+        fit: Option<&(usize, Vec<f64>)>,
+        positive: bool,
+    ) -> (f64, f64, f64) {
+        let Some((t, k)) = fit else {
+            return (f64::NAN, 0.0, f64::NAN);
+        };
+        let rows = self.problem.rows;
+        let n = rows.len();
+        // The term's wear (%) is x/w: the share in wear, not on
+        // the relative scale (which weights the lightly worn rows up).
+        let c1 = k[k.len() - 1];
+        let wear = |i: usize| c1 * x[*t][i] / self.w[i];
+        let total: f64 = (0..n).map(wear).sum();
+        let front: f64 = (0..n)
+            .filter(|&i| rows[i].axle == Axle::Front)
+            .map(wear)
+            .sum();
+        // A term that changes sign across rows (a generic KPI,
+        // a two-sided hypothesis) has no share to speak of.
+        let share = if positive { front / total } else { f64::NAN };
+        (c.thresholds[*t % c.thresholds.len()], c1, share)
+    }
+
+    /// One candidate scored: its CV gains, its fit on all rows and its
+    /// p-value (None where a column is not finite).
+    fn score(&self, c: &Candidate) -> Option<Scored> {
+        let (problem, settings) = (self.problem, self.settings);
+        let rows = problem.rows;
+        let scale = kpi_scale(c, rows);
+        let scopes = c.resolved();
+        let n_thresholds = c.thresholds.len();
+        let x = self.columns(c, &scopes, scale)?;
+        let positive = c.adds_wear_only();
+        let track_level = c.feature.track_level();
+        let null = if track_level {
+            &self.across
+        } else {
+            &self.within
+        };
+        let (gain, sse_by_fold) = cv_gain(rows, null, &self.groups, &x, positive, !track_level);
+        let gain_across = if track_level {
+            gain
+        } else {
+            cv_gain(rows, &self.across, &self.groups, &x, positive, false).0
+        };
+        // Fit on all rows, and the permutation test, on the null's scale.
+        let xs = null.columns(&x);
+        let fit = best_threshold(&null.fit, &xs, positive);
+        let (threshold, coefficient, front_share) = self.sized(c, &x, fit.as_ref(), positive);
+        // The chosen scope (a candidate without scopes is its own).
+        let scope = match &fit {
+            Some((t, _)) => &scopes[*t / n_thresholds],
+            None => c,
+        };
+        let (ft, nf) = projected(&null.q, &xs);
+        let on_one_car: Vec<bool> = (0..x.len())
+            .map(|j| {
+                scopes[j / n_thresholds]
+                    .group
+                    .as_ref()
+                    .is_some_and(|g| g.car.is_some())
+            })
+            .collect();
+        let observed = max_f(&null.e0, &null.q, &ft, &nf, positive);
+        let testable = fit.is_some() && observed > 0.0;
+        // The statistic under every permutation: for a candidate's own
+        // p-value when it has one to test, and under the max-statistic
+        // for every within-track candidate (also where its own observed
+        // one is 0), since the family's max over them is that null.
+        let family = settings.multiple_testing == MultipleTesting::MaxStatistic;
+        let draws = (!track_level && (testable || family)).then(|| NullDraws {
+            observed: if fit.is_none() { 0.0 } else { observed },
+            stats: self.permuted.max_f(&ft, &nf, positive, &on_one_car),
+        });
+        // A per-sample mechanism's between-track part (under
+        // Benjamini–Hochberg; the max-statistic's family is the
+        // within-track permutations' alone).
+        let p_between = if problem.between_tracks
+            && testable
+            && !track_level
+            && !family
+            && c.tested_between_tracks()
+        {
+            let columns: Vec<(Option<Axle>, &[f64])> = x
+                .iter()
+                .enumerate()
+                .map(|(j, v)| (scopes[j / n_thresholds].axle, v.as_slice()))
+                .collect();
+            self.severities.p_between(
+                &columns,
+                positive,
+                settings.permutations,
+                settings.seed ^ 0x6265_7477,
+            )
+        } else {
+            f64::NAN
+        };
+        let mut floor = None;
+        let p = if !testable {
+            1.0
+        } else if track_level {
+            self.severities.p_value(
+                c,
+                scale,
+                settings.permutations,
+                settings.seed ^ 0x7472_6163_6b73,
+            )
+        } else {
+            let d = draws.as_ref().expect("within-track draws");
+            let exceed = d.stats.iter().filter(|&&f| f >= observed).count();
+            let p_within = (1 + exceed) as f64 / (1 + settings.permutations) as f64;
+            if exceed == 0 && !family {
+                floor = Some(AtTheFloor {
+                    ft: ft.clone(),
+                    nf: nf.clone(),
+                    on_one_car,
+                    observed,
+                    positive,
+                });
+            }
+            combined(p_within, p_between)
+        };
+        let score = Score {
+            name: scope.name.clone(),
+            candidate: c.name.clone(),
+            feature: c.feature,
+            axle: scope.axle,
+            group: scope.group.clone(),
+            threshold: if matches!(c.feature, Feature::Kpi(_)) {
+                f64::NAN
+            } else {
+                threshold
+            },
+            coefficient,
+            cv_gain: gain,
+            cv_sse_by_fold: sse_by_fold,
+            cv_gain_across: gain_across,
+            p,
+            p_between,
+            p_adjusted: f64::NAN,
+            front_share,
+            kpi_scale: scale,
+            acts_in: Vec::new(),
+        };
+        Some((score, draws, floor))
+    }
 }
 
 /// A within-track candidate whose statistic beat every permutation: what
