@@ -78,7 +78,7 @@ fn the_demo_report_has_every_section_its_figures_and_no_external_url() {
             "{title}"
         );
     }
-    // Figures: the road's PSD and HDC, the master curves' E′ and tan δ, an
+    // Figures: the season's wear by event, the road's PSD and HDC, the master curves' E′ and tan δ, an
     // energy map per axle, four table-4 KPIs per track, two axles of wear against energy, the slopes
     // against temperature and the residuals against skewness, one model and
     // its explained variance, the physical model's predictions, and the
@@ -87,7 +87,7 @@ fn the_demo_report_has_every_section_its_figures_and_no_external_url() {
     let svgs: Vec<&str> = html.split("<svg").skip(1).collect();
     assert_eq!(svgs.len(), summary.figures);
     let flagged = !d.slices.is_empty();
-    assert_eq!(summary.figures, 18 + flagged as usize);
+    assert_eq!(summary.figures, 19 + flagged as usize);
     for svg in &svgs {
         let svg = &svg[..svg.find("</svg>").expect("closed svg")];
         // Axis titles carry their unit in parentheses: both axes.
@@ -225,6 +225,47 @@ fn the_demo_report_has_every_section_its_figures_and_no_external_url() {
         y_scale < 0.0 && y_worst <= 1.0,
         "y: {y_scale} px/%, off by {y_worst} px"
     );
+
+    // The season's wear by event: each event's rear axle worked out here
+    // from the rows (mean, sample sd with n − 1, least, most of the tires
+    // not worn through; those worn through counted), against its table row.
+    let mut events: Vec<&str> = rows.iter().map(|r| r.event.as_str()).collect();
+    events.sort();
+    events.dedup();
+    for event in &events {
+        let tires: Vec<_> = rows
+            .iter()
+            .filter(|r| r.event == *event && r.axle == tirewear::Axle::Rear)
+            .collect();
+        let wear: Vec<f64> = tires
+            .iter()
+            .filter(|r| r.wear_mean_pct.is_finite() && r.worn_through_readings <= 0.0)
+            .map(|r| r.wear_mean_pct)
+            .collect();
+        let n = wear.len() as f64;
+        let mean = wear.iter().sum::<f64>() / n;
+        let sd = (wear.iter().map(|w| (w - mean) * (w - mean)).sum::<f64>() / (n - 1.0)).sqrt();
+        let mut sorted = wear.clone();
+        sorted.sort_by(f64::total_cmp);
+        let worn = tires
+            .iter()
+            .filter(|r| r.worn_through_readings > 0.0)
+            .count();
+        let mut compounds: Vec<&str> = tires.iter().map(|r| r.compound.as_str()).collect();
+        compounds.sort();
+        compounds.dedup();
+        let row = format!(
+            "<tr><td class=\"t\">{event}</td><td class=\"t\">{}</td><td class=\"t\">{}</td><td class=\"t\">rear</td><td class=\"n\">{}</td><td class=\"n\">{}</td><td class=\"n\">{mean:.2}</td><td class=\"n\">{sd:.2}</td><td class=\"n\">{:.2}</td><td class=\"n\">{:.2}</td><td class=\"n\">{worn}</td></tr>",
+            tires[0].track,
+            compounds.join(" "),
+            tires.len(),
+            wear.len(),
+            sorted[0],
+            sorted[sorted.len() - 1]
+        );
+        assert!(html.contains(&row), "{row}");
+    }
+    assert!(html.contains("<h3>Wear by event</h3>"));
 
     // The per-track line of one track and axle against the closed form of
     // least squares (slope = Σ(x−x̄)(y−ȳ) / Σ(x−x̄)²) on the rows.

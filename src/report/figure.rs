@@ -154,14 +154,15 @@ fn line_mark(c: RGBColor) -> impl Fn((i32, i32)) -> PathElement<(i32, i32)> {
 }
 
 /// The y range of marks `ys` (padded) widened to the whiskers' ends, by at
-/// most [`WHISKER_REACH`] of the marks' range on either side.
+/// most `reach` times the marks' range on either side.
 fn reaching_whiskers<I: Iterator<Item = f64>>(
     ys: impl Fn() -> I,
     whiskers: &[Whisker],
+    reach: f64,
     from_zero: bool,
 ) -> (f64, f64) {
     let (m0, m1) = padded(ys(), from_zero);
-    let reach = WHISKER_REACH * (m1 - m0);
+    let reach = reach * (m1 - m0);
     let ends = whiskers
         .iter()
         .flat_map(|w| [w.y.0, w.y.1])
@@ -172,8 +173,8 @@ fn reaching_whiskers<I: Iterator<Item = f64>>(
 /// Opacity of a whisker: the marks stay readable where intervals overlap.
 pub(crate) const WHISKER_OPACITY: f64 = 0.35;
 
-/// How far beyond the marks' range the y axis may reach for a whisker, as
-/// a share of that range.
+/// How far beyond the marks' range the y axis reaches for a prediction
+/// interval's whisker, as a share of that range.
 pub(crate) const WHISKER_REACH: f64 = 0.5;
 
 /// A scatter of point groups with lines over them, as an SVG element.
@@ -183,18 +184,19 @@ pub(crate) fn scatter(
     lines: &[Segment],
     from_zero: bool,
 ) -> Result<String, ReportError> {
-    scatter_with_whiskers(axes, points, lines, &[], from_zero)
+    scatter_with_whiskers(axes, points, lines, (&[], 0.0), from_zero)
 }
 
 /// [`scatter`] with vertical intervals under the marks. The y axis reaches
-/// the whiskers' ends, but by at most [`WHISKER_REACH`] of the marks' own
-/// range on either side, a longer whisker being cut at the frame: one wide
-/// interval must not squeeze every mark into a line.
+/// the whiskers' ends, but by at most `reach` times the marks' own range on
+/// either side (infinite: all of them), a longer whisker being cut at the
+/// frame: one wide prediction interval must not squeeze every mark into a
+/// line ([`WHISKER_REACH`]).
 pub(crate) fn scatter_with_whiskers(
     axes: &Axes,
     points: &[Points],
     lines: &[Segment],
-    whiskers: &[Whisker],
+    (whiskers, reach): (&[Whisker], f64),
     from_zero: bool,
 ) -> Result<String, ReportError> {
     // Lines count too: a fit's end may lie beyond the marks.
@@ -210,7 +212,7 @@ pub(crate) fn scatter_with_whiskers(
             .chain(ends().map(|q| q.1))
     };
     let (x0, x1) = padded(xs, from_zero);
-    let (y0, y1) = reaching_whiskers(ys, whiskers, from_zero);
+    let (y0, y1) = reaching_whiskers(ys, whiskers, reach, from_zero);
     let at = |(x, y): (f64, f64)| (clip(x, (x0, x1)), clip(y, (y0, y1)));
     svg(|root| {
         let mut chart = frame(root, axes)
@@ -712,17 +714,26 @@ mod tests {
             y,
         };
         let marks = || [0.0, 10.0].into_iter();
-        let (lo, hi) = reaching_whiskers(marks, &[whisker((-100.0, 3.0))], false);
+        let (lo, hi) = reaching_whiskers(marks, &[whisker((-100.0, 3.0))], WHISKER_REACH, false);
         assert!(
             (lo + 6.8).abs() < 1e-12 && (hi - 10.8).abs() < 1e-12,
             "{lo} {hi}"
         );
-        let (lo, hi) = reaching_whiskers(marks, &[whisker((-1.0, 11.0))], false);
+        let (lo, hi) = reaching_whiskers(marks, &[whisker((-1.0, 11.0))], WHISKER_REACH, false);
         assert!(
             (lo + 1.6).abs() < 1e-12 && (hi - 11.6).abs() < 1e-12,
             "{lo} {hi}"
         );
-        assert_eq!(reaching_whiskers(marks, &[], false), (-0.5, 10.5));
+        assert_eq!(
+            reaching_whiskers(marks, &[], WHISKER_REACH, false),
+            (-0.5, 10.5)
+        );
+        // Without a limit, all of it: −100..10 padded 5.5.
+        let (lo, hi) = reaching_whiskers(marks, &[whisker((-100.0, 3.0))], f64::INFINITY, false);
+        assert!(
+            (lo + 105.5).abs() < 1e-12 && (hi - 15.5).abs() < 1e-12,
+            "{lo} {hi}"
+        );
         let points = [Points {
             label: "a".into(),
             color: 0,
@@ -730,7 +741,7 @@ mod tests {
             filled: false,
         }];
         let odd = [whisker((f64::NAN, 1e308)), whisker((-1e308, f64::INFINITY))];
-        assert!(scatter_with_whiskers(&axes, &points, &[], &odd, false).is_ok());
+        assert!(scatter_with_whiskers(&axes, &points, &[], (&odd, f64::INFINITY), false).is_ok());
         // A heat map whose edges are not increasing or do not match its
         // cells is an error, not a hang or an index out of bounds.
         let cells = vec![vec![1.0; 2]; 2];

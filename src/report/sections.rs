@@ -45,6 +45,8 @@ pub(super) fn season(inputs: &Inputs) -> Section {
             ],
         ],
     );
+    let (wear, figures) = wear_by_event(rows);
+    html += &wear;
     match &inputs.extraction {
         Some(report) => {
             // `extract`'s skipped runs, or `process`'s failed ones (which
@@ -109,8 +111,140 @@ pub(super) fn season(inputs: &Inputs) -> Section {
     Section {
         title: "Season".into(),
         html,
-        figures: 0,
+        figures,
     }
+}
+
+/// Measured wear by event and axle: a table (tires, measured, mean, sample
+/// standard deviation, least and most, worn through) and a figure of the
+/// means with the least-to-most range as whiskers, with the number of
+/// figures drawn. A worn-through tire's wear is only a lower bound: it is
+/// counted apart, not averaged.
+fn wear_by_event(rows: &[KpiRow]) -> (String, usize) {
+    let mut groups: std::collections::BTreeMap<(&str, Axle), Vec<&KpiRow>> = Default::default();
+    for r in rows {
+        groups
+            .entry((r.event.as_str(), r.axle))
+            .or_default()
+            .push(r);
+    }
+    if groups.is_empty() {
+        return (String::new(), 0);
+    }
+    let events: Vec<&str> = groups
+        .keys()
+        .map(|k| k.0)
+        .collect::<BTreeSet<_>>()
+        .into_iter()
+        .collect();
+    let mut cells = Vec::new();
+    let mut points = [Vec::new(), Vec::new()];
+    let mut whiskers = Vec::new();
+    for ((event, axle), tires) in &groups {
+        let wear: Vec<f64> = tires
+            .iter()
+            .filter(|r| measured(r))
+            .map(|r| r.wear_mean_pct)
+            .collect();
+        let worn = tires
+            .iter()
+            .filter(|r| r.worn_through_readings > 0.0)
+            .count();
+        let n = wear.len() as f64;
+        let mean = wear.iter().sum::<f64>() / n;
+        let sd = if wear.len() > 1 {
+            (wear.iter().map(|w| (w - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt()
+        } else {
+            f64::NAN
+        };
+        let least = wear.iter().copied().fold(f64::INFINITY, f64::min);
+        let most = wear.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        let compounds: BTreeSet<&str> = tires.iter().map(|r| r.compound.as_str()).collect();
+        cells.push(vec![
+            event.to_string(),
+            tires[0].track.clone(),
+            compounds.into_iter().collect::<Vec<_>>().join(" "),
+            axle.to_string(),
+            tires.len().to_string(),
+            wear.len().to_string(),
+            num(mean, 2),
+            num(sd, 2),
+            num(least, 2),
+            num(most, 2),
+            worn.to_string(),
+        ]);
+        if !wear.is_empty() {
+            // Front left of the event's place, rear right.
+            let (side, offset) = match axle {
+                Axle::Front => (0, -0.15),
+                Axle::Rear => (1, 0.15),
+            };
+            let x = events.partition_point(|e| e < event) as f64 + 1.0 + offset;
+            points[side].push((x, mean));
+            whiskers.push(figure::Whisker {
+                color: side,
+                x,
+                y: (least, most),
+            });
+        }
+    }
+    let header = [
+        "event",
+        "track",
+        "compounds",
+        "axle",
+        "tires",
+        "measured",
+        "mean wear (%)",
+        "sd (%)",
+        "least (%)",
+        "most (%)",
+        "worn through",
+    ];
+    let mut html = String::from("<h3>Wear by event</h3>\n");
+    let [front, rear] = points;
+    let svg = figure::scatter_with_whiskers(
+        &Axes {
+            title: "Measured wear by event",
+            x: "event (1, 2, … in id order, as in the table)",
+            y: "mean wear (%)",
+        },
+        &[
+            Points {
+                label: "front".into(),
+                color: 0,
+                xy: front,
+                filled: true,
+            },
+            Points {
+                label: "rear".into(),
+                color: 1,
+                xy: rear,
+                filled: true,
+            },
+        ],
+        &[],
+        (&whiskers, f64::INFINITY),
+        true,
+    );
+    let figures = match svg {
+        Ok(svg) => {
+            html += &fig(
+                &svg,
+                "Each event's mean measured wear per axle (front left of its place, rear \
+right), the whisker from the least to the most worn tire; tires worn through are left out \
+(their wear is only a lower bound) and counted in the table.",
+                &csv_link("wear_by_event.csv", &header, &cells),
+            );
+            1
+        }
+        Err(e) => {
+            html += &missing(&format!("The wear-by-event figure could not be drawn: {e}"));
+            0
+        }
+    };
+    html += &table(&header, &cells);
+    (html, figures)
 }
 
 /// The curve of one track: the mean over its locations where they share the
@@ -1208,7 +1342,7 @@ their event left out) hold {} and {}.",
                 from: (lo, lo),
                 to: (hi, hi),
             }],
-            &whiskers,
+            (&whiskers, figure::WHISKER_REACH),
             false,
         )?;
         let whiskers_are = match whisker_kinds {
