@@ -181,7 +181,7 @@ fn wear_by_event(rows: &[KpiRow]) -> (String, usize) {
             };
             let x = events.partition_point(|e| e < event) as f64 + 1.0 + offset;
             points[side].push((x, mean));
-            whiskers.push(figure::Whisker {
+            whiskers.push(Whisker {
                 color: side,
                 x,
                 y: (least, most),
