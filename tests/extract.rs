@@ -391,16 +391,24 @@ fn a_bad_energy_map_record_is_named() {
         Field::new("j", DataType::UInt32, false),
         Field::new("energy_j", DataType::Float64, false),
     ]));
-    let cols: Vec<ArrayRef> = vec![
-        Arc::new(StringArray::from(vec!["R1", "R1"])),
-        Arc::new(StringArray::from(vec!["FL", "FL"])),
-        Arc::new(StringArray::from(vec!["surface_inner", "surface_inner"])),
-        Arc::new(UInt32Array::from(vec![3, 40])),
-        Arc::new(UInt32Array::from(vec![4, 2])),
-        Arc::new(Float64Array::from(vec![10.0, 5.0])),
-    ];
-    tirewear::kpi::table::write_batch(&path, &RecordBatch::try_new(schema, cols).unwrap()).unwrap();
-    let err = tirewear::kpi::energy_maps::read_energy_maps(&path)
+    let write = |i: Vec<u32>, j: Vec<u32>, map: &str, wheel: &str| {
+        let cols: Vec<ArrayRef> = vec![
+            Arc::new(StringArray::from(vec!["R1"; 3])),
+            Arc::new(StringArray::from(vec!["FL", "FL", wheel])),
+            Arc::new(StringArray::from(vec![
+                "surface_inner",
+                "surface_inner",
+                map,
+            ])),
+            Arc::new(UInt32Array::from(i)),
+            Arc::new(UInt32Array::from(j)),
+            Arc::new(Float64Array::from(vec![10.0, 5.0, 2.0])),
+        ];
+        let batch = RecordBatch::try_new(schema.clone(), cols).unwrap();
+        tirewear::kpi::table::write_batch(&path, &batch).unwrap();
+        tirewear::kpi::energy_maps::read_energy_maps(&path)
+    };
+    let err = write(vec![3, 40, 0], vec![4, 2, 0], "surface_inner", "FL")
         .unwrap_err()
         .to_string();
     assert!(
@@ -409,6 +417,21 @@ fn a_bad_energy_map_record_is_named() {
             && err.contains("(40, 2)"),
         "{err}"
     );
+    // A bin given twice for one tire is refused, not added up (a table
+    // holds each bin of a tire once); the same bin of another map or
+    // another wheel is not the same bin.
+    let err = write(vec![3, 5, 3], vec![4, 6, 4], "surface_inner", "FL")
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("record 3") && err.contains("(3, 4)") && err.contains("given twice"),
+        "{err}"
+    );
+    for (map, wheel) in [("lateral_surface_inner", "FL"), ("surface_inner", "RR")] {
+        let maps = write(vec![3, 5, 3], vec![4, 6, 4], map, wheel).unwrap();
+        let fl = &maps[&("R1".to_string(), tirewear::Wheel::FL)];
+        assert_eq!(fl.surface_inner.iter().sum::<f64>(), 15.0, "{map} {wheel}");
+    }
 }
 
 /// A run on a machine without a display prints nothing but its own output:

@@ -156,6 +156,13 @@ pub fn read_energy_maps(
     use arrow_array::{Array, Float64Array, StringArray, UInt32Array};
     use arrow_schema::DataType;
     let mut out: std::collections::BTreeMap<super::TireRun, EnergyMaps> = Default::default();
+    // The three maps' cells side by side: one bit each per tire.
+    let grids = [
+        (T_SURFACE_BINS.n, T_INNER_BINS.n),
+        (SLIDING_SPEED_BINS.n, T_SURFACE_BINS.n),
+        (T_SURFACE_BINS.n, T_INNER_BINS.n),
+    ];
+    let mut given = crate::kpi::table::CellsGiven::new(grids.iter().map(|(a, b)| a * b).sum());
     let mut record = 0usize;
     for batch in crate::kpi::table::side_batches(path)? {
         let batch = batch?;
@@ -193,18 +200,13 @@ pub fn read_energy_maps(
         for k in 0..batch.num_rows() {
             record += 1;
             let w = super::wheel_cell(path, record, wheel.value(k))?;
-            let m = out.entry((run.value(k).to_string(), w)).or_default();
+            let tire = (run.value(k).to_string(), w);
+            let m = out.entry(tire.clone()).or_default();
             let (bi, bj) = (i.value(k) as usize, j.value(k) as usize);
-            let (data, (ni, nj)) = match map.value(k) {
-                "surface_inner" => (&mut m.surface_inner, (T_SURFACE_BINS.n, T_INNER_BINS.n)),
-                "lateral_surface_inner" => (
-                    &mut m.lateral_surface_inner,
-                    (T_SURFACE_BINS.n, T_INNER_BINS.n),
-                ),
-                "speed_surface" => (
-                    &mut m.speed_surface,
-                    (SLIDING_SPEED_BINS.n, T_SURFACE_BINS.n),
-                ),
+            let (data, slot) = match map.value(k) {
+                "surface_inner" => (&mut m.surface_inner, 0),
+                "speed_surface" => (&mut m.speed_surface, 1),
+                "lateral_surface_inner" => (&mut m.lateral_surface_inner, 2),
                 other => {
                     return Err(IngestError::invalid(
                         path,
@@ -213,6 +215,7 @@ pub fn read_energy_maps(
                     ));
                 }
             };
+            let (ni, nj) = grids[slot];
             if bi >= ni || bj >= nj {
                 return Err(IngestError::invalid(
                     path,
@@ -220,6 +223,19 @@ pub fn read_energy_maps(
                     format!(
                         "bin ({bi}, {bj}) outside the {ni}×{nj} grid of map '{}'",
                         map.value(k)
+                    ),
+                ));
+            }
+            let before: usize = grids[..slot].iter().map(|(a, b)| a * b).sum();
+            if !given.first(&tire, before + bi * nj + bj) {
+                return Err(IngestError::invalid(
+                    path,
+                    format!("record {record}"),
+                    format!(
+                        "bin ({bi}, {bj}) of map '{}' for run {} wheel {w} given twice (a \
+                         table holds each bin of a tire once)",
+                        map.value(k),
+                        tire.0
                     ),
                 ));
             }

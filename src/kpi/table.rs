@@ -241,6 +241,39 @@ pub(crate) fn side_batches(
     Ok(reader.map(move |b| b.map_err(|e| parquet_err(&path, e))))
 }
 
+/// The cells of each tire's maps a side table has given so far: a side
+/// table holds each tire's non-empty cells once, and a cell given twice
+/// (a damaged or hand-made file) would otherwise be added up into a map
+/// silently.
+pub(crate) struct CellsGiven {
+    cells: usize,
+    given: std::collections::HashMap<super::TireRun, Vec<u64>>,
+}
+
+impl CellsGiven {
+    /// For maps of `cells` cells per tire.
+    pub(crate) fn new(cells: usize) -> CellsGiven {
+        CellsGiven {
+            cells,
+            given: Default::default(),
+        }
+    }
+
+    /// Notes `cell` (below the `cells` of [`CellsGiven::new`]) of `tire`:
+    /// false when the table gave it before.
+    pub(crate) fn first(&mut self, tire: &super::TireRun, cell: usize) -> bool {
+        let words = self.cells.div_ceil(64);
+        let bits = match self.given.get_mut(tire) {
+            Some(bits) => bits,
+            None => self.given.entry(tire.clone()).or_insert(vec![0; words]),
+        };
+        let (word, bit) = (cell / 64, 1u64 << (cell % 64));
+        let first = bits[word] & bit == 0;
+        bits[word] |= bit;
+        first
+    }
+}
+
 /// Schema metadata key that ties the outputs of one extraction together
 /// (the KPI table, its side tables and its report carry the same value).
 pub(crate) const EXTRACTION_ID_KEY: &str = "tirewear.extraction_id";

@@ -1103,6 +1103,8 @@ pub fn read_condition_maps(
     let reader = builder.build().map_err(perr)?;
     let mut out: std::collections::BTreeMap<crate::kpi::TireRun, ConditionMaps> =
         Default::default();
+    // The 1-D maps' bins, then the pair maps': one bit each per tire.
+    let mut given = crate::kpi::table::CellsGiven::new(CONDITION_BINS + PAIR_BINS);
     let mut record = 0usize;
     for batch in reader {
         let batch = batch.map_err(|e| perr(e.into()))?;
@@ -1186,13 +1188,27 @@ pub fn read_condition_maps(
                 ));
             }
             let w = crate::kpi::wheel_cell(path, record, wheel.value(k))?;
-            let m = out
-                .entry((run.value(k).to_string(), w))
-                .or_insert_with(|| ConditionMaps {
-                    held,
-                    pairs_held,
-                    ..Default::default()
-                });
+            let tire = (run.value(k).to_string(), w);
+            let cell = match l.second {
+                None => l.offset + b,
+                Some(_) => CONDITION_BINS + l.offset + b,
+            };
+            if !given.first(&tire, cell) {
+                return Err(IngestError::invalid(
+                    path,
+                    at(),
+                    format!(
+                        "bin {b} of '{name}' for run {} wheel {w} given twice (a table holds \
+                         each bin of a tire once)",
+                        tire.0
+                    ),
+                ));
+            }
+            let m = out.entry(tire).or_insert_with(|| ConditionMaps {
+                held,
+                pairs_held,
+                ..Default::default()
+            });
             // A pair map holds the total only: its parts' columns are NaN.
             let parts = if l.second.is_some() { 1 } else { COMPONENTS };
             for (comp, col) in e.iter().enumerate().take(parts) {
@@ -1545,5 +1561,20 @@ mod tests {
             e.to_string().contains("record 2") && e.to_string().contains("wheel 'LF'"),
             "{e}"
         );
+        // A bin given twice for one tire is refused, not added up; the
+        // same bin of another wheel is another tire's.
+        let twice =
+            arrow_select::concat::concat_batches(&batch.schema(), [&batch, &batch.slice(2, 1)])
+                .unwrap();
+        let e = read_condition_maps(&write("twice.parquet", &twice)).unwrap_err();
+        assert!(
+            e.to_string().contains("record 4") && e.to_string().contains("given twice"),
+            "{e}"
+        );
+        let mut cols = twice.columns().to_vec();
+        cols[1] = Arc::new(arrow_array::StringArray::from(vec!["FL", "FL", "FL", "RR"]));
+        let other = arrow_array::RecordBatch::try_new(batch.schema(), cols).unwrap();
+        let back = read_condition_maps(&write("other.parquet", &other)).unwrap();
+        assert_eq!(back.len(), 2);
     }
 }
