@@ -16,6 +16,23 @@ fn attributes<'a>(html: &'a str, name: &str) -> Vec<&'a str> {
         .collect()
 }
 
+/// The least-squares line of `y` on `x` through `pairs`, by the closed form
+/// slope = Σ(x−x̄)(y−ȳ) / Σ(x−x̄)², and the largest |residual| from it.
+fn least_squares(pairs: &[(f64, f64)]) -> (f64, f64) {
+    let n = pairs.len() as f64;
+    let (mx, my) = (
+        pairs.iter().map(|q| q.0).sum::<f64>() / n,
+        pairs.iter().map(|q| q.1).sum::<f64>() / n,
+    );
+    let slope = pairs.iter().map(|q| (q.0 - mx) * (q.1 - my)).sum::<f64>()
+        / pairs.iter().map(|q| (q.0 - mx).powi(2)).sum::<f64>();
+    let worst = pairs
+        .iter()
+        .map(|q| (q.1 - my - slope * (q.0 - mx)).abs())
+        .fold(0.0, f64::max);
+    (slope, worst)
+}
+
 /// Percent-decodes a `data:` URL's payload.
 fn percent_decode(s: &str) -> String {
     let b = s.as_bytes();
@@ -196,27 +213,13 @@ fn the_demo_report_has_every_section_its_figures_and_no_external_url() {
     assert_eq!(drawn.len(), expected.len());
     assert!(html.contains("Whiskers: each testing tire&#39;s 95 % interval for a new event."));
     // Least-squares line of pixels on values; every point within a pixel.
-    let affine = |pairs: Vec<(f64, f64)>| {
-        let n = pairs.len() as f64;
-        let (mv, mp) = (
-            pairs.iter().map(|q| q.0).sum::<f64>() / n,
-            pairs.iter().map(|q| q.1).sum::<f64>() / n,
-        );
-        let b = pairs.iter().map(|q| (q.0 - mv) * (q.1 - mp)).sum::<f64>()
-            / pairs.iter().map(|q| (q.0 - mv).powi(2)).sum::<f64>();
-        let worst = pairs
-            .iter()
-            .map(|q| (q.1 - mp - b * (q.0 - mv)).abs())
-            .fold(0.0, f64::max);
-        (b, worst)
-    };
     let zipped = || expected.iter().zip(&drawn);
-    let (x_scale, x_worst) = affine(zipped().map(|(e, d)| (e.0, d.0)).collect());
-    let (y_scale, y_worst) = affine(
-        zipped()
-            .flat_map(|(e, d)| [(e.1, d.1), (e.2, d.2)])
-            .collect(),
-    );
+    let x_pairs: Vec<(f64, f64)> = zipped().map(|(e, d)| (e.0, d.0)).collect();
+    let (x_scale, x_worst) = least_squares(&x_pairs);
+    let y_pairs: Vec<(f64, f64)> = zipped()
+        .flat_map(|(e, d)| [(e.1, d.1), (e.2, d.2)])
+        .collect();
+    let (y_scale, y_worst) = least_squares(&y_pairs);
     assert!(
         x_scale > 0.0 && x_worst <= 1.0,
         "x: {x_scale} px/%, off by {x_worst} px"
@@ -276,13 +279,7 @@ fn the_demo_report_has_every_section_its_figures_and_no_external_url() {
         .filter(|r| r.wear_mean_pct.is_finite() && r.worn_through_readings <= 0.0)
         .map(|r| (r.friction_energy_j / 1e6, r.wear_mean_pct))
         .collect();
-    let n = xy.len() as f64;
-    let (mx, my) = (
-        xy.iter().map(|p| p.0).sum::<f64>() / n,
-        xy.iter().map(|p| p.1).sum::<f64>() / n,
-    );
-    let slope = xy.iter().map(|p| (p.0 - mx) * (p.1 - my)).sum::<f64>()
-        / xy.iter().map(|p| (p.0 - mx).powi(2)).sum::<f64>();
+    let (slope, _) = least_squares(&xy);
     let cell = format!(
         "<td class=\"t\">{track}</td><td class=\"t\">front</td><td class=\"n\">{}</td><td class=\"n\">{slope:.3}</td>",
         xy.len()

@@ -162,6 +162,8 @@ pub fn read_energy_maps(
         (SLIDING_SPEED_BINS.n, T_SURFACE_BINS.n),
         (T_SURFACE_BINS.n, T_INNER_BINS.n),
     ];
+    let first_cell: [usize; 3] =
+        std::array::from_fn(|m| grids[..m].iter().map(|(a, b)| a * b).sum());
     let mut given = crate::kpi::table::CellsGiven::new(grids.iter().map(|(a, b)| a * b).sum());
     let mut record = 0usize;
     for batch in crate::kpi::table::side_batches(path)? {
@@ -201,12 +203,11 @@ pub fn read_energy_maps(
             record += 1;
             let w = super::wheel_cell(path, record, wheel.value(k))?;
             let tire = (run.value(k).to_string(), w);
-            let m = out.entry(tire.clone()).or_default();
             let (bi, bj) = (i.value(k) as usize, j.value(k) as usize);
-            let (data, slot) = match map.value(k) {
-                "surface_inner" => (&mut m.surface_inner, 0),
-                "speed_surface" => (&mut m.speed_surface, 1),
-                "lateral_surface_inner" => (&mut m.lateral_surface_inner, 2),
+            let slot = match map.value(k) {
+                "surface_inner" => 0,
+                "speed_surface" => 1,
+                "lateral_surface_inner" => 2,
                 other => {
                     return Err(IngestError::invalid(
                         path,
@@ -226,8 +227,7 @@ pub fn read_energy_maps(
                     ),
                 ));
             }
-            let before: usize = grids[..slot].iter().map(|(a, b)| a * b).sum();
-            if !given.first(&tire, before + bi * nj + bj) {
+            if !given.first(&tire, first_cell[slot] + bi * nj + bj) {
                 return Err(IngestError::invalid(
                     path,
                     format!("record {record}"),
@@ -246,6 +246,12 @@ pub fn read_energy_maps(
                     format!("energy_j = {} is not finite", e.value(k)),
                 ));
             }
+            let m = out.entry(tire).or_default();
+            let data = match slot {
+                0 => &mut m.surface_inner,
+                1 => &mut m.speed_surface,
+                _ => &mut m.lateral_surface_inner,
+            };
             data[bi * nj + bj] += e.value(k);
         }
     }
