@@ -1195,20 +1195,13 @@ fn mutated_logger_files_never_panic_the_import() {
     assert!(failures.is_empty(), "{}", failures.join("\n"));
 }
 
-/// A KPI table written by another tool (pyarrow, pandas: no tirewear data
-/// checksum) and then damaged is refused naming the file, or read, but never
-/// panics the reader or takes unbounded memory: without the checksum the
-/// Parquet reader itself meets the damage.
-#[test]
-fn a_damaged_kpi_table_from_another_tool_never_panics_the_reader() {
+/// `src` rewritten to `dst` as another tool writes it (pyarrow, pandas):
+/// the same schema, rows and key/value metadata, but no tirewear data
+/// checksum, so a damage is met by the reader itself.
+fn foreign_copy(src: &Path, dst: &Path) {
     use parquet::arrow::ArrowWriter;
     use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
-    let _one = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
-    let dir = tempfile::tempdir().unwrap();
-    common::demo_kpis(dir.path());
-    // The table rewritten as another tool writes it: same schema, rows and
-    // key/value metadata but the checksum.
-    let ours = std::fs::File::open(dir.path().join("kpis.parquet")).unwrap();
+    let ours = std::fs::File::open(src).unwrap();
     let builder = ParquetRecordBatchReaderBuilder::try_new(ours).unwrap();
     let kv: Vec<_> = builder
         .metadata()
@@ -1219,59 +1212,156 @@ fn a_damaged_kpi_table_from_another_tool_never_panics_the_reader() {
         .filter(|kv| kv.key != "tirewear.data_crc32" && kv.key != "ARROW:schema")
         .cloned()
         .collect();
+    // The schema's own metadata (a side table's format version) travels in
+    // the encoded Arrow schema, which the writer makes again from it.
+    let schema = builder.schema().clone();
     let batches: Vec<_> = builder.build().unwrap().map(|b| b.unwrap()).collect();
-    let foreign = dir.path().join("foreign.parquet");
     let props = parquet::file::properties::WriterProperties::builder()
         .set_key_value_metadata(Some(kv))
         .build();
-    let mut w = ArrowWriter::try_new(
-        std::fs::File::create(&foreign).unwrap(),
-        batches[0].schema(),
-        Some(props),
-    )
-    .unwrap();
+    let mut w =
+        ArrowWriter::try_new(std::fs::File::create(dst).unwrap(), schema, Some(props)).unwrap();
     for b in &batches {
         w.write(b).unwrap();
     }
     w.close().unwrap();
-    let clean_rows = tirewear::kpi::table::read_parquet(&foreign).unwrap();
-    assert_eq!(clean_rows.len(), 320);
-    let bytes = std::fs::read(&foreign).unwrap();
-    let footer = parquet_footer(&bytes);
-    let target = dir.path().join("damaged.parquet");
-    let mut rng = ChaCha8Rng::seed_from_u64(61);
-    let (mut refused, mut read, mut failures, mut peak_max) = (0, 0, Vec::new(), 0);
-    for case in 0..200 {
-        // Half the changes in the footer, half anywhere.
+}
+
+/// Damages the Parquet file `clean` (bytes) `cases` times, half of them in
+/// its footer, writes each to `target` and reads it with `read`: counts the
+/// damages refused naming the file (and among them those where the Parquet
+/// decoder panicked, caught by the reader) and those read, and lists every panic,
+/// error without the file's name, or read that took more than
+/// [`MEMORY_BOUND`] of heap beyond `clean_peak` (the undamaged read's).
+fn damage_and_read(
+    clean: &[u8],
+    target: &Path,
+    (seed, cases): (u64, usize),
+    clean_peak: usize,
+    read: impl Fn(&Path) -> Result<usize, String> + std::panic::RefUnwindSafe,
+) -> (Refused, usize, Vec<String>) {
+    let footer = parquet_footer(clean);
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let (mut refused, mut read_ok, mut failures) = (Refused::default(), 0, Vec::new());
+    for case in 0..cases {
         let hot = if case % 2 == 0 {
             footer.clone()
         } else {
-            0..bytes.len()
+            0..clean.len()
         };
-        let (m, what) = mutate_binary(&bytes, hot, &mut rng);
-        std::fs::write(&target, &m).unwrap();
-        let tag = format!("case {case} ({what})");
+        let (m, what) = mutate_binary(clean, hot, &mut rng);
+        std::fs::write(target, &m).unwrap();
+        let tag = format!("{} case {case} ({what})", target.display());
         let base = LIVE.load(Ordering::Relaxed);
         PEAK.store(base, Ordering::Relaxed);
-        let r = std::panic::catch_unwind(|| tirewear::kpi::table::read_parquet(&target));
+        let r = std::panic::catch_unwind(|| read(target));
         let peak = PEAK.load(Ordering::Relaxed).saturating_sub(base);
-        peak_max = peak_max.max(peak);
-        if peak > MEMORY_BOUND {
+        if peak > clean_peak + MEMORY_BOUND {
             failures.push(format!("{tag}: {peak} bytes of heap"));
         }
         match r {
             Err(_) => failures.push(format!("{tag}: panicked")),
-            Ok(Err(e)) if e.to_string().contains(target.to_str().unwrap()) => refused += 1,
+            Ok(Err(e)) if e.contains(target.to_str().unwrap()) => {
+                refused.named += 1;
+                refused.decoder_panics += usize::from(e.contains("Parquet decoder stopped"));
+            }
             Ok(Err(e)) => failures.push(format!("{tag}: error does not name the file: {e}")),
-            Ok(Ok(_)) => read += 1,
+            Ok(Ok(_)) => read_ok += 1,
         }
     }
+    (refused, read_ok, failures)
+}
+
+/// Damaged files refused with the file named, and how many of those the
+/// Parquet decoder panicked on (the reader's error then).
+#[derive(Default)]
+struct Refused {
+    named: usize,
+    decoder_panics: usize,
+}
+
+/// The heap `read` takes beyond what was live before it.
+fn heap_of(read: impl FnOnce()) -> usize {
+    let base = LIVE.load(Ordering::Relaxed);
+    PEAK.store(base, Ordering::Relaxed);
+    read();
+    PEAK.load(Ordering::Relaxed).saturating_sub(base)
+}
+
+/// A KPI table written by another tool (pyarrow, pandas: no tirewear data
+/// checksum) and then damaged is refused naming the file, or read, but never
+/// panics the reader or takes unbounded memory: without the checksum the
+/// Parquet reader itself meets the damage.
+#[test]
+fn a_damaged_kpi_table_from_another_tool_never_panics_the_reader() {
+    let _one = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    let dir = tempfile::tempdir().unwrap();
+    common::demo_kpis(dir.path());
+    let foreign = dir.path().join("foreign.parquet");
+    foreign_copy(&dir.path().join("kpis.parquet"), &foreign);
+    let bytes = std::fs::read(&foreign).unwrap();
+    let read = |p: &Path| {
+        tirewear::kpi::table::read_parquet(p)
+            .map(|rows| rows.len())
+            .map_err(|e| e.to_string())
+    };
+    let clean_peak = heap_of(|| assert_eq!(read(&foreign), Ok(320)));
+    let target = dir.path().join("damaged.parquet");
+    let (refused, read, failures) = damage_and_read(&bytes, &target, (61, 200), clean_peak, read);
     println!(
-        "foreign KPI table mutations: {refused} refused with the file named, {read} read, {} \
-         failures; peak heap of one read {peak_max} bytes",
+        "foreign KPI table mutations: {} refused with the file named ({} a decoder panic \
+         caught), {read} read, {} failures; undamaged read {clean_peak} bytes of heap",
+        refused.named,
+        refused.decoder_panics,
         failures.len()
     );
-    assert!(refused >= 50, "{refused}");
+    assert!(refused.named >= 50, "{}", refused.named);
+    assert!(failures.is_empty(), "{}", failures.join("\n"));
+}
+
+/// The energy-map and condition-map side tables, written by another tool
+/// and then damaged, are refused naming the file, or read, but never panic
+/// their readers or take unbounded memory. Their readers index the maps by
+/// the file's bin numbers and condition names, which a damage can set to
+/// anything.
+#[test]
+fn damaged_side_tables_from_another_tool_never_panic_their_readers() {
+    let _one = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    let dir = tempfile::tempdir().unwrap();
+    common::demo_kpis(dir.path());
+    // Each reader gives the number of tires it read maps for.
+    type Read = fn(&Path) -> Result<usize, String>;
+    let cases: [(&str, Read); 2] = [
+        ("energy_maps", |p| {
+            let maps = tirewear::kpi::energy_maps::read_energy_maps(p);
+            maps.map(|m| m.len()).map_err(|e| e.to_string())
+        }),
+        ("condition_maps", |p| {
+            let maps = tirewear::kpi::cpu::condition_map::read_condition_maps(p);
+            maps.map(|m| m.len()).map_err(|e| e.to_string())
+        }),
+    ];
+    let mut failures = Vec::new();
+    for (seed, (name, read)) in (71..).zip(cases) {
+        let foreign = dir.path().join(format!("foreign.{name}.parquet"));
+        foreign_copy(&dir.path().join(format!("kpis.{name}.parquet")), &foreign);
+        let bytes = std::fs::read(&foreign).unwrap();
+        // The demo's 320 tire-runs all slid: each has maps.
+        let clean_peak = heap_of(|| assert_eq!(read(&foreign), Ok(320), "{name}"));
+        let target = dir.path().join(format!("damaged.{name}.parquet"));
+        let (refused, read_ok, f) = damage_and_read(&bytes, &target, (seed, 60), clean_peak, read);
+        println!(
+            "foreign {name} mutations ({} bytes): {} refused with the file named ({} a \
+             decoder panic caught), {read_ok} read, {} failures; undamaged read {clean_peak} \
+             bytes of heap",
+            bytes.len(),
+            refused.named,
+            refused.decoder_panics,
+            f.len()
+        );
+        assert!(refused.named >= 15, "{name}: {}", refused.named);
+        failures.extend(f);
+    }
     assert!(failures.is_empty(), "{}", failures.join("\n"));
 }
 

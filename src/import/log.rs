@@ -350,7 +350,7 @@ pub(crate) fn read_parquet(path: &Path) -> Result<RawLog, ImportError> {
     // The footer's byte ranges checked as for every Parquet file read.
     let builder = crate::ingest::checksum::open_parquet(path)?;
     let schema = builder.schema().clone();
-    let reader = builder.build().map_err(|e| bad(e.to_string()))?;
+    let reader = crate::ingest::checksum::read_batches(builder).map_err(|e| bad(e.to_string()))?;
     let mut channels: Vec<RawChannel> = Vec::new();
     let mut columns = Vec::new();
     for (i, f) in schema.fields().iter().enumerate() {

@@ -19,7 +19,7 @@
 use std::io::{Read, Write};
 use std::path::Path;
 
-use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
+use parquet::arrow::arrow_reader::{ParquetRecordBatchReader, ParquetRecordBatchReaderBuilder};
 use parquet::file::metadata::{KeyValue, ParquetMetaData};
 use parquet::file::writer::SerializedFileWriter;
 
@@ -439,6 +439,39 @@ pub(crate) fn open_parquet(
     }
 }
 
+/// The record batches of an opened Parquet file, each read with the
+/// decoder's panics caught: the Parquet reader asserts on some damaged data
+/// pages (a run-length header longer than ten bytes panics `get_vlq_int`,
+/// in release builds too), which a file without tirewear's checksum (another
+/// tool's) can carry. Such a panic is the file's error, and no batch
+/// follows it.
+pub(crate) struct Batches(Option<ParquetRecordBatchReader>);
+
+/// [`Batches`] of the file `builder` opened (see [`open_parquet`]).
+pub(crate) fn read_batches(
+    builder: ParquetRecordBatchReaderBuilder<ParquetSource>,
+) -> Result<Batches, parquet::errors::ParquetError> {
+    Ok(Batches(Some(builder.build()?)))
+}
+
+impl Iterator for Batches {
+    type Item = Result<arrow_array::RecordBatch, arrow_schema::ArrowError>;
+
+    fn next(&mut self) -> Option<Self::Item> {
+        let reader = self.0.as_mut()?;
+        match crate::guard::catch_panic(|| reader.next()) {
+            Ok(batch) => batch,
+            Err(msg) => {
+                // The reader is mid-page: it is dropped, not read on.
+                self.0 = None;
+                Some(Err(arrow_schema::ArrowError::ParquetError(format!(
+                    "damaged data: the Parquet decoder stopped on it ({msg})"
+                ))))
+            }
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -700,6 +733,59 @@ mod tests {
                 "{what}: {why}"
             );
         }
+    }
+
+    /// Another tool's file (no checksum) with eleven continuation bytes
+    /// written over a dictionary column's data panics the Parquet decoder
+    /// where it reads a run-length header; read through [`Batches`] it is
+    /// an error, and no batch follows it. Found by the robustness suite on
+    /// a damaged energy-map table.
+    #[test]
+    fn a_decoder_panic_on_damaged_data_is_the_files_error() {
+        use arrow_array::{RecordBatch, StringArray};
+        use parquet::arrow::ArrowWriter;
+        use std::sync::Arc;
+        let wheels = ["FL", "FR", "RL", "RR"];
+        let wheels = StringArray::from_iter_values((0..400).map(|i| wheels[i % 4]));
+        let batch = RecordBatch::try_from_iter([("wheel", Arc::new(wheels) as _)]).unwrap();
+        let mut clean = Vec::new();
+        let mut w = ArrowWriter::try_new(&mut clean, batch.schema(), None).unwrap();
+        w.write(&batch).unwrap();
+        w.close().unwrap();
+        let footer_len = u32::from_le_bytes(clean[clean.len() - 8..][..4].try_into().unwrap());
+        let data_end = clean.len() - 8 - footer_len as usize;
+        let unguarded = |b: &[u8]| {
+            crate::guard::catch_panic(|| {
+                let bytes = bytes::Bytes::copy_from_slice(b);
+                let reader = ParquetRecordBatchReaderBuilder::try_new(bytes)
+                    .and_then(|b| b.build())
+                    .map_err(|e| e.to_string())?;
+                // Up to the first error: the reader gives errors without end.
+                let batches: Result<Vec<_>, _> = reader.collect();
+                batches.map(|b| b.len()).map_err(|e| e.to_string())
+            })
+        };
+        assert!(matches!(unguarded(&clean), Ok(Ok(1))));
+        let damaged = (4..data_end - 11)
+            .map(|at| {
+                let mut b = clean.clone();
+                b[at..at + 11].fill(0xff);
+                b
+            })
+            .find(|b| unguarded(b).is_err())
+            .expect("some place where the decoder panics");
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("wheels.parquet");
+        std::fs::write(&path, &damaged).unwrap();
+        let batches: Vec<_> = read_batches(open_parquet(&path).unwrap())
+            .unwrap()
+            .collect();
+        assert_eq!(batches.len(), 1);
+        let e = batches[0].as_ref().unwrap_err().to_string();
+        assert!(
+            e.contains("damaged data: the Parquet decoder stopped"),
+            "{e}"
+        );
     }
 
     /// A sealed JSON object reads back; every changed byte outside the

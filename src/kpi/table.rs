@@ -234,9 +234,8 @@ fn parquet_err(path: &Path, e: impl Into<parquet::errors::ParquetError>) -> Inge
 pub(crate) fn side_batches(
     path: &Path,
 ) -> Result<impl Iterator<Item = Result<RecordBatch, IngestError>> + use<>, IngestError> {
-    let reader = crate::ingest::checksum::open_parquet(path)?
-        .build()
-        .map_err(|e| parquet_err(path, e))?;
+    use crate::ingest::checksum::{open_parquet, read_batches};
+    let reader = read_batches(open_parquet(path)?).map_err(|e| parquet_err(path, e))?;
     let path = path.to_path_buf();
     Ok(reader.map(move |b| b.map_err(|e| parquet_err(&path, e))))
 }
@@ -706,7 +705,8 @@ pub fn read_parquet(path: &Path) -> Result<Vec<KpiRow>, IngestError> {
         e => e,
     })?;
     check_units(path, builder.schema())?;
-    let reader = builder.build().map_err(|e| parquet_err(path, e))?;
+    let reader =
+        crate::ingest::checksum::read_batches(builder).map_err(|e| parquet_err(path, e))?;
     let mut rows = Vec::new();
     for batch in reader {
         let batch = batch.map_err(|e| parquet_err(path, e))?;

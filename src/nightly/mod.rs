@@ -349,7 +349,7 @@ fn read_batches(path: &Path) -> Result<Vec<RecordBatch>, NightlyError> {
                 .unwrap_or(&msg))
         }
     })?;
-    let reader = builder.build().map_err(|e| bad(&e))?;
+    let reader = crate::ingest::checksum::read_batches(builder).map_err(|e| bad(&e))?;
     reader.collect::<Result<Vec<_>, _>>().map_err(|e| bad(&e))
 }
 

@@ -1100,7 +1100,7 @@ pub fn read_condition_maps(
         })
         .map(|l| (l.name.as_str(), l))
         .collect();
-    let reader = builder.build().map_err(perr)?;
+    let reader = crate::ingest::checksum::read_batches(builder).map_err(perr)?;
     let mut out: std::collections::BTreeMap<crate::kpi::TireRun, ConditionMaps> =
         Default::default();
     // The 1-D maps' bins, then the pair maps': one bit each per tire.
