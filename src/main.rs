@@ -172,6 +172,7 @@ fn run() -> Result<std::process::ExitCode> {
         .with_env_filter(filter)
         .with_writer(std::io::stderr)
         .init();
+    tirewear::quiet_caught_panics();
     // Before any thread starts (rayon's pool, the engines).
     cli::allocator::tune();
     cli::device_select::quiet();

@@ -1604,3 +1604,69 @@ fn a_runs_memory_need_bounds_its_peak_heap() {
         }
     }
 }
+
+/// The command line does not print a caught panic as a crash: `fit` on
+/// another tool's table whose data make the Parquet decoder panic (eleven
+/// `0xff` over a dictionary column, the first place that panics the bare
+/// reader) exits 1 with the file's error, which carries the panic's message
+/// and place, and standard error has no "panicked at".
+#[test]
+fn a_decoder_panic_reaches_the_user_as_the_files_error_not_a_crash() {
+    use arrow_array::{RecordBatch, StringArray};
+    use parquet::arrow::ArrowWriter;
+    use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
+    let wheels = ["FL", "FR", "RL", "RR"];
+    let wheels = StringArray::from_iter_values((0..400).map(|i| wheels[i % 4]));
+    let batch = RecordBatch::try_from_iter([("wheel", std::sync::Arc::new(wheels) as _)]).unwrap();
+    let mut clean = Vec::new();
+    let mut w = ArrowWriter::try_new(&mut clean, batch.schema(), None).unwrap();
+    w.write(&batch).unwrap();
+    w.close().unwrap();
+    let data_end = parquet_footer(&clean).start;
+    let panics = |b: &[u8]| {
+        std::panic::catch_unwind(|| {
+            let bytes = bytes::Bytes::copy_from_slice(b);
+            let Ok(reader) =
+                ParquetRecordBatchReaderBuilder::try_new(bytes).and_then(|r| r.build())
+            else {
+                return;
+            };
+            // Up to the first error: the reader gives errors without end.
+            reader.take_while(Result::is_ok).for_each(drop);
+        })
+        .is_err()
+    };
+    let damaged = (4..data_end - 11)
+        .map(|at| {
+            let mut b = clean.clone();
+            b[at..at + 11].fill(0xff);
+            b
+        })
+        .find(|b| panics(b))
+        .expect("some place where the decoder panics");
+    let dir = tempfile::tempdir().unwrap();
+    let kpis = dir.path().join("kpis.parquet");
+    std::fs::write(&kpis, &damaged).unwrap();
+    let run = std::process::Command::new(env!("CARGO_BIN_EXE_tirewear"))
+        .args(["--quiet", "fit"])
+        .arg(&kpis)
+        .arg("--out")
+        .arg(dir.path().join("models"))
+        .env_remove("RUST_BACKTRACE")
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert_eq!(run.status.code(), Some(1), "{stderr}");
+    assert!(!stderr.contains("panicked at"), "{stderr}");
+    let error = stderr
+        .lines()
+        .find(|l| l.starts_with("Error:"))
+        .unwrap_or_default();
+    assert!(
+        error.contains(kpis.to_str().unwrap())
+            && error.contains("damaged data: the Parquet decoder stopped on it")
+            && error.contains(", at ")
+            && error.contains(".rs:"),
+        "{stderr}"
+    );
+}

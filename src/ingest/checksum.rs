@@ -464,7 +464,7 @@ impl Iterator for Batches {
             Err(msg) => {
                 // The reader is mid-page: it is dropped, not read on.
                 self.0 = None;
-                Some(Err(arrow_schema::ArrowError::ParquetError(format!(
+                Some(Err(arrow_schema::ArrowError::ParseError(format!(
                     "damaged data: the Parquet decoder stopped on it ({msg})"
                 ))))
             }
