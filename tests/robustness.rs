@@ -1605,11 +1605,12 @@ fn a_runs_memory_need_bounds_its_peak_heap() {
     }
 }
 
-/// The command line does not print a caught panic as a crash: `fit` on
-/// another tool's table whose data make the Parquet decoder panic (eleven
-/// `0xff` over a dictionary column, the first place that panics the bare
-/// reader) exits 1 with the file's error, which carries the panic's message
-/// and place, and standard error has no "panicked at".
+/// Another tool's table (no checksum) whose data make the Parquet decoder
+/// panic — eleven `0xff` over a dictionary column, the first place that
+/// panics the bare reader, where it reads a run-length header — is the
+/// file's error: from the library, and from the command line, which does
+/// not print the caught panic as a crash (`fit` exits 1 with the file's
+/// error, carrying the panic's message and place; no "panicked at").
 #[test]
 fn a_decoder_panic_reaches_the_user_as_the_files_error_not_a_crash() {
     use arrow_array::{RecordBatch, StringArray};
@@ -1647,6 +1648,14 @@ fn a_decoder_panic_reaches_the_user_as_the_files_error_not_a_crash() {
     let dir = tempfile::tempdir().unwrap();
     let kpis = dir.path().join("kpis.parquet");
     std::fs::write(&kpis, &damaged).unwrap();
+    let e = tirewear::kpi::table::read_parquet(&kpis)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains(kpis.to_str().unwrap())
+            && e.contains("damaged data: the Parquet decoder stopped on it"),
+        "{e}"
+    );
     let run = std::process::Command::new(env!("CARGO_BIN_EXE_tirewear"))
         .args(["--quiet", "fit"])
         .arg(&kpis)

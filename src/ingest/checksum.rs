@@ -735,59 +735,6 @@ mod tests {
         }
     }
 
-    /// Another tool's file (no checksum) with eleven continuation bytes
-    /// written over a dictionary column's data panics the Parquet decoder
-    /// where it reads a run-length header; read through [`Batches`] it is
-    /// an error, and no batch follows it. Found by the robustness suite on
-    /// a damaged energy-map table.
-    #[test]
-    fn a_decoder_panic_on_damaged_data_is_the_files_error() {
-        use arrow_array::{RecordBatch, StringArray};
-        use parquet::arrow::ArrowWriter;
-        use std::sync::Arc;
-        let wheels = ["FL", "FR", "RL", "RR"];
-        let wheels = StringArray::from_iter_values((0..400).map(|i| wheels[i % 4]));
-        let batch = RecordBatch::try_from_iter([("wheel", Arc::new(wheels) as _)]).unwrap();
-        let mut clean = Vec::new();
-        let mut w = ArrowWriter::try_new(&mut clean, batch.schema(), None).unwrap();
-        w.write(&batch).unwrap();
-        w.close().unwrap();
-        let footer_len = u32::from_le_bytes(clean[clean.len() - 8..][..4].try_into().unwrap());
-        let data_end = clean.len() - 8 - footer_len as usize;
-        let unguarded = |b: &[u8]| {
-            crate::guard::catch_panic(|| {
-                let bytes = bytes::Bytes::copy_from_slice(b);
-                let reader = ParquetRecordBatchReaderBuilder::try_new(bytes)
-                    .and_then(|b| b.build())
-                    .map_err(|e| e.to_string())?;
-                // Up to the first error: the reader gives errors without end.
-                let batches: Result<Vec<_>, _> = reader.collect();
-                batches.map(|b| b.len()).map_err(|e| e.to_string())
-            })
-        };
-        assert!(matches!(unguarded(&clean), Ok(Ok(1))));
-        let damaged = (4..data_end - 11)
-            .map(|at| {
-                let mut b = clean.clone();
-                b[at..at + 11].fill(0xff);
-                b
-            })
-            .find(|b| unguarded(b).is_err())
-            .expect("some place where the decoder panics");
-        let dir = tempfile::tempdir().unwrap();
-        let path = dir.path().join("wheels.parquet");
-        std::fs::write(&path, &damaged).unwrap();
-        let batches: Vec<_> = read_batches(open_parquet(&path).unwrap())
-            .unwrap()
-            .collect();
-        assert_eq!(batches.len(), 1);
-        let e = batches[0].as_ref().unwrap_err().to_string();
-        assert!(
-            e.contains("damaged data: the Parquet decoder stopped"),
-            "{e}"
-        );
-    }
-
     /// A sealed JSON object reads back; every changed byte outside the
     /// field's own name is a mismatch; CRLF line ends and a deleted field
     /// pass; a value that is not 8 hex digits, or a field moved, does not.

@@ -1044,88 +1044,105 @@ fn map_layouts() -> Vec<MapLayout> {
     out
 }
 
-/// Reads a condition-map side table back, keyed by (run, wheel). A file of
-/// another format version, an unknown condition, a bin outside its
-/// condition's grid, a bin whose edges differ from this build's, or a
-/// non-finite energy is an error naming the record.
-pub fn read_condition_maps(
-    path: &std::path::Path,
-) -> Result<
-    std::collections::BTreeMap<crate::kpi::TireRun, ConditionMaps>,
-    crate::ingest::IngestError,
-> {
-    use crate::ingest::IngestError;
-    use arrow_array::{Array, Float64Array, StringArray, UInt32Array};
-    use arrow_schema::DataType;
-    let perr = |e: parquet::errors::ParquetError| IngestError::Parquet {
-        path: path.to_path_buf(),
-        source: e,
-    };
-    let builder = crate::ingest::checksum::open_parquet(path)?;
-    let version: u32 = match builder.schema().metadata().get(VERSION_KEY) {
-        Some(v) if matches!(v.as_str(), "1" | "2" | "3" | "4") => v.parse().expect("a digit"),
-        Some(v) => {
-            return Err(IngestError::invalid(
-                path,
-                "schema metadata",
-                format!(
-                    "condition maps of format version {v}; this build reads versions 1 to {VERSION}"
-                ),
-            ));
-        }
-        None => {
-            return Err(IngestError::invalid(
-                path,
-                "schema metadata",
-                format!("no '{VERSION_KEY}': not a condition-map table"),
-            ));
-        }
-    };
-    let held = match version {
-        1 => V1_CONDITIONS,
-        2 | 3 => V3_CONDITIONS,
-        _ => N_CONDITIONS,
-    };
-    let pairs_held = version >= 3;
-    // The maps a file of this version may hold, by name.
-    let layouts = map_layouts();
-    let by_name: std::collections::HashMap<&str, &MapLayout> = layouts
-        .iter()
-        .filter(|l| {
-            if l.second.is_some() {
-                pairs_held
-            } else {
-                l.condition < held
+/// What a condition-map table of one format version holds: its 1-D maps
+/// for the conditions below `held` (1: [`V1_CONDITIONS`], 2 and 3:
+/// [`V3_CONDITIONS`], 4: all), its pair maps from version 3 on.
+struct TableVersion {
+    version: u32,
+    held: usize,
+    pairs_held: bool,
+}
+
+impl TableVersion {
+    /// The version a table's schema metadata declares ([`VERSION_KEY`]);
+    /// one this build does not read, or none, is an error naming the file.
+    fn of(
+        path: &std::path::Path,
+        schema: &arrow_schema::Schema,
+    ) -> Result<TableVersion, crate::ingest::IngestError> {
+        use crate::ingest::IngestError;
+        let version: u32 = match schema.metadata().get(VERSION_KEY) {
+            Some(v) if matches!(v.as_str(), "1" | "2" | "3" | "4") => v.parse().expect("a digit"),
+            Some(v) => {
+                return Err(IngestError::invalid(
+                    path,
+                    "schema metadata",
+                    format!(
+                        "condition maps of format version {v}; this build reads versions 1 to {VERSION}"
+                    ),
+                ));
             }
-        })
-        .map(|l| (l.name.as_str(), l))
-        .collect();
-    let reader = crate::ingest::checksum::read_batches(builder).map_err(perr)?;
-    let mut out: std::collections::BTreeMap<crate::kpi::TireRun, ConditionMaps> =
-        Default::default();
-    // The 1-D maps' bins, then the pair maps': one bit each per tire.
-    let mut given = crate::kpi::table::CellsGiven::new(CONDITION_BINS + PAIR_BINS);
-    let mut record = 0usize;
-    for batch in reader {
-        let batch = batch.map_err(|e| perr(e.into()))?;
-        let col = |name: &str, ty: &DataType| {
-            crate::kpi::table::checked_column(path, &batch, name, ty, record)
+            None => {
+                return Err(IngestError::invalid(
+                    path,
+                    "schema metadata",
+                    format!("no '{VERSION_KEY}': not a condition-map table"),
+                ));
+            }
         };
-        let text = |name: &str| -> Result<StringArray, IngestError> {
+        let held = match version {
+            1 => V1_CONDITIONS,
+            2 | 3 => V3_CONDITIONS,
+            _ => N_CONDITIONS,
+        };
+        Ok(TableVersion {
+            version,
+            held,
+            pairs_held: version >= 3,
+        })
+    }
+
+    /// Whether a file of this version may hold the map `l`.
+    fn holds(&self, l: &MapLayout) -> bool {
+        match l.second {
+            Some(_) => self.pairs_held,
+            None => l.condition < self.held,
+        }
+    }
+}
+
+/// One batch of a condition-map table, its columns cast and checked
+/// (`lo_2`, `hi_2` from version 3 on).
+struct MapColumns {
+    run: arrow_array::StringArray,
+    wheel: arrow_array::StringArray,
+    condition: arrow_array::StringArray,
+    bin: arrow_array::UInt32Array,
+    lo: arrow_array::Float64Array,
+    hi: arrow_array::Float64Array,
+    second: Option<(arrow_array::Float64Array, arrow_array::Float64Array)>,
+    /// Total, longitudinal, lateral (J).
+    energy_j: [arrow_array::Float64Array; COMPONENTS],
+}
+
+impl MapColumns {
+    /// The columns of `batch`, whose first record is `record` + 1.
+    fn of(
+        path: &std::path::Path,
+        batch: &arrow_array::RecordBatch,
+        record: usize,
+        pairs_held: bool,
+    ) -> Result<MapColumns, crate::ingest::IngestError> {
+        use arrow_array::{Array, Float64Array, StringArray, UInt32Array};
+        use arrow_schema::DataType;
+        let col = |name: &str, ty: &DataType| {
+            crate::kpi::table::checked_column(path, batch, name, ty, record)
+        };
+        let text = |name: &str| -> Result<StringArray, crate::ingest::IngestError> {
             let a = col(name, &DataType::Utf8)?;
             Ok(a.as_any()
                 .downcast_ref::<StringArray>()
                 .expect("cast")
                 .clone())
         };
-        let float = |name: &str| -> Result<Float64Array, IngestError> {
+        let float = |name: &str| -> Result<Float64Array, crate::ingest::IngestError> {
             let a = col(name, &DataType::Float64)?;
             Ok(a.as_any()
                 .downcast_ref::<Float64Array>()
                 .expect("cast")
                 .clone())
         };
-        let (run, wheel, cond) = (text("run")?, text("wheel")?, text("condition")?);
+        let (run, wheel, condition) = (text("run")?, text("wheel")?, text("condition")?);
         let bin = col("bin", &DataType::UInt32)?;
         let bin = bin
             .as_any()
@@ -1138,23 +1155,118 @@ pub fn read_condition_maps(
         } else {
             None
         };
-        let e = [
+        let energy_j = [
             float("energy_j")?,
             float("energy_x_j")?,
             float("energy_y_j")?,
         ];
+        Ok(MapColumns {
+            run,
+            wheel,
+            condition,
+            bin,
+            lo,
+            hi,
+            second,
+            energy_j,
+        })
+    }
+
+    /// Row `k`'s bin edges as [`MapLayout::edges`] gives them: lo, hi and,
+    /// for a pair map, lo_2, hi_2 (NaN for a 1-D map).
+    fn edges(&self, k: usize, l: &MapLayout) -> [f64; 4] {
+        match (&self.second, l.second) {
+            (Some((lo_2, hi_2)), Some(_)) => [
+                self.lo.value(k),
+                self.hi.value(k),
+                lo_2.value(k),
+                hi_2.value(k),
+            ],
+            _ => [self.lo.value(k), self.hi.value(k), f64::NAN, f64::NAN],
+        }
+    }
+}
+
+/// Checks that bin `b` of map `l` has this build's edges in the file
+/// (`got`, from [`MapColumns::edges`]); else an error naming the record.
+fn check_edges(
+    path: &std::path::Path,
+    record: usize,
+    l: &MapLayout,
+    b: usize,
+    got: [f64; 4],
+) -> Result<(), crate::ingest::IngestError> {
+    let want = l.edges(b);
+    let close =
+        |a: f64, b: f64| (a.is_nan() && b.is_nan()) || (a - b).abs() <= 1e-9 * (1.0 + b.abs());
+    if got.iter().zip(&want).all(|(g, w)| close(*g, *w)) {
+        return Ok(());
+    }
+    let show = |e: &[f64]| match l.second {
+        None => format!("[{}, {})", e[0], e[1]),
+        Some(_) => format!("[{}, {}) × [{}, {})", e[0], e[1], e[2], e[3]),
+    };
+    Err(crate::ingest::IngestError::invalid(
+        path,
+        format!("record {record}"),
+        format!(
+            "bin {b} of '{}' is {} in the file but {} in this build",
+            l.name,
+            show(&got),
+            show(&want)
+        ),
+    ))
+}
+
+/// Reads a condition-map side table back, keyed by (run, wheel). A file of
+/// another format version, an unknown condition, a bin outside its
+/// condition's grid, a bin whose edges differ from this build's, a bin
+/// given twice for one tire, or a non-finite energy is an error naming the
+/// record.
+pub fn read_condition_maps(
+    path: &std::path::Path,
+) -> Result<
+    std::collections::BTreeMap<crate::kpi::TireRun, ConditionMaps>,
+    crate::ingest::IngestError,
+> {
+    use crate::ingest::IngestError;
+    let perr = |e: parquet::errors::ParquetError| IngestError::Parquet {
+        path: path.to_path_buf(),
+        source: e,
+    };
+    let builder = crate::ingest::checksum::open_parquet(path)?;
+    let v = TableVersion::of(path, builder.schema())?;
+    // The maps a file of this version may hold, by name.
+    let layouts = map_layouts();
+    let by_name: std::collections::HashMap<&str, &MapLayout> = layouts
+        .iter()
+        .filter(|l| v.holds(l))
+        .map(|l| (l.name.as_str(), l))
+        .collect();
+    let reader = crate::ingest::checksum::read_batches(builder).map_err(perr)?;
+    let mut out: std::collections::BTreeMap<crate::kpi::TireRun, ConditionMaps> =
+        Default::default();
+    // The 1-D maps' bins, then the pair maps': one bit each per tire.
+    let mut given = crate::kpi::table::CellsGiven::new(CONDITION_BINS + PAIR_BINS);
+    let mut record = 0usize;
+    for batch in reader {
+        let batch = batch.map_err(|e| perr(e.into()))?;
+        let c = MapColumns::of(path, &batch, record, v.pairs_held)?;
         for k in 0..batch.num_rows() {
             record += 1;
             let at = || format!("record {record}");
-            let name = cond.value(k);
+            let name = c.condition.value(k);
             let l = by_name.get(name).ok_or_else(|| {
                 IngestError::invalid(
                     path,
                     at(),
-                    format!("unknown condition '{name}' in a version-{version} table"),
+                    format!(
+                        "unknown condition '{name}' in a version-{} table",
+                        v.version
+                    ),
                 )
             })?;
-            let b = bin.value(k) as usize;
+            let b = c.bin.value(k) as usize;
             if b >= l.cells {
                 return Err(IngestError::invalid(
                     path,
@@ -1162,33 +1274,9 @@ pub fn read_condition_maps(
                     format!("bin {b} outside the {} bins of '{name}'", l.cells),
                 ));
             }
-            let want = l.edges(b);
-            let got = match (&second, l.second) {
-                (Some((lo_2, hi_2)), Some(_)) => {
-                    [lo.value(k), hi.value(k), lo_2.value(k), hi_2.value(k)]
-                }
-                _ => [lo.value(k), hi.value(k), f64::NAN, f64::NAN],
-            };
-            let close = |a: f64, b: f64| {
-                (a.is_nan() && b.is_nan()) || (a - b).abs() <= 1e-9 * (1.0 + b.abs())
-            };
-            if !got.iter().zip(&want).all(|(g, w)| close(*g, *w)) {
-                let show = |e: &[f64]| match l.second {
-                    None => format!("[{}, {})", e[0], e[1]),
-                    Some(_) => format!("[{}, {}) × [{}, {})", e[0], e[1], e[2], e[3]),
-                };
-                return Err(IngestError::invalid(
-                    path,
-                    at(),
-                    format!(
-                        "bin {b} of '{name}' is {} in the file but {} in this build",
-                        show(&got),
-                        show(&want)
-                    ),
-                ));
-            }
-            let w = crate::kpi::wheel_cell(path, record, wheel.value(k))?;
-            let tire = (run.value(k).to_string(), w);
+            check_edges(path, record, l, b, c.edges(k, l))?;
+            let w = crate::kpi::wheel_cell(path, record, c.wheel.value(k))?;
+            let tire = (c.run.value(k).to_string(), w);
             let cell = match l.second {
                 None => l.offset + b,
                 Some(_) => CONDITION_BINS + l.offset + b,
@@ -1205,25 +1293,25 @@ pub fn read_condition_maps(
                 ));
             }
             let m = out.entry(tire).or_insert_with(|| ConditionMaps {
-                held,
-                pairs_held,
+                held: v.held,
+                pairs_held: v.pairs_held,
                 ..Default::default()
             });
             // A pair map holds the total only: its parts' columns are NaN.
             let parts = if l.second.is_some() { 1 } else { COMPONENTS };
-            for (comp, col) in e.iter().enumerate().take(parts) {
-                let v = col.value(k);
-                if !v.is_finite() {
+            for (comp, col) in c.energy_j.iter().enumerate().take(parts) {
+                let e = col.value(k);
+                if !e.is_finite() {
                     return Err(IngestError::invalid(
                         path,
                         at(),
-                        format!("energy {v} of '{name}' bin {b} is not finite"),
+                        format!("energy {e} of '{name}' bin {b} is not finite"),
                     ));
                 }
                 if l.second.is_some() {
-                    m.pairs_j[l.offset + b] += v;
+                    m.pairs_j[l.offset + b] += e;
                 } else {
-                    m.energy_j[comp][l.offset + b] += v;
+                    m.energy_j[comp][l.offset + b] += e;
                 }
             }
         }
