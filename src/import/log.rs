@@ -348,9 +348,9 @@ pub(crate) fn read_parquet(path: &Path) -> Result<RawLog, ImportError> {
     use arrow_array::Array;
     let bad = |what: String| ImportError::log(path, "file", what);
     // The footer's byte ranges checked as for every Parquet file read.
-    let builder = crate::ingest::checksum::open_parquet(path)?;
-    let schema = builder.schema().clone();
-    let reader = crate::ingest::checksum::read_batches(builder).map_err(|e| bad(e.to_string()))?;
+    let opened = crate::ingest::checksum::open_parquet(path)?;
+    let schema = opened.schema().clone();
+    let reader = opened.batches().map_err(|e| bad(e.to_string()))?;
     let mut channels: Vec<RawChannel> = Vec::new();
     let mut columns = Vec::new();
     for (i, f) in schema.fields().iter().enumerate() {

@@ -410,9 +410,7 @@ fn first_line_of_text(head: &[u8]) -> Option<String> {
 /// A Parquet file opened for reading, its footer read and its byte ranges
 /// checked against the file (any file) and its data against the footer's
 /// checksum (tirewear's files); every error names the file.
-pub(crate) fn open_parquet(
-    path: &Path,
-) -> crate::ingest::Result<ParquetRecordBatchReaderBuilder<ParquetSource>> {
+pub(crate) fn open_parquet(path: &Path) -> crate::ingest::Result<OpenedParquet> {
     use crate::ingest::IngestError;
     use parquet::file::reader::Length;
     let source = ParquetSource::open(path)?;
@@ -434,7 +432,7 @@ pub(crate) fn open_parquet(
         return Err(IngestError::invalid(path, "footer", why));
     }
     match mismatch_in(path, data.as_deref(), builder.metadata()) {
-        None => Ok(builder),
+        None => Ok(OpenedParquet(builder)),
         Some(why) => Err(IngestError::invalid(path, "data checksum", why)),
     }
 }
@@ -447,11 +445,21 @@ pub(crate) fn open_parquet(
 /// follows it.
 pub(crate) struct Batches(Option<ParquetRecordBatchReader>);
 
-/// [`Batches`] of the file `builder` opened (see [`open_parquet`]).
-pub(crate) fn read_batches(
-    builder: ParquetRecordBatchReaderBuilder<ParquetSource>,
-) -> Result<Batches, parquet::errors::ParquetError> {
-    Ok(Batches(Some(builder.build()?)))
+/// A Parquet file [`open_parquet`] opened and checked. Its batches are read
+/// only as [`Batches`], so no reader of a Parquet file can meet the
+/// decoder's panics unguarded.
+pub(crate) struct OpenedParquet(ParquetRecordBatchReaderBuilder<ParquetSource>);
+
+impl OpenedParquet {
+    /// The file's Arrow schema (its key-value metadata included).
+    pub(crate) fn schema(&self) -> &arrow_schema::SchemaRef {
+        self.0.schema()
+    }
+
+    /// The file's record batches, each read with the decoder's panics caught.
+    pub(crate) fn batches(self) -> Result<Batches, parquet::errors::ParquetError> {
+        Ok(Batches(Some(self.0.build()?)))
+    }
 }
 
 impl Iterator for Batches {
@@ -568,7 +576,7 @@ mod tests {
         crate::kpi::table::write_part_to(&mut bytes, &batch).unwrap();
         std::fs::write(&path, &bytes).unwrap();
         let opened = open_parquet(&path).unwrap();
-        let in_memory: Vec<RecordBatch> = opened.build().unwrap().map(|b| b.unwrap()).collect();
+        let in_memory: Vec<RecordBatch> = opened.batches().unwrap().map(|b| b.unwrap()).collect();
         let file = ParquetSource::File(std::fs::File::open(&path).unwrap());
         let through_file: Vec<RecordBatch> = ParquetRecordBatchReaderBuilder::try_new(file)
             .unwrap()

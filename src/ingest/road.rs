@@ -226,7 +226,7 @@ pub(crate) fn read_profiles_parquet_each(path: &Path) -> Result<Vec<ProfileResul
         path: path.to_path_buf(),
         source,
     };
-    let reader = super::checksum::read_batches(super::checksum::open_parquet(path)?).map_err(pq)?;
+    let reader = super::checksum::open_parquet(path)?.batches().map_err(pq)?;
     struct Acc {
         key: (String, String),
         x: Vec<f64>,

@@ -234,8 +234,9 @@ fn parquet_err(path: &Path, e: impl Into<parquet::errors::ParquetError>) -> Inge
 pub(crate) fn side_batches(
     path: &Path,
 ) -> Result<impl Iterator<Item = Result<RecordBatch, IngestError>> + use<>, IngestError> {
-    use crate::ingest::checksum::{open_parquet, read_batches};
-    let reader = read_batches(open_parquet(path)?).map_err(|e| parquet_err(path, e))?;
+    let reader = crate::ingest::checksum::open_parquet(path)?
+        .batches()
+        .map_err(|e| parquet_err(path, e))?;
     let path = path.to_path_buf();
     Ok(reader.map(move |b| b.map_err(|e| parquet_err(&path, e))))
 }
@@ -697,16 +698,15 @@ pub fn read_parquet(path: &Path) -> Result<Vec<KpiRow>, IngestError> {
             format!("is a folder, not a KPI database (the Parquet file `extract` writes){hint}"),
         ));
     }
-    let builder = crate::ingest::checksum::open_parquet(path).map_err(|e| match e {
+    let opened = crate::ingest::checksum::open_parquet(path).map_err(|e| match e {
         // `open_parquet`'s refusal of a file that is not Parquet.
         IngestError::Invalid { record, what, .. } if record == "file" && what.contains("PAR1") => {
             not_a_kpi_database(path, what)
         }
         e => e,
     })?;
-    check_units(path, builder.schema())?;
-    let reader =
-        crate::ingest::checksum::read_batches(builder).map_err(|e| parquet_err(path, e))?;
+    check_units(path, opened.schema())?;
+    let reader = opened.batches().map_err(|e| parquet_err(path, e))?;
     let mut rows = Vec::new();
     for batch in reader {
         let batch = batch.map_err(|e| parquet_err(path, e))?;

@@ -339,7 +339,7 @@ fn read_batches(path: &Path) -> Result<Vec<RecordBatch>, NightlyError> {
             path.display()
         ))
     };
-    let builder = crate::ingest::checksum::open_parquet(path).map_err(|e| match e {
+    let opened = crate::ingest::checksum::open_parquet(path).map_err(|e| match e {
         IngestError::Io { source, .. } => NightlyError::io(path)(source),
         // The message without its leading path: `bad` names the file once.
         e => {
@@ -349,7 +349,7 @@ fn read_batches(path: &Path) -> Result<Vec<RecordBatch>, NightlyError> {
                 .unwrap_or(&msg))
         }
     })?;
-    let reader = crate::ingest::checksum::read_batches(builder).map_err(|e| bad(&e))?;
+    let reader = opened.batches().map_err(|e| bad(&e))?;
     reader.collect::<Result<Vec<_>, _>>().map_err(|e| bad(&e))
 }
 

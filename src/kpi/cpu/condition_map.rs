@@ -1234,8 +1234,8 @@ pub fn read_condition_maps(
         path: path.to_path_buf(),
         source: e,
     };
-    let builder = crate::ingest::checksum::open_parquet(path)?;
-    let v = TableVersion::of(path, builder.schema())?;
+    let opened = crate::ingest::checksum::open_parquet(path)?;
+    let v = TableVersion::of(path, opened.schema())?;
     // The maps a file of this version may hold, by name.
     let layouts = map_layouts();
     let by_name: std::collections::HashMap<&str, &MapLayout> = layouts
@@ -1243,7 +1243,7 @@ pub fn read_condition_maps(
         .filter(|l| v.holds(l))
         .map(|l| (l.name.as_str(), l))
         .collect();
-    let reader = crate::ingest::checksum::read_batches(builder).map_err(perr)?;
+    let reader = opened.batches().map_err(perr)?;
     let mut out: std::collections::BTreeMap<crate::kpi::TireRun, ConditionMaps> =
         Default::default();
     // The 1-D maps' bins, then the pair maps': one bit each per tire.
