@@ -23,7 +23,7 @@ pub mod sim;
 pub mod validate;
 pub mod wheel;
 
-pub use guard::quiet_caught_panics;
+pub use guard::{print_held_panics, quiet_caught_panics};
 pub use wheel::{Axle, Wheel};
 
 /// Makes a FIFO at `path` for tests of files that must not be opened (a

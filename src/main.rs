@@ -155,11 +155,17 @@ const EXIT_RUNS_SKIPPED: u8 = 3;
 const EXIT_LOCKED: u8 = 4;
 
 fn main() -> std::process::ExitCode {
-    match run() {
-        Ok(code) => code,
-        Err(e) => {
+    match std::panic::catch_unwind(run) {
+        Ok(Ok(code)) => code,
+        Ok(Err(e)) => {
             eprintln!("Error: {e:?}");
             std::process::ExitCode::FAILURE
+        }
+        // A bug: what the panic hook held back is printed, and the
+        // process ends as a panic does (exit 101).
+        Err(panic) => {
+            tirewear::print_held_panics();
+            std::panic::resume_unwind(panic)
         }
     }
 }
