@@ -992,163 +992,169 @@ fn slopes_and_skewness(
 fn model_details(m: &crate::model::saved::SavedModel) -> Result<(String, usize), ReportError> {
     use crate::model::saved::ModelBody;
     match &m.model {
-        ModelBody::Pca { pca, .. } => {
-            let bars: Vec<Bar> = pca
-                .proportions
-                .iter()
-                .enumerate()
-                .map(|(i, p)| Bar {
-                    value: 100.0 * p,
-                    interval: None,
-                    color: if i < pca.kept { None } else { Some(7) },
-                })
-                .collect();
-            let svg = figure::bars(
-                &Axes {
-                    title: "PCA: variance explained per component",
-                    x: "principal component (1: the largest)",
-                    y: "share of the inputs' variance (%)",
-                },
-                &bars,
-            )?;
-            let kept: f64 = pca.proportions.iter().take(pca.kept).sum();
-            let rows: Vec<Vec<String>> = pca
-                .proportions
-                .iter()
-                .enumerate()
-                .map(|(i, p)| {
-                    let cumulative: f64 = pca.proportions[..=i].iter().sum();
-                    vec![
-                        format!("PC{}", i + 1),
-                        // A hand-edited file may hold fewer: "–", not a panic.
-                        num(pca.eigenvalues.get(i).copied().unwrap_or(f64::NAN), 3),
-                        num(100.0 * p, 2),
-                        num(100.0 * cumulative, 2),
-                        (i < pca.kept).to_string(),
-                    ]
-                })
-                .collect();
-            Ok((
-                fig(
-                    &svg,
-                    &format!(
-                        "PCA of the {} standardised inputs: each component's share of their \
-variance (eigenvalue of the correlation matrix over their sum, eq. 4); the {} kept \
-components (blue) explain {} %, the regression uses their scores.",
-                        pca.inputs.len(),
-                        pca.kept,
-                        num(100.0 * kept, 1)
-                    ),
-                    &csv_link(
-                        "pca_explained_variance.csv",
-                        &[
-                            "component",
-                            "eigenvalue",
-                            "share_pct",
-                            "cumulative_pct",
-                            "kept",
-                        ],
-                        &rows,
-                    ),
-                ),
-                1,
-            ))
-        }
+        ModelBody::Pca { pca, .. } => Ok((pca_explained_variance(pca)?, 1)),
         ModelBody::Ffnn { network, .. } => {
-            let xy: Vec<(f64, f64)> = network
-                .trials
-                .iter()
-                .map(|t| (t.hidden2 as f64, t.validation_mse))
-                .collect();
-            let svg = figure::curves_with_marks(
-                &Axes {
-                    title: "Network: validation error against the second layer's width",
-                    x: "neurons in the second hidden layer",
-                    y: "validation MSE (normalised units)",
-                },
-                &[Points {
-                    label: "validation MSE".into(),
-                    color: 0,
-                    xy: xy.clone(),
-                    filled: false,
-                }],
-                &[Points {
-                    label: String::new(),
-                    color: 0,
-                    xy,
-                    filled: false,
-                }],
-                false,
-            )?;
-            let net = &network.net;
-            let epochs = |k: usize| -> Vec<(f64, f64)> {
-                net.curve
-                    .iter()
-                    .enumerate()
-                    .map(|(e, c)| ((e + 1) as f64, if k == 0 { c.0 } else { c.1 }))
-                    .collect()
-            };
-            let best: Vec<(f64, f64)> = net
-                .curve
-                .get(net.best_epoch.saturating_sub(1))
-                .map(|c| vec![(net.best_epoch as f64, c.1)])
-                .unwrap_or_default();
-            let curve = figure::curves_with_marks(
-                &Axes {
-                    title: "Network: training curve (Levenberg–Marquardt)",
-                    x: "epoch",
-                    y: "MSE (normalised units)",
-                },
-                &[
-                    Points {
-                        label: "training".into(),
-                        color: 0,
-                        xy: epochs(0),
-                        filled: false,
-                    },
-                    Points {
-                        label: "validation".into(),
-                        color: 1,
-                        xy: epochs(1),
-                        filled: false,
-                    },
-                ],
-                &[Points {
-                    label: String::new(),
-                    color: 1,
-                    xy: best,
-                    filled: false,
-                }],
-                true,
-            )?;
-            let training_curve = fig(
-                &curve,
-                &format!(
-                    "The chosen network's training: the mean squared error of the normalised \
-wear on the training and the validation rows after each Levenberg–Marquardt epoch (log \
-axis over six decades: a training error below runs along its floor); training stopped when the validation error had not improved for a while, and the \
-weights of epoch {} (circled, the lowest validation error) were kept.",
-                    net.best_epoch
-                ),
-                "",
-            );
-            Ok((
-                training_curve
-                    + &fig(
-                        &svg,
-                        &format!(
-                            "The network's width search: the validation error (MSE of the normalised \
-wear on the {} validation rows) of each second-layer width tried; the chosen network has {} \
-and {} neurons.",
-                            network.validation_rows, network.net.hidden1, network.net.hidden2
-                        ),
-                        "",
-                    ),
-                2,
-            ))
+            Ok((training_curve(&network.net)? + &width_search(network)?, 2))
         }
         ModelBody::Physical { .. } => Ok((String::new(), 0)),
     }
+}
+
+/// PCA's share of the inputs' variance per component, kept ones in blue,
+/// with its CSV.
+fn pca_explained_variance(pca: &crate::model::pca::PcaFit) -> Result<String, ReportError> {
+    let bars: Vec<Bar> = pca
+        .proportions
+        .iter()
+        .enumerate()
+        .map(|(i, p)| Bar {
+            value: 100.0 * p,
+            interval: None,
+            color: if i < pca.kept { None } else { Some(7) },
+        })
+        .collect();
+    let svg = figure::bars(
+        &Axes {
+            title: "PCA: variance explained per component",
+            x: "principal component (1: the largest)",
+            y: "share of the inputs' variance (%)",
+        },
+        &bars,
+    )?;
+    let kept: f64 = pca.proportions.iter().take(pca.kept).sum();
+    let rows: Vec<Vec<String>> = pca
+        .proportions
+        .iter()
+        .enumerate()
+        .map(|(i, p)| {
+            let cumulative: f64 = pca.proportions[..=i].iter().sum();
+            vec![
+                format!("PC{}", i + 1),
+                // A hand-edited file may hold fewer: "–", not a panic.
+                num(pca.eigenvalues.get(i).copied().unwrap_or(f64::NAN), 3),
+                num(100.0 * p, 2),
+                num(100.0 * cumulative, 2),
+                (i < pca.kept).to_string(),
+            ]
+        })
+        .collect();
+    Ok(fig(
+        &svg,
+        &format!(
+            "PCA of the {} standardised inputs: each component's share of their \
+variance (eigenvalue of the correlation matrix over their sum, eq. 4); the {} kept \
+components (blue) explain {} %, the regression uses their scores.",
+            pca.inputs.len(),
+            pca.kept,
+            num(100.0 * kept, 1)
+        ),
+        &csv_link(
+            "pca_explained_variance.csv",
+            &[
+                "component",
+                "eigenvalue",
+                "share_pct",
+                "cumulative_pct",
+                "kept",
+            ],
+            &rows,
+        ),
+    ))
+}
+
+/// The chosen network's training and validation error per epoch, the kept
+/// epoch circled.
+fn training_curve(net: &crate::model::ffnn::Ffnn) -> Result<String, ReportError> {
+    let epochs = |k: usize| -> Vec<(f64, f64)> {
+        net.curve
+            .iter()
+            .enumerate()
+            .map(|(e, c)| ((e + 1) as f64, if k == 0 { c.0 } else { c.1 }))
+            .collect()
+    };
+    let best: Vec<(f64, f64)> = net
+        .curve
+        .get(net.best_epoch.saturating_sub(1))
+        .map(|c| vec![(net.best_epoch as f64, c.1)])
+        .unwrap_or_default();
+    let curve = figure::curves_with_marks(
+        &Axes {
+            title: "Network: training curve (Levenberg–Marquardt)",
+            x: "epoch",
+            y: "MSE (normalised units)",
+        },
+        &[
+            Points {
+                label: "training".into(),
+                color: 0,
+                xy: epochs(0),
+                filled: false,
+            },
+            Points {
+                label: "validation".into(),
+                color: 1,
+                xy: epochs(1),
+                filled: false,
+            },
+        ],
+        &[Points {
+            label: String::new(),
+            color: 1,
+            xy: best,
+            filled: false,
+        }],
+        true,
+    )?;
+    Ok(fig(
+        &curve,
+        &format!(
+            "The chosen network's training: the mean squared error of the normalised \
+wear on the training and the validation rows after each Levenberg–Marquardt epoch (log \
+axis over six decades: a training error below runs along its floor); training stopped when the validation error had not improved for a while, and the \
+weights of epoch {} (circled, the lowest validation error) were kept.",
+            net.best_epoch
+        ),
+        "",
+    ))
+}
+
+/// The network's validation error for each second-layer width tried.
+fn width_search(network: &crate::model::network::NetworkFit) -> Result<String, ReportError> {
+    let xy: Vec<(f64, f64)> = network
+        .trials
+        .iter()
+        .map(|t| (t.hidden2 as f64, t.validation_mse))
+        .collect();
+    let svg = figure::curves_with_marks(
+        &Axes {
+            title: "Network: validation error against the second layer's width",
+            x: "neurons in the second hidden layer",
+            y: "validation MSE (normalised units)",
+        },
+        &[Points {
+            label: "validation MSE".into(),
+            color: 0,
+            xy: xy.clone(),
+            filled: false,
+        }],
+        &[Points {
+            label: String::new(),
+            color: 0,
+            xy,
+            filled: false,
+        }],
+        false,
+    )?;
+    Ok(fig(
+        &svg,
+        &format!(
+            "The network's width search: the validation error (MSE of the normalised \
+wear on the {} validation rows) of each second-layer width tried; the chosen network has {} \
+and {} neurons.",
+            network.validation_rows, network.net.hidden1, network.net.hidden2
+        ),
+        "",
+    ))
 }
 
 /// The physical model's own preliminary analysis (`models/physical.json`,
