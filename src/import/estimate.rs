@@ -6,12 +6,13 @@
 //! steering (kinematics) or, without them, from a linear tyre.
 
 use super::align::Aligned;
-use super::car::{CarDescription, DrivenAxle};
+use super::car::{CarDescription, DrivenAxle, Suspension};
 use super::channel_map::Quantity;
 use super::error::ImportError;
 use super::units::STANDARD_GRAVITY as G;
 use crate::Wheel;
 use crate::ingest::telemetry::proto::{TireSample, VehicleSample};
+use std::borrow::Cow;
 use std::path::Path;
 
 /// How the lateral sliding velocity was obtained.
@@ -176,223 +177,589 @@ pub(crate) fn estimate(
     cond: EventConditions,
     calibrate_radius: bool,
 ) -> Result<Estimated, ImportError> {
+    let mut notes = Vec::new();
+    let sources = Sources::gather(path, a, car, cond, &mut notes)?;
     let n = a.len();
-    let mut est = Estimated::default();
-    let mut notes: Vec<String> = Vec::new();
-    let mut note = |s: &str| notes.push(s.to_string());
-    let speed = a
-        .get(Quantity::GroundSpeed, None)
-        .ok_or_else(|| missing(path, "ground_speed", &[Quantity::GroundSpeed], a))?;
-    let yaw_in = a.get(Quantity::YawRate, None);
-    let ay_in = a.get(Quantity::AccelLat, None);
-    let (ay, yaw): (Vec<f64>, Vec<f64>) = match (ay_in, yaw_in) {
-        (Some(ay), Some(r)) => (ay.to_vec(), r.to_vec()),
+    let mut est = Estimated {
+        lateral: Some(sources.lateral.method()),
+        estimated: notes,
+        ..Estimated::default()
+    };
+    est.tires.reserve(n);
+    est.vehicle.reserve(n);
+    for i in 0..n {
+        let (tires, vehicle) = sources.sample(i);
+        est.tires.push(tires);
+        est.vehicle.push(vehicle);
+    }
+    check_radius(&mut est, car, calibrate_radius);
+    Ok(est)
+}
+
+/// What a run's samples are estimated from: the log's series, what stands
+/// in for those it lacks, and the car.
+struct Sources<'a> {
+    car: &'a CarDescription,
+    speed_mps: &'a [f64],
+    accel_long_mps2: Vec<f64>,
+    accel_lat_mps2: Vec<f64>,
+    yaw_rate_radps: Vec<f64>,
+    /// Per wheel, as logged: Ω (rad/s) where `angular`, else Ω·R (m/s).
+    wheel_speed: Vec<&'a [f64]>,
+    angular: [bool; 4],
+    surface_c: Vec<&'a [f64]>,
+    pressure_pa: Vec<Cow<'a, [f64]>>,
+    /// TPMS gas temperature per wheel; the surface's where absent.
+    inner_c: Vec<Option<&'a [f64]>>,
+    loads: Loads<'a>,
+    lateral: Lateral<'a>,
+    air_c: Temperature<'a>,
+    track_c: Temperature<'a>,
+    distance_m: Vec<f64>,
+    /// CG to front and to rear axle (m): a and b.
+    cg_to_front_m: f64,
+    cg_to_rear_m: f64,
+}
+
+/// Where the wheel loads come from.
+enum Loads<'a> {
+    /// Logged per wheel.
+    Measured(Vec<&'a [f64]>),
+    /// Static load plus wheel rate times wheel travel from the damper
+    /// positions (m).
+    Springs {
+        dampers: Vec<&'a [f64]>,
+        suspension: &'a Suspension,
+        static_load_n: [f64; 4],
+    },
+    /// Static weight, downforce and load transfer.
+    Transfer,
+}
+
+/// Where the lateral sliding comes from (see [`LateralMethod`]).
+enum Lateral<'a> {
+    Kinematic {
+        body_slip_deg: &'a [f64],
+        steer_deg: Vec<f64>,
+    },
+    TyreModel {
+        cornering_stiffness_per_rad: [f64; 2],
+    },
+}
+
+/// A temperature the log has, or the event's.
+enum Temperature<'a> {
+    Logged(&'a [f64]),
+    Event(f64),
+}
+
+/// One sample's car-level estimates, which its four tires share.
+struct CarSample {
+    speed_mps: f64,
+    accel_lat_mps2: f64,
+    yaw_rate_radps: f64,
+    fz_n: [f64; 4],
+    axle_fx_n: [f64; 2],
+    axle_fy_n: [f64; 2],
+    axle_slip: AxleSlip,
+}
+
+/// Each axle's lateral slip: from kinematics, or (per tire, from its
+/// lateral force and load) through the axle's cornering stiffness (1/rad).
+enum AxleSlip {
+    Kinematic([f64; 2]),
+    TyreModel {
+        cornering_stiffness_per_rad: [f64; 2],
+    },
+}
+
+impl<'a> Sources<'a> {
+    /// The run's sources, each estimated one noted (`notes`, in the order
+    /// the archive lists them); an error names what is missing.
+    fn gather(
+        path: &Path,
+        a: &'a Aligned,
+        car: &'a CarDescription,
+        cond: EventConditions,
+        notes: &mut Vec<String>,
+    ) -> Result<Sources<'a>, ImportError> {
+        let speed = a
+            .get(Quantity::GroundSpeed, None)
+            .ok_or_else(|| missing(path, "ground_speed", &[Quantity::GroundSpeed], a))?;
+        let (accel_lat_mps2, yaw_rate_radps) = lateral_motion(path, a, speed, notes)?;
+        let accel_long_mps2 = match a.get(Quantity::AccelLong, None) {
+            Some(x) => x.to_vec(),
+            None => {
+                notes.push("longitudinal acceleration: d(speed)/dt over ±0.25 s".into());
+                derivative(a, speed)
+            }
+        };
+        let wheel_speed = per_wheel(path, a, Quantity::WheelSpeed, "wheel_speed")?;
+        // A linear wheel speed (the unit said km/h, m/s...) is Ω·R at the
+        // logger's radius; an angular one (rpm, rad/s) is Ω.
+        let angular: [bool; 4] = std::array::from_fn(|k| {
+            matches!(
+                a.wheel_speed_dimension[k],
+                Some(super::units::Dimension::AngularSpeed)
+            )
+        });
+        let surface_c = per_wheel(path, a, Quantity::TyreTemp, "tyre_temp")?;
+        let pressure_pa = pressures(path, a, car, notes)?;
+        let inner_c: Vec<Option<&[f64]>> = Wheel::ALL
+            .iter()
+            .map(|&w| a.get(Quantity::TpmsTemp, Some(w)))
+            .collect();
+        notes.push(if inner_c.iter().any(Option::is_none) {
+            "t_inner_c: the surface temperature (no TPMS gas temperature)".into()
+        } else {
+            "t_inner_c: TPMS gas temperature".into()
+        });
+        let loads = Loads::choose(a, car, notes);
+        notes.push("fx_n, fy_n: the accelerations distributed over the wheels (car.toml)".into());
+        notes.push("vx_mps: speed and yaw rate at the wheel centre".into());
+        notes.push("rolling_radius_m: car.toml".into());
+        let lateral = Lateral::choose(path, a, car, notes)?;
+        notes.push(if car.camber.is_some() {
+            "camber_deg: static camber and roll (car.toml)".into()
+        } else {
+            "camber_deg: 0 (car.toml has no [camber])".into()
+        });
+        let air_c = Temperature::of(path, a, Quantity::AirTemp, "air", cond.air_c, notes)?;
+        let track_c = Temperature::of(path, a, Quantity::TrackTemp, "track", cond.track_c, notes)?;
+        let distance_m = distance_m(a, speed, notes);
+        Ok(Sources {
+            car,
+            speed_mps: speed,
+            accel_long_mps2,
+            accel_lat_mps2,
+            yaw_rate_radps,
+            wheel_speed,
+            angular,
+            surface_c,
+            pressure_pa,
+            inner_c,
+            loads,
+            lateral,
+            air_c,
+            track_c,
+            distance_m,
+            cg_to_front_m: car.cg_to_front_m(),
+            cg_to_rear_m: car.cg_to_rear_m(),
+        })
+    }
+
+    /// Sample `i`'s four tires and the car's own channels.
+    fn sample(&self, i: usize) -> ([TireSample; 4], VehicleSample) {
+        let state = self.car_sample(i);
+        let mut tires = [TireSample::default(); 4];
+        for w in Wheel::ALL {
+            tires[w.index()] = self.tire(i, w, &state);
+        }
+        let vehicle = VehicleSample {
+            speed_mps: state.speed_mps as f32,
+            t_track_c: self.track_c.at(i) as f32,
+            t_air_c: self.air_c.at(i) as f32,
+            distance_m: self.distance_m[i],
+        };
+        (tires, vehicle)
+    }
+
+    /// Sample `i`'s loads, axle forces and kinematic slips.
+    fn car_sample(&self, i: usize) -> CarSample {
+        let car = self.car;
+        let v = self.speed_mps[i].max(0.0);
+        let (ax, ay, r) = (
+            self.accel_long_mps2[i],
+            self.accel_lat_mps2[i],
+            self.yaw_rate_radps[i],
+        );
+        let fz_n = self.loads.at(car, i, v, ax, ay);
+        let (axle_fx_n, axle_fy_n) = axle_forces(car, v, ax, ay);
+        let vv = v.max(1.0);
+        let axle_slip = match &self.lateral {
+            Lateral::Kinematic {
+                body_slip_deg,
+                steer_deg,
+            } => {
+                let tb = body_slip_deg[i].to_radians().tan();
+                let td = steer_deg[i].to_radians().tan();
+                AxleSlip::Kinematic([
+                    tb + self.cg_to_front_m * r / vv - td,
+                    tb - self.cg_to_rear_m * r / vv,
+                ])
+            }
+            Lateral::TyreModel {
+                cornering_stiffness_per_rad,
+            } => AxleSlip::TyreModel {
+                cornering_stiffness_per_rad: *cornering_stiffness_per_rad,
+            },
+        };
+        CarSample {
+            speed_mps: v,
+            accel_lat_mps2: ay,
+            yaw_rate_radps: r,
+            fz_n,
+            axle_fx_n,
+            axle_fy_n,
+            axle_slip,
+        }
+    }
+
+    /// Wheel `w`'s sample `i`: its axle's forces shared by load, the wheel
+    /// centre's velocities, and its own channels.
+    fn tire(&self, i: usize, w: Wheel, s: &CarSample) -> TireSample {
+        let car = self.car;
+        let (fz, k) = (&s.fz_n, w.index());
+        let ax_i = CarDescription::axle_of(w);
+        let (l_, r_) = if ax_i == 0 {
+            (fz[0], fz[1])
+        } else {
+            (fz[2], fz[3])
+        };
+        let share = fz[k] / (l_ + r_);
+        let fx = s.axle_fx_n[ax_i] * share;
+        let fy = s.axle_fy_n[ax_i] * share;
+        let y_w = w.side_sign() * 0.5 * car.track_width(w);
+        let vx = (s.speed_mps - s.yaw_rate_radps * y_w).max(0.5);
+        let s_y = match &s.axle_slip {
+            AxleSlip::Kinematic(slip) => slip[ax_i],
+            AxleSlip::TyreModel {
+                cornering_stiffness_per_rad: c,
+            } => -fy / (c[ax_i] * fz[k]),
+        };
+        let ws = self.wheel_speed[k][i];
+        let omega = if self.angular[k] {
+            ws
+        } else {
+            ws / car.wheel_speed_radius(w)
+        };
+        let camber = car.camber.as_ref().map_or(0.0, |c| {
+            let roll = c.roll_gradient_deg_per_g * s.accel_lat_mps2 / G;
+            c.static_deg[ax_i] - w.side_sign() * c.change_per_roll * roll
+        });
+        TireSample {
+            vx_mps: vx as f32,
+            vy_mps: (s_y * vx) as f32,
+            omega_radps: omega as f32,
+            rolling_radius_m: car.loaded_radius(w, fz[k]) as f32,
+            fx_n: fx as f32,
+            fy_n: fy as f32,
+            fz_n: fz[k] as f32,
+            t_surface_c: self.surface_c[k][i] as f32,
+            t_inner_c: self.inner_c[k].unwrap_or(self.surface_c[k])[i] as f32,
+            pressure_pa: self.pressure_pa[k][i] as f32,
+            camber_deg: camber as f32,
+        }
+    }
+}
+
+/// The lateral acceleration (m/s²) and yaw rate (rad/s): as logged, or
+/// one from the other and the speed.
+fn lateral_motion(
+    path: &Path,
+    a: &Aligned,
+    speed: &[f64],
+    notes: &mut Vec<String>,
+) -> Result<(Vec<f64>, Vec<f64>), ImportError> {
+    match (
+        a.get(Quantity::AccelLat, None),
+        a.get(Quantity::YawRate, None),
+    ) {
+        (Some(ay), Some(r)) => Ok((ay.to_vec(), r.to_vec())),
         (Some(ay), None) => {
-            note("yaw rate: lateral acceleration / speed");
-            (
+            notes.push("yaw rate: lateral acceleration / speed".into());
+            Ok((
                 ay.to_vec(),
                 ay.iter().zip(speed).map(|(y, v)| y / v.max(1.0)).collect(),
-            )
+            ))
         }
         (None, Some(r)) => {
-            note("lateral acceleration: speed · yaw rate");
-            (
+            notes.push("lateral acceleration: speed · yaw rate".into());
+            Ok((
                 r.iter().zip(speed).map(|(r, v)| r * v).collect(),
                 r.to_vec(),
-            )
+            ))
         }
-        (None, None) => {
-            return Err(missing(
-                path,
-                "accel_lat or yaw_rate",
-                &[Quantity::AccelLat, Quantity::YawRate],
-                a,
-            ));
-        }
+        (None, None) => Err(missing(
+            path,
+            "accel_lat or yaw_rate",
+            &[Quantity::AccelLat, Quantity::YawRate],
+            a,
+        )),
+    }
+}
+
+/// Quantity `q` of each wheel, which the log must have (`name` in the
+/// error).
+fn per_wheel<'a>(
+    path: &Path,
+    a: &'a Aligned,
+    q: Quantity,
+    name: &str,
+) -> Result<Vec<&'a [f64]>, ImportError> {
+    Wheel::ALL
+        .iter()
+        .map(|&w| {
+            a.get(q, Some(w))
+                .ok_or_else(|| missing(path, &format!("{name} {}", w.name()), &[q], a))
+        })
+        .collect()
+}
+
+/// Each wheel's pressure (Pa): TPMS, or without it car.toml's hot
+/// pressure per axle (a constant).
+fn pressures<'a>(
+    path: &Path,
+    a: &'a Aligned,
+    car: &CarDescription,
+    notes: &mut Vec<String>,
+) -> Result<Vec<Cow<'a, [f64]>>, ImportError> {
+    let tpms: Vec<Option<&[f64]>> = Wheel::ALL
+        .iter()
+        .map(|&w| a.get(Quantity::TpmsPressure, Some(w)))
+        .collect();
+    if tpms.iter().all(Option::is_some) {
+        return Ok(tpms.into_iter().flatten().map(Cow::Borrowed).collect());
+    }
+    let Some(kpa) = car.tyres.pressure_kpa else {
+        let w = Wheel::ALL
+            .into_iter()
+            .find(|&w| tpms[w.index()].is_none())
+            .expect("one is missing");
+        return Err(missing(
+            path,
+            &format!(
+                "tpms_pressure {} (or car.toml [tyres] pressure_kpa)",
+                w.name()
+            ),
+            &[Quantity::TpmsPressure],
+            a,
+        ));
     };
-    let ax: Vec<f64> = match a.get(Quantity::AccelLong, None) {
-        Some(x) => x.to_vec(),
-        None => {
-            note("longitudinal acceleration: d(speed)/dt over ±0.25 s");
-            derivative(a, speed)
+    notes.push("pressure_pa: car.toml [tyres] pressure_kpa (no TPMS)".into());
+    Ok(Wheel::ALL
+        .iter()
+        .map(|&w| Cow::Owned(vec![kpa[CarDescription::axle_of(w)] * 1e3; a.len()]))
+        .collect())
+}
+
+impl<'a> Loads<'a> {
+    /// Logged loads; else the damper positions through car.toml's springs;
+    /// else load transfer.
+    fn choose(a: &'a Aligned, car: &'a CarDescription, notes: &mut Vec<String>) -> Loads<'a> {
+        let of = |q: Quantity| -> Option<Vec<&'a [f64]>> {
+            Wheel::ALL.iter().map(|&w| a.get(q, Some(w))).collect()
+        };
+        if let Some(loads) = of(Quantity::WheelLoad) {
+            return Loads::Measured(loads);
         }
+        match (of(Quantity::DamperPos), &car.suspension) {
+            (Some(dampers), Some(suspension)) => {
+                notes.push(
+                    "fz_n: static load plus wheel rate times wheel travel from the damper positions (car.toml)"
+                        .into(),
+                );
+                let static_load_n: [f64; 4] = std::array::from_fn(|k| {
+                    let w = Wheel::ALL[k];
+                    let wf = car.front_weight_fraction;
+                    0.5 * car.mass_kg
+                        * G
+                        * if w.axle() == crate::Axle::Front {
+                            wf
+                        } else {
+                            1.0 - wf
+                        }
+                });
+                Loads::Springs {
+                    dampers,
+                    suspension,
+                    static_load_n,
+                }
+            }
+            _ => {
+                notes.push("fz_n: static weight, downforce and load transfer (car.toml)".into());
+                Loads::Transfer
+            }
+        }
+    }
+
+    /// The four wheel loads (N) of sample `i`, at speed `v` (m/s) and
+    /// accelerations `ax`, `ay` (m/s²).
+    fn at(&self, car: &CarDescription, i: usize, v: f64, ax: f64, ay: f64) -> [f64; 4] {
+        match self {
+            Loads::Measured(loads) => std::array::from_fn(|k| loads[k][i]),
+            Loads::Springs {
+                dampers,
+                suspension: s,
+                static_load_n,
+            } => std::array::from_fn(|k| {
+                let ax_i = CarDescription::axle_of(Wheel::ALL[k]);
+                // Damper travel (mm, compression positive) over the motion
+                // ratio is wheel travel; the wheel rate turns it into load.
+                let damper_mm = dampers[k][i] * 1e3;
+                let travel_mm = (damper_mm - s.static_damper_mm[ax_i]) / s.motion_ratio[ax_i];
+                (static_load_n[k] + s.wheel_rate_n_per_mm[ax_i] * travel_mm).max(50.0)
+            }),
+            Loads::Transfer => load_transfer(car, v, ax, ay),
+        }
+    }
+}
+
+/// Quasi-static wheel loads (N): static weight and downforce per axle,
+/// longitudinal and lateral load transfer (the latter shared by the axles'
+/// roll stiffness); at least 50 N.
+fn load_transfer(car: &CarDescription, v: f64, ax: f64, ay: f64) -> [f64; 4] {
+    let m = car.mass_kg;
+    let (h, l, wf) = (car.cg_height_m, car.wheelbase_m, car.front_weight_fraction);
+    let rho = car.aero.air_density_kg_m3;
+    let df = 0.5 * rho * car.aero.cl_a_m2 * v * v;
+    let long = m * ax * h / l;
+    let axle = [
+        m * G * wf + df * car.aero.front_fraction - long,
+        m * G * (1.0 - wf) + df * (1.0 - car.aero.front_fraction) + long,
+    ];
+    let lat_share = [
+        car.roll_stiffness_front_fraction,
+        1.0 - car.roll_stiffness_front_fraction,
+    ];
+    std::array::from_fn(|k| {
+        let w = Wheel::ALL[k];
+        let ax_i = CarDescription::axle_of(w);
+        let lat = lat_share[ax_i] * m * ay * h / car.track_width(w);
+        // A left turn (a_y > 0) moves load to the right wheels.
+        (0.5 * axle[ax_i] - w.side_sign() * lat).max(50.0)
+    })
+}
+
+/// Each axle's longitudinal and lateral force (N): the driving force (mass
+/// times acceleration plus drag) on the driven axles, braking shared by the
+/// brake balance; the lateral force by the steady-turn yaw balance.
+fn axle_forces(car: &CarDescription, v: f64, ax: f64, ay: f64) -> ([f64; 2], [f64; 2]) {
+    let (m, wf) = (car.mass_kg, car.front_weight_fraction);
+    let drag = 0.5 * car.aero.air_density_kg_m3 * car.aero.cd_a_m2 * v * v;
+    let fx_total = m * ax + drag;
+    let axle_fx = if fx_total >= 0.0 {
+        match car.driven_axle {
+            DrivenAxle::Rear => [0.0, fx_total],
+            DrivenAxle::Front => [fx_total, 0.0],
+            DrivenAxle::All => [fx_total * wf, fx_total * (1.0 - wf)],
+        }
+    } else {
+        [
+            fx_total * car.brake_front_fraction,
+            fx_total * (1.0 - car.brake_front_fraction),
+        ]
     };
-    let mut wheel_omega = Vec::new();
-    for w in Wheel::ALL {
-        let ws = a.get(Quantity::WheelSpeed, Some(w)).ok_or_else(|| {
+    // Steady-turn yaw balance: the front axle carries m·a_y·b/L.
+    let axle_fy = [m * ay * wf, m * ay * (1.0 - wf)];
+    (axle_fx, axle_fy)
+}
+
+impl<'a> Lateral<'a> {
+    /// Kinematics when the log has body slip and a steer angle (or a
+    /// steering wheel and car.toml's ratio); else car.toml's tyre model.
+    fn choose(
+        path: &Path,
+        a: &'a Aligned,
+        car: &CarDescription,
+        notes: &mut Vec<String>,
+    ) -> Result<Lateral<'a>, ImportError> {
+        let steer: Option<Vec<f64>> = match (
+            a.get(Quantity::SteerAngle, None),
+            a.get(Quantity::SteeringWheel, None),
+        ) {
+            (Some(d), _) => Some(d.to_vec()),
+            (None, Some(sw)) => car
+                .steering_ratio
+                .map(|r| sw.iter().map(|x| x / r).collect()),
+            _ => None,
+        };
+        let lateral = match (
+            a.get(Quantity::BodySlip, None),
+            steer,
+            car.tyres.cornering_stiffness_per_rad,
+        ) {
+            (Some(body_slip_deg), Some(steer_deg), _) => Lateral::Kinematic {
+                body_slip_deg,
+                steer_deg,
+            },
+            (_, _, Some(c)) => Lateral::TyreModel {
+                cornering_stiffness_per_rad: c,
+            },
+            _ => {
+                return Err(missing(
+                    path,
+                    "body_slip and steer_angle (or steering_wheel with car.toml steering_ratio), or car.toml [tyres] cornering_stiffness_per_rad",
+                    &[
+                        Quantity::BodySlip,
+                        Quantity::SteerAngle,
+                        Quantity::SteeringWheel,
+                    ],
+                    a,
+                ));
+            }
+        };
+        notes.push(match lateral {
+            Lateral::Kinematic { .. } => {
+                "vy_mps: body slip angle, yaw rate and steer angle (kinematics)".into()
+            }
+            Lateral::TyreModel { .. } => {
+                "vy_mps: lateral force / cornering stiffness (car.toml)".into()
+            }
+        });
+        Ok(lateral)
+    }
+
+    fn method(&self) -> LateralMethod {
+        match self {
+            Lateral::Kinematic { .. } => LateralMethod::Kinematic,
+            Lateral::TyreModel { .. } => LateralMethod::TyreModel,
+        }
+    }
+}
+
+impl<'a> Temperature<'a> {
+    /// The `which` ("air" or "track") temperature `q` as logged, else the
+    /// event's (`event_c`).
+    fn of(
+        path: &Path,
+        a: &'a Aligned,
+        q: Quantity,
+        which: &str,
+        event_c: Option<f64>,
+        notes: &mut Vec<String>,
+    ) -> Result<Temperature<'a>, ImportError> {
+        if let Some(t) = a.get(q, None) {
+            return Ok(Temperature::Logged(t));
+        }
+        notes.push(format!("t_{which}_c: the event's {which} temperature"));
+        let t = event_c.ok_or_else(|| {
             missing(
                 path,
-                &format!("wheel_speed {}", w.name()),
-                &[Quantity::WheelSpeed],
+                &format!("{which}_temp (and no event to take it from)"),
+                &[q],
                 a,
             )
         })?;
-        wheel_omega.push(ws);
+        Ok(Temperature::Event(t))
     }
-    // A linear wheel speed (the unit said km/h, m/s...) is Ω·R at the
-    // logger's radius; an angular one (rpm, rad/s) is Ω.
-    let angular: [bool; 4] = std::array::from_fn(|k| {
-        matches!(
-            a.wheel_speed_dimension[k],
-            Some(super::units::Dimension::AngularSpeed)
-        )
-    });
-    let temp_of = |q: Quantity, w: Wheel, name: &str| {
-        a.get(q, Some(w))
-            .ok_or_else(|| missing(path, &format!("{name} {}", w.name()), &[q], a))
-    };
-    let mut surface = Vec::new();
-    for w in Wheel::ALL {
-        surface.push(temp_of(Quantity::TyreTemp, w, "tyre_temp")?);
-    }
-    // Without TPMS, car.toml's hot pressure per axle (a constant).
-    let mut fixed_pressure: Vec<Vec<f64>> = Vec::new();
-    let mut pressure: Vec<&[f64]> = Vec::new();
-    let have_tpms = Wheel::ALL
-        .iter()
-        .all(|&w| a.get(Quantity::TpmsPressure, Some(w)).is_some());
-    match (have_tpms, car.tyres.pressure_kpa) {
-        (true, _) => {
-            for w in Wheel::ALL {
-                pressure.push(a.get(Quantity::TpmsPressure, Some(w)).expect("checked"));
-            }
-        }
-        (false, Some(kpa)) => {
-            note("pressure_pa: car.toml [tyres] pressure_kpa (no TPMS)");
-            for w in Wheel::ALL {
-                fixed_pressure.push(vec![kpa[CarDescription::axle_of(w)] * 1e3; n]);
-            }
-            pressure = fixed_pressure.iter().map(Vec::as_slice).collect();
-        }
-        (false, None) => {
-            let w = Wheel::ALL
-                .into_iter()
-                .find(|&w| a.get(Quantity::TpmsPressure, Some(w)).is_none())
-                .expect("one is missing");
-            return Err(missing(
-                path,
-                &format!(
-                    "tpms_pressure {} (or car.toml [tyres] pressure_kpa)",
-                    w.name()
-                ),
-                &[Quantity::TpmsPressure],
-                a,
-            ));
+
+    fn at(&self, i: usize) -> f64 {
+        match self {
+            Temperature::Logged(t) => t[i],
+            Temperature::Event(t) => *t,
         }
     }
-    let inner: Vec<Option<&[f64]>> = Wheel::ALL
-        .iter()
-        .map(|&w| a.get(Quantity::TpmsTemp, Some(w)))
-        .collect();
-    if inner.iter().any(Option::is_none) {
-        note("t_inner_c: the surface temperature (no TPMS gas temperature)");
-    } else {
-        note("t_inner_c: TPMS gas temperature");
-    }
-    let loads: Vec<Option<&[f64]>> = Wheel::ALL
-        .iter()
-        .map(|&w| a.get(Quantity::WheelLoad, Some(w)))
-        .collect();
-    let measured_loads = loads.iter().all(Option::is_some);
-    let dampers: Vec<Option<&[f64]>> = Wheel::ALL
-        .iter()
-        .map(|&w| a.get(Quantity::DamperPos, Some(w)))
-        .collect();
-    let spring_loads =
-        !measured_loads && dampers.iter().all(Option::is_some) && car.suspension.is_some();
-    if spring_loads {
-        note(
-            "fz_n: static load plus wheel rate times wheel travel from the damper positions (car.toml)",
-        );
-    } else if !measured_loads {
-        note("fz_n: static weight, downforce and load transfer (car.toml)");
-    }
-    let static_load: [f64; 4] = std::array::from_fn(|k| {
-        let w = Wheel::ALL[k];
-        let wf = car.front_weight_fraction;
-        0.5 * car.mass_kg
-            * G
-            * if w.axle() == crate::Axle::Front {
-                wf
-            } else {
-                1.0 - wf
-            }
-    });
-    note("fx_n, fy_n: the accelerations distributed over the wheels (car.toml)");
-    note("vx_mps: speed and yaw rate at the wheel centre");
-    note("rolling_radius_m: car.toml");
-    let steer: Option<Vec<f64>> = match (
-        a.get(Quantity::SteerAngle, None),
-        a.get(Quantity::SteeringWheel, None),
-    ) {
-        (Some(d), _) => Some(d.to_vec()),
-        (None, Some(sw)) => car
-            .steering_ratio
-            .map(|r| sw.iter().map(|x| x / r).collect()),
-        _ => None,
-    };
-    let body_slip = a.get(Quantity::BodySlip, None);
-    let lateral = match (&body_slip, &steer, car.tyres.cornering_stiffness_per_rad) {
-        (Some(_), Some(_), _) => LateralMethod::Kinematic,
-        (_, _, Some(_)) => LateralMethod::TyreModel,
-        _ => {
-            return Err(missing(
-                path,
-                "body_slip and steer_angle (or steering_wheel with car.toml steering_ratio), or car.toml [tyres] cornering_stiffness_per_rad",
-                &[
-                    Quantity::BodySlip,
-                    Quantity::SteerAngle,
-                    Quantity::SteeringWheel,
-                ],
-                a,
-            ));
-        }
-    };
-    match lateral {
-        LateralMethod::Kinematic => {
-            note("vy_mps: body slip angle, yaw rate and steer angle (kinematics)")
-        }
-        LateralMethod::TyreModel => note("vy_mps: lateral force / cornering stiffness (car.toml)"),
-    }
-    if car.camber.is_some() {
-        note("camber_deg: static camber and roll (car.toml)");
-    } else {
-        note("camber_deg: 0 (car.toml has no [camber])");
-    }
-    let air = a.get(Quantity::AirTemp, None);
-    let track = a.get(Quantity::TrackTemp, None);
-    let air_c = match air {
-        Some(_) => None,
-        None => {
-            note("t_air_c: the event's air temperature");
-            Some(cond.air_c.ok_or_else(|| {
-                missing(
-                    path,
-                    "air_temp (and no event to take it from)",
-                    &[Quantity::AirTemp],
-                    a,
-                )
-            })?)
-        }
-    };
-    let track_c = match track {
-        Some(_) => None,
-        None => {
-            note("t_track_c: the event's track temperature");
-            Some(cond.track_c.ok_or_else(|| {
-                missing(
-                    path,
-                    "track_temp (and no event to take it from)",
-                    &[Quantity::TrackTemp],
-                    a,
-                )
-            })?)
-        }
-    };
-    let distance: Vec<f64> = match a.get(Quantity::Distance, None) {
+}
+
+/// Distance (m) from the log's start: as logged, else speed integrated
+/// over time (trapezoids).
+fn distance_m(a: &Aligned, speed: &[f64], notes: &mut Vec<String>) -> Vec<f64> {
+    match a.get(Quantity::Distance, None) {
         Some(d) => d.iter().map(|x| x - d[0]).collect(),
         None => {
-            note("distance_m: speed integrated over time");
+            notes.push("distance_m: speed integrated over time".into());
+            let n = a.len();
             let mut d = vec![0.0; n];
             for i in 1..n {
                 let dt = (a.index[i] - a.index[i - 1]) as f64 / a.rate_hz;
@@ -400,130 +767,7 @@ pub(crate) fn estimate(
             }
             d
         }
-    };
-
-    est.lateral = Some(lateral);
-    let m = car.mass_kg;
-    let (h, l, wf) = (car.cg_height_m, car.wheelbase_m, car.front_weight_fraction);
-    let (a_front, b_rear) = (car.cg_to_front_m(), car.cg_to_rear_m());
-    let rho = car.aero.air_density_kg_m3;
-    est.estimated = notes;
-    est.tires.reserve(n);
-    est.vehicle.reserve(n);
-    for i in 0..n {
-        let v = speed[i].max(0.0);
-        let (axi, ayi, r) = (ax[i], ay[i], yaw[i]);
-        let fz: [f64; 4] = if measured_loads {
-            std::array::from_fn(|k| loads[k].expect("all present")[i])
-        } else if spring_loads {
-            let s = car.suspension.as_ref().expect("checked");
-            std::array::from_fn(|k| {
-                let ax_i = CarDescription::axle_of(Wheel::ALL[k]);
-                // Damper travel (mm, compression positive) over the motion
-                // ratio is wheel travel; the wheel rate turns it into load.
-                let damper_mm = dampers[k].expect("all present")[i] * 1e3;
-                let travel_mm = (damper_mm - s.static_damper_mm[ax_i]) / s.motion_ratio[ax_i];
-                (static_load[k] + s.wheel_rate_n_per_mm[ax_i] * travel_mm).max(50.0)
-            })
-        } else {
-            let df = 0.5 * rho * car.aero.cl_a_m2 * v * v;
-            let long = m * axi * h / l;
-            let axle = [
-                m * G * wf + df * car.aero.front_fraction - long,
-                m * G * (1.0 - wf) + df * (1.0 - car.aero.front_fraction) + long,
-            ];
-            let lat_share = [
-                car.roll_stiffness_front_fraction,
-                1.0 - car.roll_stiffness_front_fraction,
-            ];
-            std::array::from_fn(|k| {
-                let w = Wheel::ALL[k];
-                let ax_i = CarDescription::axle_of(w);
-                let lat = lat_share[ax_i] * m * ayi * h / car.track_width(w);
-                // A left turn (a_y > 0) moves load to the right wheels.
-                (0.5 * axle[ax_i] - w.side_sign() * lat).max(50.0)
-            })
-        };
-        let drag = 0.5 * rho * car.aero.cd_a_m2 * v * v;
-        let fx_total = m * axi + drag;
-        let axle_fx = if fx_total >= 0.0 {
-            match car.driven_axle {
-                DrivenAxle::Rear => [0.0, fx_total],
-                DrivenAxle::Front => [fx_total, 0.0],
-                DrivenAxle::All => [fx_total * wf, fx_total * (1.0 - wf)],
-            }
-        } else {
-            [
-                fx_total * car.brake_front_fraction,
-                fx_total * (1.0 - car.brake_front_fraction),
-            ]
-        };
-        // Steady-turn yaw balance: the front axle carries m·a_y·b/L.
-        let axle_fy = [m * ayi * wf, m * ayi * (1.0 - wf)];
-        let vv = v.max(1.0);
-        let slip_kin = match lateral {
-            LateralMethod::Kinematic => {
-                let tb = body_slip.expect("kinematic")[i].to_radians().tan();
-                let td = steer.as_ref().expect("kinematic")[i].to_radians().tan();
-                Some([tb + a_front * r / vv - td, tb - b_rear * r / vv])
-            }
-            LateralMethod::TyreModel => None,
-        };
-        let mut tires = [TireSample::default(); 4];
-        for w in Wheel::ALL {
-            let k = w.index();
-            let ax_i = CarDescription::axle_of(w);
-            let (l_, r_) = if ax_i == 0 {
-                (fz[0], fz[1])
-            } else {
-                (fz[2], fz[3])
-            };
-            let share = fz[k] / (l_ + r_);
-            let fx = axle_fx[ax_i] * share;
-            let fy = axle_fy[ax_i] * share;
-            let y_w = w.side_sign() * 0.5 * car.track_width(w);
-            let vx = (v - r * y_w).max(0.5);
-            let s_y = match slip_kin {
-                Some(s) => s[ax_i],
-                None => {
-                    let c = car.tyres.cornering_stiffness_per_rad.expect("tyre model")[ax_i];
-                    -fy / (c * fz[k])
-                }
-            };
-            let ws = wheel_omega[k][i];
-            let omega = if angular[k] {
-                ws
-            } else {
-                ws / car.wheel_speed_radius(w)
-            };
-            let camber = car.camber.as_ref().map_or(0.0, |c| {
-                let roll = c.roll_gradient_deg_per_g * ayi / G;
-                c.static_deg[ax_i] - w.side_sign() * c.change_per_roll * roll
-            });
-            tires[k] = TireSample {
-                vx_mps: vx as f32,
-                vy_mps: (s_y * vx) as f32,
-                omega_radps: omega as f32,
-                rolling_radius_m: car.loaded_radius(w, fz[k]) as f32,
-                fx_n: fx as f32,
-                fy_n: fy as f32,
-                fz_n: fz[k] as f32,
-                t_surface_c: surface[k][i] as f32,
-                t_inner_c: inner[k].unwrap_or(surface[k])[i] as f32,
-                pressure_pa: pressure[k][i] as f32,
-                camber_deg: camber as f32,
-            };
-        }
-        est.tires.push(tires);
-        est.vehicle.push(VehicleSample {
-            speed_mps: v as f32,
-            t_track_c: track.map_or_else(|| track_c.expect("set when absent"), |t| t[i]) as f32,
-            t_air_c: air.map_or_else(|| air_c.expect("set when absent"), |t| t[i]) as f32,
-            distance_m: distance[i],
-        });
     }
-    check_radius(&mut est, car, calibrate_radius);
-    Ok(est)
 }
 
 #[cfg(test)]
