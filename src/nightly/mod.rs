@@ -539,32 +539,7 @@ fn process_under_lock(opts: &ProcessOptions) -> Result<ProcessSummary, NightlyEr
             dataset.display()
         )));
     }
-    // An archive that cannot be read fails its own runs, not the night; its
-    // committed runs stay as they are.
-    let mut seasons = Vec::with_capacity(archives.len());
-    let mut inputs = Vec::with_capacity(archives.len());
-    let mut archives_of_seasons = Vec::with_capacity(archives.len());
-    let mut unreadable: Vec<Failed> = Vec::new();
-    for a in &archives {
-        let opened = Season::open_with(a, opts.allow_external_paths)
-            .and_then(|s| season_inputs(&s).map(|i| (s, i)));
-        match opened {
-            Ok((s, i)) => {
-                seasons.push(s);
-                inputs.push(i);
-                archives_of_seasons.push(a.clone());
-            }
-            Err(e) => {
-                tracing::warn!("archive {} left as committed: {e}", a.display());
-                unreadable.push(Failed {
-                    run: "(every run of the archive)".into(),
-                    season: a.display().to_string(),
-                    reason: format!("{e}; its committed runs are kept as they were"),
-                    kept: old.runs.iter().any(|r| r.archive == *a),
-                });
-            }
-        }
-    }
+    let opened = open_archives(&archives, &old, opts.allow_external_paths);
 
     // The engine decides the keys (f32 on the GPU, f64 on the CPU); it is
     // opened before planning, but the device only used if there is work.
@@ -582,45 +557,7 @@ fn process_under_lock(opts: &ProcessOptions) -> Result<ProcessSummary, NightlyEr
         old: old.files.clone(),
         ..Default::default()
     };
-    let mut plan: Vec<Planned> = Vec::new();
-    let mut key_failures: Vec<Failed> = Vec::new();
-    let mut seen_runs: BTreeMap<String, String> = BTreeMap::new();
-    for (si, season) in seasons.iter().enumerate() {
-        let inp = &inputs[si];
-        for run in &season.manifest.runs {
-            if let Some(other) = seen_runs.insert(run.id.clone(), season.manifest.name.clone()) {
-                return Err(NightlyError::Invalid(format!(
-                    "run {} is in both season {other} and season {}: run ids must be unique \
-                     across the archives of one dataset",
-                    run.id, season.manifest.name
-                )));
-            }
-            let track = season.event(&run.event).expect("validated").track.clone();
-            let readings = inp.readings.get(&run.id).map_or(&[][..], |v| v.as_slice());
-            // A file that cannot be read fails its run (and is tried again).
-            let keyed = keys::run_key(season, run, readings, engine, &mut files)
-                .and_then(|k| keys::road_key(season, &track, engine, &mut files).map(|r| (k, r)));
-            let (key, road_key) = match keyed {
-                Ok(k) => k,
-                Err(e) => {
-                    key_failures.push(Failed {
-                        run: run.id.clone(),
-                        season: season.manifest.name.clone(),
-                        reason: e.to_string(),
-                        kept: false,
-                    });
-                    continue;
-                }
-            };
-            plan.push(Planned {
-                season: si,
-                run: run.clone(),
-                track,
-                key,
-                road_key,
-            });
-        }
-    }
+    let plan = plan_runs(&opened, engine, &mut files)?;
 
     let committed: BTreeMap<&str, &RunEntry> =
         old.runs.iter().map(|e| (e.run.as_str(), e)).collect();
@@ -635,90 +572,22 @@ fn process_under_lock(opts: &ProcessOptions) -> Result<ProcessSummary, NightlyEr
         device: reducer.device(),
         ..Default::default()
     };
-    summary.failed.extend(unreadable.iter().cloned());
-    summary.failed.extend(key_failures.iter().cloned());
-    let kept_archives: BTreeSet<String> = unreadable.iter().map(|f| f.season.clone()).collect();
-    // Committed runs of unreadable archives, carried over unchanged.
-    let carried: Vec<&RunEntry> = old
-        .runs
-        .iter()
-        .filter(|e| kept_archives.contains(&e.archive.display().to_string()))
-        .collect();
-    // Every run of a readable archive (planned or failed) and the carried ones.
-    let in_archives: BTreeSet<&str> = seen_runs
-        .keys()
-        .map(|r| r.as_str())
-        .chain(carried.iter().map(|e| e.run.as_str()))
-        .collect();
-    summary.removed = if matches!(opts.mode, Mode::Shard { .. }) {
-        0
-    } else {
-        old.runs
-            .iter()
-            .filter(|e| !in_archives.contains(e.run.as_str()))
-            .count()
-    };
-    // What each run needs.
-    let mut to_process: Vec<&Planned> = Vec::new();
-    let mut ready: Vec<&Planned> = Vec::new();
-    for p in &plan {
-        if let Mode::Shard { index, count } = opts.mode
-            && shard_of(&seasons[p.season].manifest.name, &p.run.id, count) != index
-        {
-            continue;
-        }
-        summary.planned += 1;
-        // A committed part deleted or damaged since is made again.
-        let unchanged = committed
-            .get(p.run.id.as_str())
-            .is_some_and(|e| e.key == p.key && parts_intact(dataset, e, &mut summary.warnings));
-        if unchanged && !opts.force {
-            summary.unchanged += 1;
-        } else if !opts.force && staged_complete(dataset, &p.key) {
-            summary.reused_staged += 1;
-            ready.push(p);
-        } else if opts.mode == Mode::Commit {
-            let path = staged_failure(dataset, &p.key);
-            let reason = match read_sealed::<Failed>(&path) {
-                Ok(Some(f)) => f.reason,
-                Ok(None) => "not processed: no shard staged its parts \
-                             (run the shards, or process without --commit)"
-                    .to_string(),
-                Err(why) => format!(
-                    "a shard failed it, but its record {} is damaged ({why}): \
-                     run the shard again",
-                    path.display()
-                ),
-            };
-            summary.failed.push(Failed {
-                run: p.run.id.clone(),
-                season: seasons[p.season].manifest.name.clone(),
-                reason,
-                kept: false,
-            });
-        } else {
-            to_process.push(p);
-        }
+    summary.failed.extend(opened.unreadable.iter().cloned());
+    summary.failed.extend(plan.failed.iter().cloned());
+    let carried = carried_runs(&old, &opened);
+    if !matches!(opts.mode, Mode::Shard { .. }) {
+        summary.removed = removed_runs(&old, &plan, &carried);
     }
+    let (to_process, mut ready) = triage(opts, &plan.runs, &opened, &committed, &mut summary);
     summary.runs_processed = to_process.iter().map(|p| p.run.id.clone()).collect();
     tracing::debug!(
         "planned {} runs in {:.2} s ({} to process)",
-        plan.len(),
+        plan.runs.len(),
         start.elapsed().as_secs_f64(),
         to_process.len()
     );
     if opts.dry_run {
-        summary.largest_memory_need = to_process
-            .iter()
-            .filter_map(|p| {
-                let path = seasons[p.season].path(&p.run.telemetry);
-                let bytes = crate::kpi::run_memory_need(&path).ok()?;
-                Some(MemoryNeed {
-                    run: p.run.id.clone(),
-                    bytes,
-                })
-            })
-            .max_by_key(|n| n.bytes);
+        summary.largest_memory_need = largest_memory_need(&opened.seasons, &to_process);
         summary.seconds = start.elapsed().as_secs_f64();
         summary.hashed_bytes = files.bytes_hashed;
         summary.dataset_id = old.dataset_id.clone();
@@ -726,7 +595,14 @@ fn process_under_lock(opts: &ProcessOptions) -> Result<ProcessSummary, NightlyEr
     }
 
     // Process and stage.
-    let staged = stage_runs(opts, &seasons, &inputs, &to_process, reducer, &mut summary)?;
+    let staged = stage_runs(
+        opts,
+        &opened.seasons,
+        &opened.inputs,
+        &to_process,
+        reducer,
+        &mut summary,
+    )?;
     ready.extend(staged);
     summary.processed = to_process.len();
     tracing::debug!("staged at {:.2} s", start.elapsed().as_secs_f64());
@@ -734,78 +610,15 @@ fn process_under_lock(opts: &ProcessOptions) -> Result<ProcessSummary, NightlyEr
 
     if let Mode::Shard { index, count } = opts.mode {
         summary.seconds = start.elapsed().as_secs_f64();
-        let record = ShardRecord {
-            archives: archives.clone(),
-            summary: summary.clone(),
-        };
-        let path = dataset
-            .join("staging")
-            .join(format!("shard-{}-of-{count}.json", index + 1));
-        let text = sealed(&record);
-        crate::atomic::write_bytes(&path, text.as_bytes()).map_err(NightlyError::io(&path))?;
+        write_shard_record(dataset, index, count, &archives, &summary)?;
         return Ok(summary);
     }
 
-    // The new committed state: unchanged runs keep their entries.
-    let ready_keys: BTreeSet<&str> = ready.iter().map(|p| p.key.as_str()).collect();
-    let mut runs: Vec<(RunEntry, Option<&Planned>)> = Vec::new();
-    for p in &plan {
-        let old_entry = committed.get(p.run.id.as_str());
-        if ready_keys.contains(p.key.as_str()) {
-            runs.push((
-                RunEntry {
-                    run: p.run.id.clone(),
-                    event: p.run.event.clone(),
-                    track: p.track.clone(),
-                    season: seasons[p.season].manifest.name.clone(),
-                    archive: archives_of_seasons[p.season].clone(),
-                    key: p.key.clone(),
-                    rows: 0,
-                },
-                Some(p),
-            ));
-        } else if let Some(e) = old_entry.filter(|e| e.key == p.key) {
-            runs.push(((*e).clone(), None));
-        }
-    }
+    let mut runs = committed_runs(&plan.runs, &ready, &committed, &opened);
     keep_failed_runs(dataset, &committed, &mut runs, &mut summary);
     runs.extend(carried.iter().map(|e| ((*e).clone(), None)));
     runs.sort_by(|a, b| (&a.0.event, &a.0.run).cmp(&(&b.0.event, &b.0.run)));
-    // Each track's road key: from this night's plan, else the last commit's.
-    let mut road_keys: BTreeMap<&str, &str> = old
-        .roads
-        .iter()
-        .map(|r| (r.track.as_str(), r.key.as_str()))
-        .collect();
-    road_keys.extend(plan.iter().map(|p| (p.track.as_str(), p.road_key.as_str())));
-    let mut roads: BTreeMap<String, RoadEntry> = BTreeMap::new();
-    for (e, _) in &runs {
-        if let Some(key) = road_keys.get(e.track.as_str()) {
-            roads.insert(
-                e.track.clone(),
-                RoadEntry {
-                    track: e.track.clone(),
-                    key: key.to_string(),
-                },
-            );
-        }
-    }
-    let mut new = DatasetManifest {
-        format_version: DATASET_FORMAT_VERSION,
-        dataset_id: String::new(),
-        archives: archives.clone(),
-        runs: runs.iter().map(|(e, _)| e.clone()).collect(),
-        roads: roads.into_values().collect(),
-        files: files.seen.clone(),
-    };
-    let mut id = blake3::Hasher::new();
-    for e in &new.runs {
-        id.update(e.key.as_bytes());
-    }
-    for r in &new.roads {
-        id.update(r.key.as_bytes());
-    }
-    new.dataset_id = id.finalize().to_hex()[..32].to_string();
+    let mut new = new_manifest(&old, &archives, &runs, &plan.runs, &files);
     if new.dataset_id == old.dataset_id
         && ready.is_empty()
         && !opts.force
@@ -831,6 +644,316 @@ fn process_under_lock(opts: &ProcessOptions) -> Result<ProcessSummary, NightlyEr
     let text = sealed(&summary);
     crate::atomic::write_bytes(&path, text.as_bytes()).map_err(NightlyError::io(&path))?;
     Ok(summary)
+}
+
+/// Writes what shard `index` of `count` leaves for the commit.
+fn write_shard_record(
+    dataset: &Path,
+    index: u32,
+    count: u32,
+    archives: &[PathBuf],
+    summary: &ProcessSummary,
+) -> Result<(), NightlyError> {
+    let record = ShardRecord {
+        archives: archives.to_vec(),
+        summary: summary.clone(),
+    };
+    let path = dataset
+        .join("staging")
+        .join(format!("shard-{}-of-{count}.json", index + 1));
+    let text = sealed(&record);
+    crate::atomic::write_bytes(&path, text.as_bytes()).map_err(NightlyError::io(&path))
+}
+
+/// The committed runs of archives that could not be read this night,
+/// carried over unchanged.
+fn carried_runs<'m>(old: &'m DatasetManifest, opened: &OpenedArchives) -> Vec<&'m RunEntry> {
+    let kept_archives: BTreeSet<String> =
+        opened.unreadable.iter().map(|f| f.season.clone()).collect();
+    old.runs
+        .iter()
+        .filter(|e| kept_archives.contains(&e.archive.display().to_string()))
+        .collect()
+}
+
+/// How many committed runs are in no archive any more: neither a run of a
+/// readable archive (planned or failed) nor a carried one.
+fn removed_runs(old: &DatasetManifest, plan: &Plan, carried: &[&RunEntry]) -> usize {
+    let in_archives: BTreeSet<&str> = plan
+        .run_ids
+        .iter()
+        .map(|r| r.as_str())
+        .chain(carried.iter().map(|e| e.run.as_str()))
+        .collect();
+    old.runs
+        .iter()
+        .filter(|e| !in_archives.contains(e.run.as_str()))
+        .count()
+}
+
+/// The night's archives that could be read, each with its inputs, and a
+/// failure for each that could not.
+struct OpenedArchives {
+    seasons: Vec<Season>,
+    inputs: Vec<SeasonInputs>,
+    /// The archive of each season.
+    paths: Vec<PathBuf>,
+    unreadable: Vec<Failed>,
+}
+
+/// Opens each archive: one that cannot be read fails its own runs, not the
+/// night, and its committed runs (in `old`) stay as they are.
+fn open_archives(
+    archives: &[PathBuf],
+    old: &DatasetManifest,
+    allow_external_paths: bool,
+) -> OpenedArchives {
+    let mut opened = OpenedArchives {
+        seasons: Vec::with_capacity(archives.len()),
+        inputs: Vec::with_capacity(archives.len()),
+        paths: Vec::with_capacity(archives.len()),
+        unreadable: Vec::new(),
+    };
+    for a in archives {
+        let read = Season::open_with(a, allow_external_paths)
+            .and_then(|s| season_inputs(&s).map(|i| (s, i)));
+        match read {
+            Ok((s, i)) => {
+                opened.seasons.push(s);
+                opened.inputs.push(i);
+                opened.paths.push(a.clone());
+            }
+            Err(e) => {
+                tracing::warn!("archive {} left as committed: {e}", a.display());
+                opened.unreadable.push(Failed {
+                    run: "(every run of the archive)".into(),
+                    season: a.display().to_string(),
+                    reason: format!("{e}; its committed runs are kept as they were"),
+                    kept: old.runs.iter().any(|r| r.archive == *a),
+                });
+            }
+        }
+    }
+    opened
+}
+
+/// Every run of the readable archives with its keys.
+struct Plan {
+    runs: Vec<Planned>,
+    /// Runs whose keys could not be made (a file that cannot be read).
+    failed: Vec<Failed>,
+    /// Every run id of the readable archives, planned or failed.
+    run_ids: BTreeSet<String>,
+}
+
+/// Keys every run of the opened archives (hashing only files whose stamp
+/// changed). A file that cannot be read fails its run, which is tried
+/// again; a run id in two seasons stops the night.
+fn plan_runs(
+    opened: &OpenedArchives,
+    engine: Engine,
+    files: &mut FileHashes,
+) -> Result<Plan, NightlyError> {
+    let mut plan = Plan {
+        runs: Vec::new(),
+        failed: Vec::new(),
+        run_ids: BTreeSet::new(),
+    };
+    let mut season_of_run: BTreeMap<String, String> = BTreeMap::new();
+    for (si, season) in opened.seasons.iter().enumerate() {
+        let inp = &opened.inputs[si];
+        for run in &season.manifest.runs {
+            if let Some(other) = season_of_run.insert(run.id.clone(), season.manifest.name.clone())
+            {
+                return Err(NightlyError::Invalid(format!(
+                    "run {} is in both season {other} and season {}: run ids must be unique \
+                     across the archives of one dataset",
+                    run.id, season.manifest.name
+                )));
+            }
+            let track = season.event(&run.event).expect("validated").track.clone();
+            let readings = inp.readings.get(&run.id).map_or(&[][..], |v| v.as_slice());
+            let keyed = keys::run_key(season, run, readings, engine, files)
+                .and_then(|k| keys::road_key(season, &track, engine, files).map(|r| (k, r)));
+            let (key, road_key) = match keyed {
+                Ok(k) => k,
+                Err(e) => {
+                    plan.failed.push(Failed {
+                        run: run.id.clone(),
+                        season: season.manifest.name.clone(),
+                        reason: e.to_string(),
+                        kept: false,
+                    });
+                    continue;
+                }
+            };
+            plan.runs.push(Planned {
+                season: si,
+                run: run.clone(),
+                track,
+                key,
+                road_key,
+            });
+        }
+    }
+    plan.run_ids = season_of_run.into_keys().collect();
+    Ok(plan)
+}
+
+/// What each planned run (of this shard) needs: nothing (committed and
+/// unchanged, its parts intact), its staged parts committed (`ready`), or
+/// processing (`to_process`); under `--commit`, a run no shard staged
+/// fails with the shard's reason. Counts go to `summary`.
+fn triage<'p>(
+    opts: &ProcessOptions,
+    plan: &'p [Planned],
+    opened: &OpenedArchives,
+    committed: &BTreeMap<&str, &RunEntry>,
+    summary: &mut ProcessSummary,
+) -> (Vec<&'p Planned>, Vec<&'p Planned>) {
+    let dataset = &opts.dataset;
+    let mut to_process: Vec<&Planned> = Vec::new();
+    let mut ready: Vec<&Planned> = Vec::new();
+    for p in plan {
+        if let Mode::Shard { index, count } = opts.mode
+            && shard_of(&opened.seasons[p.season].manifest.name, &p.run.id, count) != index
+        {
+            continue;
+        }
+        summary.planned += 1;
+        // A committed part deleted or damaged since is made again.
+        let unchanged = committed
+            .get(p.run.id.as_str())
+            .is_some_and(|e| e.key == p.key && parts_intact(dataset, e, &mut summary.warnings));
+        if unchanged && !opts.force {
+            summary.unchanged += 1;
+        } else if !opts.force && staged_complete(dataset, &p.key) {
+            summary.reused_staged += 1;
+            ready.push(p);
+        } else if opts.mode == Mode::Commit {
+            summary.failed.push(Failed {
+                run: p.run.id.clone(),
+                season: opened.seasons[p.season].manifest.name.clone(),
+                reason: unstaged_reason(dataset, &p.key),
+                kept: false,
+            });
+        } else {
+            to_process.push(p);
+        }
+    }
+    (to_process, ready)
+}
+
+/// Why the commit finds no staged parts for the run keyed `key`: a shard's
+/// failure record, or no shard staged it.
+fn unstaged_reason(dataset: &Path, key: &str) -> String {
+    let path = staged_failure(dataset, key);
+    match read_sealed::<Failed>(&path) {
+        Ok(Some(f)) => f.reason,
+        Ok(None) => "not processed: no shard staged its parts \
+                     (run the shards, or process without --commit)"
+            .to_string(),
+        Err(why) => format!(
+            "a shard failed it, but its record {} is damaged ({why}): \
+             run the shard again",
+            path.display()
+        ),
+    }
+}
+
+/// The run of `to_process` that needs the most memory (a dry run's
+/// forecast); runs whose need cannot be read are left out.
+fn largest_memory_need(seasons: &[Season], to_process: &[&Planned]) -> Option<MemoryNeed> {
+    to_process
+        .iter()
+        .filter_map(|p| {
+            let path = seasons[p.season].path(&p.run.telemetry);
+            let bytes = crate::kpi::run_memory_need(&path).ok()?;
+            Some(MemoryNeed {
+                run: p.run.id.clone(),
+                bytes,
+            })
+        })
+        .max_by_key(|n| n.bytes)
+}
+
+/// The runs of the new commit: each ready run with a new entry (its rows
+/// counted when committed), each unchanged one with its committed entry.
+fn committed_runs<'p>(
+    plan: &'p [Planned],
+    ready: &[&Planned],
+    committed: &BTreeMap<&str, &RunEntry>,
+    opened: &OpenedArchives,
+) -> Vec<(RunEntry, Option<&'p Planned>)> {
+    let ready_keys: BTreeSet<&str> = ready.iter().map(|p| p.key.as_str()).collect();
+    let mut runs = Vec::new();
+    for p in plan {
+        let old_entry = committed.get(p.run.id.as_str());
+        if ready_keys.contains(p.key.as_str()) {
+            runs.push((
+                RunEntry {
+                    run: p.run.id.clone(),
+                    event: p.run.event.clone(),
+                    track: p.track.clone(),
+                    season: opened.seasons[p.season].manifest.name.clone(),
+                    archive: opened.paths[p.season].clone(),
+                    key: p.key.clone(),
+                    rows: 0,
+                },
+                Some(p),
+            ));
+        } else if let Some(e) = old_entry.filter(|e| e.key == p.key) {
+            runs.push(((*e).clone(), None));
+        }
+    }
+    runs
+}
+
+/// The dataset manifest of `runs`: each of their tracks with its road key
+/// (this night's plan's, else the last commit's), the files' stamps, and
+/// the dataset id (a hash of every run and road key).
+fn new_manifest(
+    old: &DatasetManifest,
+    archives: &[PathBuf],
+    runs: &[(RunEntry, Option<&Planned>)],
+    plan: &[Planned],
+    files: &FileHashes,
+) -> DatasetManifest {
+    let mut road_keys: BTreeMap<&str, &str> = old
+        .roads
+        .iter()
+        .map(|r| (r.track.as_str(), r.key.as_str()))
+        .collect();
+    road_keys.extend(plan.iter().map(|p| (p.track.as_str(), p.road_key.as_str())));
+    let mut roads: BTreeMap<String, RoadEntry> = BTreeMap::new();
+    for (e, _) in runs {
+        if let Some(key) = road_keys.get(e.track.as_str()) {
+            roads.insert(
+                e.track.clone(),
+                RoadEntry {
+                    track: e.track.clone(),
+                    key: key.to_string(),
+                },
+            );
+        }
+    }
+    let mut new = DatasetManifest {
+        format_version: DATASET_FORMAT_VERSION,
+        dataset_id: String::new(),
+        archives: archives.to_vec(),
+        runs: runs.iter().map(|(e, _)| e.clone()).collect(),
+        roads: roads.into_values().collect(),
+        files: files.seen.clone(),
+    };
+    let mut id = blake3::Hasher::new();
+    for e in &new.runs {
+        id.update(e.key.as_bytes());
+    }
+    for r in &new.roads {
+        id.update(r.key.as_bytes());
+    }
+    new.dataset_id = id.finalize().to_hex()[..32].to_string();
+    new
 }
 
 /// What a shard leaves for the commit: the archives and its summary.
