@@ -33,7 +33,6 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicU64, Ordering};
 use wear::RoadTruth;
 
 /// What to simulate.
@@ -155,14 +154,7 @@ pub fn simulate(opts: &SimOptions) -> Result<SimSummary, SimError> {
     let earlier = earlier_season(out)?;
     std::fs::create_dir_all(out).map_err(|e| io(out, e))?;
     if opts.logger_export.is_some() {
-        let dir = out.join("logger");
-        std::fs::create_dir_all(&dir).map_err(|e| io(&dir, e))?;
-        for car in &plan.cars {
-            write_toml(
-                &dir.join(format!("{}.car.toml", car.id)),
-                &logger::car_description(car),
-            )?;
-        }
+        write_logger_cars(out, &plan)?;
     }
     if out.join("season.toml").exists() {
         std::fs::remove_file(out.join("season.toml")).map_err(|e| io(out, e))?;
@@ -173,8 +165,49 @@ pub fn simulate(opts: &SimOptions) -> Result<SimSummary, SimError> {
         "simulating season '{}'",
         plan.name
     );
+    let compounds = write_compounds(out, &plan)?;
+    let (tracks, roads) = write_roads(out, &plan, opts.seed)?;
+    let truths = simulate_runs(opts, &plan)?;
+    let saturated_fraction = write_wear(opts, &plan, &roads, &truths)?;
+    let manifest = season_manifest(opts, &plan, compounds, tracks);
+    manifest.validate(&out.join("season.toml"))?;
+    manifest.write(&out.join("season.toml"))?;
+    let (removed_files, stale_outputs) = match earlier {
+        Some(old) if old != manifest => (
+            remove_earlier_files(out, old, &manifest),
+            derived_outputs(out),
+        ),
+        _ => (0, Vec::new()),
+    };
+    Ok(SimSummary {
+        out: out.clone(),
+        tracks: plan.tracks.len(),
+        events: plan.events.len(),
+        runs: plan.runs.len(),
+        observations: plan.runs.len() * 4,
+        samples: truths.iter().map(|t| t.samples).sum(),
+        bytes: dir_size(out),
+        saturated_fraction,
+        stale_outputs,
+        removed_files,
+    })
+}
 
-    // Compounds.
+/// Each car's description for `tirewear import`, beside the logger export.
+fn write_logger_cars(out: &Path, plan: &Plan) -> Result<(), SimError> {
+    let dir = out.join("logger");
+    std::fs::create_dir_all(&dir).map_err(|e| SimError::Ingest(IngestError::io(&dir, e)))?;
+    for car in &plan.cars {
+        write_toml(
+            &dir.join(format!("{}.car.toml", car.id)),
+            &logger::car_description(car),
+        )?;
+    }
+    Ok(())
+}
+
+/// The compounds' master-curve files, and the manifest's references.
+fn write_compounds(out: &Path, plan: &Plan) -> Result<Vec<manifest::CompoundRef>, SimError> {
     let mut compound_refs = Vec::new();
     for c in &plan.compounds {
         let rel = format!("compounds/{}.toml", c.id);
@@ -184,9 +217,18 @@ pub fn simulate(opts: &SimOptions) -> Result<SimSummary, SimError> {
             file: rel,
         });
     }
+    Ok(compound_refs)
+}
 
-    // Road profiles: all but the last location of each track in the bulk file, the last one as CSV.
-    let (profiles, roads) = synthesise_roads(&plan, opts.seed);
+/// The road profiles: all but the last location of each track in the bulk
+/// Parquet file, the last one as CSV. Returns the manifest's tracks and
+/// each track's road truth.
+fn write_roads(
+    out: &Path,
+    plan: &Plan,
+    seed: u64,
+) -> Result<(Vec<manifest::Track>, Vec<RoadTruth>), SimError> {
+    let (profiles, roads) = synthesise_roads(plan, seed);
     let (bulk, single): (Vec<&Profile>, Vec<&Profile>) = profiles
         .iter()
         .partition(|p| p.location != format!("L{}", plan.locations_per_track));
@@ -212,103 +254,122 @@ pub fn simulate(opts: &SimOptions) -> Result<SimSummary, SimError> {
             profiles: refs,
         });
     }
+    Ok((tracks, roads))
+}
 
-    // Runs, in parallel.
+/// Simulates every run, in parallel, writing its telemetry (and its
+/// logger export); the runs' truths in plan order.
+fn simulate_runs(opts: &SimOptions, plan: &Plan) -> Result<Vec<run::RunTruth>, SimError> {
     let shapes: Vec<_> = plan.tracks.iter().map(|t| t.shape(1.0)).collect();
     let progress = crate::progress::bar(opts.progress, plan.runs.len() as u64, "simulating runs");
-    let samples = AtomicU64::new(0);
     let results: Vec<Result<run::RunTruth, SimError>> = plan
         .runs
         .par_iter()
         .map(|rp| {
-            let ev = &plan.events[rp.event];
-            let car = &plan.cars[rp.car];
-            let compound = &plan.compounds[rp.compound];
-            let track = &plan.tracks[ev.track];
-            let mu = compound
-                .grip
-                .mu(compound.grip.t_opt_c, tire::FZ_NOMINAL, track.grip)
-                * rp.pace;
-            let lap = lap::solve(&shapes[ev.track], car, mu);
-            let ctx = run::RunContext {
-                car,
-                compound,
-                lap: &lap,
-                thermal: thermal::ThermalParams::default(),
-                road_grip: track.grip,
-                effects: &opts.effects,
-                generated: opts.generated.as_ref(),
-            };
-            let settings = run::RunSettings {
-                distance_m: rp.distance_m,
-                rate_hz: plan.rate_hz,
-                start_ns: rp.start_ns,
-                air_c: ev.air_c,
-                track_c: ev.track_c,
-                cold_pressure_pa: rp.cold_pressure_pa,
-                blanket_c: 70.0,
-                sensor_noise: opts.sensor_noise,
-            };
-            let info = RunInfo {
-                run: rp.id.clone(),
-                event: ev.id.clone(),
-                car: car.id.clone(),
-                sample_rate_hz: plan.rate_hz,
-            };
-            let path = out.join(telemetry_rel(&rp.id));
-            let mut writer = TelemetryWriter::create(
-                &path,
-                &info,
-                opts.encoding,
-                plan.rate_hz.round() as usize,
-            )?;
-            let mut rng = ChaCha8Rng::seed_from_u64(rp.seed);
-            // The export's noise has its own stream: asking for an export
-            // leaves the archive unchanged.
-            let mut logger_rng = ChaCha8Rng::seed_from_u64(rp.seed ^ 0x6c6f_6767_6572);
-            let mut recorder = opts
-                .logger_export
-                .map(|_| logger::Recorder::new(car, opts.sensor_noise));
-            let truth = run::simulate_run(&ctx, &settings, &mut rng, |t, tires, veh, motion| {
-                if let Some(r) = &mut recorder {
-                    r.push(t, tires, veh, motion, &mut logger_rng);
-                }
-                writer.push(t, tires, veh)
-            })?;
-            writer.finish()?;
-            if let (Some(r), Some(format)) = (&recorder, opts.logger_export) {
-                let ext = match format {
-                    logger::LoggerFormat::MotecCsv => "csv",
-                    logger::LoggerFormat::MotecLd => "ld",
-                };
-                let path = out.join(format!("logger/{}.{ext}", rp.id));
-                let info = logger::ExportInfo {
-                    run: rp.id.clone(),
-                    venue: plan.tracks[ev.track].name.clone(),
-                    vehicle: car.id.clone(),
-                    vehicle_desc: car.name.clone(),
-                    date: ev.date.clone(),
-                    rate_hz: plan.rate_hz,
-                };
-                r.write(&path, format, &info)
-                    .map_err(|e| IngestError::io(&path, e))?;
-            }
-            samples.fetch_add(truth.samples, Ordering::Relaxed);
+            let truth = simulate_one(opts, plan, &shapes[plan.events[rp.event].track], rp);
             progress.inc(1);
-            Ok(truth)
+            truth
         })
         .collect();
     progress.finish_and_clear();
-    let truths = results.into_iter().collect::<Result<Vec<_>, _>>()?;
+    results.into_iter().collect()
+}
 
-    // Wear: truth and readings.
-    let mut drawn = draw_tire_wear(opts, &plan, &roads, &truths);
-    let generated = resolve_generated(opts, &plan, &roads, &truths, &drawn);
+/// Simulates run `rp` on its track's `shape`: its telemetry file, and its
+/// logger export when asked for.
+fn simulate_one(
+    opts: &SimOptions,
+    plan: &Plan,
+    shape: &track::TrackShape,
+    rp: &preset::RunPlan,
+) -> Result<run::RunTruth, SimError> {
+    let ev = &plan.events[rp.event];
+    let car = &plan.cars[rp.car];
+    let compound = &plan.compounds[rp.compound];
+    let track = &plan.tracks[ev.track];
+    let mu = compound
+        .grip
+        .mu(compound.grip.t_opt_c, tire::FZ_NOMINAL, track.grip)
+        * rp.pace;
+    let lap = lap::solve(shape, car, mu);
+    let ctx = run::RunContext {
+        car,
+        compound,
+        lap: &lap,
+        thermal: thermal::ThermalParams::default(),
+        road_grip: track.grip,
+        effects: &opts.effects,
+        generated: opts.generated.as_ref(),
+    };
+    let settings = run::RunSettings {
+        distance_m: rp.distance_m,
+        rate_hz: plan.rate_hz,
+        start_ns: rp.start_ns,
+        air_c: ev.air_c,
+        track_c: ev.track_c,
+        cold_pressure_pa: rp.cold_pressure_pa,
+        blanket_c: 70.0,
+        sensor_noise: opts.sensor_noise,
+    };
+    let info = RunInfo {
+        run: rp.id.clone(),
+        event: ev.id.clone(),
+        car: car.id.clone(),
+        sample_rate_hz: plan.rate_hz,
+    };
+    let path = opts.out.join(telemetry_rel(&rp.id));
+    let mut writer =
+        TelemetryWriter::create(&path, &info, opts.encoding, plan.rate_hz.round() as usize)?;
+    let mut rng = ChaCha8Rng::seed_from_u64(rp.seed);
+    // The export's noise has its own stream: asking for an export leaves
+    // the archive unchanged.
+    let mut logger_rng = ChaCha8Rng::seed_from_u64(rp.seed ^ 0x6c6f_6767_6572);
+    let mut recorder = opts
+        .logger_export
+        .map(|_| logger::Recorder::new(car, opts.sensor_noise));
+    let truth = run::simulate_run(&ctx, &settings, &mut rng, |t, tires, veh, motion| {
+        if let Some(r) = &mut recorder {
+            r.push(t, tires, veh, motion, &mut logger_rng);
+        }
+        writer.push(t, tires, veh)
+    })?;
+    writer.finish()?;
+    if let (Some(r), Some(format)) = (&recorder, opts.logger_export) {
+        let ext = match format {
+            logger::LoggerFormat::MotecCsv => "csv",
+            logger::LoggerFormat::MotecLd => "ld",
+        };
+        let path = opts.out.join(format!("logger/{}.{ext}", rp.id));
+        let info = logger::ExportInfo {
+            run: rp.id.clone(),
+            venue: track.name.clone(),
+            vehicle: car.id.clone(),
+            vehicle_desc: car.name.clone(),
+            date: ev.date.clone(),
+            rate_hz: plan.rate_hz,
+        };
+        r.write(&path, format, &info)
+            .map_err(|e| IngestError::io(&path, e))?;
+    }
+    Ok(truth)
+}
+
+/// Each tire's wear (drawn, with any generated effect and the scatter of
+/// real readings), written as spot readings and as the ground truth.
+/// Returns the fraction of tire samples whose friction saturated.
+fn write_wear(
+    opts: &SimOptions,
+    plan: &Plan,
+    roads: &[RoadTruth],
+    truths: &[run::RunTruth],
+) -> Result<f64, SimError> {
+    let mut drawn = draw_tire_wear(opts, plan, roads, truths);
+    let generated = resolve_generated(opts, plan, roads, truths, &drawn);
     let mut readings = Vec::new();
     let mut truth_rows = Vec::new();
     let mut saturated = 0u64;
     let mut total_samples = 0u64;
-    for ((rp, truth), tires) in plan.runs.iter().zip(&truths).zip(&mut drawn) {
+    for ((rp, truth), tires) in plan.runs.iter().zip(truths).zip(&mut drawn) {
         let ev = &plan.events[rp.event];
         let car = &plan.cars[rp.car];
         let compound = &plan.compounds[rp.compound];
@@ -345,18 +406,28 @@ pub fn simulate(opts: &SimOptions) -> Result<SimSummary, SimError> {
             ));
         }
     }
-    write_wear_csv(&out.join("wear/readings.csv"), &readings)?;
+    write_wear_csv(&opts.out.join("wear/readings.csv"), &readings)?;
     write_truth(
-        out,
-        &plan,
-        &roads,
+        &opts.out,
+        plan,
+        roads,
         &truth_rows,
-        truths.as_slice(),
+        truths,
         opts,
         generated.as_ref(),
     )?;
+    Ok(saturated as f64 / total_samples.max(1) as f64)
+}
 
-    let manifest = Manifest {
+/// The season's manifest: what was simulated (in its description), the
+/// compounds' and tracks' files, the events, cars and runs.
+fn season_manifest(
+    opts: &SimOptions,
+    plan: &Plan,
+    compounds: Vec<manifest::CompoundRef>,
+    tracks: Vec<manifest::Track>,
+) -> Manifest {
+    Manifest {
         format_version: manifest::FORMAT_VERSION,
         name: plan.name.clone(),
         description: format!(
@@ -373,7 +444,7 @@ pub fn simulate(opts: &SimOptions) -> Result<SimSummary, SimError> {
         ),
         wear_readings: vec!["wear/readings.csv".into()],
         road_profiles: Some("road/profiles.parquet".into()),
-        compounds: compound_refs,
+        compounds,
         tracks,
         events: plan
             .events
@@ -416,28 +487,7 @@ pub fn simulate(opts: &SimOptions) -> Result<SimSummary, SimError> {
                 },
             })
             .collect(),
-    };
-    manifest.validate(&out.join("season.toml"))?;
-    manifest.write(&out.join("season.toml"))?;
-    let (removed_files, stale_outputs) = match earlier {
-        Some(old) if old != manifest => (
-            remove_earlier_files(out, old, &manifest),
-            derived_outputs(out),
-        ),
-        _ => (0, Vec::new()),
-    };
-    Ok(SimSummary {
-        out: out.clone(),
-        tracks: plan.tracks.len(),
-        events: plan.events.len(),
-        runs: plan.runs.len(),
-        observations: plan.runs.len() * 4,
-        samples: samples.load(Ordering::Relaxed),
-        bytes: dir_size(out),
-        saturated_fraction: saturated as f64 / total_samples.max(1) as f64,
-        stale_outputs,
-        removed_files,
-    })
+    }
 }
 
 /// The manifest of a season tirewear simulated into `out` before, which
