@@ -1497,19 +1497,7 @@ pub(super) fn gap(inputs: &Inputs) -> Result<Section, ReportError> {
         g["testing_events"].as_array().map_or(0, |a| a.len()),
         num(f(&g["testing"]["rmse_pct"]), 2),
     );
-    // What it found, in words (gap.json from before 2026-11-26 has none).
-    let findings: Vec<&str> = g["findings"]
-        .as_array()
-        .into_iter()
-        .flatten()
-        .filter_map(Value::as_str)
-        .collect();
-    if !findings.is_empty() {
-        html += "<h3>Findings</h3>\n";
-        for line in findings {
-            html += &format!("<p>{}</p>\n", escape(line));
-        }
-    }
+    html += &gap_findings(g);
     let mut figures = 0;
     // Where: the flagged slices' mean residual with its 95 % interval.
     let slices: Vec<&Value> = g["slices"].as_array().into_iter().flatten().collect();
@@ -1517,152 +1505,15 @@ pub(super) fn gap(inputs: &Inputs) -> Result<Section, ReportError> {
         html += "<p>No slice of the season differs from the rest beyond chance: the \
 model's residuals show no place where it and the measurements disagree.</p>\n";
     } else {
-        // A strong effect flags hundreds of overlapping slices: the first
-        // ones in the diagnosis's order are drawn, all are in the CSV.
-        let shown = &slices[..slices.len().min(SHOWN_SLICES)];
-        let bars: Vec<Bar> = shown
-            .iter()
-            .map(|s| {
-                // Value indexing gives Null (NaN here) for a short or
-                // missing interval, where Vec indexing would panic.
-                let ci = s["ci_pct"].as_array().map(|_| &s["ci_pct"]);
-                Bar {
-                    value: f(&s["difference_pct"]),
-                    interval: ci
-                        .map(|c| (f(&c[0]), f(&c[1])))
-                        .filter(|(lo, hi)| lo.is_finite() && hi.is_finite()),
-                    color: None,
-                }
-            })
-            .collect();
-        let svg = figure::bars(
-            &Axes {
-                title: "Where the model and the track disagree",
-                x: "flagged slice (table)",
-                y: "gap against the rest, measured − predicted (%)",
-            },
-            &bars,
-        )?;
-        let rows: Vec<Vec<String>> = slices
-            .iter()
-            .enumerate()
-            .map(|(i, s)| {
-                vec![
-                    (i + 1).to_string(),
-                    s["name"].as_str().unwrap_or("").to_string(),
-                    s["n"].to_string(),
-                    num(f(&s["mean_residual_pct"]), 2),
-                    num(f(&s["difference_pct"]), 2),
-                    num(f(&s["p_adjusted"]), 4),
-                ]
-            })
-            .collect();
-        let header = [
-            "#",
-            "slice",
-            "n",
-            "mean residual (%)",
-            "difference (%)",
-            "p adj.",
-        ];
-        html += &fig(
-            &svg,
-            &format!(
-                "Flagged slices: how much more (or less) the tires of each slice wear than \
-the model predicts, against the rest of the season (difference of mean residuals, % of \
-the new tread), with its 95 % interval; the slices are numbered as in the table. {} \
-slices flagged{}.",
-                slices.len(),
-                if slices.len() > shown.len() {
-                    format!(
-                        "; the first {} in the diagnosis's order are drawn, all are in the CSV",
-                        shown.len()
-                    )
-                } else {
-                    String::new()
-                }
-            ),
-            &format!(
-                "{}{}",
-                table(&header, &rows[..shown.len()]),
-                csv_link("flagged_slices.csv", &header, &rows)
-            ),
-        );
+        html += &flagged_slices(&slices)?;
         figures += 1;
     }
     // Which: the candidates, best first.
-    let candidates: Vec<Vec<String>> = g["candidates"]
-        .as_array()
-        .into_iter()
-        .flatten()
-        .take(10)
-        .map(|c| {
-            vec![
-                c["name"].as_str().unwrap_or("").to_string(),
-                threshold_text(c),
-                num(f(&c["cv_gain"]), 3),
-                num(f(&c["p_adjusted"]), 4),
-            ]
-        })
-        .collect();
-    html += "<h3>Candidate effects (ten best by held-out gain)</h3>\n";
-    html += &table(
-        &["candidate", "threshold", "CV gain", "p adj."],
-        &candidates,
-    );
+    html += &candidates_table(g);
     // How far: RMSE after each step.
     let steps: Vec<&Value> = g["steps"].as_array().into_iter().flatten().collect();
     if !steps.is_empty() {
-        let series =
-            |key: &str| -> Vec<f64> { steps.iter().map(|s| f(&s[key]["rmse_pct"])).collect() };
-        // Inside each flagged slice too (numbered as in the slices' table).
-        let in_slice = |k: usize| -> Vec<f64> {
-            steps
-                .iter()
-                .map(|s| f(&s["slices"][k]["rmse_pct"]))
-                .collect()
-        };
-        let mut lines = vec![
-            ("training".to_string(), 0, series("training")),
-            ("testing".to_string(), 1, series("testing")),
-        ];
-        let traced = slices.len().min(SHRINK_SLICES);
-        lines.extend((0..traced).map(|k| (format!("slice {}", k + 1), k + 2, in_slice(k))));
-        let svg = figure::steps(
-            &Axes {
-                title: "How far the gap shrinks",
-                x: "step (0: baseline; then each added term)",
-                y: "RMSE (% of new tread)",
-            },
-            &lines,
-        )?;
-        let header: Vec<String> = ["step", "added", "training RMSE (%)", "testing RMSE (%)"]
-            .into_iter()
-            .map(String::from)
-            .chain((0..traced).map(|k| format!("slice {} RMSE (%)", k + 1)))
-            .collect();
-        let rows: Vec<Vec<String>> = steps
-            .iter()
-            .enumerate()
-            .map(|(i, s)| {
-                let mut row = vec![
-                    i.to_string(),
-                    s["added"].as_str().unwrap_or("").to_string(),
-                    num(f(&s["training"]["rmse_pct"]), 3),
-                    num(f(&s["testing"]["rmse_pct"]), 3),
-                ];
-                row.extend((0..traced).map(|k| num(f(&s["slices"][k]["rmse_pct"]), 3)));
-                row
-            })
-            .collect();
-        let header: Vec<&str> = header.iter().map(String::as_str).collect();
-        html += &fig(
-            &svg,
-            "Shrink table: the RMSE of the baseline, then after each term the selection \
-added, on the training and the testing events and inside the first flagged slices \
-(numbered as in the slices' table).",
-            &table(&header, &rows),
-        );
+        html += &shrink_chart(&steps, &slices)?;
         figures += 1;
     }
     // Each added term's wear against the residual it is there to explain.
@@ -1678,74 +1529,10 @@ added, on the training and the testing events and inside the first flagged slice
         .collect();
     let tires: Vec<&Value> = g["terms_wear"].as_array().into_iter().flatten().collect();
     for (j, term) in terms.iter().enumerate() {
-        let mut groups: Vec<Points> = Axle::ALL
-            .into_iter()
-            .enumerate()
-            .map(|(k, a)| Points {
-                label: format!("{a} axle"),
-                color: k,
-                xy: Vec::new(),
-                filled: true,
-            })
-            .collect();
-        for t in &tires {
-            let key = (
-                t["run"].as_str().unwrap_or("").to_string(),
-                t["wheel"].as_str().unwrap_or("").to_string(),
-            );
-            let Some(&wear) = measured_wear.get(&key) else {
-                continue;
-            };
-            let part = f(&t["by_term_pct"][j]);
-            // What is left to explain without this term.
-            let residual = wear - f(&t["predicted_pct"]) + part;
-            if !(part.is_finite() && residual.is_finite()) {
-                continue;
-            }
-            let axle = usize::from(t["axle"].as_str() == Some("rear"));
-            groups[axle].xy.push((part, residual));
+        if let Some(figure) = term_figure(j, term, &tires, &measured_wear)? {
+            html += &figure;
+            figures += 1;
         }
-        let all: Vec<(f64, f64)> = groups.iter().flat_map(|g| g.xy.iter().copied()).collect();
-        if all.is_empty() {
-            continue;
-        }
-        let r = line_fit(&all).map_or(f64::NAN, |f| f.2.sqrt());
-        let lo = all
-            .iter()
-            .map(|p| p.0.min(p.1))
-            .fold(f64::INFINITY, f64::min);
-        let hi = all
-            .iter()
-            .map(|p| p.0.max(p.1))
-            .fold(f64::NEG_INFINITY, f64::max);
-        let title = format!("Term {}: its wear against the residual it explains", j + 1);
-        let svg = figure::scatter(
-            &Axes {
-                title: &title,
-                x: "the term's wear (% of new tread)",
-                y: "residual without the term (%)",
-            },
-            &groups,
-            &[Segment {
-                color: None,
-                from: (lo, lo),
-                to: (hi, hi),
-            }],
-            false,
-        )?;
-        html += &fig(
-            &svg,
-            &format!(
-                "Term {} ({term}): each tire-run's wear from this term in the final model \
-against what the measurement leaves without it (measured − final prediction + the \
-term's wear), grey the 1:1 line; |correlation| {}. A term that explains a real effect \
-follows the residual along the line.",
-                j + 1,
-                num(r, 2)
-            ),
-            "",
-        );
-        figures += 1;
     }
     if g["final_terms"].as_array().is_some_and(|t| t.is_empty()) {
         html += "<p>No term was added: nothing the candidates describe explains the gap \
@@ -1756,6 +1543,256 @@ beyond chance.</p>\n";
         html,
         figures,
     })
+}
+
+/// What the diagnosis found, in words (gap.json from before 2026-11-26 has
+/// none: empty).
+fn gap_findings(g: &Value) -> String {
+    let findings: Vec<&str> = g["findings"]
+        .as_array()
+        .into_iter()
+        .flatten()
+        .filter_map(Value::as_str)
+        .collect();
+    if findings.is_empty() {
+        return String::new();
+    }
+    let mut html = "<h3>Findings</h3>\n".to_string();
+    for line in findings {
+        html += &format!("<p>{}</p>\n", escape(line));
+    }
+    html
+}
+
+/// The flagged slices' difference of mean residuals with its 95 %
+/// interval (the first [`SHOWN_SLICES`] drawn), their table and CSV.
+fn flagged_slices(slices: &[&Value]) -> Result<String, ReportError> {
+    // A strong effect flags hundreds of overlapping slices: the first
+    // ones in the diagnosis's order are drawn, all are in the CSV.
+    let shown = &slices[..slices.len().min(SHOWN_SLICES)];
+    let bars: Vec<Bar> = shown
+        .iter()
+        .map(|s| {
+            // Value indexing gives Null (NaN here) for a short or
+            // missing interval, where Vec indexing would panic.
+            let ci = s["ci_pct"].as_array().map(|_| &s["ci_pct"]);
+            Bar {
+                value: f(&s["difference_pct"]),
+                interval: ci
+                    .map(|c| (f(&c[0]), f(&c[1])))
+                    .filter(|(lo, hi)| lo.is_finite() && hi.is_finite()),
+                color: None,
+            }
+        })
+        .collect();
+    let svg = figure::bars(
+        &Axes {
+            title: "Where the model and the track disagree",
+            x: "flagged slice (table)",
+            y: "gap against the rest, measured − predicted (%)",
+        },
+        &bars,
+    )?;
+    let rows: Vec<Vec<String>> = slices
+        .iter()
+        .enumerate()
+        .map(|(i, s)| {
+            vec![
+                (i + 1).to_string(),
+                s["name"].as_str().unwrap_or("").to_string(),
+                s["n"].to_string(),
+                num(f(&s["mean_residual_pct"]), 2),
+                num(f(&s["difference_pct"]), 2),
+                num(f(&s["p_adjusted"]), 4),
+            ]
+        })
+        .collect();
+    let header = [
+        "#",
+        "slice",
+        "n",
+        "mean residual (%)",
+        "difference (%)",
+        "p adj.",
+    ];
+    Ok(fig(
+        &svg,
+        &format!(
+            "Flagged slices: how much more (or less) the tires of each slice wear than \
+the model predicts, against the rest of the season (difference of mean residuals, % of \
+the new tread), with its 95 % interval; the slices are numbered as in the table. {} \
+slices flagged{}.",
+            slices.len(),
+            if slices.len() > shown.len() {
+                format!(
+                    "; the first {} in the diagnosis's order are drawn, all are in the CSV",
+                    shown.len()
+                )
+            } else {
+                String::new()
+            }
+        ),
+        &format!(
+            "{}{}",
+            table(&header, &rows[..shown.len()]),
+            csv_link("flagged_slices.csv", &header, &rows)
+        ),
+    ))
+}
+
+/// The ten best candidate effects by held-out gain, as a table.
+fn candidates_table(g: &Value) -> String {
+    let candidates: Vec<Vec<String>> = g["candidates"]
+        .as_array()
+        .into_iter()
+        .flatten()
+        .take(10)
+        .map(|c| {
+            vec![
+                c["name"].as_str().unwrap_or("").to_string(),
+                threshold_text(c),
+                num(f(&c["cv_gain"]), 3),
+                num(f(&c["p_adjusted"]), 4),
+            ]
+        })
+        .collect();
+    "<h3>Candidate effects (ten best by held-out gain)</h3>\n".to_string()
+        + &table(
+            &["candidate", "threshold", "CV gain", "p adj."],
+            &candidates,
+        )
+}
+
+/// The RMSE after each added term on the training and testing events and
+/// inside the first flagged slices: chart and table.
+fn shrink_chart(steps: &[&Value], slices: &[&Value]) -> Result<String, ReportError> {
+    let series = |key: &str| -> Vec<f64> { steps.iter().map(|s| f(&s[key]["rmse_pct"])).collect() };
+    // Inside each flagged slice too (numbered as in the slices' table).
+    let in_slice = |k: usize| -> Vec<f64> {
+        steps
+            .iter()
+            .map(|s| f(&s["slices"][k]["rmse_pct"]))
+            .collect()
+    };
+    let mut lines = vec![
+        ("training".to_string(), 0, series("training")),
+        ("testing".to_string(), 1, series("testing")),
+    ];
+    let traced = slices.len().min(SHRINK_SLICES);
+    lines.extend((0..traced).map(|k| (format!("slice {}", k + 1), k + 2, in_slice(k))));
+    let svg = figure::steps(
+        &Axes {
+            title: "How far the gap shrinks",
+            x: "step (0: baseline; then each added term)",
+            y: "RMSE (% of new tread)",
+        },
+        &lines,
+    )?;
+    let header: Vec<String> = ["step", "added", "training RMSE (%)", "testing RMSE (%)"]
+        .into_iter()
+        .map(String::from)
+        .chain((0..traced).map(|k| format!("slice {} RMSE (%)", k + 1)))
+        .collect();
+    let rows: Vec<Vec<String>> = steps
+        .iter()
+        .enumerate()
+        .map(|(i, s)| {
+            let mut row = vec![
+                i.to_string(),
+                s["added"].as_str().unwrap_or("").to_string(),
+                num(f(&s["training"]["rmse_pct"]), 3),
+                num(f(&s["testing"]["rmse_pct"]), 3),
+            ];
+            row.extend((0..traced).map(|k| num(f(&s["slices"][k]["rmse_pct"]), 3)));
+            row
+        })
+        .collect();
+    let header: Vec<&str> = header.iter().map(String::as_str).collect();
+    Ok(fig(
+        &svg,
+        "Shrink table: the RMSE of the baseline, then after each term the selection \
+added, on the training and the testing events and inside the first flagged slices \
+(numbered as in the slices' table).",
+        &table(&header, &rows),
+    ))
+}
+
+/// Term `j`'s (`term`) wear in the final model against the residual it is
+/// there to explain, per tire-run with a measured wear (`measured_wear` by
+/// run and wheel); None when no tire has both.
+fn term_figure(
+    j: usize,
+    term: &str,
+    tires: &[&Value],
+    measured_wear: &std::collections::HashMap<(String, String), f64>,
+) -> Result<Option<String>, ReportError> {
+    let mut groups: Vec<Points> = Axle::ALL
+        .into_iter()
+        .enumerate()
+        .map(|(k, a)| Points {
+            label: format!("{a} axle"),
+            color: k,
+            xy: Vec::new(),
+            filled: true,
+        })
+        .collect();
+    for t in tires {
+        let key = (
+            t["run"].as_str().unwrap_or("").to_string(),
+            t["wheel"].as_str().unwrap_or("").to_string(),
+        );
+        let Some(&wear) = measured_wear.get(&key) else {
+            continue;
+        };
+        let part = f(&t["by_term_pct"][j]);
+        // What is left to explain without this term.
+        let residual = wear - f(&t["predicted_pct"]) + part;
+        if !(part.is_finite() && residual.is_finite()) {
+            continue;
+        }
+        let axle = usize::from(t["axle"].as_str() == Some("rear"));
+        groups[axle].xy.push((part, residual));
+    }
+    let all: Vec<(f64, f64)> = groups.iter().flat_map(|g| g.xy.iter().copied()).collect();
+    if all.is_empty() {
+        return Ok(None);
+    }
+    let r = line_fit(&all).map_or(f64::NAN, |f| f.2.sqrt());
+    let lo = all
+        .iter()
+        .map(|p| p.0.min(p.1))
+        .fold(f64::INFINITY, f64::min);
+    let hi = all
+        .iter()
+        .map(|p| p.0.max(p.1))
+        .fold(f64::NEG_INFINITY, f64::max);
+    let title = format!("Term {}: its wear against the residual it explains", j + 1);
+    let svg = figure::scatter(
+        &Axes {
+            title: &title,
+            x: "the term's wear (% of new tread)",
+            y: "residual without the term (%)",
+        },
+        &groups,
+        &[Segment {
+            color: None,
+            from: (lo, lo),
+            to: (hi, hi),
+        }],
+        false,
+    )?;
+    Ok(Some(fig(
+        &svg,
+        &format!(
+            "Term {} ({term}): each tire-run's wear from this term in the final model \
+against what the measurement leaves without it (measured − final prediction + the \
+term's wear), grey the 1:1 line; |correlation| {}. A term that explains a real effect \
+follows the residual along the line.",
+            j + 1,
+            num(r, 2)
+        ),
+        "",
+    )))
 }
 
 /// The performance section, when `tirewear bench` JSONs are given: with
