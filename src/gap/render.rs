@@ -179,6 +179,21 @@ pub fn render_markdown(d: &Diagnosis, max_slices: usize) -> String {
     if let Some(p) = &d.physics {
         let _ = writeln!(s, "Calibrated on the training events: {}", describe_law(p));
     }
+    write_left_out(&mut s, d);
+    write_fit(&mut s, d);
+    s.push_str("\n## Findings\n\n");
+    write_findings(&mut s, &d.findings);
+    write_slices(&mut s, d, max_slices);
+    if !d.candidates.is_empty() {
+        write_candidates(&mut s, d, max_slices);
+        write_shrink(&mut s, d);
+    }
+    s
+}
+
+/// The tires left out: those the baseline cannot predict, and those worn
+/// through (with the ones that enter imputed).
+fn write_left_out(s: &mut String, d: &Diagnosis) {
     if !d.unpredicted.is_empty() {
         let lacking: Vec<&str> = d.unpredicted_lacking.iter().map(String::as_str).collect();
         let why = if lacking.is_empty() {
@@ -242,6 +257,10 @@ pub fn render_markdown(d: &Diagnosis, max_slices: usize) -> String {
             )
         };
     }
+}
+
+/// The baseline's bias and RMSE on the training and testing events.
+fn write_fit(s: &mut String, d: &Diagnosis) {
     let _ = writeln!(
         s,
         "\n| events | n | bias (%) | RMSE (%) |\n|---|---|---|---|"
@@ -266,8 +285,10 @@ pub fn render_markdown(d: &Diagnosis, max_slices: usize) -> String {
             let _ = writeln!(s, "\n{}", no_testing_said(d));
         }
     }
-    s.push_str("\n## Findings\n\n");
-    write_findings(&mut s, &d.findings);
+}
+
+/// Step 1: the slices flagged (at most `max_slices` listed).
+fn write_slices(s: &mut String, d: &Diagnosis, max_slices: usize) {
     let _ = writeln!(
         s,
         "\n## Where the gap lies\n\n{} distinct slices tested (singly and in pairs, against the rest, t-test allowing for the residuals' correlation within events); {} survive Benjamini–Hochberg at FDR {}. Ranked by the part of the squared gap their offset accounts for (n·mean²/Σr²).\n",
@@ -309,100 +330,105 @@ pub fn render_markdown(d: &Diagnosis, max_slices: usize) -> String {
             );
         }
     }
-    if !d.candidates.is_empty() {
+}
+
+/// Step 2: the candidate effects, best first (at most ten listed).
+fn write_candidates(s: &mut String, d: &Diagnosis, max_slices: usize) {
+    let _ = writeln!(
+        s,
+        "\n## Which unmodelled effect\n\nEach candidate term is refitted with the baseline's per-group energy terms on the training events, on the relative scale (rows divided by the baseline). CV gain: 1 − held-out SSE / held-out SSE of the baseline alone, whole tracks left out in turn, the threshold scanned on the training folds only. p: Freedman–Lane permutation test of the nested models (whole runs' residuals permuted within their track, wheel for wheel{}), max F over the threshold grid; road terms: F test of the tracks' severities on their road value, max F over the grid against Monte Carlo draws. p adj.: Benjamini–Hochberg within each family (within-track, road) over {} candidates, then times the number of families, so that together they hold the rate. Coefficient (physics baseline): how many times the law's abrasion per joule a mechanism adds; for a road term, % per MJ of the law's energy term per unit of its road value; for a generic KPI, % per MJ and sd. Front share: the part of the term's wear on the front axle. Acts in: the flagged slices of step 1 whose gap the fitted term follows most, with the part of the slice's mean residual it accounts for. Definitions: docs/gap.md.\n\n| candidate | threshold | coefficient | CV gain | p adj. | front share | acts in (part of the slice's mean gap) |\n|---|---|---|---|---|---|---|",
+        d.exchange.also_exchanged(),
+        d.candidates.len()
+    );
+    for c in d.candidates.iter().take(max_slices.min(10)) {
+        let th = if c.threshold.is_finite() {
+            c.feature.format_threshold(c.threshold)
+        } else {
+            "–".into()
+        };
         let _ = writeln!(
             s,
-            "\n## Which unmodelled effect\n\nEach candidate term is refitted with the baseline's per-group energy terms on the training events, on the relative scale (rows divided by the baseline). CV gain: 1 − held-out SSE / held-out SSE of the baseline alone, whole tracks left out in turn, the threshold scanned on the training folds only. p: Freedman–Lane permutation test of the nested models (whole runs' residuals permuted within their track, wheel for wheel{}), max F over the threshold grid; road terms: F test of the tracks' severities on their road value, max F over the grid against Monte Carlo draws. p adj.: Benjamini–Hochberg within each family (within-track, road) over {} candidates, then times the number of families, so that together they hold the rate. Coefficient (physics baseline): how many times the law's abrasion per joule a mechanism adds; for a road term, % per MJ of the law's energy term per unit of its road value; for a generic KPI, % per MJ and sd. Front share: the part of the term's wear on the front axle. Acts in: the flagged slices of step 1 whose gap the fitted term follows most, with the part of the slice's mean residual it accounts for. Definitions: docs/gap.md.\n\n| candidate | threshold | coefficient | CV gain | p adj. | front share | acts in (part of the slice's mean gap) |\n|---|---|---|---|---|---|---|",
-            d.exchange.also_exchanged(),
-            d.candidates.len()
-        );
-        for c in d.candidates.iter().take(max_slices.min(10)) {
-            let th = if c.threshold.is_finite() {
-                c.feature.format_threshold(c.threshold)
+            "| {}{} | {th} | {:+.4} | {:+.3} | {} | {} | {} |",
+            c.name,
+            if c.significant(d.fdr) {
+                " **(significant)**"
             } else {
-                "–".into()
-            };
-            let _ = writeln!(
-                s,
-                "| {}{} | {th} | {:+.4} | {:+.3} | {} | {} | {} |",
-                c.name,
-                if c.significant(d.fdr) {
-                    " **(significant)**"
-                } else {
-                    ""
-                },
-                c.coefficient,
-                c.cv_gain,
-                p_text(c.p_adjusted),
-                // A generic KPI term changes sign across rows: no share.
-                if (0.0..=1.0).contains(&c.front_share) {
-                    format!("{:.0} %", 100.0 * c.front_share)
-                } else {
-                    "–".to_string()
-                },
-                if c.acts_in.is_empty() {
-                    "–".to_string()
-                } else {
-                    c.acts_in
-                        .iter()
-                        .map(|a| format!("{} ({:.0} %)", a.slice, 100.0 * a.share_of_offset))
-                        .collect::<Vec<_>>()
-                        .join("; ")
-                }
-            );
-        }
+                ""
+            },
+            c.coefficient,
+            c.cv_gain,
+            p_text(c.p_adjusted),
+            // A generic KPI term changes sign across rows: no share.
+            if (0.0..=1.0).contains(&c.front_share) {
+                format!("{:.0} %", 100.0 * c.front_share)
+            } else {
+                "–".to_string()
+            },
+            if c.acts_in.is_empty() {
+                "–".to_string()
+            } else {
+                c.acts_in
+                    .iter()
+                    .map(|a| format!("{} ({:.0} %)", a.slice, 100.0 * a.share_of_offset))
+                    .collect::<Vec<_>>()
+                    .join("; ")
+            }
+        );
+    }
+}
+
+/// Step 3: the fit after each added term, and the law calibrated again.
+fn write_shrink(s: &mut String, d: &Diagnosis) {
+    let _ = writeln!(
+        s,
+        "\n## How far the gap shrinks\n\nEach step adds the best significant candidate that improves the held-out tracks (significant on its own in step 2, or the mechanism already found on another axle or threshold; no generic KPI once a mechanism is in: docs/gap.md); the physics law is then calibrated again on the training events around the terms, which are refitted with it, until the calibration settles (a model baseline is refitted with the terms). Slices: the top flagged slices of step 1, in order{}.\n\n| step | training bias / RMSE (%) | testing bias / RMSE (%) | bias / RMSE in slices 1… (%) |\n|---|---|---|---|",
+        d.slices
+            .iter()
+            .take(5)
+            .enumerate()
+            .map(|(i, sl)| format!("; {} = {}", i + 1, sl.name))
+            .collect::<String>()
+    );
+    for st in &d.steps {
+        let te = st.testing.map_or("–".to_string(), |t| {
+            format!("{:+.3} / {:.3}", t.bias_pct, t.rmse_pct)
+        });
+        let sl: Vec<String> = st
+            .slices
+            .iter()
+            .take(5)
+            .map(|g| format!("{:+.2} / {:.2}", g.bias_pct, g.rmse_pct))
+            .collect();
         let _ = writeln!(
             s,
-            "\n## How far the gap shrinks\n\nEach step adds the best significant candidate that improves the held-out tracks (significant on its own in step 2, or the mechanism already found on another axle or threshold; no generic KPI once a mechanism is in: docs/gap.md); the physics law is then calibrated again on the training events around the terms, which are refitted with it, until the calibration settles (a model baseline is refitted with the terms). Slices: the top flagged slices of step 1, in order{}.\n\n| step | training bias / RMSE (%) | testing bias / RMSE (%) | bias / RMSE in slices 1… (%) |\n|---|---|---|---|",
-            d.slices
-                .iter()
-                .take(5)
-                .enumerate()
-                .map(|(i, sl)| format!("; {} = {}", i + 1, sl.name))
-                .collect::<String>()
+            "| {} | {:+.3} / {:.3} | {te} | {} |",
+            if st.added == "baseline" {
+                st.added.clone()
+            } else if st.threshold.is_finite() {
+                format!(
+                    "+ {} (θ = {}, c = {:+.4})",
+                    st.added,
+                    st.feature.map_or_else(
+                        || significant(st.threshold),
+                        |f| f.format_threshold(st.threshold)
+                    ),
+                    st.coefficient
+                )
+            } else {
+                format!("+ {} (c = {:+.4})", st.added, st.coefficient)
+            },
+            st.training.bias_pct,
+            st.training.rmse_pct,
+            sl.join(", ")
         );
-        for st in &d.steps {
-            let te = st.testing.map_or("–".to_string(), |t| {
-                format!("{:+.3} / {:.3}", t.bias_pct, t.rmse_pct)
-            });
-            let sl: Vec<String> = st
-                .slices
-                .iter()
-                .take(5)
-                .map(|g| format!("{:+.2} / {:.2}", g.bias_pct, g.rmse_pct))
-                .collect();
-            let _ = writeln!(
-                s,
-                "| {} | {:+.3} / {:.3} | {te} | {} |",
-                if st.added == "baseline" {
-                    st.added.clone()
-                } else if st.threshold.is_finite() {
-                    format!(
-                        "+ {} (θ = {}, c = {:+.4})",
-                        st.added,
-                        st.feature.map_or_else(
-                            || significant(st.threshold),
-                            |f| f.format_threshold(st.threshold)
-                        ),
-                        st.coefficient
-                    )
-                } else {
-                    format!("+ {} (c = {:+.4})", st.added, st.coefficient)
-                },
-                st.training.bias_pct,
-                st.training.rmse_pct,
-                sl.join(", ")
-            );
-        }
-        if let Some(p) = &d.physics_with_terms {
-            let _ = writeln!(
-                s,
-                "\nThe law calibrated again around the terms: {}",
-                describe_law(p)
-            );
-        }
     }
-    s
+    if let Some(p) = &d.physics_with_terms {
+        let _ = writeln!(
+            s,
+            "\nThe law calibrated again around the terms: {}",
+            describe_law(p)
+        );
+    }
 }
 
 /// Why the table has no testing line, and what judges a term without one.
