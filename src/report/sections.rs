@@ -6,6 +6,7 @@ use super::{Inputs, ReportError, Section};
 use crate::Axle;
 use crate::kpi::KpiRow;
 use crate::model::interval::{Coverage, IntervalLevel};
+use crate::model::saved::SavedModel;
 use serde_json::Value;
 use std::collections::BTreeSet;
 
@@ -1233,132 +1234,12 @@ pub(super) fn models(inputs: &Inputs) -> Result<Section, ReportError> {
     }
     let mut summary = Vec::new();
     for (path, m) in &inputs.models {
-        let (mut train, mut test, mut csv) = (Vec::new(), Vec::new(), Vec::new());
-        // Per split, of the tires with a 95 % prediction interval, how many
-        // hold their measured wear, and the same for the new-event interval
-        // (docs/models.md).
-        let mut inside = [Coverage::default(); 2];
-        let mut inside_event = [Coverage::default(); 2];
-        // Each testing tire's interval as a whisker: a testing event is a new
-        // event to the model, so its new-event interval where the fit kept
-        // the event errors, else the model's own.
-        let mut whiskers = Vec::new();
-        let mut whisker_kinds = [0usize; 2];
-        for r in inputs.rows.iter().filter(|r| measured(r)) {
-            let Ok((p, interval)) = m.predict_row_within(r, Some(IntervalLevel::P95)) else {
-                continue;
-            };
-            if !p.is_finite() {
-                continue;
-            }
-            let split = if m.training_events.contains(&r.event) {
-                train.push((r.wear_mean_pct, p));
-                0
-            } else if m.testing_events.contains(&r.event) {
-                test.push((r.wear_mean_pct, p));
-                1
-            } else {
-                continue;
-            };
-            if let Some((low, high)) = interval {
-                inside[split].add(r.wear_mean_pct, low, high);
-            }
-            let event = m.event_interval_around(p, r.axle, IntervalLevel::P95);
-            if let Some((low, high)) = event {
-                inside_event[split].add(r.wear_mean_pct, low, high);
-            }
-            let drawn = if event.is_some() { event } else { interval };
-            if let (1, Some(y)) = (split, drawn) {
-                whiskers.push(Whisker {
-                    color: 1,
-                    x: r.wear_mean_pct,
-                    y,
-                });
-                whisker_kinds[usize::from(event.is_some())] += 1;
-            }
-            let (low, high) = interval.unwrap_or((f64::NAN, f64::NAN));
-            let (event_low, event_high) = event.unwrap_or((f64::NAN, f64::NAN));
-            csv.push(vec![
-                r.run.clone(),
-                r.wheel.to_string(),
-                ["training", "testing"][split].into(),
-                num(r.wear_mean_pct, 4),
-                num(p, 4),
-                num(low, 4),
-                num(high, 4),
-                num(event_low, 4),
-                num(event_high, 4),
-            ]);
-        }
-        let share = |c: Coverage| {
-            c.share()
-                .map_or("–".into(), |s| format!("{} %", num(100.0 * s, 1)))
-        };
-        let mut intervals = if inside.iter().any(|c| c.of > 0) {
-            format!(
-                " The 95 % prediction intervals hold {} of the training and {} of the testing \
-tires' measured wear.",
-                share(inside[0]),
-                share(inside[1])
-            )
-        } else {
-            String::new()
-        };
-        if inside_event.iter().any(|c| c.of > 0) {
-            intervals += &format!(
-                " The 95 % intervals for a new event (from the training tires' errors with \
-their event left out) hold {} and {}.",
-                share(inside_event[0]),
-                share(inside_event[1])
-            );
-        }
-        let (r2_train, rmse_train) = fit_quality(&train);
-        let (r2_test, rmse_test) = fit_quality(&test);
-        let all = train.iter().chain(&test);
-        let lo = all
-            .clone()
-            .map(|p| p.0.min(p.1))
-            .fold(f64::INFINITY, f64::min);
-        let hi = all.map(|p| p.0.max(p.1)).fold(f64::NEG_INFINITY, f64::max);
+        let p = predictions(inputs, m);
+        let (r2_train, rmse_train) = fit_quality(&p.train);
+        let (r2_test, rmse_test) = fit_quality(&p.test);
         let method = m.method();
         let title = format!("Predicted against measured wear: {method}");
-        let swap = |v: &[(f64, f64)]| v.to_vec();
-        let svg = figure::scatter_with_whiskers(
-            &Axes {
-                title: &title,
-                x: "measured mean wear (%)",
-                y: "predicted mean wear (%)",
-            },
-            &[
-                Points {
-                    label: "training".into(),
-                    color: 0,
-                    xy: swap(&train),
-                    filled: true,
-                },
-                Points {
-                    label: "testing".into(),
-                    color: 1,
-                    xy: swap(&test),
-                    filled: false,
-                },
-            ],
-            &[Segment {
-                color: None,
-                from: (lo, lo),
-                to: (hi, hi),
-            }],
-            (&whiskers, figure::WHISKER_REACH),
-            false,
-        )?;
-        let whiskers_are = match whisker_kinds {
-            [0, 0] => String::new(),
-            [_, 0] => " Whiskers: each testing tire's 95 % prediction interval.".into(),
-            [0, _] => " Whiskers: each testing tire's 95 % interval for a new event.".into(),
-            _ => " Whiskers: each testing tire's 95 % interval for a new event, the model's own \
-95 % prediction interval where the fit kept no event errors for its axle."
-                .into(),
-        };
+        let svg = predictions_figure(&p, &title)?;
         let name = path
             .file_name()
             .map(|n| n.to_string_lossy().into_owned())
@@ -1367,27 +1248,15 @@ their event left out) hold {} and {}.",
             &svg,
             &format!(
                 "{title} ({name}): filled marks training events, hollow testing events, grey the 1:1 \
-line. Training R² {} RMSE {} %, testing R² {} RMSE {} %.{intervals}{whiskers_are}",
+line. Training R² {} RMSE {} %, testing R² {} RMSE {} %.{}{}",
                 num(r2_train, 3),
                 num(rmse_train, 2),
                 num(r2_test, 3),
-                num(rmse_test, 2)
+                num(rmse_test, 2),
+                intervals_held(&p),
+                whiskers_are(p.whisker_kinds)
             ),
-            &csv_link(
-                &format!("predictions_{method}.csv"),
-                &[
-                    "run",
-                    "wheel",
-                    "split",
-                    "measured_pct",
-                    "predicted_pct",
-                    "interval_95_low_pct",
-                    "interval_95_high_pct",
-                    "new_event_95_low_pct",
-                    "new_event_95_high_pct",
-                ],
-                &csv,
-            ),
+            &predictions_csv(method, &p.csv),
         );
         figures += 1;
         let (extra, n) = model_details(m)?;
@@ -1395,14 +1264,14 @@ line. Training R² {} RMSE {} %, testing R² {} RMSE {} %.{intervals}{whiskers_a
         figures += n;
         summary.push(vec![
             method.to_string(),
-            train.len().to_string(),
+            p.train.len().to_string(),
             num(r2_train, 3),
             num(rmse_train, 2),
-            test.len().to_string(),
+            p.test.len().to_string(),
             num(r2_test, 3),
             num(rmse_test, 2),
-            share(inside[1]),
-            share(inside_event[1]),
+            coverage_share(p.inside[1]),
+            coverage_share(p.inside_event[1]),
         ]);
     }
     if !summary.is_empty() {
@@ -1426,6 +1295,185 @@ line. Training R² {} RMSE {} %, testing R² {} RMSE {} %.{intervals}{whiskers_a
         html,
         figures,
     })
+}
+
+/// One model's predictions of the measured tires, training and testing
+/// events apart.
+#[derive(Default)]
+struct Predictions {
+    /// (measured, predicted) mean wear (%) of the training events' tires.
+    train: Vec<(f64, f64)>,
+    /// The same for the testing events' tires.
+    test: Vec<(f64, f64)>,
+    /// The rows of `predictions_METHOD.csv` ([`predictions_csv`]).
+    csv: Vec<Vec<String>>,
+    /// Per split, of the tires with a 95 % prediction interval, how many
+    /// hold their measured wear (docs/models.md).
+    inside: [Coverage; 2],
+    /// The same for the new-event interval.
+    inside_event: [Coverage; 2],
+    /// Each testing tire's interval as a whisker: a testing event is a new
+    /// event to the model, so its new-event interval where the fit kept
+    /// the event errors, else the model's own.
+    whiskers: Vec<Whisker>,
+    /// How many whiskers are the model's own interval (0) and how many the
+    /// new-event one (1).
+    whisker_kinds: [usize; 2],
+}
+
+/// `m`'s predictions of the measured tires of its training and testing
+/// events (a tire it cannot predict is left out).
+fn predictions(inputs: &Inputs, m: &SavedModel) -> Predictions {
+    let mut out = Predictions::default();
+    for r in inputs.rows.iter().filter(|r| measured(r)) {
+        let Ok((p, interval)) = m.predict_row_within(r, Some(IntervalLevel::P95)) else {
+            continue;
+        };
+        if !p.is_finite() {
+            continue;
+        }
+        let split = if m.training_events.contains(&r.event) {
+            out.train.push((r.wear_mean_pct, p));
+            0
+        } else if m.testing_events.contains(&r.event) {
+            out.test.push((r.wear_mean_pct, p));
+            1
+        } else {
+            continue;
+        };
+        if let Some((low, high)) = interval {
+            out.inside[split].add(r.wear_mean_pct, low, high);
+        }
+        let event = m.event_interval_around(p, r.axle, IntervalLevel::P95);
+        if let Some((low, high)) = event {
+            out.inside_event[split].add(r.wear_mean_pct, low, high);
+        }
+        let drawn = if event.is_some() { event } else { interval };
+        if let (1, Some(y)) = (split, drawn) {
+            out.whiskers.push(Whisker {
+                color: 1,
+                x: r.wear_mean_pct,
+                y,
+            });
+            out.whisker_kinds[usize::from(event.is_some())] += 1;
+        }
+        let (low, high) = interval.unwrap_or((f64::NAN, f64::NAN));
+        let (event_low, event_high) = event.unwrap_or((f64::NAN, f64::NAN));
+        out.csv.push(vec![
+            r.run.clone(),
+            r.wheel.to_string(),
+            ["training", "testing"][split].into(),
+            num(r.wear_mean_pct, 4),
+            num(p, 4),
+            num(low, 4),
+            num(high, 4),
+            num(event_low, 4),
+            num(event_high, 4),
+        ]);
+    }
+    out
+}
+
+/// A coverage as a percentage, "–" where no tire had an interval.
+fn coverage_share(c: Coverage) -> String {
+    c.share()
+        .map_or("–".into(), |s| format!("{} %", num(100.0 * s, 1)))
+}
+
+/// The caption's sentences on how many measured tires the 95 % intervals
+/// hold (empty where the model gives none).
+fn intervals_held(p: &Predictions) -> String {
+    let mut held = if p.inside.iter().any(|c| c.of > 0) {
+        format!(
+            " The 95 % prediction intervals hold {} of the training and {} of the testing \
+tires' measured wear.",
+            coverage_share(p.inside[0]),
+            coverage_share(p.inside[1])
+        )
+    } else {
+        String::new()
+    };
+    if p.inside_event.iter().any(|c| c.of > 0) {
+        held += &format!(
+            " The 95 % intervals for a new event (from the training tires' errors with \
+their event left out) hold {} and {}.",
+            coverage_share(p.inside_event[0]),
+            coverage_share(p.inside_event[1])
+        );
+    }
+    held
+}
+
+/// The caption's sentence on what the whiskers are.
+fn whiskers_are(kinds: [usize; 2]) -> &'static str {
+    match kinds {
+        [0, 0] => "",
+        [_, 0] => " Whiskers: each testing tire's 95 % prediction interval.",
+        [0, _] => " Whiskers: each testing tire's 95 % interval for a new event.",
+        _ => {
+            " Whiskers: each testing tire's 95 % interval for a new event, the model's own \
+95 % prediction interval where the fit kept no event errors for its axle."
+        }
+    }
+}
+
+/// Predicted against measured wear, training events filled and testing
+/// events hollow with their intervals as whiskers, and the 1:1 line.
+fn predictions_figure(p: &Predictions, title: &str) -> Result<String, ReportError> {
+    let all = p.train.iter().chain(&p.test);
+    let lo = all
+        .clone()
+        .map(|p| p.0.min(p.1))
+        .fold(f64::INFINITY, f64::min);
+    let hi = all.map(|p| p.0.max(p.1)).fold(f64::NEG_INFINITY, f64::max);
+    figure::scatter_with_whiskers(
+        &Axes {
+            title,
+            x: "measured mean wear (%)",
+            y: "predicted mean wear (%)",
+        },
+        &[
+            Points {
+                label: "training".into(),
+                color: 0,
+                xy: p.train.clone(),
+                filled: true,
+            },
+            Points {
+                label: "testing".into(),
+                color: 1,
+                xy: p.test.clone(),
+                filled: false,
+            },
+        ],
+        &[Segment {
+            color: None,
+            from: (lo, lo),
+            to: (hi, hi),
+        }],
+        (&p.whiskers, figure::WHISKER_REACH),
+        false,
+    )
+}
+
+/// The link to `predictions_METHOD.csv`: each tire's measured and predicted
+/// wear with its intervals.
+fn predictions_csv(method: &str, rows: &[Vec<String>]) -> String {
+    csv_link(
+        &format!("predictions_{method}.csv"),
+        &[
+            "run",
+            "wheel",
+            "split",
+            "measured_pct",
+            "predicted_pct",
+            "interval_95_low_pct",
+            "interval_95_high_pct",
+            "new_event_95_low_pct",
+            "new_event_95_high_pct",
+        ],
+        rows,
+    )
 }
 
 /// A threshold in at most four decimals, trailing zeros dropped.
