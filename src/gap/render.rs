@@ -3,7 +3,7 @@
 
 use super::baseline::PhysicsBaseline;
 use super::candidates::{Feature, SET_UP_SHARE, SetUpForm, significant};
-use super::report::{Diagnosis, WornThrough};
+use super::report::{Diagnosis, Step, WornThrough};
 use super::scoring::Score;
 use crate::kpi::cpu::condition_map::{CONDITIONS, pair_conditions};
 use std::fmt::Write;
@@ -563,165 +563,207 @@ fn findings(s: &mut String, d: &Diagnosis) {
         }
     }
     for (t, st) in terms.iter().enumerate() {
-        let name = with_threshold(&st.added, st.feature, st.threshold);
-        // The final model's coefficient and its event-bootstrap interval.
-        let (c, (lo, hi)) = d
-            .final_terms
-            .get(t)
-            .map_or((st.coefficient, (f64::NAN, f64::NAN)), |f| {
-                (f.coefficient, f.ci95)
-            });
-        let ci = |shift: f64, digits: usize| {
-            if lo.is_finite() && hi.is_finite() {
-                format!(
-                    " (95 % interval {:.digits$} to {:.digits$})",
-                    shift + lo,
-                    shift + hi
-                )
-            } else {
-                String::new()
-            }
-        };
-        // A set-up factor on one component of the energy, not the law's wear.
-        let set_up_energy = match (st.feature, SetUpForm::of(st.threshold)) {
-            (Some(Feature::Group), Some(SetUpForm::Energy(k))) => Some(k.energy_name()),
-            _ => None,
-        };
-        let rate = match st.feature {
-            Some(Feature::Kpi(k)) => format!(
-                "wear per MJ changes by {c:+.4} %{} per standard deviation of {k}",
-                ci(0.0, 4)
-            ),
-            Some(Feature::Group) if set_up_energy.is_some() => {
-                format!("abrades {:.2}{} times the law's rate", 1.0 + c, ci(1.0, 2))
-            }
-            Some(Feature::Group) => format!(
-                "wears {:.2}{} times what the law predicts from its telemetry",
-                1.0 + c,
-                ci(1.0, 2)
-            ),
-            Some(f) if d.physics.is_some() && !f.track_level() && f != Feature::User => format!(
-                "abrades {:.2}{} times the law's rate where it acts",
-                1.0 + c,
-                ci(1.0, 2)
-            ),
-            _ => format!("coefficient {c:+.4}{}", ci(0.0, 4)),
-        };
-        // Its part of the predicted wear of the tires it acts on.
-        let (part, total) = d
-            .terms_wear
-            .iter()
-            .filter(|w| w.by_term_pct.get(t).is_some_and(|v| *v != 0.0))
-            .fold((0.0, 0.0), |(a, b), w| {
-                (a + w.by_term_pct[t], b + w.predicted_pct)
-            });
-        let share = match 100.0 * part / total {
-            x if !(total > 0.0 && x.is_finite()) => String::new(),
-            x if x >= 0.0 => format!(": {x:.0} % of the predicted wear of the tires it acts on"),
-            x => format!(": {:.0} % less predicted wear on the tires it acts on", -x),
-        };
-        let testing = match (d.steps[t].testing, st.testing) {
-            (Some(a), Some(b)) if b.rmse_pct > a.rmse_pct => format!(
-                " Testing-event RMSE {:.3} → {:.3} %: worse on the events the selection never saw, so it may not carry to a new event (a term can fit the training events' scatter; docs/gap.md, \"When a term makes the testing events worse\").",
-                a.rmse_pct, b.rmse_pct
-            ),
-            (Some(a), Some(b)) => format!(
-                " Testing-event RMSE {:.3} → {:.3} %.",
-                a.rmse_pct, b.rmse_pct
-            ),
-            _ => String::new(),
-        };
-        let acts = d
-            .candidates
-            .iter()
-            .find(|c| c.name == st.added)
-            .filter(|c| !c.acts_in.is_empty())
-            .map(|c| {
-                format!(
-                    // The change of the prediction, not the term alone: the
-                    // law calibrated again around the term gives back what
-                    // the term takes over, so other tires' slices can close
-                    // too (an FL term lowers the front axle's k, which an
-                    // FL excess had raised, and FR's overestimate goes).
-                    " The gap closes most (the term, and the law calibrated again around it) in: {}.",
-                    c.acts_in
-                        .iter()
-                        .map(|a| format!(
-                            "{} ({:.0} % of its mean gap)",
-                            a.slice,
-                            100.0 * a.share_of_offset
-                        ))
-                        .collect::<Vec<_>>()
-                        .join("; ")
-                )
-            })
-            .unwrap_or_default();
-        let component = st.feature.and_then(|f| f.energy_component());
-        let scope = st.scope.as_deref().unwrap_or("its tires");
-        // A condition that leaves out next to none of the energy.
-        let unlimited = st.energy_share.is_some_and(|x| x >= SET_UP_SHARE);
-        let set_up = name.strip_prefix("set-up: ").map(|g| match set_up_energy {
-            Some(energy) => format!("Set-up effect: the {energy} of {scope}"),
-            None => format!("Set-up effect: {g}"),
-        });
-        let name = match (set_up, component, st.energy_share) {
-            (Some(set_up), _, _) => set_up,
-            (None, Some(component), Some(x)) if unlimited => format!(
-                "{} {component} of {scope} under nearly every condition (the term found, \"{name}\", holds {:.1} % of that energy)",
-                if st.set_up {
-                    "Set-up effect: the"
-                } else {
-                    "The"
-                },
-                100.0 * x
-            ),
-            (None, component, x) => {
-                let held = match (component, x) {
-                    (Some(component), Some(x)) => {
-                        format!(" ({:.0} % of the {component} of {scope})", 100.0 * x)
-                    }
-                    _ => String::new(),
-                };
-                capitalised(&name) + &held
-            }
-        };
-        let advice = if st.set_up {
-            " The telemetry does not show why: look at the alignment (toe, camber settings), a suspension setting or the tire batch of that group."
-        } else if unlimited {
-            " No condition sets it apart: the law's one rate per joule does not fit this energy on these tires as it fits the rest (how the law weighs longitudinal against lateral energy, say)."
-        } else {
-            ""
-        };
-        let _ = writeln!(s, "{}. {name} {rate}{share}.{advice}{testing}{acts}", t + 1);
+        let _ = writeln!(s, "{}. {}", t + 1, term_finding(d, t, st));
     }
     if let Some(line) = worse_on_testing(d) {
         let _ = writeln!(s, "\n{line}");
     }
-    // Flagged slices whose mean residual the terms leave at more than half.
-    if let (Some(first), Some(last)) = (d.steps.first(), d.steps.last())
-        && d.steps.len() > 1
-    {
-        let open: Vec<String> = d
-            .slices
-            .iter()
-            .zip(first.slices.iter().zip(&last.slices))
-            .take(5)
-            .filter(|(_, (a, b))| b.bias_pct.abs() > 0.5 * a.bias_pct.abs())
-            .map(|(sl, (a, b))| {
-                format!(
-                    "{} (mean residual {:+.2} % → {:+.2} %)",
-                    sl.name, a.bias_pct, b.bias_pct
-                )
-            })
-            .collect();
-        if !open.is_empty() {
-            let _ = writeln!(
-                s,
-                "\nNot explained by any term (more than half of the mean residual remains): {}.",
-                open.join("; ")
-            );
+    if let Some(open) = unexplained_slices(d) {
+        let _ = writeln!(
+            s,
+            "\nNot explained by any term (more than half of the mean residual remains): {open}."
+        );
+    }
+}
+
+/// Term `t` (step `t + 1`, `st`) in words: what it is, its rate against
+/// the law's, its part of the wear, what to look at, the testing events'
+/// RMSE and where the gap closes most.
+fn term_finding(d: &Diagnosis, t: usize, st: &Step) -> String {
+    // A set-up factor on one component of the energy, not the law's wear.
+    let set_up_energy = match (st.feature, SetUpForm::of(st.threshold)) {
+        (Some(Feature::Group), Some(SetUpForm::Energy(k))) => Some(k.energy_name()),
+        _ => None,
+    };
+    // A condition that leaves out next to none of the energy.
+    let unlimited = st.energy_share.is_some_and(|x| x >= SET_UP_SHARE);
+    let advice = if st.set_up {
+        " The telemetry does not show why: look at the alignment (toe, camber settings), a suspension setting or the tire batch of that group."
+    } else if unlimited {
+        " No condition sets it apart: the law's one rate per joule does not fit this energy on these tires as it fits the rest (how the law weighs longitudinal against lateral energy, say)."
+    } else {
+        ""
+    };
+    format!(
+        "{} {}{}.{advice}{}{}",
+        term_name(st, set_up_energy, unlimited),
+        term_rate(d, t, st, set_up_energy.is_some()),
+        term_share(d, t),
+        term_testing(d, t, st),
+        term_acts(d, st)
+    )
+}
+
+/// The term's name, with its threshold, scope and the share of its energy
+/// component it holds; a set-up effect as such.
+fn term_name(st: &Step, set_up_energy: Option<&str>, unlimited: bool) -> String {
+    let name = with_threshold(&st.added, st.feature, st.threshold);
+    let component = st.feature.and_then(|f| f.energy_component());
+    let scope = st.scope.as_deref().unwrap_or("its tires");
+    let set_up = name.strip_prefix("set-up: ").map(|g| match set_up_energy {
+        Some(energy) => format!("Set-up effect: the {energy} of {scope}"),
+        None => format!("Set-up effect: {g}"),
+    });
+    match (set_up, component, st.energy_share) {
+        (Some(set_up), _, _) => set_up,
+        (None, Some(component), Some(x)) if unlimited => format!(
+            "{} {component} of {scope} under nearly every condition (the term found, \"{name}\", holds {:.1} % of that energy)",
+            if st.set_up {
+                "Set-up effect: the"
+            } else {
+                "The"
+            },
+            100.0 * x
+        ),
+        (None, component, x) => {
+            let held = match (component, x) {
+                (Some(component), Some(x)) => {
+                    format!(" ({:.0} % of the {component} of {scope})", 100.0 * x)
+                }
+                _ => String::new(),
+            };
+            capitalised(&name) + &held
         }
     }
+}
+
+/// The term's rate: a factor on the law's rate (or on the wear the law
+/// predicts, for a set-up group of the whole law), or a coefficient; from
+/// the final model, with its event-bootstrap interval.
+fn term_rate(d: &Diagnosis, t: usize, st: &Step, set_up_energy: bool) -> String {
+    let (c, (lo, hi)) = d
+        .final_terms
+        .get(t)
+        .map_or((st.coefficient, (f64::NAN, f64::NAN)), |f| {
+            (f.coefficient, f.ci95)
+        });
+    let ci = |shift: f64, digits: usize| {
+        if lo.is_finite() && hi.is_finite() {
+            format!(
+                " (95 % interval {:.digits$} to {:.digits$})",
+                shift + lo,
+                shift + hi
+            )
+        } else {
+            String::new()
+        }
+    };
+    match st.feature {
+        Some(Feature::Kpi(k)) => format!(
+            "wear per MJ changes by {c:+.4} %{} per standard deviation of {k}",
+            ci(0.0, 4)
+        ),
+        Some(Feature::Group) if set_up_energy => {
+            format!("abrades {:.2}{} times the law's rate", 1.0 + c, ci(1.0, 2))
+        }
+        Some(Feature::Group) => format!(
+            "wears {:.2}{} times what the law predicts from its telemetry",
+            1.0 + c,
+            ci(1.0, 2)
+        ),
+        Some(f) if d.physics.is_some() && !f.track_level() && f != Feature::User => format!(
+            "abrades {:.2}{} times the law's rate where it acts",
+            1.0 + c,
+            ci(1.0, 2)
+        ),
+        _ => format!("coefficient {c:+.4}{}", ci(0.0, 4)),
+    }
+}
+
+/// Term `t`'s part of the predicted wear of the tires it acts on, as a
+/// clause (empty where there is none to give).
+fn term_share(d: &Diagnosis, t: usize) -> String {
+    let (part, total) = d
+        .terms_wear
+        .iter()
+        .filter(|w| w.by_term_pct.get(t).is_some_and(|v| *v != 0.0))
+        .fold((0.0, 0.0), |(a, b), w| {
+            (a + w.by_term_pct[t], b + w.predicted_pct)
+        });
+    match 100.0 * part / total {
+        x if !(total > 0.0 && x.is_finite()) => String::new(),
+        x if x >= 0.0 => format!(": {x:.0} % of the predicted wear of the tires it acts on"),
+        x => format!(": {:.0} % less predicted wear on the tires it acts on", -x),
+    }
+}
+
+/// The testing events' RMSE before and after term `t`, with a warning
+/// where it got worse.
+fn term_testing(d: &Diagnosis, t: usize, st: &Step) -> String {
+    match (d.steps[t].testing, st.testing) {
+        (Some(a), Some(b)) if b.rmse_pct > a.rmse_pct => format!(
+            " Testing-event RMSE {:.3} → {:.3} %: worse on the events the selection never saw, so it may not carry to a new event (a term can fit the training events' scatter; docs/gap.md, \"When a term makes the testing events worse\").",
+            a.rmse_pct, b.rmse_pct
+        ),
+        (Some(a), Some(b)) => format!(
+            " Testing-event RMSE {:.3} → {:.3} %.",
+            a.rmse_pct, b.rmse_pct
+        ),
+        _ => String::new(),
+    }
+}
+
+/// The slices where the term closes the gap most (empty where none were
+/// measured).
+fn term_acts(d: &Diagnosis, st: &Step) -> String {
+    d.candidates
+        .iter()
+        .find(|c| c.name == st.added)
+        .filter(|c| !c.acts_in.is_empty())
+        .map(|c| {
+            format!(
+                // The change of the prediction, not the term alone: the
+                // law calibrated again around the term gives back what
+                // the term takes over, so other tires' slices can close
+                // too (an FL term lowers the front axle's k, which an
+                // FL excess had raised, and FR's overestimate goes).
+                " The gap closes most (the term, and the law calibrated again around it) in: {}.",
+                c.acts_in
+                    .iter()
+                    .map(|a| format!(
+                        "{} ({:.0} % of its mean gap)",
+                        a.slice,
+                        100.0 * a.share_of_offset
+                    ))
+                    .collect::<Vec<_>>()
+                    .join("; ")
+            )
+        })
+        .unwrap_or_default()
+}
+
+/// The top five flagged slices whose mean residual the terms leave at more
+/// than half, with the residual before and after; None without terms or
+/// where every slice closed.
+fn unexplained_slices(d: &Diagnosis) -> Option<String> {
+    let (first, last) = (d.steps.first()?, d.steps.last()?);
+    if d.steps.len() < 2 {
+        return None;
+    }
+    let open: Vec<String> = d
+        .slices
+        .iter()
+        .zip(first.slices.iter().zip(&last.slices))
+        .take(5)
+        .filter(|(_, (a, b))| b.bias_pct.abs() > 0.5 * a.bias_pct.abs())
+        .map(|(sl, (a, b))| {
+            format!(
+                "{} (mean residual {:+.2} % → {:+.2} %)",
+                sl.name, a.bias_pct, b.bias_pct
+            )
+        })
+        .collect();
+    (!open.is_empty()).then(|| open.join("; "))
 }
 
 /// Whether the terms together left the testing events' RMSE above the
