@@ -464,13 +464,53 @@ fn fit_core<'a>(
     settings: &FitSettings,
 ) -> Result<Fitted<'a>, ModelError> {
     settings.check()?;
-    // A column no training row has (the road KPIs of a season without road
-    // profiles) would leave out every row: it is left out instead.
+    let (candidates, mut notes) = present_inputs(method, &s.train)?;
+    let (train, dropped) = usable(&s.train, &candidates, "training");
+    notes.extend(dropped);
+    let (test, dropped) = usable(&s.test, &candidates, "testing");
+    notes.extend(dropped);
+    if train.is_empty() {
+        return Err(ModelError::Invalid(no_rows_left(&s.train, &candidates)));
+    }
+    let (features, body, table) = match method {
+        Method::Ffnn => fit_network_body(&train, &test, settings)?,
+        Method::Pca => fit_pca_body(&train, &test, settings)?,
+        Method::Physical => fit_physical_body(&train, &test)?,
+    };
+    let (table, line_rows): (Vec<Indicators>, Vec<Vec<&KpiRow>>) =
+        table.into_iter().map(|l| (l.indicators, l.rows)).unzip();
+    let model = SavedModel {
+        format: MODEL_FORMAT.into(),
+        version: MODEL_VERSION,
+        tirewear_version: env!("CARGO_PKG_VERSION").into(),
+        target: Feature::of(TARGET),
+        features: features.iter().map(|f| Feature::of(f)).collect(),
+        training_events: s.train_events.clone(),
+        testing_events: s.test_events.clone(),
+        indicators: table,
+        model: body,
+        event_errors: None,
+    };
+    Ok(Fitted {
+        model,
+        notes,
+        line_rows,
+    })
+}
+
+/// The candidate inputs some training row has a value of, and a note
+/// naming the others. A column no training row has (the road KPIs of a
+/// season without road profiles) would leave out every row: it is left
+/// out instead, unless the physical method needs it.
+fn present_inputs(
+    method: Method,
+    train: &[&KpiRow],
+) -> Result<(Vec<String>, Vec<String>), ModelError> {
     let (candidates, absent): (Vec<String>, Vec<String>) = candidate_inputs()
         .iter()
         .map(|c| c.to_string())
         .partition(|c| {
-            s.train
+            train
                 .iter()
                 .any(|r| r.number(c).is_some_and(f64::is_finite))
         });
@@ -496,137 +536,129 @@ fn fit_core<'a>(
             road_hint(&shown)
         ));
     }
-    let (train, dropped) = usable(&s.train, &candidates, "training");
-    notes.extend(dropped);
-    let (test, dropped) = usable(&s.test, &candidates, "testing");
-    notes.extend(dropped);
-    if train.is_empty() {
-        return Err(ModelError::Invalid(no_rows_left(&s.train, &candidates)));
+    Ok((candidates, notes))
+}
+
+/// A method's inputs, its fitted body and its indicator lines.
+type Body<'a> = (Vec<String>, ModelBody, Vec<Line<'a>>);
+
+/// Every candidate input's column over `rows` (usable rows: each has them all).
+fn columns(rows: &[&KpiRow]) -> Vec<(&'static str, Vec<f64>)> {
+    candidate_inputs()
+        .into_iter()
+        .map(|c| {
+            (
+                c,
+                rows.iter().map(|r| r.number(c).expect("column")).collect(),
+            )
+        })
+        .collect()
+}
+
+/// `inputs` of a row, in their order (a usable row has them all).
+fn row_inputs(r: &KpiRow, inputs: &[String]) -> Vec<f64> {
+    inputs
+        .iter()
+        .map(|c| r.number(c).expect("column"))
+        .collect()
+}
+
+/// The network (paper section 4.1): inputs chosen by their correlation
+/// with the wear and with each other, trained by Levenberg–Marquardt.
+fn fit_network_body<'a>(
+    train: &[&'a KpiRow],
+    test: &[&'a KpiRow],
+    settings: &FitSettings,
+) -> Result<Body<'a>, ModelError> {
+    let ns = &settings.network;
+    let y = target(train);
+    let inputs = select_inputs(
+        &columns(train),
+        Some((&y, ns.min_target_corr)),
+        ns.max_mutual_corr,
+    );
+    let x = matrix(train, &inputs);
+    let bar = crate::progress::bar(settings.progress, 0, "training the network's widths");
+    let network = super::network::fit_network(&x, &y, ns, &bar);
+    bar.finish_and_clear();
+    let network = network?;
+    let predict = |r: &KpiRow| {
+        let x = row_inputs(r, &inputs);
+        (
+            network.net.predict_one(&x),
+            network.prediction_interval(&x, IntervalLevel::P95),
+        )
+    };
+    let table = indicators("", train, test, inputs.len(), predict)?;
+    let body = ModelBody::Ffnn {
+        settings: ns.clone(),
+        network,
+    };
+    Ok((inputs, body, table))
+}
+
+/// PCA + regression (paper section 4.2): the mutually uncorrelated inputs'
+/// principal components, the wear regressed on the kept ones.
+fn fit_pca_body<'a>(
+    train: &[&'a KpiRow],
+    test: &[&'a KpiRow],
+    settings: &FitSettings,
+) -> Result<Body<'a>, ModelError> {
+    let all = columns(train);
+    let inputs = select_inputs(&all, None, settings.network.max_mutual_corr);
+    let dropped_correlated = all
+        .iter()
+        .map(|c| c.0.to_string())
+        .filter(|c| !inputs.contains(c))
+        .collect();
+    let x = matrix(train, &inputs);
+    let pca = settings.pca.fit(Dataset::new(&x, &[], &inputs))?;
+    let scores = pca.transform(&matrix(train, &inputs));
+    let names: Vec<String> = (1..=pca.kept).map(|i| format!("PC{i}")).collect();
+    let regression = OlsSettings.fit(Dataset::new(&scores, &target(train), &names))?;
+    let predict = |r: &KpiRow| {
+        let scores = &pca.transform(&[row_inputs(r, &inputs)])[0];
+        (
+            regression.predict_one(scores),
+            regression.prediction_interval(scores, IntervalLevel::P95),
+        )
+    };
+    let table = indicators("", train, test, pca.kept, predict)?;
+    let body = ModelBody::Pca {
+        dropped_correlated,
+        pca,
+        regression,
+    };
+    Ok((inputs, body, table))
+}
+
+/// The physical correlations + regression (paper section 4.3), per axle.
+fn fit_physical_body<'a>(
+    train: &[&'a KpiRow],
+    test: &[&'a KpiRow],
+) -> Result<Body<'a>, ModelError> {
+    fn axle<'r>(rows: &[&'r KpiRow], a: Axle) -> Vec<&'r KpiRow> {
+        rows.iter().filter(|r| r.axle == a).copied().collect()
     }
-    let columns = |rows: &[&KpiRow]| -> Vec<(&str, Vec<f64>)> {
-        candidate_inputs()
-            .into_iter()
-            .map(|c| {
-                (
-                    c,
-                    rows.iter().map(|r| r.number(c).expect("column")).collect(),
-                )
-            })
-            .collect()
-    };
-    let y = target(&train);
-    let (features, body, table) = match method {
-        Method::Ffnn => {
-            let ns = &settings.network;
-            let inputs = select_inputs(
-                &columns(&train),
-                Some((&y, ns.min_target_corr)),
-                ns.max_mutual_corr,
-            );
-            let x = matrix(&train, &inputs);
-            let bar = crate::progress::bar(settings.progress, 0, "training the network's widths");
-            let network = super::network::fit_network(&x, &y, ns, &bar);
-            bar.finish_and_clear();
-            let network = network?;
-            let predict = |r: &KpiRow| {
-                let x: Vec<f64> = inputs
-                    .iter()
-                    .map(|c| r.number(c).expect("column"))
-                    .collect();
-                (
-                    network.net.predict_one(&x),
-                    network.prediction_interval(&x, IntervalLevel::P95),
-                )
-            };
-            let table = indicators("", &train, &test, inputs.len(), predict)?;
-            (
-                inputs,
-                ModelBody::Ffnn {
-                    settings: ns.clone(),
-                    network,
-                },
-                table,
-            )
-        }
-        Method::Pca => {
-            let all = columns(&train);
-            let inputs = select_inputs(&all, None, settings.network.max_mutual_corr);
-            let dropped_correlated = all
-                .iter()
-                .map(|c| c.0.to_string())
-                .filter(|c| !inputs.contains(c))
-                .collect();
-            let x = matrix(&train, &inputs);
-            let pca = settings.pca.fit(Dataset::new(&x, &[], &inputs))?;
-            let scores = pca.transform(&matrix(&train, &inputs));
-            let names: Vec<String> = (1..=pca.kept).map(|i| format!("PC{i}")).collect();
-            let regression = OlsSettings.fit(Dataset::new(&scores, &y, &names))?;
-            let predict = |r: &KpiRow| {
-                let x: Vec<f64> = inputs
-                    .iter()
-                    .map(|c| r.number(c).expect("column"))
-                    .collect();
-                let scores = &pca.transform(&[x])[0];
-                (
-                    regression.predict_one(scores),
-                    regression.prediction_interval(scores, IntervalLevel::P95),
-                )
-            };
-            let table = indicators("", &train, &test, pca.kept, predict)?;
-            (
-                inputs,
-                ModelBody::Pca {
-                    dropped_correlated,
-                    pca,
-                    regression,
-                },
-                table,
-            )
-        }
-        Method::Physical => {
-            fn axle<'r>(rows: &[&'r KpiRow], a: Axle) -> Vec<&'r KpiRow> {
-                rows.iter().filter(|r| r.axle == a).copied().collect()
-            }
-            let of = |a: Axle| analyse_axle(a, &axle(&train, a));
-            let (front, rear) = (of(Axle::Front)?, of(Axle::Rear)?);
-            let mut table = Vec::new();
-            for (name, a) in [("Front—", &front), ("Rear—", &rear)] {
-                let predict = |r: &KpiRow| {
-                    let x = super::physical::inputs_of(r);
-                    let interval = a.regression.prediction_interval(&x, IntervalLevel::P95);
-                    (a.regression.predict_one(&x), interval)
-                };
-                table.extend(indicators(
-                    name,
-                    &axle(&train, a.axle),
-                    &axle(&test, a.axle),
-                    PHYSICAL_INPUTS.len(),
-                    predict,
-                )?);
-            }
-            let inputs = PHYSICAL_INPUTS.iter().map(|c| c.to_string()).collect();
-            (inputs, ModelBody::Physical { front, rear }, table)
-        }
-    };
-    let (table, line_rows): (Vec<Indicators>, Vec<Vec<&KpiRow>>) =
-        table.into_iter().map(|l| (l.indicators, l.rows)).unzip();
-    let model = SavedModel {
-        format: MODEL_FORMAT.into(),
-        version: MODEL_VERSION,
-        tirewear_version: env!("CARGO_PKG_VERSION").into(),
-        target: Feature::of(TARGET),
-        features: features.iter().map(|f| Feature::of(f)).collect(),
-        training_events: s.train_events.clone(),
-        testing_events: s.test_events.clone(),
-        indicators: table,
-        model: body,
-        event_errors: None,
-    };
-    Ok(Fitted {
-        model,
-        notes,
-        line_rows,
-    })
+    let of = |a: Axle| analyse_axle(a, &axle(train, a));
+    let (front, rear) = (of(Axle::Front)?, of(Axle::Rear)?);
+    let mut table = Vec::new();
+    for (name, a) in [("Front—", &front), ("Rear—", &rear)] {
+        let predict = |r: &KpiRow| {
+            let x = super::physical::inputs_of(r);
+            let interval = a.regression.prediction_interval(&x, IntervalLevel::P95);
+            (a.regression.predict_one(&x), interval)
+        };
+        table.extend(indicators(
+            name,
+            &axle(train, a.axle),
+            &axle(test, a.axle),
+            PHYSICAL_INPUTS.len(),
+            predict,
+        )?);
+    }
+    let inputs = PHYSICAL_INPUTS.iter().map(|c| c.to_string()).collect();
+    Ok((inputs, ModelBody::Physical { front, rear }, table))
 }
 
 fn method_title(m: &SavedModel) -> &'static str {
