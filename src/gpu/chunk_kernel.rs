@@ -107,17 +107,34 @@ fn fill(staging: &wgpu::Buffer, src: &[u8]) -> Result<(), GpuError> {
     if threads == 1 {
         return if src.is_empty() { Ok(()) } else { copy(0, src) };
     }
+    copy_in_threads(src, threads, copy)
+}
+
+/// Runs `copy(offset, share)` over `src` cut into `threads` shares of
+/// whole [`COPY_PIECE`]s (the last one shorter), one plain thread each.
+/// Each thread catches its own panic: a plain thread is no rayon worker,
+/// so only a catch on it keeps the panic off standard error and gives its
+/// place to the run's error.
+fn copy_in_threads(
+    src: &[u8],
+    threads: usize,
+    copy: impl Fn(usize, &[u8]) -> Result<(), GpuError> + Sync,
+) -> Result<(), GpuError> {
     // Shares in whole pieces keep every mapped range 8-byte aligned.
     let share = src.len().div_ceil(threads).div_ceil(COPY_PIECE) * COPY_PIECE;
+    let copy = &copy;
     std::thread::scope(|s| {
         let copies: Vec<_> = src
             .chunks(share)
             .enumerate()
-            .map(|(i, piece)| s.spawn(move || copy(i * share, piece)))
+            .map(|(i, piece)| s.spawn(move || crate::guard::catch_panic(|| copy(i * share, piece))))
             .collect();
-        copies.into_iter().try_for_each(|c| {
-            c.join()
-                .map_err(|_| GpuError::Map("a staging copy thread panicked".into()))?
+        copies.into_iter().try_for_each(|c| match c.join() {
+            Ok(Ok(copied)) => copied,
+            Ok(Err(why)) => Err(GpuError::Map(format!(
+                "a staging copy thread panicked: {why}"
+            ))),
+            Err(_) => Err(GpuError::Map("a staging copy thread panicked".into())),
         })
     })
 }
@@ -505,5 +522,61 @@ impl GpuContext {
             t.readback = t0.elapsed();
         }
         Ok(t)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::sync::Mutex;
+
+    /// 5 pieces and 123 bytes over 3 threads: shares of ⌈(5 P + 123) / 3 / P⌉
+    /// = 2 pieces, at 0, 2 P and 4 P, the last P + 123 bytes long.
+    #[test]
+    fn copies_cover_the_source_in_whole_pieces_and_a_panic_is_the_error() {
+        let src: Vec<u8> = (0..5 * COPY_PIECE + 123).map(|i| (i % 251) as u8).collect();
+        let got = Mutex::new(Vec::new());
+        copy_in_threads(&src, 3, |at, piece| {
+            got.lock().unwrap().push((at, piece.to_vec()));
+            Ok(())
+        })
+        .unwrap();
+        let mut got = got.into_inner().unwrap();
+        got.sort_by_key(|g| g.0);
+        let offsets: Vec<usize> = got.iter().map(|g| g.0).collect();
+        assert_eq!(offsets, [0, 2 * COPY_PIECE, 4 * COPY_PIECE]);
+        assert!(got.iter().flat_map(|g| &g.1).eq(&src));
+
+        // A panic in one share's thread is the copy's error, with its
+        // message; the other shares are copied.
+        let copied = Mutex::new(0);
+        let e = copy_in_threads(&src, 3, |at, piece| {
+            if at == 2 * COPY_PIECE {
+                panic!("share at {at} broke");
+            }
+            *copied.lock().unwrap() += piece.len();
+            Ok(())
+        })
+        .unwrap_err();
+        let said = format!(
+            "a staging copy thread panicked: share at {} broke",
+            2 * COPY_PIECE
+        );
+        assert!(
+            matches!(&e, GpuError::Map(m) if m.starts_with(&said)),
+            "{e}"
+        );
+        assert_eq!(copied.into_inner().unwrap(), src.len() - 2 * COPY_PIECE);
+
+        // A copy's own error is returned as it is.
+        let e = copy_in_threads(&src, 3, |at, _| match at {
+            0 => Err(GpuError::Map("mapping refused".into())),
+            _ => Ok(()),
+        })
+        .unwrap_err();
+        assert!(
+            matches!(&e, GpuError::Map(m) if m == "mapping refused"),
+            "{e}"
+        );
     }
 }
