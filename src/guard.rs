@@ -245,20 +245,12 @@ mod tests {
     #[test]
     #[ignore = "run in a child process by a_panic_on_a_rayon_worker_in_a_catch_…"]
     fn hook_child() {
-        use rayon::prelude::*;
         if std::env::var_os(HOOK_CHILD).is_none() {
             return;
         }
         quiet_caught_panics();
         // Parallel work started outside the pool runs on its workers.
-        let e = catch_panic(|| {
-            (0..64).into_par_iter().for_each(|i| {
-                if i == 37 {
-                    println!("caught line {}", line!() + 1);
-                    panic!("cell {i} is odd");
-                }
-            })
-        });
+        let e = catch_panic(|| panic_in_parallel("caught", "cell", 37));
         println!("caught: {}", e.unwrap_err());
         // A catch on a worker (a run prepared in a rayon task).
         rayon::scope(|s| {
@@ -282,27 +274,26 @@ mod tests {
                 })
             });
             started.wait();
-            let ended = catch_unwind(|| {
-                (0..64).into_par_iter().for_each(|i| {
-                    if i == 5 {
-                        println!("held line {}", line!() + 1);
-                        panic!("row {i} is odd");
-                    }
-                })
-            });
+            let ended = catch_unwind(|| panic_in_parallel("held", "row", 5));
             assert!(ended.is_err());
             print_held_panics();
             wait.wait();
         });
 
-        let ended = catch_unwind(|| {
-            (0..64).into_par_iter().for_each(|i| {
-                if i == 9 {
-                    println!("free line {}", line!() + 1);
-                    panic!("lap {i} is odd");
-                }
-            })
-        });
+        let ended = catch_unwind(|| panic_in_parallel("free", "lap", 9));
         assert!(ended.is_err());
+    }
+
+    /// A parallel loop of 64 items (on rayon's workers) whose item `at`
+    /// panics with "`what` `at` is odd", having printed "`key` line N", N the
+    /// `panic!`'s line.
+    fn panic_in_parallel(key: &str, what: &str, at: usize) {
+        use rayon::prelude::*;
+        (0..64).into_par_iter().for_each(|i| {
+            if i == at {
+                println!("{key} line {}", line!() + 1);
+                panic!("{what} {i} is odd");
+            }
+        })
     }
 }
