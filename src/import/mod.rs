@@ -127,81 +127,168 @@ pub(crate) fn import_log(
             "fewer than two complete samples",
         ));
     }
-    let archive_err = |what: String| ImportError::Archive {
+    let entry = run_entry(run_id, season, manifest, settings, &raw)?;
+    let cond = EventConditions {
+        air_c: entry.event.as_ref().map(|e| e.air_temp_c),
+        track_c: entry.event.as_ref().map(|e| e.track_temp_c),
+    };
+    let car = entry.car;
+    let est = estimate::estimate(log_path, &aligned, car, cond, settings.calibrate_radius)?;
+    // A new run is entered (in the caller's copy of the manifest) before its
+    // telemetry is written: what it lacks fails the log with no file left.
+    let distance_m = est.vehicle.last().map_or(0.0, |v| v.distance_m);
+    if entry.existing.is_none() {
+        add_run(
+            manifest,
+            run_id,
+            &entry.event_id,
+            &entry.telemetry,
+            distance_m,
+            &raw.meta,
+            &est,
+            car,
+            settings,
+        )
+        .map_err(|what| archive_error(season, what))?;
+    }
+    let info = RunInfo {
+        run: run_id.to_string(),
+        event: entry.event_id.clone(),
+        car: car.id.clone(),
+        sample_rate_hz: aligned.rate_hz,
+    };
+    let map_record = channel_map_record(&mapping, &raw);
+    let mut metadata = vec![(
+        crate::ingest::telemetry::IMPORT_METADATA,
+        run_metadata(log_path, &raw, car, &est),
+    )];
+    if !raw.meta.beacons_s.is_empty() {
+        metadata.push(("tirewear.laps", laps_record(&raw.meta.beacons_s)));
+    }
+    metadata.push(("tirewear.channel_map", map_record.clone()));
+    let start_s = run_start_s(&raw.meta, entry.event.as_ref());
+    write_telemetry(
+        &season.path(&entry.telemetry),
+        &info,
+        &aligned,
+        &est,
+        start_s,
+        metadata,
+    )?;
+
+    let duration_s = (aligned.index[aligned.len() - 1] - aligned.index[0]) as f64 / aligned.rate_hz;
+    Ok(ImportedRun {
+        log: log_path.to_path_buf(),
+        run: run_id.to_string(),
+        telemetry: entry.telemetry,
+        replaced: entry.existing.is_some(),
+        format: raw.meta.format.clone(),
+        samples: aligned.len(),
+        dropped_samples: aligned.dropped,
+        rate_hz: aligned.rate_hz,
+        duration_s,
+        distance_m,
+        lateral: est.lateral,
+        mapping: map_record,
+        estimated: est.estimated,
+        unmapped: mapping.unmapped,
+        beacons_s: raw.meta.beacons_s.clone(),
+        radius_checks: est.radius_checks.clone(),
+    })
+}
+
+/// An error of the archive (its manifest named) for a log's run.
+fn archive_error(season: &Season, what: String) -> ImportError {
+    ImportError::Archive {
         path: season.manifest_path.clone(),
         what,
-    };
+    }
+}
+
+/// What the manifest has, or the options give, for a log's run.
+struct RunEntry<'a> {
+    /// The run's index in the manifest; None for a new run.
+    existing: Option<usize>,
+    event_id: String,
+    /// The event's entry (None where the manifest has none yet).
+    event: Option<manifest::Event>,
+    car: &'a CarDescription,
+    /// The run's telemetry file, relative to the archive.
+    telemetry: String,
+}
+
+/// The run `run_id` of a log: its manifest entry's event, car and
+/// telemetry file, or for a new run those the options give (its id must
+/// name a file in telemetry/).
+fn run_entry<'a>(
+    run_id: &str,
+    season: &Season,
+    manifest: &manifest::Manifest,
+    settings: &'a ImportSettings,
+    raw: &log::RawLog,
+) -> Result<RunEntry<'a>, ImportError> {
     let existing = manifest.runs.iter().position(|r| r.id == run_id);
     // A new run's telemetry goes to telemetry/RUN.mcap: its id must not
     // leave that folder.
     let unsafe_id =
         run_id.is_empty() || run_id.starts_with('.') || run_id.contains(['/', '\\', ':', '\0']);
     if existing.is_none() && unsafe_id {
-        return Err(archive_err(format!(
-            "run id '{run_id}' cannot name a file in telemetry/ (empty, a leading '.', or '/', '\\', ':')"
-        )));
+        return Err(archive_error(
+            season,
+            format!(
+                "run id '{run_id}' cannot name a file in telemetry/ (empty, a leading '.', or '/', '\\', ':')"
+            ),
+        ));
     }
     let event_id = match existing {
         Some(i) => manifest.runs[i].event.clone(),
         None => settings.new_run.event.clone().ok_or_else(|| {
-            archive_err(format!(
-                "run '{run_id}' is not in the manifest: give --event, --compound and --tire-sets"
-            ))
+            archive_error(
+                season,
+                format!(
+                    "run '{run_id}' is not in the manifest: give --event, --compound and --tire-sets"
+                ),
+            )
         })?,
     };
     let event = manifest.events.iter().find(|e| e.id == event_id).cloned();
-    let cond = EventConditions {
-        air_c: event.as_ref().map(|e| e.air_temp_c),
-        track_c: event.as_ref().map(|e| e.track_temp_c),
-    };
     let car = choose_car(
         settings,
         existing.map(|i| manifest.runs[i].car.as_str()),
         &raw.meta.vehicle,
     )
-    .map_err(archive_err)?;
-    let est = estimate::estimate(log_path, &aligned, car, cond, settings.calibrate_radius)?;
-
-    // The run's start: the log's date and time of day (UTC), else the epoch.
-    let start_s = raw
-        .meta
-        .date
-        .as_deref()
-        .or(event.as_ref().map(|e| e.date.as_str()))
-        .and_then(days_from_civil)
-        .map_or(0, |d| d.max(0) as u64 * 86_400)
-        + raw.meta.time_of_day_s.unwrap_or(0.0) as u64;
-    let period_ns = (1e9 / aligned.rate_hz).round() as u64;
+    .map_err(|what| archive_error(season, what))?;
     let telemetry = match existing {
         Some(i) => manifest.runs[i].telemetry.clone(),
         None => format!("telemetry/{run_id}.mcap"),
     };
-    // A new run is entered (in the caller's copy of the manifest) before its
-    // telemetry is written: what it lacks fails the log with no file left.
-    let distance_m = est.vehicle.last().map_or(0.0, |v| v.distance_m);
-    if existing.is_none() {
-        add_run(
-            manifest, run_id, &event_id, &telemetry, distance_m, &raw.meta, &est, car, settings,
-        )
-        .map_err(archive_err)?;
-    }
-    let out_path = season.path(&telemetry);
-    if let Some(dir) = out_path.parent() {
-        std::fs::create_dir_all(dir).map_err(|e| ImportError::io(dir, e))?;
-    }
-    let info = RunInfo {
-        run: run_id.to_string(),
-        event: event_id.clone(),
-        car: car.id.clone(),
-        sample_rate_hz: aligned.rate_hz,
-    };
-    let mut writer = TelemetryWriter::create(
-        &out_path,
-        &info,
-        Encoding::Block,
-        aligned.rate_hz.round().max(1.0) as usize,
-    )?;
-    let mut map_record = BTreeMap::new();
+    Ok(RunEntry {
+        existing,
+        event_id,
+        event,
+        car,
+        telemetry,
+    })
+}
+
+/// The run's start (s since the epoch, UTC): the log's date, else its
+/// event's, and the log's time of day; the epoch where neither has a date.
+fn run_start_s(meta: &log::LogMeta, event: Option<&manifest::Event>) -> u64 {
+    meta.date
+        .as_deref()
+        .or(event.map(|e| e.date.as_str()))
+        .and_then(days_from_civil)
+        .map_or(0, |d| d.max(0) as u64 * 86_400)
+        + meta.time_of_day_s.unwrap_or(0.0) as u64
+}
+
+/// Each mapped quantity (with its corner) and the log's channels it was
+/// read from, with their unit: the telemetry's `tirewear.channel_map`.
+fn channel_map_record(
+    mapping: &channel_map::Mapping,
+    raw: &log::RawLog,
+) -> BTreeMap<String, String> {
+    let mut record = BTreeMap::new();
     for m in &mapping.mapped {
         let key = match m.corner {
             Some(w) => format!("{} {}", m.quantity.key(), w.name()),
@@ -212,8 +299,19 @@ pub(crate) fn import_log(
             .iter()
             .map(|&s| raw.channels[s].name.as_str())
             .collect();
-        map_record.insert(key, format!("{} [{}]", names.join(" + "), m.unit));
+        record.insert(key, format!("{} [{}]", names.join(" + "), m.unit));
     }
+    record
+}
+
+/// The telemetry's import metadata: the source log, its details, the car
+/// description used, what was estimated and the log's own header.
+fn run_metadata(
+    log_path: &Path,
+    raw: &log::RawLog,
+    car: &CarDescription,
+    est: &estimate::Estimated,
+) -> BTreeMap<String, String> {
     let mut meta = BTreeMap::from([
         ("source_file".to_string(), log_path.display().to_string()),
         ("source_format".to_string(), raw.meta.format.clone()),
@@ -231,22 +329,43 @@ pub(crate) fn import_log(
     for (k, v) in &raw.meta.header {
         meta.insert(format!("header: {k}"), v.clone());
     }
-    writer.write_metadata(crate::ingest::telemetry::IMPORT_METADATA, meta)?;
-    if !raw.meta.beacons_s.is_empty() {
-        // Beacons (lap markers) from the `.ldx`, in seconds from the log's start.
-        let mut laps = BTreeMap::new();
-        laps.insert(
-            "beacons_s".into(),
-            raw.meta
-                .beacons_s
-                .iter()
-                .map(|t| format!("{t:.6}"))
-                .collect::<Vec<_>>()
-                .join(","),
-        );
-        writer.write_metadata("tirewear.laps", laps)?;
+    meta
+}
+
+/// Beacons (lap markers) from the `.ldx`, in seconds from the log's start:
+/// the telemetry's `tirewear.laps`.
+fn laps_record(beacons_s: &[f64]) -> BTreeMap<String, String> {
+    let beacons = beacons_s
+        .iter()
+        .map(|t| format!("{t:.6}"))
+        .collect::<Vec<_>>()
+        .join(",");
+    BTreeMap::from([("beacons_s".to_string(), beacons)])
+}
+
+/// Writes the run's telemetry to `out_path` (block encoding, a block a
+/// second): the metadata records in their order, then every sample.
+fn write_telemetry(
+    out_path: &Path,
+    info: &RunInfo,
+    aligned: &align::Aligned,
+    est: &estimate::Estimated,
+    start_s: u64,
+    metadata: Vec<(&str, BTreeMap<String, String>)>,
+) -> Result<(), ImportError> {
+    if let Some(dir) = out_path.parent() {
+        std::fs::create_dir_all(dir).map_err(|e| ImportError::io(dir, e))?;
     }
-    writer.write_metadata("tirewear.channel_map", map_record.clone())?;
+    let mut writer = TelemetryWriter::create(
+        out_path,
+        info,
+        Encoding::Block,
+        aligned.rate_hz.round().max(1.0) as usize,
+    )?;
+    for (name, record) in metadata {
+        writer.write_metadata(name, record)?;
+    }
+    let period_ns = (1e9 / aligned.rate_hz).round() as u64;
     for (i, k) in aligned.index.iter().enumerate() {
         writer.push(
             start_s * 1_000_000_000 + k * period_ns,
@@ -255,27 +374,7 @@ pub(crate) fn import_log(
         )?;
     }
     writer.finish()?;
-
-    let duration_s = (aligned.index[aligned.len() - 1] - aligned.index[0]) as f64 / aligned.rate_hz;
-    let replaced = existing.is_some();
-    Ok(ImportedRun {
-        log: log_path.to_path_buf(),
-        run: run_id.to_string(),
-        telemetry,
-        replaced,
-        format: raw.meta.format.clone(),
-        samples: aligned.len(),
-        dropped_samples: aligned.dropped,
-        rate_hz: aligned.rate_hz,
-        duration_s,
-        distance_m,
-        lateral: est.lateral,
-        mapping: map_record,
-        estimated: est.estimated,
-        unmapped: mapping.unmapped,
-        beacons_s: raw.meta.beacons_s.clone(),
-        radius_checks: est.radius_checks.clone(),
-    })
+    Ok(())
 }
 
 /// The vehicle description of a run: its manifest car's for a run in the
