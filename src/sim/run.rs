@@ -11,7 +11,7 @@ use super::generated::{GeneratedEffect, SampleState};
 use super::lap::LapProfile;
 use super::thermal::{ThermalParams, TireTemps, hot_pressure_pa};
 use super::tire::slips;
-use super::vehicle::CarParams;
+use super::vehicle::{CarParams, WheelForces};
 use crate::Wheel;
 use crate::ingest::telemetry::proto::{TireSample, VehicleSample};
 use rand::Rng;
@@ -156,30 +156,20 @@ pub(crate) fn simulate_run<E>(
     rng: &mut impl Rng,
     mut sink: impl FnMut(u64, &[TireSample; 4], &VehicleSample, &Motion) -> Result<(), E>,
 ) -> Result<RunTruth, E> {
-    let car = ctx.car;
     let lap = ctx.lap;
     let dt = 1.0 / set.rate_hz;
     let period_ns = (1e9 / set.rate_hz).round() as u64;
     let lap_len = lap.ds_m * lap.v.len() as f64;
-    let psi = PsiTable::new(ctx.compound);
-    let noise = Noise::new(set.sensor_noise);
-
-    // Logger dropouts: a Poisson number per hour, 0.1-1.5 s each.
-    let est_duration = set.distance_m / (lap_len / lap.lap_time_s);
-    let n_drop = match set.sensor_noise {
-        true => Poisson::new(1.5 * est_duration / 3600.0 + 0.5)
-            .map(|p| p.sample(rng) as usize)
-            .unwrap_or(0),
-        false => 0,
-    };
-    let mut dropouts: Vec<(f64, f64)> = (0..n_drop)
-        .map(|_| {
-            let t0 = rng.random_range(5.0..est_duration.max(6.0));
-            (t0, t0 + rng.random_range(0.1..1.5))
-        })
-        .collect();
-    dropouts.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let dropouts = logger_dropouts(set, set.distance_m / (lap_len / lap.lap_time_s), rng);
     let weather_phase = rng.random_range(0.0..std::f64::consts::TAU);
+    let stepper = Stepper {
+        ctx,
+        psi: PsiTable::new(ctx.compound),
+        noise: Noise::new(set.sensor_noise),
+        dt,
+        static_load: ctx.car.wheel_loads(0.0, 0.0, 0.0),
+        cold_pressure_pa: set.cold_pressure_pa,
+    };
 
     let mut temps = [TireTemps {
         surface_c: set.blanket_c,
@@ -196,121 +186,41 @@ pub(crate) fn simulate_run<E>(
             wt.generated_histogram = vec![0.0; g.histogram_len()];
         }
     }
-    let static_load = car.wheel_loads(0.0, 0.0, 0.0);
     // dT_surface/dt over the last sample, per wheel (K/s).
     let mut surface_rate = [0.0f64; 4];
     while distance < set.distance_m {
-        // Interpolate the lap profile at s, scaled by this lap's pace.
-        let x = s_lap / lap.ds_m;
-        let i = (x as usize).min(lap.v.len() - 1);
-        let j = (i + 1) % lap.v.len();
-        let w = x - i as f64;
-        let lerp = |a: &[f64]| a[i] * (1.0 - w) + a[j] * w;
-        let pace = lap_pace * manage;
-        let v = lerp(&lap.v) * pace.sqrt();
-        let ax = lerp(&lap.ax) * pace;
-        let ay = lerp(&lap.ay) * pace;
-        let kappa = lerp(&lap.curvature);
-        let yaw_rate = v * kappa;
-        let weather = (std::f64::consts::TAU * time / 3600.0 + weather_phase).sin();
-        let t_air = set.air_c + 1.0 * weather;
-        let t_track = set.track_c + 2.5 * weather;
-
-        let forces = car.wheel_forces(v, ax, ay);
+        let m = Moment::new(
+            lap,
+            s_lap,
+            lap_pace * manage,
+            (time, distance),
+            weather_phase,
+            set,
+        );
+        let forces = ctx.car.wheel_forces(m.v, m.ax, m.ay);
         let mut motion = Motion {
-            ax_mps2: ax,
-            ay_mps2: ay,
-            yaw_rate_radps: yaw_rate,
+            ax_mps2: m.ax,
+            ay_mps2: m.ay,
+            yaw_rate_radps: m.yaw_rate,
             slip_y: [0.0; 4],
         };
         for wheel in Wheel::ALL {
             let k = wheel.index();
-            let f = forces[k];
-            let mu = ctx
-                .compound
-                .grip
-                .mu(temps[k].surface_c, f.fz, ctx.road_grip);
-            let (sx, sy, saturated) = slips(f.fx, f.fy, f.fz, mu);
-            truth.saturated_samples += saturated as u64;
-            motion.slip_y[k] = sy;
-            let y_w = wheel.side_sign() * 0.5 * car.track_width(wheel);
-            let vx = (v - yaw_rate * y_w).max(0.5);
-            let v_sx = sx * vx; // paper eq. 21
-            let v_sy = sy * vx; // paper eq. 22
-            let p_x = -f.fx * v_sx; // paper eq. 23, dissipated (≥ 0)
-            let p_y = -f.fy * v_sy; // paper eq. 24
-            let p = p_x + p_y; // paper eq. 25
-            let radius = car.rolling_radius(wheel) - f.fz / RADIAL_STIFFNESS_N_PER_M;
-            let omega = vx * (1.0 - sx) / radius;
-            let camber = car.camber_deg(wheel, ay);
-            let pressure = hot_pressure_pa(set.cold_pressure_pa[k], 20.0, temps[k].inner_c);
-
-            let wt = &mut truth.wheels[k];
-            wt.friction_energy_x_j += p_x * dt;
-            wt.friction_energy_y_j += p_y * dt;
-            wt.weighted_energy_j += p * psi.at(temps[k].surface_c) * dt;
-            for e in ctx.effects {
-                let idx = EffectKind::ALL
-                    .iter()
-                    .position(|k| *k == e.kind)
-                    .expect("listed");
-                let power = if e.kind == EffectKind::Graining {
-                    p_y
-                } else {
-                    p
-                };
-                wt.effect_energy_j[idx] +=
-                    power * e.weight(temps[k].surface_c, temps[k].inner_c) * dt;
-            }
-            if let Some(g) = ctx.generated {
-                let state = SampleState {
-                    slip_ratio: sx,
-                    slip_angle: sy,
-                    sliding_speed_mps: v_sx.hypot(v_sy),
-                    load_n: f.fz,
-                    static_load_n: static_load[k],
-                    utilisation: f.fx.hypot(f.fy) / f.fz.max(100.0),
-                    t_surface_c: temps[k].surface_c,
-                    t_inner_c: temps[k].inner_c,
-                    t_surface_rate_kps: surface_rate[k],
-                    pressure_pa: pressure,
-                    camber_deg: camber,
-                    speed_mps: v,
-                    ax_mps2: ax,
-                    ay_mps2: ay,
-                    time_s: time,
-                    distance_m: distance,
-                };
-                wt.generated_histogram[g.bin(&state)] += g.component.power(p_x, p_y) * dt;
-            }
-            wt.mean_camber_deg += camber;
-            wt.mean_pressure_pa += pressure;
-            wt.mean_surface_c += temps[k].surface_c;
-            wt.mean_inner_c += temps[k].inner_c;
-
-            let rel = 1.0 + noise.force_rel.sample(rng);
-            tires[k] = TireSample {
-                vx_mps: (vx + noise.vx.sample(rng)) as f32,
-                vy_mps: (v_sy + noise.vy.sample(rng)) as f32,
-                omega_radps: (omega + noise.omega.sample(rng)) as f32,
-                rolling_radius_m: radius as f32,
-                fx_n: (f.fx * rel + noise.force_n.sample(rng)) as f32,
-                fy_n: (f.fy * rel + noise.force_n.sample(rng)) as f32,
-                fz_n: (f.fz * rel + noise.force_n.sample(rng)) as f32,
-                t_surface_c: (temps[k].surface_c + noise.t_surface.sample(rng)) as f32,
-                t_inner_c: (temps[k].inner_c + noise.t_inner.sample(rng)) as f32,
-                pressure_pa: (pressure + noise.pressure.sample(rng)) as f32,
-                camber_deg: (camber + noise.camber.sample(rng)) as f32,
-            };
-            let before = temps[k].surface_c;
-            temps[k] = ctx.thermal.step(temps[k], dt, p, f.fz, vx, t_air, t_track);
-            surface_rate[k] = (temps[k].surface_c - before) / dt;
+            (tires[k], motion.slip_y[k]) = stepper.wheel(
+                wheel,
+                forces[k],
+                &m,
+                (&mut temps[k], &mut surface_rate[k]),
+                &mut truth,
+                rng,
+            );
         }
         manage += (tire_management(&temps) - manage) * (dt / MANAGE_LAG_S).min(1.0);
+        let noise = &stepper.noise;
         let vehicle = VehicleSample {
-            speed_mps: (v + noise.speed.sample(rng)) as f32,
-            t_track_c: (t_track + noise.t_track.sample(rng)) as f32,
-            t_air_c: (t_air + noise.t_air.sample(rng)) as f32,
+            speed_mps: (m.v + noise.speed.sample(rng)) as f32,
+            t_track_c: (m.t_track + noise.t_track.sample(rng)) as f32,
+            t_air_c: (m.t_air + noise.t_air.sample(rng)) as f32,
             distance_m: distance,
         };
         let dropped = dropouts.iter().any(|&(a, b)| time >= a && time < b);
@@ -325,8 +235,8 @@ pub(crate) fn simulate_run<E>(
             )?;
         }
         truth.samples += 1;
-        s_lap += v * dt;
-        distance += v * dt;
+        s_lap += m.v * dt;
+        distance += m.v * dt;
         time = truth.samples as f64 * dt;
         if s_lap >= lap_len {
             s_lap -= lap_len;
@@ -343,6 +253,223 @@ pub(crate) fn simulate_run<E>(
     }
     truth.duration_s = time;
     Ok(truth)
+}
+
+/// Logger dropouts of a run of about `duration_s`: a Poisson number per
+/// hour, 0.1-1.5 s each, sorted by start (none with ideal sensors).
+fn logger_dropouts(set: &RunSettings, duration_s: f64, rng: &mut impl Rng) -> Vec<(f64, f64)> {
+    let n_drop = match set.sensor_noise {
+        true => Poisson::new(1.5 * duration_s / 3600.0 + 0.5)
+            .map(|p| p.sample(rng) as usize)
+            .unwrap_or(0),
+        false => 0,
+    };
+    let mut dropouts: Vec<(f64, f64)> = (0..n_drop)
+        .map(|_| {
+            let t0 = rng.random_range(5.0..duration_s.max(6.0));
+            (t0, t0 + rng.random_range(0.1..1.5))
+        })
+        .collect();
+    dropouts.sort_by(|a, b| a.0.total_cmp(&b.0));
+    dropouts
+}
+
+/// The car at one sample: the lap profile at its distance into the lap,
+/// scaled by the pace, and the weather's slow drift.
+struct Moment {
+    v: f64,
+    ax: f64,
+    ay: f64,
+    yaw_rate: f64,
+    t_air: f64,
+    t_track: f64,
+    time_s: f64,
+    distance_m: f64,
+}
+
+impl Moment {
+    fn new(
+        lap: &LapProfile,
+        s_lap: f64,
+        pace: f64,
+        (time_s, distance_m): (f64, f64),
+        weather_phase: f64,
+        set: &RunSettings,
+    ) -> Self {
+        // Interpolate the lap profile at s, scaled by this lap's pace.
+        let x = s_lap / lap.ds_m;
+        let i = (x as usize).min(lap.v.len() - 1);
+        let j = (i + 1) % lap.v.len();
+        let w = x - i as f64;
+        let lerp = |a: &[f64]| a[i] * (1.0 - w) + a[j] * w;
+        let v = lerp(&lap.v) * pace.sqrt();
+        let kappa = lerp(&lap.curvature);
+        let weather = (std::f64::consts::TAU * time_s / 3600.0 + weather_phase).sin();
+        Moment {
+            v,
+            ax: lerp(&lap.ax) * pace,
+            ay: lerp(&lap.ay) * pace,
+            yaw_rate: v * kappa,
+            t_air: set.air_c + 1.0 * weather,
+            t_track: set.track_c + 2.5 * weather,
+            time_s,
+            distance_m,
+        }
+    }
+}
+
+/// What a run's samples share: the wheel step's constants.
+struct Stepper<'a> {
+    ctx: &'a RunContext<'a>,
+    psi: PsiTable,
+    noise: Noise,
+    dt: f64,
+    /// Each wheel's load at rest (N).
+    static_load: [f64; 4],
+    cold_pressure_pa: [f64; 4],
+}
+
+/// One wheel at one sample, before its temperatures are stepped.
+struct WheelState {
+    k: usize,
+    f: WheelForces,
+    temps: TireTemps,
+    /// dT_surface/dt over the last sample (K/s).
+    surface_rate: f64,
+    sx: f64,
+    sy: f64,
+    vx: f64,
+    v_sx: f64,
+    v_sy: f64,
+    p_x: f64,
+    p_y: f64,
+    p: f64,
+    radius: f64,
+    omega: f64,
+    camber: f64,
+    pressure: f64,
+}
+
+impl Stepper<'_> {
+    /// `wheel` at moment `m` under forces `f`: its noise-free integrals
+    /// added to `truth`, its temperatures and their rate stepped; its
+    /// recorded sample (with sensor noise) and lateral slip returned.
+    fn wheel(
+        &self,
+        wheel: Wheel,
+        f: WheelForces,
+        m: &Moment,
+        (temps, surface_rate): (&mut TireTemps, &mut f64),
+        truth: &mut RunTruth,
+        rng: &mut impl Rng,
+    ) -> (TireSample, f64) {
+        let ctx = self.ctx;
+        let k = wheel.index();
+        let mu = ctx.compound.grip.mu(temps.surface_c, f.fz, ctx.road_grip);
+        let (sx, sy, saturated) = slips(f.fx, f.fy, f.fz, mu);
+        truth.saturated_samples += saturated as u64;
+        let y_w = wheel.side_sign() * 0.5 * ctx.car.track_width(wheel);
+        let vx = (m.v - m.yaw_rate * y_w).max(0.5);
+        let v_sx = sx * vx; // paper eq. 21
+        let v_sy = sy * vx; // paper eq. 22
+        let p_x = -f.fx * v_sx; // paper eq. 23, dissipated (≥ 0)
+        let p_y = -f.fy * v_sy; // paper eq. 24
+        let radius = ctx.car.rolling_radius(wheel) - f.fz / RADIAL_STIFFNESS_N_PER_M;
+        let s = WheelState {
+            k,
+            f,
+            temps: *temps,
+            surface_rate: *surface_rate,
+            sx,
+            sy,
+            vx,
+            v_sx,
+            v_sy,
+            p_x,
+            p_y,
+            p: p_x + p_y, // paper eq. 25
+            radius,
+            omega: vx * (1.0 - sx) / radius,
+            camber: ctx.car.camber_deg(wheel, m.ay),
+            pressure: hot_pressure_pa(self.cold_pressure_pa[k], 20.0, temps.inner_c),
+        };
+        self.account(&mut truth.wheels[k], &s, m);
+        let sample = self.recorded(&s, rng);
+        let before = temps.surface_c;
+        *temps = ctx
+            .thermal
+            .step(*temps, self.dt, s.p, f.fz, vx, m.t_air, m.t_track);
+        *surface_rate = (temps.surface_c - before) / self.dt;
+        (sample, sy)
+    }
+
+    /// Adds the sample to the wheel's noise-free integrals: friction
+    /// energy, the wear law's weighted energy, each planted effect's, the
+    /// generated effect's histogram, and the sums of the means.
+    fn account(&self, wt: &mut WheelTruth, s: &WheelState, m: &Moment) {
+        let (ctx, dt) = (self.ctx, self.dt);
+        wt.friction_energy_x_j += s.p_x * dt;
+        wt.friction_energy_y_j += s.p_y * dt;
+        wt.weighted_energy_j += s.p * self.psi.at(s.temps.surface_c) * dt;
+        for e in ctx.effects {
+            let idx = EffectKind::ALL
+                .iter()
+                .position(|k| *k == e.kind)
+                .expect("listed");
+            let power = if e.kind == EffectKind::Graining {
+                s.p_y
+            } else {
+                s.p
+            };
+            wt.effect_energy_j[idx] += power * e.weight(s.temps.surface_c, s.temps.inner_c) * dt;
+        }
+        if let Some(g) = ctx.generated {
+            let f = s.f;
+            let state = SampleState {
+                slip_ratio: s.sx,
+                slip_angle: s.sy,
+                sliding_speed_mps: s.v_sx.hypot(s.v_sy),
+                load_n: f.fz,
+                static_load_n: self.static_load[s.k],
+                utilisation: f.fx.hypot(f.fy) / f.fz.max(100.0),
+                t_surface_c: s.temps.surface_c,
+                t_inner_c: s.temps.inner_c,
+                t_surface_rate_kps: s.surface_rate,
+                pressure_pa: s.pressure,
+                camber_deg: s.camber,
+                speed_mps: m.v,
+                ax_mps2: m.ax,
+                ay_mps2: m.ay,
+                time_s: m.time_s,
+                distance_m: m.distance_m,
+            };
+            wt.generated_histogram[g.bin(&state)] += g.component.power(s.p_x, s.p_y) * dt;
+        }
+        wt.mean_camber_deg += s.camber;
+        wt.mean_pressure_pa += s.pressure;
+        wt.mean_surface_c += s.temps.surface_c;
+        wt.mean_inner_c += s.temps.inner_c;
+    }
+
+    /// The wheel's sample as its sensors record it (noise drawn in field
+    /// order).
+    fn recorded(&self, s: &WheelState, rng: &mut impl Rng) -> TireSample {
+        let (noise, f) = (&self.noise, s.f);
+        let rel = 1.0 + noise.force_rel.sample(rng);
+        TireSample {
+            vx_mps: (s.vx + noise.vx.sample(rng)) as f32,
+            vy_mps: (s.v_sy + noise.vy.sample(rng)) as f32,
+            omega_radps: (s.omega + noise.omega.sample(rng)) as f32,
+            rolling_radius_m: s.radius as f32,
+            fx_n: (f.fx * rel + noise.force_n.sample(rng)) as f32,
+            fy_n: (f.fy * rel + noise.force_n.sample(rng)) as f32,
+            fz_n: (f.fz * rel + noise.force_n.sample(rng)) as f32,
+            t_surface_c: (s.temps.surface_c + noise.t_surface.sample(rng)) as f32,
+            t_inner_c: (s.temps.inner_c + noise.t_inner.sample(rng)) as f32,
+            pressure_pa: (s.pressure + noise.pressure.sample(rng)) as f32,
+            camber_deg: (s.camber + noise.camber.sample(rng)) as f32,
+        }
+    }
 }
 
 /// Radial stiffness of the simulated tires (N/m): loaded radius `R0 − F_z/k`.
