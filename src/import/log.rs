@@ -167,34 +167,15 @@ fn parse_cell(path: &Path, row: usize, name: &str, cell: &str) -> Result<f64, Im
 /// Reads a CSV log: a MoTeC export or a generic table.
 pub(crate) fn read_csv(path: &Path) -> Result<RawLog, ImportError> {
     let file = std::fs::File::open(path).map_err(|e| ImportError::io(path, e))?;
-    let mut rdr = csv::ReaderBuilder::new()
-        .has_headers(false)
-        .flexible(true)
-        .from_reader(std::io::BufReader::with_capacity(1 << 20, file));
-    let mut records = rdr.records();
-    let mut next = |what: &str| -> Result<Option<(usize, Vec<String>)>, ImportError> {
-        loop {
-            match records.next() {
-                None => return Ok(None),
-                Some(Err(e)) => {
-                    let line = e.position().map_or(0, |p| p.line() as usize);
-                    return Err(ImportError::log(
-                        path,
-                        format!("line {line}"),
-                        format!("{what}: {e}"),
-                    ));
-                }
-                Some(Ok(r)) => {
-                    let line = r.position().map_or(0, |p| p.line() as usize);
-                    let c = cells(&r);
-                    if !blank(&c) {
-                        return Ok(Some((line, c)));
-                    }
-                }
-            }
-        }
+    let mut rows = CsvRows {
+        path,
+        records: csv::ReaderBuilder::new()
+            .has_headers(false)
+            .flexible(true)
+            .from_reader(std::io::BufReader::with_capacity(1 << 20, file))
+            .into_records(),
     };
-    let Some((_, first)) = next("header")? else {
+    let Some((_, first)) = rows.next("header")? else {
         return Err(ImportError::log(path, "file", "is empty"));
     };
     let motec = first
@@ -205,112 +186,14 @@ pub(crate) fn read_csv(path: &Path) -> Result<RawLog, ImportError> {
         format: if motec { "MoTeC CSV" } else { "CSV" }.into(),
         ..LogMeta::default()
     };
-    let (names, units) = if motec {
-        // Header rows of key/value pairs (cells 0-1 and 4-5) up to the row of
-        // channel names, which starts with the time column.
-        let mut row = first;
-        loop {
-            let is_names = row.first().is_some_and(|c| c.eq_ignore_ascii_case("Time"))
-                && row.len() > 2
-                && row
-                    .get(1)
-                    .is_some_and(|c| !c.is_empty() && c.parse::<f64>().is_err());
-            if is_names {
-                break;
-            }
-            for k in [0, 4] {
-                if let (Some(key), Some(v)) = (row.get(k), row.get(k + 1))
-                    && !key.is_empty()
-                {
-                    meta.header.insert(key.clone(), v.clone());
-                }
-            }
-            row = next("header")?
-                .ok_or_else(|| {
-                    ImportError::log(
-                        path,
-                        "header",
-                        "no row of channel names (starting with \"Time\")",
-                    )
-                })?
-                .1;
-        }
-        let units = next("units row")?
-            .ok_or_else(|| {
-                ImportError::log(path, "header", "no units row after the channel names")
-            })?
-            .1;
-        (row, units)
+    let (names, mut units, pending) = if motec {
+        let (names, units) = motec_csv_header(&mut rows, first, &mut meta.header)?;
+        (names, units, None)
     } else {
-        // First row: names, with units in brackets ("Speed [km/h]") or in
-        // a second row that is not numeric.
-        (first, Vec::new())
+        table_header(&mut rows, first)?
     };
-    let mut pending: Option<(usize, Vec<String>)> = None;
-    let (names, units) = if motec {
-        (names, units)
-    } else {
-        let split: Vec<(String, String)> = names
-            .iter()
-            .map(|n| match n.rfind(['[', '(']) {
-                Some(i) if n.ends_with([']', ')']) => (
-                    n[..i].trim().to_string(),
-                    n[i + 1..n.len() - 1].trim().to_string(),
-                ),
-                _ => (n.clone(), String::new()),
-            })
-            .collect();
-        let second = next("data")?;
-        let units_row = second
-            .as_ref()
-            .is_some_and(|(_, c)| c.first().is_some_and(|x| x.parse::<f64>().is_err()));
-        let units = if units_row {
-            second.expect("checked").1
-        } else {
-            pending = second;
-            split.iter().map(|s| s.1.clone()).collect()
-        };
-        (split.into_iter().map(|s| s.0).collect(), units)
-    };
-    if names.iter().any(|n| n.is_empty()) {
-        return Err(ImportError::log(
-            path,
-            "header",
-            "a channel has an empty name",
-        ));
-    }
-    let mut seen = std::collections::HashSet::new();
-    if let Some(d) = names.iter().find(|n| !seen.insert(n.as_str())) {
-        return Err(ImportError::Channel {
-            path: path.to_path_buf(),
-            channel: d.clone(),
-            what: "appears twice in the header".into(),
-        });
-    }
-    let mut values: Vec<Vec<f64>> = vec![Vec::new(); names.len()];
-    let mut push = |line: usize, row: Vec<String>| -> Result<(), ImportError> {
-        if row.len() != names.len() {
-            return Err(ImportError::log(
-                path,
-                format!("line {line}"),
-                format!(
-                    "{} cells, the header names {} channels",
-                    row.len(),
-                    names.len()
-                ),
-            ));
-        }
-        for ((v, cell), name) in values.iter_mut().zip(&row).zip(&names) {
-            v.push(parse_cell(path, line, name, cell)?);
-        }
-        Ok(())
-    };
-    if let Some((line, row)) = pending {
-        push(line, row)?;
-    }
-    while let Some((line, row)) = next("data")? {
-        push(line, row)?;
-    }
+    check_channel_names(path, &names)?;
+    let values = csv_values(&mut rows, &names, pending)?;
     if motec {
         meta.venue = meta.header.get("Venue").cloned().unwrap_or_default();
         meta.vehicle = meta.header.get("Vehicle").cloned().unwrap_or_default();
@@ -323,7 +206,6 @@ pub(crate) fn read_csv(path: &Path) -> Result<RawLog, ImportError> {
             .get("Log Time")
             .and_then(|t| parse_time_of_day(t));
     }
-    let mut units = units;
     units.resize(names.len(), String::new());
     Ok(RawLog {
         path: path.to_path_buf(),
@@ -340,6 +222,174 @@ pub(crate) fn read_csv(path: &Path) -> Result<RawLog, ImportError> {
             })
             .collect(),
     })
+}
+
+/// A CSV file's rows, blank ones skipped, each with its line number.
+struct CsvRows<'a> {
+    path: &'a Path,
+    records: csv::StringRecordsIntoIter<std::io::BufReader<std::fs::File>>,
+}
+
+/// A row's line number and its cells (trimmed).
+type Row = (usize, Vec<String>);
+
+impl CsvRows<'_> {
+    /// The next row that is not blank; a malformed one is an error naming
+    /// its line and `what` was expected there.
+    fn next(&mut self, what: &str) -> Result<Option<Row>, ImportError> {
+        loop {
+            match self.records.next() {
+                None => return Ok(None),
+                Some(Err(e)) => {
+                    let line = e.position().map_or(0, |p| p.line() as usize);
+                    return Err(ImportError::log(
+                        self.path,
+                        format!("line {line}"),
+                        format!("{what}: {e}"),
+                    ));
+                }
+                Some(Ok(r)) => {
+                    let line = r.position().map_or(0, |p| p.line() as usize);
+                    let c = cells(&r);
+                    if !blank(&c) {
+                        return Ok(Some((line, c)));
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// A MoTeC CSV export's header from its `first` row: rows of key/value
+/// pairs (cells 0-1 and 4-5, into `header`) up to the row of channel
+/// names, which starts with the time column, then the units row. Returns
+/// the names and units.
+fn motec_csv_header(
+    rows: &mut CsvRows,
+    first: Vec<String>,
+    header: &mut BTreeMap<String, String>,
+) -> Result<(Vec<String>, Vec<String>), ImportError> {
+    let mut row = first;
+    loop {
+        let is_names = row.first().is_some_and(|c| c.eq_ignore_ascii_case("Time"))
+            && row.len() > 2
+            && row
+                .get(1)
+                .is_some_and(|c| !c.is_empty() && c.parse::<f64>().is_err());
+        if is_names {
+            break;
+        }
+        for k in [0, 4] {
+            if let (Some(key), Some(v)) = (row.get(k), row.get(k + 1))
+                && !key.is_empty()
+            {
+                header.insert(key.clone(), v.clone());
+            }
+        }
+        row = rows
+            .next("header")?
+            .ok_or_else(|| {
+                ImportError::log(
+                    rows.path,
+                    "header",
+                    "no row of channel names (starting with \"Time\")",
+                )
+            })?
+            .1;
+    }
+    let units = rows
+        .next("units row")?
+        .ok_or_else(|| {
+            ImportError::log(rows.path, "header", "no units row after the channel names")
+        })?
+        .1;
+    Ok((row, units))
+}
+
+/// A generic table's header: its `first` row names the channels, with
+/// units in brackets ("Speed [km/h]") or in a second row that is not
+/// numeric. Returns the names, the units, and the second row where it is
+/// the first data row.
+fn table_header(
+    rows: &mut CsvRows,
+    first: Vec<String>,
+) -> Result<(Vec<String>, Vec<String>, Option<Row>), ImportError> {
+    let split: Vec<(String, String)> = first
+        .iter()
+        .map(|n| match n.rfind(['[', '(']) {
+            Some(i) if n.ends_with([']', ')']) => (
+                n[..i].trim().to_string(),
+                n[i + 1..n.len() - 1].trim().to_string(),
+            ),
+            _ => (n.clone(), String::new()),
+        })
+        .collect();
+    let second = rows.next("data")?;
+    let units_row = second
+        .as_ref()
+        .is_some_and(|(_, c)| c.first().is_some_and(|x| x.parse::<f64>().is_err()));
+    let (units, pending) = if units_row {
+        (second.expect("checked").1, None)
+    } else {
+        (split.iter().map(|s| s.1.clone()).collect(), second)
+    };
+    Ok((split.into_iter().map(|s| s.0).collect(), units, pending))
+}
+
+/// Every channel needs a name of its own.
+fn check_channel_names(path: &Path, names: &[String]) -> Result<(), ImportError> {
+    if names.iter().any(|n| n.is_empty()) {
+        return Err(ImportError::log(
+            path,
+            "header",
+            "a channel has an empty name",
+        ));
+    }
+    let mut seen = std::collections::HashSet::new();
+    if let Some(d) = names.iter().find(|n| !seen.insert(n.as_str())) {
+        return Err(ImportError::Channel {
+            path: path.to_path_buf(),
+            channel: d.clone(),
+            what: "appears twice in the header".into(),
+        });
+    }
+    Ok(())
+}
+
+/// The data rows (`pending` first, where the header read one) as one
+/// column of values per channel; an empty cell is NaN, a row of another
+/// length or a cell that is not a number an error naming its line.
+fn csv_values(
+    rows: &mut CsvRows,
+    names: &[String],
+    pending: Option<Row>,
+) -> Result<Vec<Vec<f64>>, ImportError> {
+    let path = rows.path;
+    let mut values: Vec<Vec<f64>> = vec![Vec::new(); names.len()];
+    let mut push = |line: usize, row: Vec<String>| -> Result<(), ImportError> {
+        if row.len() != names.len() {
+            return Err(ImportError::log(
+                path,
+                format!("line {line}"),
+                format!(
+                    "{} cells, the header names {} channels",
+                    row.len(),
+                    names.len()
+                ),
+            ));
+        }
+        for ((v, cell), name) in values.iter_mut().zip(&row).zip(names) {
+            v.push(parse_cell(path, line, name, cell)?);
+        }
+        Ok(())
+    };
+    if let Some((line, row)) = pending {
+        push(line, row)?;
+    }
+    while let Some((line, row)) = rows.next("data")? {
+        push(line, row)?;
+    }
+    Ok(values)
 }
 
 /// Reads a Parquet table: every numeric column is a channel; a column's
