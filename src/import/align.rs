@@ -63,7 +63,6 @@ pub(crate) fn align(
     mapping: &Mapping,
     rate_hz: Option<f64>,
 ) -> Result<Aligned, ImportError> {
-    let path = &log.path;
     let mapped: Vec<&Mapped> = mapping
         .mapped
         .iter()
@@ -80,159 +79,194 @@ pub(crate) fn align(
             .map(|m| m.conversion.dimension);
     }
     if log.tabular() {
-        let time = mapping
-            .get(Quantity::Time, None)
-            .ok_or_else(|| ImportError::Missing {
-                path: path.clone(),
-                quantity: "time".into(),
-                tried: mapping
-                    .tried
-                    .get(&Quantity::Time)
-                    .map_or("[channels.time] has no names".into(), |t| t.join(", ")),
-                available: log.names().join(", "),
-            })?;
-        let tc = &log.channels[time.sources[0]];
-        let t: Vec<f64> = tc
-            .values
-            .iter()
-            .map(|v| time.conversion.apply(*v))
-            .collect();
-        let bad = |row: usize, what: String| ImportError::Channel {
+        align_rows(log, mapping, &mapped, rate_hz, &mut out)?;
+    } else {
+        resample_channels(log, &mapped, rate_hz, &mut out)?;
+    }
+    Ok(out)
+}
+
+/// A table's rows on the grid of its time column: each row's time a whole
+/// number of periods from the first (the rate the median step's, or
+/// `rate_hz`); rows where a mapped quantity has no value are dropped.
+fn align_rows(
+    log: &RawLog,
+    mapping: &Mapping,
+    mapped: &[&Mapped],
+    rate_hz: Option<f64>,
+    out: &mut Aligned,
+) -> Result<(), ImportError> {
+    let path = &log.path;
+    let time = mapping
+        .get(Quantity::Time, None)
+        .ok_or_else(|| ImportError::Missing {
             path: path.clone(),
-            channel: tc.name.clone(),
-            what: format!("sample {row}: {what}"),
-        };
-        if let Some(i) = t.iter().position(|v| !v.is_finite()) {
-            return Err(bad(i, "no time".into()));
-        }
-        if let Some(i) = (1..t.len()).find(|&i| t[i] <= t[i - 1]) {
+            quantity: "time".into(),
+            tried: mapping
+                .tried
+                .get(&Quantity::Time)
+                .map_or("[channels.time] has no names".into(), |t| t.join(", ")),
+            available: log.names().join(", "),
+        })?;
+    let tc = &log.channels[time.sources[0]];
+    let t: Vec<f64> = tc
+        .values
+        .iter()
+        .map(|v| time.conversion.apply(*v))
+        .collect();
+    let bad = |row: usize, what: String| ImportError::Channel {
+        path: path.clone(),
+        channel: tc.name.clone(),
+        what: format!("sample {row}: {what}"),
+    };
+    if let Some(i) = t.iter().position(|v| !v.is_finite()) {
+        return Err(bad(i, "no time".into()));
+    }
+    if let Some(i) = (1..t.len()).find(|&i| t[i] <= t[i - 1]) {
+        return Err(bad(
+            i,
+            format!(
+                "time {} s is not after the previous {} s (non-monotonic)",
+                t[i],
+                t[i - 1]
+            ),
+        ));
+    }
+    if t.len() < 2 {
+        return Err(ImportError::log(path, "data", "fewer than two samples"));
+    }
+    out.rate_hz = rows_rate_hz(&t, rate_hz);
+    if !(out.rate_hz.is_finite() && out.rate_hz > 0.0 && out.rate_hz <= MAX_RATE_HZ * 1.001) {
+        return Err(bad(
+            0,
+            format!(
+                "sample rate {} Hz is outside (0, 1000]",
+                super::shown(out.rate_hz)
+            ),
+        ));
+    }
+    let period = 1.0 / out.rate_hz;
+    out.t0_s = t[0];
+    let mut index = Vec::with_capacity(t.len());
+    for (i, &ti) in t.iter().enumerate() {
+        let x = (ti - t[0]) / period;
+        let k = x.round();
+        if (x - k).abs() > 0.25 {
             return Err(bad(
                 i,
                 format!(
-                    "time {} s is not after the previous {} s (non-monotonic)",
-                    t[i],
-                    t[i - 1]
+                    "time {ti} s is off the {:.6} s sample grid by {:.0} % of a period \
+                     (mixed rates? export on one rate, or give --rate)",
+                    period,
+                    (x - k).abs() * 100.0
                 ),
             ));
         }
-        if t.len() < 2 {
-            return Err(ImportError::log(path, "data", "fewer than two samples"));
+        index.push(k as u64);
+    }
+    let mut keep = vec![true; t.len()];
+    for m in mapped {
+        let v: Vec<f64> = (0..t.len())
+            .map(|i| mean_of_zones(log, m, |vals, _| vals[i]))
+            .collect();
+        for (k, x) in keep.iter_mut().zip(&v) {
+            *k &= x.is_finite();
         }
-        let period = match rate_hz {
-            Some(r) => 1.0 / r,
-            None => {
-                let mut dt: Vec<f64> = t.windows(2).map(|w| w[1] - w[0]).collect();
-                dt.sort_by(f64::total_cmp);
-                dt[dt.len() / 2]
-            }
-        };
-        // A rate within 1 ppm of a whole number of Hz is that number (times
-        // written with 3 decimals give 19.999999999 Hz).
-        let r = 1.0 / period;
-        out.rate_hz = if (r - r.round()).abs() < 1e-6 * r {
-            r.round()
-        } else {
-            r
-        };
-        let period = 1.0 / out.rate_hz;
-        if !(out.rate_hz.is_finite() && out.rate_hz > 0.0 && out.rate_hz <= MAX_RATE_HZ * 1.001) {
-            return Err(bad(
-                0,
-                format!(
-                    "sample rate {} Hz is outside (0, 1000]",
-                    super::shown(out.rate_hz)
-                ),
-            ));
+        out.series.insert((m.quantity, m.corner), v);
+    }
+    out.index = index;
+    filter(out, &keep);
+    Ok(())
+}
+
+/// The rate (Hz) of rows at times `t` (s): `rate_hz`, else one over the
+/// median step; within 1 ppm of a whole number of Hz, that number (times
+/// written with 3 decimals give 19.999999999 Hz).
+fn rows_rate_hz(t: &[f64], rate_hz: Option<f64>) -> f64 {
+    let period = match rate_hz {
+        Some(r) => 1.0 / r,
+        None => {
+            let mut dt: Vec<f64> = t.windows(2).map(|w| w[1] - w[0]).collect();
+            dt.sort_by(f64::total_cmp);
+            dt[dt.len() / 2]
         }
-        out.t0_s = t[0];
-        let mut index = Vec::with_capacity(t.len());
-        for (i, &ti) in t.iter().enumerate() {
-            let x = (ti - t[0]) / period;
-            let k = x.round();
-            if (x - k).abs() > 0.25 {
-                return Err(bad(
-                    i,
-                    format!(
-                        "time {ti} s is off the {:.6} s sample grid by {:.0} % of a period \
-                         (mixed rates? export on one rate, or give --rate)",
-                        period,
-                        (x - k).abs() * 100.0
-                    ),
-                ));
-            }
-            index.push(k as u64);
-        }
-        let mut keep = vec![true; t.len()];
-        for m in &mapped {
-            let v: Vec<f64> = (0..t.len())
-                .map(|i| mean_of_zones(log, m, |vals, _| vals[i]))
-                .collect();
-            for (k, x) in keep.iter_mut().zip(&v) {
-                *k &= x.is_finite();
-            }
-            out.series.insert((m.quantity, m.corner), v);
-        }
-        out.index = index;
-        filter(&mut out, &keep);
+    };
+    let r = 1.0 / period;
+    if (r - r.round()).abs() < 1e-6 * r {
+        r.round()
     } else {
-        let rate = match rate_hz {
-            Some(r) => r,
-            None => mapped
-                .iter()
-                .flat_map(|m| {
-                    m.sources
-                        .iter()
-                        .map(|&s| log.channels[s].rate_hz.unwrap_or(0.0))
-                })
-                .fold(0.0, f64::max),
-        };
-        if !(rate > 0.0 && rate <= MAX_RATE_HZ) {
-            return Err(ImportError::log(
-                path,
-                "channels",
-                format!("sample rate {} Hz is outside (0, 1000]", super::shown(rate)),
-            ));
-        }
-        let duration = mapped
+        r
+    }
+}
+
+/// Channels of their own rates (a `.ld` log) interpolated to one grid:
+/// `rate_hz`, else the fastest mapped channel's rate, over the shortest
+/// mapped channel; grid points where a mapped quantity has no value are
+/// dropped.
+fn resample_channels(
+    log: &RawLog,
+    mapped: &[&Mapped],
+    rate_hz: Option<f64>,
+    out: &mut Aligned,
+) -> Result<(), ImportError> {
+    let path = &log.path;
+    let rate = match rate_hz {
+        Some(r) => r,
+        None => mapped
             .iter()
             .flat_map(|m| {
-                m.sources.iter().map(|&s| {
-                    let c = &log.channels[s];
-                    (c.values.len().saturating_sub(1)) as f64 / c.rate_hz.unwrap_or(1.0)
+                m.sources
+                    .iter()
+                    .map(|&s| log.channels[s].rate_hz.unwrap_or(0.0))
+            })
+            .fold(0.0, f64::max),
+    };
+    if !(rate > 0.0 && rate <= MAX_RATE_HZ) {
+        return Err(ImportError::log(
+            path,
+            "channels",
+            format!("sample rate {} Hz is outside (0, 1000]", super::shown(rate)),
+        ));
+    }
+    let duration = mapped
+        .iter()
+        .flat_map(|m| {
+            m.sources.iter().map(|&s| {
+                let c = &log.channels[s];
+                (c.values.len().saturating_sub(1)) as f64 / c.rate_hz.unwrap_or(1.0)
+            })
+        })
+        .fold(f64::INFINITY, f64::min);
+    if !duration.is_finite() || duration <= 0.0 {
+        return Err(ImportError::log(
+            path,
+            "channels",
+            "no mapped channel has two samples",
+        ));
+    }
+    let n = (duration * rate).floor() as u64 + 1;
+    out.rate_hz = rate;
+    out.index = (0..n).collect();
+    let mut keep = vec![true; n as usize];
+    for m in mapped {
+        let v: Vec<f64> = (0..n)
+            .map(|k| {
+                mean_of_zones(log, m, |vals, r| {
+                    let x = k as f64 / rate * r.unwrap_or(rate);
+                    let i = (x.floor() as usize).min(vals.len() - 1);
+                    let j = (i + 1).min(vals.len() - 1);
+                    let w = x - i as f64;
+                    vals[i] * (1.0 - w) + vals[j] * w
                 })
             })
-            .fold(f64::INFINITY, f64::min);
-        if !duration.is_finite() || duration <= 0.0 {
-            return Err(ImportError::log(
-                path,
-                "channels",
-                "no mapped channel has two samples",
-            ));
+            .collect();
+        for (k, x) in keep.iter_mut().zip(&v) {
+            *k &= x.is_finite();
         }
-        let n = (duration * rate).floor() as u64 + 1;
-        out.rate_hz = rate;
-        out.index = (0..n).collect();
-        let mut keep = vec![true; n as usize];
-        for m in &mapped {
-            let v: Vec<f64> = (0..n)
-                .map(|k| {
-                    mean_of_zones(log, m, |vals, r| {
-                        let x = k as f64 / rate * r.unwrap_or(rate);
-                        let i = (x.floor() as usize).min(vals.len() - 1);
-                        let j = (i + 1).min(vals.len() - 1);
-                        let w = x - i as f64;
-                        vals[i] * (1.0 - w) + vals[j] * w
-                    })
-                })
-                .collect();
-            for (k, x) in keep.iter_mut().zip(&v) {
-                *k &= x.is_finite();
-            }
-            out.series.insert((m.quantity, m.corner), v);
-        }
-        filter(&mut out, &keep);
+        out.series.insert((m.quantity, m.corner), v);
     }
-    Ok(out)
+    filter(out, &keep);
+    Ok(())
 }
 
 fn filter(out: &mut Aligned, keep: &[bool]) {
