@@ -186,9 +186,9 @@ pub(crate) fn read_csv(path: &Path) -> Result<RawLog, ImportError> {
         format: if motec { "MoTeC CSV" } else { "CSV" }.into(),
         ..LogMeta::default()
     };
-    let (names, mut units, pending) = if motec {
-        let (names, units) = motec_csv_header(&mut rows, first, &mut meta.header)?;
-        (names, units, None)
+    let (CsvHeader { names, mut units }, pending) = if motec {
+        let header = motec_csv_header(&mut rows, first, &mut meta.header)?;
+        (header, None)
     } else {
         table_header(&mut rows, first)?
     };
@@ -233,6 +233,13 @@ struct CsvRows<'a> {
 /// A row's line number and its cells (trimmed).
 type Row = (usize, Vec<String>);
 
+/// A CSV log's channel names and their units (in order; units may be
+/// fewer, the rest have none).
+struct CsvHeader {
+    names: Vec<String>,
+    units: Vec<String>,
+}
+
 impl CsvRows<'_> {
     /// The next row that is not blank; a malformed one is an error naming
     /// its line and `what` was expected there.
@@ -262,13 +269,12 @@ impl CsvRows<'_> {
 
 /// A MoTeC CSV export's header from its `first` row: rows of key/value
 /// pairs (cells 0-1 and 4-5, into `header`) up to the row of channel
-/// names, which starts with the time column, then the units row. Returns
-/// the names and units.
+/// names, which starts with the time column, then the units row.
 fn motec_csv_header(
     rows: &mut CsvRows,
     first: Vec<String>,
     header: &mut BTreeMap<String, String>,
-) -> Result<(Vec<String>, Vec<String>), ImportError> {
+) -> Result<CsvHeader, ImportError> {
     let mut row = first;
     loop {
         let is_names = row.first().is_some_and(|c| c.eq_ignore_ascii_case("Time"))
@@ -303,17 +309,17 @@ fn motec_csv_header(
             ImportError::log(rows.path, "header", "no units row after the channel names")
         })?
         .1;
-    Ok((row, units))
+    Ok(CsvHeader { names: row, units })
 }
 
 /// A generic table's header: its `first` row names the channels, with
 /// units in brackets ("Speed [km/h]") or in a second row that is not
-/// numeric. Returns the names, the units, and the second row where it is
-/// the first data row.
+/// numeric. Returns them with the second row where it is the first data
+/// row.
 fn table_header(
     rows: &mut CsvRows,
     first: Vec<String>,
-) -> Result<(Vec<String>, Vec<String>, Option<Row>), ImportError> {
+) -> Result<(CsvHeader, Option<Row>), ImportError> {
     let split: Vec<(String, String)> = first
         .iter()
         .map(|n| match n.rfind(['[', '(']) {
@@ -333,7 +339,8 @@ fn table_header(
     } else {
         (split.iter().map(|s| s.1.clone()).collect(), second)
     };
-    Ok((split.into_iter().map(|s| s.0).collect(), units, pending))
+    let names = split.into_iter().map(|s| s.0).collect();
+    Ok((CsvHeader { names, units }, pending))
 }
 
 /// Every channel needs a name of its own.
